@@ -1,0 +1,36 @@
+"""brdffit: fit compact, physically based microfacet models to measured BRDFs.
+
+The public API is deliberately small; everything else lives in the subpackages:
+
+* :mod:`brdffit.geometry` – spherical, Rusinkiewicz and slope-space parameterisations
+* :mod:`brdffit.io` – readers/writers of measured formats and of fitted models
+* :mod:`brdffit.microfacet` – slope distributions, shadowing, Fresnel, ``MicrofacetBRDF``
+* :mod:`brdffit.fit` – the fitting methods, one module per paper
+* :mod:`brdffit.evaluation` – rendering, metrics, plots and the HTML report
+"""
+
+from .brdf import BRDF, IsotropicBRDF
+from .errors import BRDFError, BRDFFormatError, ExportError, FitError
+
+__version__ = "0.1.0"
+
+__all__ = ["BRDF", "IsotropicBRDF", "BRDFError", "BRDFFormatError", "FitError", "ExportError",
+           "__version__"]
+
+
+def __getattr__(name):  # lazy public API: keeps `import brdffit` fast and cycle-free
+    from importlib import import_module
+
+    lazy = {
+        "load": ".io", "resample_to_merl": ".io.merl", "write_merl": ".io.merl",
+        "MicrofacetBRDF": ".microfacet", "Beckmann": ".microfacet", "GGX": ".microfacet",
+        "SGD": ".microfacet", "SchlickFresnel": ".microfacet",
+        "GeneralizedSchlickFresnel": ".microfacet", "DielectricFresnel": ".microfacet",
+        "ConductorFresnel": ".microfacet", "TabulatedFresnel": ".microfacet",
+        "synthetic": ".synthetic",
+        "fit_tabulated": ".fit", "fit_ggx": ".fit", "fit_beckmann": ".fit", "fit_sgd": ".fit",
+        "fit_npf": ".fit", "save_fit": ".io.fitfile", "load_fit": ".io.fitfile",
+    }
+    if name in lazy:
+        return getattr(import_module(lazy[name], __name__), name)
+    raise AttributeError(f"module 'brdffit' has no attribute {name!r}")

@@ -1,0 +1,139 @@
+"""The one BRDF protocol every measured table, analytic model and fitted model follows.
+
+Conventions (the same everywhere in brdffit):
+
+* Directions are unit vectors ``(..., 3)`` in the local shading frame, normal = +z, both
+  ``wi`` (towards the light) and ``wo`` (towards the viewer) pointing *away* from the surface.
+* :meth:`BRDF.eval` returns the BRDF value f_r in 1/sr, **not** multiplied by the cosine,
+  as RGB ``(..., 3)`` (linear, the colour space of the source data), and 0 when either
+  direction is at or below the horizon.
+* :meth:`BRDF.sample` draws ``wo`` for a given ``wi`` from 2D uniform numbers and returns the
+  direction with its solid-angle density; :meth:`BRDF.pdf` returns that density. The base
+  class samples the cosine-weighted hemisphere, which is valid (if not efficient) for every
+  BRDF; models with better strategies override both.
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import Any
+
+import numpy as np
+
+from .geometry import half_diff_to_io, io_to_half_diff
+
+__all__ = ["BRDF", "IsotropicBRDF", "cosine_hemisphere_sample", "cosine_hemisphere_pdf"]
+
+
+def _as_dirs(wi, wo) -> tuple[np.ndarray, np.ndarray]:
+    wi = np.asarray(wi, dtype=np.float64)
+    wo = np.asarray(wo, dtype=np.float64)
+    if wi.shape[-1:] != (3,) or wo.shape[-1:] != (3,):
+        raise ValueError(f"directions must have a last axis of size 3, got {wi.shape} and {wo.shape}")
+    return np.broadcast_arrays(wi, wo)
+
+
+def cosine_hemisphere_sample(u) -> np.ndarray:
+    """Cosine-weighted directions on the upper hemisphere from uniform ``u`` ``(..., 2)``."""
+    u = np.asarray(u, dtype=np.float64)
+    r = np.sqrt(u[..., 0])
+    phi = 2.0 * np.pi * u[..., 1]
+    z = np.sqrt(np.maximum(0.0, 1.0 - u[..., 0]))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
+
+
+def cosine_hemisphere_pdf(wo) -> np.ndarray:
+    """Solid-angle density ``max(cos θo, 0)/π`` of :func:`cosine_hemisphere_sample`."""
+    return np.maximum(np.asarray(wo)[..., 2], 0.0) / np.pi
+
+
+class BRDF(abc.ABC):
+    """Abstract BRDF: subclasses implement :meth:`eval` (and optionally ``sample``/``pdf``).
+
+    Attributes
+    ----------
+    name: str
+        Human-readable material name.
+    isotropic: bool
+        True when the BRDF is invariant under rotation about the normal.
+    source: str or None
+        Where the data came from (file path, ``collection.zip:material``, ``synthetic:...``).
+    """
+
+    name: str = "brdf"
+    isotropic: bool = False
+    source: str | None = None
+
+    @abc.abstractmethod
+    def eval(self, wi, wo) -> np.ndarray:
+        """BRDF value f_r(wi, wo), shape ``broadcast(wi, wo).shape[:-1] + (3,)``."""
+
+    def sample(self, wi, u) -> tuple[np.ndarray, np.ndarray]:
+        """Draw ``wo`` given ``wi`` from uniform numbers ``u`` ``(..., 2)``.
+
+        Returns ``(wo, pdf)`` where ``pdf`` is the solid-angle density of ``wo``. The default
+        is cosine-weighted hemisphere sampling.
+        """
+        wo = cosine_hemisphere_sample(u)
+        wo = np.broadcast_to(wo, np.broadcast_shapes(np.shape(wi), wo.shape)).copy()
+        return wo, self.pdf(wi, wo)
+
+    def pdf(self, wi, wo) -> np.ndarray:
+        """Solid-angle density of :meth:`sample` at ``wo`` given ``wi``."""
+        wi, wo = _as_dirs(wi, wo)
+        return np.where(wi[..., 2] > 0, cosine_hemisphere_pdf(wo), 0.0)
+
+    def eval_cos(self, wi, wo) -> np.ndarray:
+        """``f_r(wi, wo) · max(cos θo, 0)`` (the integrand of the reflectance)."""
+        wi, wo = _as_dirs(wi, wo)
+        return self.eval(wi, wo) * np.maximum(wo[..., 2], 0.0)[..., None]
+
+    def albedo(self, theta_i, n_samples: int = 65536, seed: int = 0) -> np.ndarray:
+        """Directional albedo ∫ f_r cos θo dωo for incidence angles ``theta_i`` (radians).
+
+        Monte Carlo with stratified cosine-weighted samples; returns ``(len(theta_i), 3)``.
+        """
+        theta_i = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
+        side = int(np.sqrt(n_samples))
+        rng = np.random.default_rng(seed)
+        g = (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
+             .reshape(-1, 2) + rng.random((side * side, 2))) / side
+        wo = cosine_hemisphere_sample(g)
+        out = np.empty((theta_i.size, 3))
+        for k, t in enumerate(theta_i):
+            wi = np.array([np.sin(t), 0.0, np.cos(t)])
+            out[k] = np.pi * self.eval(np.broadcast_to(wi, wo.shape), wo).mean(axis=0)
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        """Metadata as a plain dict (name, class, isotropy, source)."""
+        return {"name": self.name, "model": type(self).__name__,
+                "isotropic": bool(self.isotropic), "source": self.source}
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.name!r} isotropic={self.isotropic}>"
+
+
+class IsotropicBRDF(BRDF):
+    """An isotropic BRDF, also evaluable in Rusinkiewicz coordinates.
+
+    Subclasses override :meth:`eval_hd` or :meth:`eval` (at least one); the other is derived.
+    """
+
+    isotropic = True
+
+    def eval(self, wi, wo) -> np.ndarray:
+        if type(self).eval_hd is IsotropicBRDF.eval_hd:
+            raise NotImplementedError(f"{type(self).__name__} must override eval or eval_hd")
+        wi, wo = _as_dirs(wi, wo)
+        th, _, td, pd = io_to_half_diff(wi, wo)
+        f = self.eval_hd(th, td, pd)
+        above = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+        return np.where(above[..., None], f, 0.0)
+
+    def eval_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
+        """BRDF value at Rusinkiewicz coordinates (φh irrelevant by isotropy), ``(..., 3)``."""
+        if type(self).eval is IsotropicBRDF.eval:
+            raise NotImplementedError(f"{type(self).__name__} must override eval or eval_hd")
+        wi, wo = half_diff_to_io(theta_h, 0.0, theta_d, phi_d)
+        return self.eval(wi, wo)

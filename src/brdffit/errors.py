@@ -1,0 +1,39 @@
+"""The exception hierarchy of brdffit.
+
+Every error the library raises on purpose derives from :class:`BRDFError`, so a caller can
+catch one class. Messages name the file (when there is one), what was expected and what was
+found.
+"""
+
+from __future__ import annotations
+
+__all__ = ["BRDFError", "BRDFFormatError", "FitError", "ExportError"]
+
+
+class BRDFError(Exception):
+    """Base class of every error raised by brdffit."""
+
+
+class BRDFFormatError(BRDFError, ValueError):
+    """A file or in-memory table does not follow the format it claims.
+
+    Parameters
+    ----------
+    path:
+        The offending file (or ``None`` for in-memory data).
+    problem:
+        What was expected and what was found.
+    """
+
+    def __init__(self, path, problem: str):
+        self.path = None if path is None else str(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}" if self.path else problem)
+
+
+class FitError(BRDFError, RuntimeError):
+    """A fit could not produce a valid model (no convergence, no valid data, NaN...)."""
+
+
+class ExportError(BRDFError):
+    """A fitted model cannot be written in the requested target format."""

@@ -1,0 +1,69 @@
+"""The MERL sampling grid (Matusik et al. 2003), shared by the MERL reader and the fits.
+
+90 θh × 90 θd × 180 φd samples. θh is sampled uniformly in ``sqrt(θh / (π/2))``:
+sample ``i`` sits at ``θh = (i/90)² · π/2``; θd sample ``j`` at ``j · π/180``; φd sample ``k``
+at ``k · π/180`` with φd in [0, π) by reciprocity (φd ≡ φd + π).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "N_THETA_H", "N_THETA_D", "N_PHI_D", "merl_theta_h", "merl_theta_d", "merl_phi_d",
+    "theta_h_to_index", "theta_d_to_index", "phi_d_to_index", "tabulate_merl_grid",
+]
+
+N_THETA_H, N_THETA_D, N_PHI_D = 90, 90, 180
+
+
+def merl_theta_h() -> np.ndarray:
+    """θh of the 90 MERL samples (radians)."""
+    return (np.arange(N_THETA_H) / N_THETA_H) ** 2 * (np.pi / 2)
+
+
+def merl_theta_d() -> np.ndarray:
+    """θd of the 90 MERL samples (radians)."""
+    return np.arange(N_THETA_D) * (np.pi / 2 / N_THETA_D)
+
+
+def merl_phi_d() -> np.ndarray:
+    """φd of the 180 MERL samples (radians, in [0, π))."""
+    return np.arange(N_PHI_D) * (np.pi / N_PHI_D)
+
+
+def theta_h_to_index(theta_h) -> np.ndarray:
+    """Continuous MERL θh index ``sqrt(θh/(π/2))·90`` (floor gives MERL's own lookup)."""
+    return np.sqrt(np.clip(theta_h, 0.0, np.pi / 2) / (np.pi / 2)) * N_THETA_H
+
+
+def theta_d_to_index(theta_d) -> np.ndarray:
+    """Continuous MERL θd index ``θd/(π/2)·90``."""
+    return np.clip(theta_d, 0.0, np.pi / 2) / (np.pi / 2) * N_THETA_D
+
+
+def phi_d_to_index(phi_d) -> np.ndarray:
+    """Continuous MERL φd index after folding φd into [0, π) (reciprocity)."""
+    return np.mod(phi_d, np.pi) / np.pi * N_PHI_D
+
+
+def tabulate_merl_grid(brdf, chunk: int = 1 << 18) -> tuple[np.ndarray, np.ndarray]:
+    """Evaluate an isotropic BRDF at every MERL sample.
+
+    Returns ``(values, valid)`` with ``values`` of shape ``(90, 90, 180, 3)`` and a boolean
+    ``valid`` mask of shape ``(90, 90, 180)``. A BRDF that *is* a MERL table (it has a
+    ``merl_table`` attribute returning ``(values, valid)``) is returned as stored, so that
+    invalid measurements stay marked. Otherwise every finite, non-negative value is valid.
+    """
+    table = getattr(brdf, "merl_table", None)
+    if table is not None:
+        return table() if callable(table) else table
+    th, td, pd = np.meshgrid(merl_theta_h(), merl_theta_d(), merl_phi_d(), indexing="ij")
+    th, td, pd = th.ravel(), td.ravel(), pd.ravel()
+    out = np.empty((th.size, 3))
+    for s in range(0, th.size, chunk):
+        sl = slice(s, s + chunk)
+        out[sl] = brdf.eval_hd(th[sl], td[sl], pd[sl])
+    out = out.reshape(N_THETA_H, N_THETA_D, N_PHI_D, 3)
+    valid = np.all(np.isfinite(out), axis=-1) & np.all(out >= 0, axis=-1)
+    return out, valid

@@ -1,0 +1,119 @@
+"""Abstract building blocks of microfacet BRDFs (Dupuy et al. 2015, §2).
+
+:class:`SlopeDistribution` follows ``scipy.stats`` habits: ``pdf`` of slopes, ``sample``,
+moments, plus the microfacet quantities derived from it: the NDF ``D`` (Eq. 7), the projected
+area ``sigma`` and Smith ``G1`` (Eq. 3), Smith ``Lambda``, and visible-normal sampling.
+Concrete distributions (Beckmann, GGX, SGD, tabulated fits) override what they have in closed
+form; the generic fall-backs here are numerical.
+
+:class:`Fresnel` maps ``cos θd`` to an RGB reflectance ``(..., 3)``.
+"""
+
+from __future__ import annotations
+
+import abc
+
+import numpy as np
+
+from ..geometry import normal_to_slope
+
+__all__ = ["SlopeDistribution", "Fresnel"]
+
+
+class SlopeDistribution(abc.ABC):
+    """A bivariate microfacet slope PDF ``P(x̃, ỹ)`` and everything derived from it.
+
+    Roughness follows Dupuy 2015 Eq. 9: ``D(h; αx, αy) = P(x̃/αx, ỹ/αy) sec⁴θh / (αx αy)``.
+    Subclasses must implement :meth:`pdf` and :meth:`sample`; they should override
+    :meth:`sigma` (or :meth:`Lambda`) and :meth:`sample_visible` with exact forms when known.
+    """
+
+    isotropic: bool = True
+
+    # -- slope space -------------------------------------------------------------------------
+    @abc.abstractmethod
+    def pdf(self, slopes) -> np.ndarray:
+        """Slope PDF ``P22(x̃, ỹ)`` at slopes ``(..., 2)`` (integrates to 1 over R²)."""
+
+    @abc.abstractmethod
+    def sample(self, u) -> np.ndarray:
+        """Slopes ``(..., 2)`` distributed with :meth:`pdf`, from uniform ``u`` ``(..., 2)``."""
+
+    # -- hemisphere --------------------------------------------------------------------------
+    def D(self, m) -> np.ndarray:
+        """Normal distribution ``D(m) = P(m̃) / cos⁴θm`` (Eq. 7); 0 for ``m_z <= 0``."""
+        m = np.asarray(m, dtype=np.float64)
+        mz = m[..., 2]
+        safe = np.where(mz > 0, mz, 1.0)
+        slopes = normal_to_slope(np.where((mz > 0)[..., None], m, [0.0, 0.0, 1.0]))
+        return np.where(mz > 0, self.pdf(slopes) / safe**4, 0.0)
+
+    def Lambda(self, w) -> np.ndarray:
+        """Smith Λ(w) with ``G1 = 1/(1 + Λ)`` (Heitz 2014); default from :meth:`sigma`."""
+        w = np.asarray(w, dtype=np.float64)
+        cz = w[..., 2]
+        return np.where(cz > 0, self.sigma(w) / np.where(cz > 0, cz, 1.0) - 1.0, np.inf)
+
+    def sigma(self, w) -> np.ndarray:
+        """Projected area ``σ(w) = ∫ <w, m>₊ D(m) dm`` (denominator of Eq. 3)."""
+        w = np.asarray(w, dtype=np.float64)
+        return np.maximum(w[..., 2], 0.0) * (1.0 + self.Lambda(w))
+
+    def G1(self, w, m=None) -> np.ndarray:
+        """Smith monostatic shadowing ``cos θ / σ(w)`` (Eq. 3), times ``χ⁺(w·m)`` if ``m``."""
+        w = np.asarray(w, dtype=np.float64)
+        lam = self.Lambda(w)
+        g = np.where(w[..., 2] > 0, 1.0 / (1.0 + lam), 0.0)
+        if m is not None:
+            g = np.where(np.sum(w * np.asarray(m), axis=-1) > 0, g, 0.0)
+        return g
+
+    def G2(self, wi, wo, m=None) -> np.ndarray:
+        """Height-correlated Smith shadowing-masking (Dupuy 2015 Eq. 2).
+
+        ``G1(i) G1(o) / (G1(i) + G1(o) − G1(i) G1(o)) = 1 / (1 + Λ(i) + Λ(o))``.
+        """
+        wi = np.asarray(wi, dtype=np.float64)
+        wo = np.asarray(wo, dtype=np.float64)
+        ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+        with np.errstate(invalid="ignore"):
+            g = np.where(ok, 1.0 / (1.0 + self.Lambda(wi) + self.Lambda(wo)), 0.0)
+        if m is not None:
+            m = np.asarray(m)
+            g = np.where((np.sum(wi * m, -1) > 0) & (np.sum(wo * m, -1) > 0), g, 0.0)
+        return g
+
+    def pdf_visible(self, w, m) -> np.ndarray:
+        """Density of visible normals ``G1(w) <w, m>₊ D(m) / cos θw`` (Heitz & d'Eon 2014)."""
+        w = np.asarray(w, dtype=np.float64)
+        m = np.asarray(m, dtype=np.float64)
+        wm = np.maximum(np.sum(w * m, axis=-1), 0.0)
+        cz = w[..., 2]
+        return np.where(cz > 0, wm * self.D(m) / np.where(cz > 0, self.sigma(w), 1.0), 0.0)
+
+    def sample_visible(self, w, u) -> np.ndarray:
+        """Normals ``(..., 3)`` distributed with :meth:`pdf_visible` for direction ``w``."""
+        raise NotImplementedError(f"{type(self).__name__} has no visible-normal sampling")
+
+    # -- moments -----------------------------------------------------------------------------
+    def slope_moments(self) -> dict[str, float]:
+        """Slope-space moments used by Dupuy 2015 Appendix C (E|x̃|, E|ỹ|, E x̃², E ỹ², E x̃ỹ)."""
+        raise NotImplementedError
+
+    def params(self) -> dict:
+        """Parameters as a JSON-serialisable dict (for the fit file and reports)."""
+        return {}
+
+
+class Fresnel(abc.ABC):
+    """A Fresnel reflectance as a function of ``cos θd`` returning RGB ``(..., 3)``."""
+
+    @abc.abstractmethod
+    def eval(self, cos_theta_d) -> np.ndarray:
+        """Reflectance at ``cos θd`` (broadcast shape + ``(3,)``)."""
+
+    def __call__(self, cos_theta_d) -> np.ndarray:
+        return self.eval(cos_theta_d)
+
+    def params(self) -> dict:
+        return {}
