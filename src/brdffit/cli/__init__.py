@@ -15,7 +15,7 @@ import typer
 
 from ..errors import BRDFError
 
-_COMMAND_MODULES = ["info", "convert", "fit", "demo"]
+_COMMAND_MODULES = ["info", "convert", "fit", "render", "compare", "batch", "export", "demo"]
 
 app = typer.Typer(
     name="brdffit",

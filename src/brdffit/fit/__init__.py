@@ -1,0 +1,34 @@
+"""Fitting methods, one module per paper.
+
+* :mod:`.tabulated` – Dupuy et al. 2015, tabulated slope-space NDF by power iteration, and the
+  GGX/Beckmann conversions by slope moments (``fit_tabulated``, ``fit_ggx``, ``fit_beckmann``)
+* :mod:`.sgd` – Bagher, Soler, Holzschuch 2012, Shifted Gamma Distribution (``fit_sgd``) and
+  the two-slice / full-data analytic fits
+* :mod:`.npf` – Bagher, Snyder, Nowrouzezahrai 2016, non-parametric factor model (``fit_npf``)
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+
+_MODULES = ("tabulated", "sgd", "npf")
+_EXPORTS = {
+    "fit_tabulated": "tabulated", "fit_ggx": "tabulated", "fit_beckmann": "tabulated",
+    "fit_sgd": "sgd", "fit_npf": "npf",
+}
+
+
+def import_all() -> None:
+    """Import every fitting module that exists (registers their fit-file model kinds)."""
+    for name in _MODULES:
+        try:
+            import_module(f"{__name__}.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"{__name__}.{name}":
+                raise
+
+
+def __getattr__(name):
+    if name in _EXPORTS:
+        return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -165,9 +165,10 @@ def is_fit_file(path) -> bool:
 
 def load_fit(path):
     """Load a model written by :func:`save_fit`."""
-    # importing the model packages registers their kinds
-    from .. import fit as _fit  # noqa: F401
-    from .. import microfacet as _mf  # noqa: F401
+    from .. import microfacet as _mf  # noqa: F401  (registers the analytic model kinds)
+    from ..fit import import_all
+
+    import_all()  # registers the fitted model kinds
 
     header, arrays = _open(path)
     kind = header.get("model")
