@@ -1,0 +1,316 @@
+"""Error metrics between renderings and between BRDFs.
+
+Image space
+-----------
+* :func:`rendered_psnr` – PSNR of Bagher, Snyder, Nowrouzezahrai 2016 (§5, "Results"):
+  computed on the *linear* rendered values (no tone mapping), over foreground pixels only
+  (pixels covered by the object), with the numerator taken as the maximum intensity of any
+  RGB component of any foreground pixel of the ground-truth rendering.
+* :func:`delta_e2000_image` / :func:`mean_delta_e2000` – CIE dE2000 difference images as
+  shown in the supplemental of Dupuy et al. 2015 (per-material "CIE dE00" rows), computed
+  with ``colour-science`` after the conversion documented in :func:`to_lab`.
+* :func:`colorize_delta_e` – the fixed colour map used for every dE image of a report
+  (0 … :data:`DELTA_E_VMAX` mapped through matplotlib's ``inferno``; larger values saturate),
+  so that images of different materials and models are comparable.
+
+BRDF space (functions of two BRDFs, independent of rendering)
+-------------------------------------------------------------
+* :func:`cosine_weighted_relative_error` – defined and implemented here.
+* ``normalized_l2`` (Bagher, Soler, Holzschuch 2012 §6.3) and the compressive-weighted
+  objective of Bagher et al. 2016 (Eq. 7-12) are re-exported from
+  :mod:`brdffit.evaluation.l2` and :mod:`brdffit.evaluation.objective` when those modules
+  exist (attribute access raises ``AttributeError`` naming the missing module otherwise).
+
+Database summaries
+------------------
+* :func:`count_wins` – pairwise wins / ties / losses between models where a tie is a PSNR
+  difference within 2 dB, as Bagher et al. 2016 §5 report "beats … 308 times and ties it 85
+  times".
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Mapping, Sequence
+
+import numpy as np
+
+__all__ = [
+    "DELTA_E_VMAX", "DELTA_E_CMAP", "npf_tonemap", "foreground_mask", "rendered_psnr",
+    "to_lab", "delta_e2000_image", "mean_delta_e2000", "colorize_delta_e",
+    "cosine_weighted_relative_error", "count_wins", "brdf_metrics",
+    "normalized_l2", "compressive_objective",
+]
+
+#: Upper end of the fixed dE2000 colour scale (values above saturate).
+DELTA_E_VMAX = 10.0
+#: Matplotlib colour map of the dE2000 images.
+DELTA_E_CMAP = "inferno"
+
+# Names re-exported lazily from sibling modules written elsewhere in the project.
+_REEXPORTS = {
+    "normalized_l2": ("l2", ("normalized_l2",)),
+    "compressive_objective": ("objective", ("compressive_objective", "objective",
+                                            "compressive_weighted_error")),
+}
+
+
+def __getattr__(name):
+    if name in _REEXPORTS:
+        mod_name, candidates = _REEXPORTS[name]
+        try:
+            mod = importlib.import_module(f"{__package__}.{mod_name}")
+        except ModuleNotFoundError as exc:
+            raise AttributeError(f"{name} needs brdffit.evaluation.{mod_name}, which is not "
+                                 f"available: {exc}") from None
+        for cand in candidates:
+            if hasattr(mod, cand):
+                return getattr(mod, cand)
+        raise AttributeError(f"brdffit.evaluation.{mod_name} has none of {candidates}")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+# ------------------------------------------------------------------------------------------
+# helpers
+# ------------------------------------------------------------------------------------------
+def npf_tonemap(img, exposure: float = 0.02, gamma: float = 2.2) -> np.ndarray:
+    """Tone mapping of Bagher et al. 2016 §5: ``(1 - 2^(-exposure·x))^(1/gamma)``.
+
+    Negative and non-finite inputs are clamped to 0 first; output lies in [0, 1).
+    """
+    x = np.nan_to_num(np.asarray(img, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
+    x = np.maximum(x, 0.0)
+    return np.power(1.0 - np.exp2(-exposure * x), 1.0 / gamma)
+
+
+def _check_pair(reference, test, mask):
+    ref = np.asarray(reference, dtype=np.float64)
+    tst = np.asarray(test, dtype=np.float64)
+    if ref.ndim != 3 or ref.shape[-1] != 3:
+        raise ValueError(f"reference image: expected shape (H, W, 3), found {ref.shape}")
+    if tst.shape != ref.shape:
+        raise ValueError(f"test image: expected shape {ref.shape} (as the reference), "
+                         f"found {tst.shape}")
+    if mask is None:
+        m = np.ones(ref.shape[:2], dtype=bool)
+    else:
+        m = np.asarray(mask)
+        if m.ndim == 3:
+            m = m[..., 0]
+        if m.shape != ref.shape[:2]:
+            raise ValueError(f"foreground mask: expected shape {ref.shape[:2]}, found {m.shape}")
+        m = m.astype(bool)
+    if not m.any():
+        raise ValueError("foreground mask: expected at least one foreground pixel, found none")
+    return ref, tst, m
+
+
+def foreground_mask(image=None, alpha=None, threshold: float = 0.5) -> np.ndarray:
+    """Boolean foreground mask from an alpha/coverage channel (``alpha > threshold``).
+
+    With only an ``(H, W, 4)`` image, its 4th channel is used.
+    """
+    if alpha is None:
+        image = np.asarray(image)
+        if image.ndim != 3 or image.shape[-1] != 4:
+            raise ValueError(f"expected an (H, W, 4) image or an alpha channel, found {image.shape}")
+        alpha = image[..., 3]
+    return np.asarray(alpha) > threshold
+
+
+# ------------------------------------------------------------------------------------------
+# image metrics
+# ------------------------------------------------------------------------------------------
+def rendered_psnr(reference, test, mask=None) -> float:
+    """Rendered PSNR in dB, as defined by Bagher et al. 2016 §5.
+
+    ``PSNR = 10 log10(peak² / MSE)`` where MSE is the mean of ``(test - reference)²`` over
+    every RGB component of every foreground pixel (linear values, no tone mapping), and
+    ``peak`` is the maximum RGB component of the reference over the foreground. Not
+    symmetric (the peak comes from the reference). Returns ``inf`` for identical images.
+
+    Parameters
+    ----------
+    reference, test: (H, W, 3) linear images (the ground truth first).
+    mask: (H, W) boolean foreground mask (``None``: all pixels).
+    """
+    ref, tst, m = _check_pair(reference, test, mask)
+    r = ref[m]
+    t = tst[m]
+    peak = float(np.max(r))
+    if not np.isfinite(peak) or peak <= 0:
+        raise ValueError(f"reference foreground: expected a positive finite peak, found {peak}")
+    mse = float(np.mean((t - r) ** 2))
+    if not np.isfinite(mse):
+        raise ValueError("test image: expected finite values on the foreground, found NaN/inf")
+    if mse == 0.0:
+        return float("inf")
+    return float(10.0 * np.log10(peak * peak / mse))
+
+
+def to_lab(img, exposure: float = 0.02, gamma: float = 2.2, tonemap=None) -> np.ndarray:
+    """Linear rendering ``(H, W, 3)`` → CIE L*a*b* (D65) as it is displayed in the report.
+
+    Conversion (the same for every image, so dE values are comparable):
+
+    1. tone map with the operator of Bagher et al. 2016 §5 (``tonemap`` or
+       :func:`npf_tonemap` with ``exposure``/``gamma``) – this is exactly the PNG shown;
+    2. interpret the result as *encoded* sRGB (IEC 61966-2-1) and decode it with the sRGB
+       EOTF to linear sRGB;
+    3. linear sRGB → CIE XYZ (D65) → CIE L*a*b* with the D65 white point (colour-science).
+
+    The renderer's linear RGB is taken to be linear sRGB primaries (the MERL/RGL data and
+    Mitsuba's ``*_rgb`` variants use sRGB/Rec.709 primaries).
+    """
+    import colour
+
+    tm = tonemap if tonemap is not None else (lambda x: npf_tonemap(x, exposure, gamma))
+    encoded = np.clip(np.asarray(tm(np.asarray(img, dtype=np.float64)), dtype=np.float64), 0, 1)
+    linear = colour.cctf_decoding(encoded, function="sRGB")
+    xyz = colour.RGB_to_XYZ(linear, colour.RGB_COLOURSPACES["sRGB"], apply_cctf_decoding=False)
+    white = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
+    return colour.XYZ_to_Lab(xyz, white)
+
+
+def delta_e2000_image(reference, test, mask=None, exposure: float = 0.02, gamma: float = 2.2,
+                      tonemap=None) -> np.ndarray:
+    """Per-pixel CIE dE2000 (``colour.delta_E``, method ``CIE 2000``) between two renderings.
+
+    Both images go through :func:`to_lab`. Background pixels (outside ``mask``) are NaN.
+    Symmetric in its two image arguments.
+    """
+    import colour
+
+    ref, tst, m = _check_pair(reference, test, mask)
+    de = colour.delta_E(to_lab(ref, exposure, gamma, tonemap), to_lab(tst, exposure, gamma, tonemap),
+                        method="CIE 2000")
+    return np.where(m, de, np.nan)
+
+
+def mean_delta_e2000(reference, test, mask=None, **kw) -> float:
+    """Mean dE2000 over the foreground pixels (see :func:`delta_e2000_image`)."""
+    de = delta_e2000_image(reference, test, mask, **kw)
+    return float(np.nanmean(de))
+
+
+def colorize_delta_e(de, vmax: float = DELTA_E_VMAX, cmap: str = DELTA_E_CMAP,
+                     background=(0, 0, 0)) -> np.ndarray:
+    """Fixed colour map of a dE image → ``uint8`` ``(H, W, 3)``; NaN (background) → ``background``."""
+    from matplotlib import colormaps
+
+    de = np.asarray(de, dtype=np.float64)
+    x = np.clip(np.nan_to_num(de, nan=0.0) / vmax, 0.0, 1.0)
+    rgb = colormaps[cmap](x)[..., :3]
+    rgb = np.where(np.isnan(de)[..., None], np.asarray(background, float) / 255.0, rgb)
+    return np.round(rgb * 255).astype(np.uint8)
+
+
+# ------------------------------------------------------------------------------------------
+# BRDF-space metrics
+# ------------------------------------------------------------------------------------------
+def _sobol_pairs(n: int, seed: int):
+    from scipy.stats import qmc
+
+    m = max(1, int(np.ceil(np.log2(max(n, 2)))))
+    u = qmc.Sobol(d=4, scramble=True, seed=seed).random_base2(m)
+    u = np.clip(u, 1e-12, 1 - 1e-12)
+
+    def cos_hemi(a, b):
+        r = np.sqrt(a)
+        phi = 2 * np.pi * b
+        return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1 - a)], -1)
+
+    return cos_hemi(u[:, 0], u[:, 1]), cos_hemi(u[:, 2], u[:, 3])
+
+
+def cosine_weighted_relative_error(reference, test, n_samples: int = 1 << 17, seed: int = 0,
+                                   chunk: int = 1 << 15, per_channel: bool = False):
+    """Cosine-weighted relative L1 error of ``test`` against ``reference`` (two BRDFs).
+
+    Definition (this project's, not from the papers)::
+
+        E_rel = Σ_c ∫∫ |f_test,c(i, o) − f_ref,c(i, o)| cos θi cos θo dωi dωo
+                ─────────────────────────────────────────────────────────────
+                Σ_c ∫∫ |f_ref,c(i, o)| cos θi cos θo dωi dωo
+
+    over the product of upper hemispheres and the three RGB channels ``c``. The cosine
+    weights make it the relative error of reflected energy under uniform illumination
+    (numerator and denominator are both bounded by the albedo), so grazing samples – where
+    measured data and Neural-BRDF networks are least reliable – weigh little. 0 means
+    identical, 1 means an error as large as the reference itself (e.g. a black fit).
+
+    Both integrals are estimated with the *same* ``n_samples`` scrambled-Sobol pairs drawn
+    from the cosine-weighted hemisphere for ``i`` and ``o`` (density ``cos θi cos θo / π²``,
+    which cancels the weights), so the estimate is deterministic for a ``seed``. Works for
+    anisotropic BRDFs. ``per_channel=True`` returns the three per-channel ratios instead.
+    """
+    wi, wo = _sobol_pairs(n_samples, seed)
+    num = np.zeros(3)
+    den = np.zeros(3)
+    for s in range(0, wi.shape[0], chunk):
+        a, b = wi[s:s + chunk], wo[s:s + chunk]
+        fr = np.nan_to_num(np.asarray(reference.eval(a, b), dtype=np.float64))
+        ft = np.nan_to_num(np.asarray(test.eval(a, b), dtype=np.float64))
+        num += np.abs(ft - fr).sum(axis=0)
+        den += np.abs(fr).sum(axis=0)
+    if per_channel:
+        return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.inf)
+    if den.sum() <= 0:
+        raise ValueError("reference BRDF: expected a non-zero reflectance, found 0 everywhere")
+    return float(num.sum() / den.sum())
+
+
+def brdf_metrics(reference, test, n_samples: int = 1 << 16, seed: int = 0) -> dict:
+    """All available BRDF-space metrics of ``test`` against ``reference`` as a dict.
+
+    Keys: ``cos_rel_error`` always; ``normalized_l2`` and ``compressive_objective`` when the
+    modules implementing them are present and succeed (otherwise the value is ``None`` and
+    the reason is recorded under ``errors``).
+    """
+    out: dict = {"cos_rel_error": cosine_weighted_relative_error(reference, test, n_samples, seed)}
+    errors = {}
+    for key in ("normalized_l2", "compressive_objective"):
+        try:
+            fn = __getattr__(key)
+            out[key] = float(fn(reference, test))
+        except Exception as exc:  # noqa: BLE001 – optional metrics must not break a report
+            out[key] = None
+            errors[key] = f"{type(exc).__name__}: {exc}"
+    if errors:
+        out["errors"] = errors
+    return out
+
+
+# ------------------------------------------------------------------------------------------
+# database summaries
+# ------------------------------------------------------------------------------------------
+def count_wins(psnr: Mapping[str, Sequence[float]], tie_db: float = 2.0) -> dict:
+    """Pairwise wins, ties and losses between models over a set of renderings.
+
+    ``psnr`` maps model name → PSNR per rendering (same order for every model; NaN = missing,
+    skipped pairwise). Model ``a`` *beats* ``b`` on a rendering when
+    ``psnr_a > psnr_b + tie_db``; they *tie* when ``|psnr_a − psnr_b| <= tie_db`` (Bagher et
+    al. 2016 §5 use 2 dB). ``inf`` (an exact match) ties with ``inf``.
+
+    Returns ``{a: {b: {"wins": int, "ties": int, "losses": int, "n": int}}}`` for ``a != b``.
+    """
+    names = list(psnr)
+    arrs = {k: np.asarray(v, dtype=np.float64) for k, v in psnr.items()}
+    sizes = {a.shape for a in arrs.values()}
+    if len(sizes) > 1:
+        raise ValueError(f"expected the same number of renderings for every model, found {sizes}")
+    out: dict = {}
+    for a in names:
+        out[a] = {}
+        for b in names:
+            if a == b:
+                continue
+            x, y = arrs[a], arrs[b]
+            ok = ~(np.isnan(x) | np.isnan(y))
+            x, y = x[ok], y[ok]
+            both_inf = np.isinf(x) & np.isinf(y) & (np.sign(x) == np.sign(y))
+            with np.errstate(invalid="ignore"):
+                d = np.where(both_inf, 0.0, x - y)
+            out[a][b] = {"wins": int(np.sum(d > tie_db)), "ties": int(np.sum(np.abs(d) <= tie_db)),
+                         "losses": int(np.sum(d < -tie_db)), "n": int(x.size)}
+    return out
