@@ -1,0 +1,281 @@
+"""Comparison plots (matplotlib, Agg back-end), every PNG written atomically.
+
+* :func:`plot_lobes` – BRDF lobes in the incidence plane with the cube root applied, reference
+  against each fit, incidence 10°, 30°, 50°, 70° (Bagher, Soler, Holzschuch 2012 Fig. 9; the
+  "BRDF Lobes in the Incidence Plane (Cubic Root Applied)" rows of the Dupuy et al. 2015
+  supplemental). The plotted quantity is ``(f_r(i, o) cos θo)^(1/3)`` averaged over RGB
+  (the cosine-weighted lobe – the reflected radiance shape – is what those figures show;
+  documented choice since the papers do not state it).
+* :func:`plot_factors` – fitted microfacet factors of every fit that has them: Fresnel (R, G,
+  B) over θd, NDF ``D`` over θh (log scale), Smith ``G1`` over θ (Dupuy 2015 supplemental,
+  "Fitted Microfacet Functions"); and NPF tables ``D``, ``F``, ``G`` per colour channel
+  (Bagher, Snyder, Nowrouzezahrai 2016 Fig. 6).
+* :func:`plot_slices` – the backscattering slice (θd = 0, over θh) and the θh = 0 slice
+  (over θd), data against fits, log scale.
+
+Models are used through duck typing: a fit may expose ``distribution`` (``D(m)``, ``G1(w)``),
+``fresnel`` (``eval(cos θd)``), or NPF factor tables (see :func:`npf_tables`); what does not
+exist is not plotted.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from .._atomic import atomic_path
+
+__all__ = ["plot_lobes", "plot_factors", "plot_slices", "npf_tables", "has_factors",
+           "LOBE_INCIDENCES_DEG", "save_figure"]
+
+LOBE_INCIDENCES_DEG = (10.0, 30.0, 50.0, 70.0)
+_ANGLE_COLOURS = ("#1f77b4", "#2ca02c", "#ff7f0e", "#d62728")
+_MODEL_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
+                  "#7f7f7f", "#bcbd22", "#17becf")
+_RGB = ("#d62728", "#2ca02c", "#1f77b4")
+
+
+def _plt():
+    import matplotlib
+
+    if matplotlib.get_backend().lower() != "agg":
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(fig, path, dpi: int = 100) -> Path:
+    """Save a matplotlib figure as PNG atomically and close it."""
+    plt = _plt()
+    path = Path(path)
+    try:
+        with atomic_path(path, suffix=".png") as tmp:
+            fig.savefig(tmp, format="png", dpi=dpi)
+    finally:
+        plt.close(fig)
+    return path
+
+
+def _eval(brdf, wi, wo) -> np.ndarray:
+    f = np.asarray(brdf.eval(wi, wo), dtype=np.float64)
+    return np.maximum(np.nan_to_num(f, nan=0.0, posinf=0.0, neginf=0.0), 0.0)
+
+
+def _incidence_plane(theta_i_deg: float, n: int = 361):
+    """``wi`` at ``θi`` in the xz plane and ``wo`` sweeping the plane, θo ∈ [-90°, 90°]."""
+    ti = np.radians(theta_i_deg)
+    wi = np.array([np.sin(ti), 0.0, np.cos(ti)])
+    to = np.linspace(-np.pi / 2, np.pi / 2, n)
+    wo = np.stack([np.sin(to), np.zeros_like(to), np.cos(to)], -1)
+    return np.broadcast_to(wi, wo.shape), wo, to
+
+
+def lobe_curve(brdf, theta_i_deg: float, n: int = 361):
+    """Cube-root lobe ``(f_r cos θo)^(1/3)`` (RGB mean) in the incidence plane as ``(x, z)``.
+
+    ``x = r sin θo``, ``z = r cos θo`` with ``θo`` signed (negative on the mirror side of
+    ``wi``, which sits at positive x).
+    """
+    wi, wo, to = _incidence_plane(theta_i_deg, n)
+    f = _eval(brdf, wi, wo).mean(axis=-1) * np.maximum(np.cos(to), 0.0)
+    r = np.cbrt(f)
+    return r * np.sin(to), r * np.cos(to)
+
+
+def plot_lobes(reference, fits: Mapping[str, object], path, incidences=LOBE_INCIDENCES_DEG,
+               title: str | None = None) -> Path:
+    """One panel per fit: cube-root lobes of the reference (dashed black) and the fit
+    (coloured by incidence angle) in the incidence plane. See the module docstring."""
+    plt = _plt()
+    names = list(fits)
+    ncol = max(1, len(names))
+    fig, axes = plt.subplots(1, ncol, figsize=(3.2 * ncol, 2.2), squeeze=False)
+    ref_curves = [lobe_curve(reference, t) for t in incidences]
+    rmax = max(float(np.max(np.hypot(x, z))) for x, z in ref_curves) or 1.0
+    for ax, name in zip(axes[0], names):
+        for t, col, (xr, zr) in zip(incidences, _ANGLE_COLOURS, ref_curves):
+            ax.plot(xr, zr, "--", color="k", lw=0.9)
+            xf, zf = lobe_curve(fits[name], t)
+            ax.plot(xf, zf, "-", color=col, lw=1.2, label=f"{t:g}°")
+            ti = np.radians(t)
+            ax.plot([0, 0.15 * rmax * np.sin(ti)], [0, 0.15 * rmax * np.cos(ti)], ":", color=col,
+                    lw=0.8)
+        ax.set_aspect("equal")
+        ax.set_xlim(-1.05 * rmax, 1.05 * rmax)
+        ax.set_ylim(0, 1.05 * rmax)
+        ax.set_title(name, fontsize=9)
+        ax.tick_params(labelsize=6)
+    axes[0][0].legend(fontsize=6, loc="upper right", title="θi (ref dashed)", title_fontsize=6)
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+# ------------------------------------------------------------------------------------------
+# factors
+# ------------------------------------------------------------------------------------------
+def npf_tables(model) -> dict[str, np.ndarray] | None:
+    """NPF factor tables ``{"D": (n, 3), "F": (n, 3), "G": (n, 3)}`` of a model, or ``None``.
+
+    Looks, in order, for a ``factor_tables()`` / ``factors()`` method returning a dict, or
+    attributes ``D_table``/``F_table``/``G_table`` or ``d_table``/``f_table``/``g_table``.
+    Tables may be ``(n,)`` or ``(n, 3)``; they are sampled uniformly over their angle range
+    (θh, θd, θ in [0, π/2]) unless the dict has ``theta_D``/``theta_F``/``theta_G``.
+    """
+    for meth in ("factor_tables", "factors"):
+        fn = getattr(model, meth, None)
+        if callable(fn):
+            try:
+                tabs = fn()
+            except Exception:  # noqa: BLE001
+                tabs = None
+            if isinstance(tabs, Mapping) and any(k in tabs for k in "DFG"):
+                return {k: np.asarray(v, float) for k, v in tabs.items()}
+    found = {}
+    for k in "DFG":
+        for attr in (f"{k}_table", f"{k.lower()}_table"):
+            v = getattr(model, attr, None)
+            if v is not None and not callable(v):
+                found[k] = np.asarray(v, float)
+                break
+    if found:
+        return found
+    return None
+
+
+def has_factors(model) -> bool:
+    """True when a model exposes anything :func:`plot_factors` can draw."""
+    return (getattr(model, "distribution", None) is not None
+            or getattr(model, "fresnel", None) is not None or npf_tables(model) is not None)
+
+
+def _angles(n):
+    return np.linspace(0.0, np.pi / 2, n)
+
+
+def plot_factors(fits: Mapping[str, object], path, n: int = 200, title: str | None = None):
+    """Fresnel (R, G, B) over θd, D over θh and Smith G1 over θ for every fit that has them,
+    plus one row of NPF D/F/G per channel for each NPF-like fit. Returns the path, or
+    ``None`` when no fit exposes any factor (no file is written then)."""
+    plt = _plt()
+    micro = {k: m for k, m in fits.items() if getattr(m, "distribution", None) is not None
+             or getattr(m, "fresnel", None) is not None}
+    npf = {k: t for k, t in ((k, npf_tables(m)) for k, m in fits.items()) if t is not None}
+    nrows = (1 if micro else 0) + len(npf)
+    if nrows == 0:
+        return None
+    fig, axes = plt.subplots(nrows, 3, figsize=(10, 2.6 * nrows), squeeze=False)
+    th = _angles(n)
+    row = 0
+    if micro:
+        axF, axD, axG = axes[0]
+        m = np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], -1)
+        styles = ("-", "--", ":", "-.")
+        for k, (name, model) in enumerate(micro.items()):
+            col = _MODEL_COLOURS[k % len(_MODEL_COLOURS)]
+            ls = styles[k % len(styles)]
+            fr = getattr(model, "fresnel", None)
+            if fr is not None:
+                try:
+                    F = np.asarray(fr.eval(np.cos(th)), float).reshape(n, -1)
+                    for c in range(min(3, F.shape[1])):
+                        axF.plot(np.degrees(th), F[:, c], ls, color=_RGB[c], lw=1,
+                                 label=name if c == 0 else None)
+                except Exception:  # noqa: BLE001 – a factor that cannot be evaluated is skipped
+                    pass
+            dist = getattr(model, "distribution", None)
+            if dist is not None:
+                try:
+                    D = np.asarray(dist.D(m), float)
+                    axD.semilogy(np.degrees(th), np.maximum(D, 1e-8), ls, color=col, lw=1, label=name)
+                except Exception:  # noqa: BLE001
+                    pass
+                try:
+                    G = np.asarray(dist.G1(m), float)
+                    axG.plot(np.degrees(th), G, ls, color=col, lw=1, label=name)
+                except Exception:  # noqa: BLE001
+                    pass
+        axF.set(title="Fresnel (R, G, B)", xlabel="θd (°)")
+        axD.set(title="NDF D", xlabel="θh (°)")
+        axG.set(title="Smith G1", xlabel="θ (°)", ylim=(0, 1.05))
+        for ax in axes[0]:
+            if ax.get_legend_handles_labels()[0]:
+                ax.legend(fontsize=6)
+        row = 1
+    for name, tabs in npf.items():
+        for j, (key, label) in enumerate((("D", "θh"), ("F", "θd"), ("G", "θ"))):
+            ax = axes[row][j]
+            tab = tabs.get(key)
+            if tab is None:
+                ax.set_axis_off()
+                continue
+            tab = tab.reshape(tab.shape[0], -1)
+            x = np.asarray(tabs.get(f"theta_{key}", _angles(tab.shape[0])), float)
+            for c in range(min(3, tab.shape[1])):
+                col = _RGB[c] if tab.shape[1] > 1 else "k"
+                if key == "D":
+                    ax.semilogy(np.degrees(x), np.maximum(tab[:, c], 1e-8), color=col, lw=1)
+                else:
+                    ax.plot(np.degrees(x), tab[:, c], color=col, lw=1)
+            ax.set(title=f"{name}: {key} per channel", xlabel=f"{label} (°)")
+        row += 1
+    for ax in axes.ravel():
+        ax.tick_params(labelsize=7)
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+# ------------------------------------------------------------------------------------------
+# slices
+# ------------------------------------------------------------------------------------------
+def _eval_hd(brdf, theta_h, theta_d, phi_d):
+    fn = getattr(brdf, "eval_hd", None)
+    if callable(fn):
+        try:
+            return np.maximum(np.nan_to_num(np.asarray(fn(theta_h, theta_d, phi_d), float)), 0.0)
+        except NotImplementedError:
+            pass
+    from ..geometry import half_diff_to_io
+
+    wi, wo = half_diff_to_io(theta_h, np.zeros_like(theta_h), theta_d, phi_d)
+    return _eval(brdf, wi, wo)
+
+
+def slice_values(brdf, which: str, n: int = 180) -> tuple[np.ndarray, np.ndarray]:
+    """``(angles, f (n, 3))`` on the backscattering slice (``which="backscatter"``: θd = 0,
+    over θh) or the ``"theta_h0"`` slice (θh = 0, over θd, φd = π/2)."""
+    t = np.linspace(0.0, np.radians(89.0), n)
+    z = np.zeros_like(t)
+    if which == "backscatter":
+        return t, _eval_hd(brdf, t, z, z)
+    if which == "theta_h0":
+        return t, _eval_hd(brdf, z, t, np.full_like(t, np.pi / 2))
+    raise ValueError(f"slice: expected 'backscatter' or 'theta_h0', found {which!r}")
+
+
+def plot_slices(reference, fits: Mapping[str, object], path, title: str | None = None) -> Path:
+    """Backscattering (θd = 0) and θh = 0 slices, data (black) vs fits, log scale, one row per
+    RGB channel mean (left: over θh, right: over θd)."""
+    plt = _plt()
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2), squeeze=False)
+    for ax, which, xl, tt in ((axes[0][0], "backscatter", "θh (°)", "backscattering θd = 0"),
+                              (axes[0][1], "theta_h0", "θd (°)", "θh = 0")):
+        t, f = slice_values(reference, which)
+        ax.semilogy(np.degrees(t), np.maximum(f.mean(-1), 1e-6), "k-", lw=2, label="data")
+        for k, (name, model) in enumerate(fits.items()):
+            _, g = slice_values(model, which)
+            ax.semilogy(np.degrees(t), np.maximum(g.mean(-1), 1e-6), "-",
+                        color=_MODEL_COLOURS[k % len(_MODEL_COLOURS)], lw=1, label=name)
+        ax.set(title=tt + " (RGB mean)", xlabel=xl, ylabel="f_r (1/sr)")
+        ax.tick_params(labelsize=7)
+    axes[0][1].legend(fontsize=6)
+    if title:
+        fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return save_figure(fig, path)

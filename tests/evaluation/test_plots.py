@@ -1,0 +1,89 @@
+"""Tests of brdffit.evaluation.plots: files are produced, lobes point the right way."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from brdffit.evaluation import plots
+from tests.evaluation.test_metrics import Lambert, Phongish
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+class FakeDist:
+    """Beckmann-like D and a simple G1 (duck-typed ``distribution``)."""
+
+    def __init__(self, a):
+        self.a = a
+
+    def D(self, m):
+        c = np.clip(m[..., 2], 1e-6, 1)
+        t2 = (1 - c * c) / (c * c)
+        return np.exp(-t2 / self.a**2) / (np.pi * self.a**2 * c**4)
+
+    def G1(self, w):
+        return np.clip(w[..., 2], 0, 1) ** 0.1
+
+
+class FakeFresnel:
+    def eval(self, c):
+        c = np.asarray(c, float)[..., None]
+        return np.array([0.9, 0.6, 0.3]) + (1 - np.array([0.9, 0.6, 0.3])) * (1 - c) ** 5
+
+
+class FakeMicrofacet(Phongish):
+    def __init__(self):
+        super().__init__(30)
+        self.distribution = FakeDist(0.2)
+        self.fresnel = FakeFresnel()
+
+
+class FakeNPF(Lambert):
+    def __init__(self):
+        super().__init__([0.3, 0.3, 0.3])
+        t = np.linspace(0, np.pi / 2, 90)
+        self._tabs = {"D": np.exp(-t[:, None] * [3, 4, 5]), "F": np.ones((90, 3)) * 0.5,
+                      "G": np.cos(t)}
+
+    def factor_tables(self):
+        return self._tabs
+
+
+def _is_png(p):
+    return p.is_file() and p.read_bytes()[:8] == PNG_MAGIC
+
+
+def test_lobe_peaks_in_mirror_direction():
+    for ti in (10.0, 30.0, 50.0):
+        x, z = plots.lobe_curve(Phongish(50), ti)
+        k = np.argmax(np.hypot(x, z))
+        theta_o = np.degrees(np.arctan2(x[k], z[k]))
+        assert theta_o == pytest.approx(-ti, abs=2.0)
+    # a Lambertian lobe is a (cube-rooted) cosine: symmetric about the normal
+    x, z = plots.lobe_curve(Lambert([0.5] * 3), 40.0)
+    np.testing.assert_allclose(x, -x[::-1], atol=1e-12)
+
+
+def test_plot_files_written(tmp_path):
+    ref = Phongish(40)
+    fits = {"glossy": FakeMicrofacet(), "lambert": Lambert([0.4, 0.3, 0.2]), "npf": FakeNPF()}
+    p1 = plots.plot_lobes(ref, fits, tmp_path / "lobes.png")
+    p2 = plots.plot_factors(fits, tmp_path / "factors.png")
+    p3 = plots.plot_slices(ref, fits, tmp_path / "slices.png")
+    assert all(_is_png(p) for p in (p1, p2, p3))
+    assert not list(tmp_path.glob(".*"))  # no temporary files left behind
+
+
+def test_plot_factors_none_without_factors(tmp_path):
+    assert plots.plot_factors({"lambert": Lambert([0.5] * 3)}, tmp_path / "f.png") is None
+    assert not (tmp_path / "f.png").exists()
+    assert plots.npf_tables(FakeNPF())["D"].shape == (90, 3)
+    assert plots.has_factors(FakeMicrofacet()) and not plots.has_factors(Lambert([1] * 3))
+
+
+def test_slices_values():
+    t, f = plots.slice_values(Lambert([0.5, 0.5, 0.5]), "backscatter")
+    np.testing.assert_allclose(f, 0.5 / np.pi)
+    with pytest.raises(ValueError):
+        plots.slice_values(Lambert([0.5] * 3), "nope")
