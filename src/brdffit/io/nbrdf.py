@@ -1,0 +1,265 @@
+"""Neural-BRDF networks (Sztrajman, Rainer, Ritschel, Weyrich, CGF 2021) evaluated with NumPy.
+
+Each network is a Keras ``Sequential`` model saved as HDF5 weights (``.h5``), with an optional
+``.json`` sidecar holding the Keras model description (layers, units, activations). The
+published networks are ``Dense(6→21, ReLU) → Dense(21→21, ReLU) → Dense(21→3, linear)``
+followed by a ``Lambda`` computing ``exp(y) − 1``. Weights live at
+``dense_k/dense_k/kernel:0`` (shape in×out) and ``dense_k/dense_k/bias:0``.
+
+The input is the pair of Rusinkiewicz half and difference vectors with φh = 0,
+``(sin θh, 0, cos θh, sin θd cos φd, sin θd sin φd, cos θd)``; the output is the RGB BRDF
+value (not cosine-weighted) in MERL units after colour scaling. Outputs are clamped at 0
+(the networks can return slightly negative values where the BRDF is near zero).
+
+Collections (``merl_nbrdf.zip``…) are read in memory, never extracted to disk.
+"""
+
+from __future__ import annotations
+
+import difflib
+import io
+import json
+import zipfile
+from pathlib import Path, PurePosixPath
+
+import numpy as np
+
+from ..brdf import IsotropicBRDF
+from ..errors import BRDFFormatError
+
+__all__ = ["NBRDF", "read_nbrdf", "read_nbrdf_collection", "list_materials"]
+
+_ACTIVATIONS = ("relu", "linear")
+_DEFAULT_ACTIVATIONS = ["relu", "relu", "linear"]
+_CHUNK = 1 << 16
+
+
+class NBRDF(IsotropicBRDF):
+    """An isotropic BRDF represented by a Neural-BRDF multilayer perceptron.
+
+    Parameters
+    ----------
+    layers:
+        ``[(kernel (in, out), bias (out,), activation), ...]`` with activations ``"relu"`` or
+        ``"linear"``; the first layer takes 6 inputs, the last returns 3 outputs.
+    precision:
+        ``"float32"`` (default, the precision the networks were trained in) or ``"float64"``
+        for the matrix products.
+    """
+
+    format = "nbrdf"
+
+    def __init__(self, layers, *, name: str = "nbrdf", source: str | None = None,
+                 precision: str = "float32"):
+        if precision not in ("float32", "float64"):
+            raise ValueError(f"precision must be 'float32' or 'float64', got {precision!r}")
+        checked = []
+        n_in = 6
+        for k, (kernel, bias, act) in enumerate(layers):
+            kernel = np.asarray(kernel, dtype=np.float64)
+            bias = np.asarray(bias, dtype=np.float64)
+            if kernel.ndim != 2 or kernel.shape[0] != n_in or bias.shape != kernel.shape[1:]:
+                raise BRDFFormatError(source, f"layer {k + 1}: expected kernel ({n_in}, n) and bias "
+                                              f"(n,), found {kernel.shape} and {bias.shape}")
+            if act not in _ACTIVATIONS:
+                raise BRDFFormatError(source, f"layer {k + 1}: expected activation in "
+                                              f"{_ACTIVATIONS}, found {act!r}")
+            if not (np.isfinite(kernel).all() and np.isfinite(bias).all()):
+                raise BRDFFormatError(source, f"layer {k + 1}: expected finite weights, found NaN/inf")
+            checked.append((kernel, bias, act))
+            n_in = kernel.shape[1]
+        if not checked or n_in != 3:
+            raise BRDFFormatError(source, f"expected a network with 6 inputs and 3 outputs, "
+                                          f"found {len(checked)} layers ending with {n_in} outputs")
+        self.layers = checked
+        self.precision = precision
+        self.name = name
+        self.source = source
+
+    @property
+    def n_parameters(self) -> int:
+        return int(sum(k.size + b.size for k, b, _ in self.layers))
+
+    def _forward(self, x: np.ndarray) -> np.ndarray:
+        dtype = np.float32 if self.precision == "float32" else np.float64
+        cache = getattr(self, "_cast", None)
+        if cache is None or cache[0] != dtype:
+            cache = (dtype, [(k.astype(dtype), b.astype(dtype), a) for k, b, a in self.layers])
+            self._cast = cache
+        h = x.astype(dtype, copy=False)
+        for kernel, bias, act in cache[1]:
+            h = h @ kernel
+            h += bias
+            if act == "relu":
+                np.maximum(h, 0, out=h)
+        return h
+
+    def eval_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
+        """BRDF at Rusinkiewicz coordinates (radians): ``max(exp(MLP(x)) − 1, 0)``, ``(..., 3)``."""
+        th, td, pd = np.broadcast_arrays(np.asarray(theta_h, np.float64),
+                                         np.asarray(theta_d, np.float64),
+                                         np.asarray(phi_d, np.float64))
+        shape = th.shape
+        th, td, pd = th.ravel(), td.ravel(), pd.ravel()
+        out = np.empty((th.size, 3))
+        for s in range(0, th.size, _CHUNK):
+            sl = slice(s, s + _CHUNK)
+            st, sd = np.sin(th[sl]), np.sin(td[sl])
+            x = np.empty((st.size, 6))
+            x[:, 0] = st
+            x[:, 1] = 0.0
+            x[:, 2] = np.cos(th[sl])
+            x[:, 3] = sd * np.cos(pd[sl])
+            x[:, 4] = sd * np.sin(pd[sl])
+            x[:, 5] = np.cos(td[sl])
+            y = self._forward(x).astype(np.float64)
+            out[sl] = np.maximum(np.expm1(y), 0.0)
+        out[~np.isfinite(out)] = 0.0
+        return out.reshape(shape + (3,))
+
+    def describe(self) -> dict:
+        d = super().describe()
+        d.update(format="nbrdf", n_parameters=self.n_parameters, precision=self.precision,
+                 layers=[[int(k.shape[0]), int(k.shape[1]), a] for k, _, a in self.layers])
+        return d
+
+
+# -- parsing ------------------------------------------------------------------------------
+def _activations_from_json(text: bytes | str, where) -> list[str]:
+    """Activations of the Dense layers of a Keras model description; checks the final Lambda."""
+    try:
+        model = json.loads(text)
+        layers = model["config"]["layers"] if isinstance(model["config"], dict) else model["config"]
+    except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError) as exc:
+        raise BRDFFormatError(where, f"expected a Keras model description (JSON), found: {exc}")
+    acts = []
+    for layer in layers:
+        cls = layer.get("class_name")
+        if cls == "Dense":
+            acts.append(layer.get("config", {}).get("activation", "linear"))
+        elif cls not in ("Lambda", "InputLayer"):
+            raise BRDFFormatError(where, f"expected Dense layers and a final Lambda, found a "
+                                         f"{cls!r} layer")
+    return acts
+
+
+def _layers_from_h5(fileobj, where) -> list[tuple[np.ndarray, np.ndarray]]:
+    import h5py
+
+    try:
+        with h5py.File(fileobj, "r") as f:
+            root = f["model_weights"] if "model_weights" in f else f
+            names = [n.decode() if isinstance(n, bytes) else str(n)
+                     for n in root.attrs.get("layer_names", [])]
+            if not names:
+                names = sorted((k for k in root.keys() if k.startswith("dense")),
+                               key=lambda k: (len(k), k))
+            layers = []
+            for name in names:
+                group = root[name]
+                wnames = [n.decode() if isinstance(n, bytes) else str(n)
+                          for n in group.attrs.get("weight_names", [])]
+                if not wnames:
+                    if "kernel:0" in group.get(name, {}):
+                        wnames = [f"{name}/kernel:0", f"{name}/bias:0"]
+                    else:
+                        continue  # weightless layer (the exp(y)-1 Lambda)
+                kernel = [w for w in wnames if w.endswith("kernel:0")]
+                bias = [w for w in wnames if w.endswith("bias:0")]
+                if len(kernel) != 1 or len(bias) != 1:
+                    raise BRDFFormatError(where, f"layer {name!r}: expected one kernel and one bias, "
+                                                 f"found weights {wnames}")
+                k = np.asarray(group[kernel[0]][()])
+                b = np.asarray(group[bias[0]][()])
+                if k.dtype.kind != "f" or b.dtype.kind != "f":
+                    raise BRDFFormatError(where, f"layer {name!r}: expected float weights, found "
+                                                 f"{k.dtype} and {b.dtype}")
+                layers.append((k, b))
+    except BRDFFormatError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError) as exc:
+        raise BRDFFormatError(where, f"expected Keras HDF5 weights, could not read them: {exc}")
+    if not layers:
+        raise BRDFFormatError(where, "expected Dense layer weights in the HDF5 file, found none")
+    return layers
+
+
+def _build(layers, acts, *, name, source, precision) -> NBRDF:
+    if acts is None:
+        acts = _DEFAULT_ACTIVATIONS if len(layers) == 3 else ["relu"] * (len(layers) - 1) + ["linear"]
+    if len(acts) != len(layers):
+        raise BRDFFormatError(source, f"expected {len(acts)} Dense layers (from the JSON sidecar), "
+                                      f"found {len(layers)} in the weights")
+    return NBRDF([(k, b, a) for (k, b), a in zip(layers, acts)], name=name, source=source,
+                 precision=precision)
+
+
+def read_nbrdf(path, *, precision: str = "float32") -> NBRDF:
+    """Read a Neural-BRDF network from an ``.h5`` file (with its ``.json`` sidecar if present).
+
+    The sidecar, when next to the weights, supplies the layers' activations and is checked
+    against the weights; without it the published architecture (ReLU, ReLU, linear) is used.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise BRDFFormatError(path, "expected a Neural-BRDF .h5 file, found no such file")
+    layers = _layers_from_h5(path, path)
+    sidecar = path.with_suffix(".json")
+    acts = _activations_from_json(sidecar.read_bytes(), sidecar) if sidecar.is_file() else None
+    return _build(layers, acts, name=path.stem, source=str(path), precision=precision)
+
+
+def _open_zip(zip_path) -> zipfile.ZipFile:
+    zip_path = Path(zip_path)
+    if not zip_path.is_file():
+        raise BRDFFormatError(zip_path, "expected a Neural-BRDF .zip collection, found no such file")
+    try:
+        return zipfile.ZipFile(zip_path)
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise BRDFFormatError(zip_path, f"expected a .zip collection, found: {exc}")
+
+
+def _members(zf: zipfile.ZipFile) -> dict[str, str]:
+    out = {}
+    for n in zf.namelist():
+        p = PurePosixPath(n)
+        if p.suffix == ".h5" and "__MACOSX" not in p.parts:
+            out.setdefault(p.stem, n)
+    return out
+
+
+def list_materials(zip_path) -> list[str]:
+    """Sorted material names (``.h5`` members, without folder or suffix) of a collection."""
+    with _open_zip(zip_path) as zf:
+        return sorted(_members(zf))
+
+
+def read_nbrdf_collection(zip_path, material: str, *, precision: str = "float32") -> NBRDF:
+    """Read one network of a ``.zip`` collection in memory by material name.
+
+    ``material`` may be the bare name (``gold-metallic-paint``), or carry the folder and/or the
+    ``.h5`` suffix. An unknown name raises :class:`~brdffit.errors.BRDFFormatError` listing
+    close matches.
+    """
+    zip_path = Path(zip_path)
+    key = PurePosixPath(str(material)).name
+    if key.endswith(".h5"):
+        key = key[:-3]
+    with _open_zip(zip_path) as zf:
+        members = _members(zf)
+        if key not in members:
+            close = difflib.get_close_matches(key, list(members), n=5, cutoff=0.5)
+            hint = f"; close matches: {', '.join(close)}" if close else ""
+            raise BRDFFormatError(zip_path, f"expected a material of this collection "
+                                            f"({len(members)} materials), found no {key!r}{hint}")
+        h5name = members[key]
+        where = f"{zip_path}:{key}"
+        try:
+            blob = zf.read(h5name)
+            js = h5name[:-3] + ".json"
+            sidecar = zf.read(js) if js in zf.namelist() else None
+        except (zipfile.BadZipFile, OSError, EOFError) as exc:
+            raise BRDFFormatError(zip_path, f"could not read member {h5name!r}: {exc}")
+    layers = _layers_from_h5(io.BytesIO(blob), where)
+    acts = _activations_from_json(sidecar, where) if sidecar is not None else None
+    return _build(layers, acts, name=key, source=where, precision=precision)
