@@ -1,0 +1,477 @@
+"""RGL material database ``.bsdf`` files (Dupuy & Jakob 2018), evaluated like Mitsuba 3.
+
+Dupuy & Jakob, *An Adaptive Parameterization for Efficient Material Acquisition and
+Rendering*, ACM TOG 37(6) (SIGGRAPH Asia 2018). The files are Mitsuba tensor files
+(:mod:`brdffit.io.tensorfile`) holding
+
+``theta_i`` (Nθ,), ``phi_i`` (Nφ,)
+    The incident directions at which the material was measured (radians; float32).
+``ndf`` (J, K), ``sigma`` (J, K)
+    The microfacet distribution D(ωm) recovered by the acquisition's power iteration and the
+    projected area σ(ω) = ∫ D(ωm) max(0, ω·ωm) dωm, on the grid of :meth:`RGLBRDF.ndf_table`.
+``vndf`` (Nφ, Nθ, H, W)
+    The visible-normal distribution per incident direction, the warp that maps the unit
+    square to half vectors (``Marginal2D`` of Mitsuba, conditioned on (φi, θi)).
+``luminance`` (Nφ, Nθ, h, w), ``rgb`` (Nφ, Nθ, 3, h, w) (or ``spectra`` + ``wavelengths``)
+    The luminance and the RGB values of the reflectance in the *warped* (sample-space) domain.
+``jacobian`` (1,) uint8
+    When set, the value is multiplied by D(ωm) / (4 σ(ωi)) (see :meth:`RGLBRDF.eval`).
+``description`` str, plus ``version`` and ``valid`` (a packed bit mask, unused by Mitsuba).
+
+Evaluation reproduces Mitsuba 3's ``measured`` BSDF plugin (``src/bsdfs/measured.cpp``,
+``Measured::eval``) and its continuous ``Marginal2D`` warps (``include/mitsuba/core/
+distr_2d.h``, ``Marginal2D<Float, Dim, true>``: constructor, ``invert_continuous``,
+``eval``, ``interpolate_weights`` with ``math::find_interval``) in vectorised NumPy float64
+(Mitsuba computes in float32: the two agree to ~1e-5 relative).
+
+Direction convention. Mitsuba's ``eval(si.wi, wo)`` conditions its tables on ``si.wi`` (the
+direction towards the viewer: light leaves the surface along it) and returns the BSDF times
+the cosine of ``wo`` (the direction towards the light). brdffit's ``eval(wi, wo)`` has ``wi``
+towards the light and ``wo`` towards the viewer and returns f_r alone, so
+
+``RGLBRDF.eval(wi, wo) = Measured.eval(si.wi = wo, wo = wi) / cos θ(wi)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..brdf import BRDF, IsotropicBRDF, _as_dirs
+from ..errors import BRDFFormatError
+from .tensorfile import read_tensor_file
+
+__all__ = ["RGLBRDF", "IsotropicRGLBRDF", "read_rgl", "AngularTable",
+           "theta_to_u", "u_to_theta", "phi_to_u", "u_to_phi", "elevation"]
+
+_CHUNK = 1 << 17
+
+
+# ------------------------------------------------------------------ angular parameterisation
+def theta_to_u(theta):
+    """Mitsuba ``Measured::theta2u``: u = sqrt(θ · 2/π) (square-root mapping of [0, π/2])."""
+    return np.sqrt(np.asarray(theta, np.float64) * (2.0 / np.pi))
+
+
+def u_to_theta(u):
+    """Mitsuba ``Measured::u2theta``: θ = u² · π/2."""
+    return np.square(np.asarray(u, np.float64)) * (np.pi / 2.0)
+
+
+def phi_to_u(phi):
+    """Mitsuba ``Measured::phi2u``: u = (φ + π) / 2π (φ in [-π, π] -> [0, 1])."""
+    return (np.asarray(phi, np.float64) + np.pi) * (0.5 / np.pi)
+
+
+def u_to_phi(u):
+    """Mitsuba ``Measured::u2phi``: φ = (2u − 1) π."""
+    return (2.0 * np.asarray(u, np.float64) - 1.0) * np.pi
+
+
+def elevation(d):
+    """θ of unit vectors, computed as Mitsuba's ``Measured::elevation`` (stable near 0):
+    2 asin(|d − n| / 2)."""
+    d = np.asarray(d, np.float64)
+    dist = np.sqrt(d[..., 0] ** 2 + d[..., 1] ** 2 + (d[..., 2] - 1.0) ** 2)
+    return 2.0 * np.arcsin(np.clip(0.5 * dist, -1.0, 1.0))
+
+
+# ------------------------------------------------------------------ Marginal2D (continuous)
+class _Marginal2D:
+    """NumPy port of Mitsuba 3's ``Marginal2D<Float, Dimension, Continuous=true>``.
+
+    ``data`` has shape ``param_res + (H, W)``; x (fastest, width W) and y (height H) span
+    [0, 1] with W−1 and H−1 bilinear patches. Parameter dimensions are interpolated linearly
+    (``Distribution2D::interpolate_weights``: interval by ``find_interval``, weight clamped to
+    [0, 1]; a parameter of resolution 1 is ignored). With ``normalize`` every slice is divided
+    by the trapezoidal integral of its interpolant (its marginal CDF's last entry); the
+    conditional CDF (H rows of W−1) and marginal CDF (H−1) are then built per slice as in the
+    constructor of ``Marginal2D``. Only ``eval`` and ``invert`` (``invert_continuous``) are
+    needed by ``Measured::eval``.
+    """
+
+    def __init__(self, data, param_values=(), normalize=True, enable_sampling=True):
+        data = np.asarray(data, np.float64)
+        nparams = len(param_values)
+        self.param_values = [np.asarray(p, np.float64).ravel() for p in param_values]
+        self.param_res = tuple(int(p.size) for p in self.param_values)
+        if data.shape[:nparams] != self.param_res or data.ndim != nparams + 2:
+            raise ValueError(f"data shape {data.shape} does not match params {self.param_res} + (H, W)")
+        self.h, self.w = data.shape[-2:]
+        if self.h < 2 or self.w < 2:
+            raise ValueError("Marginal2D needs a resolution >= 2 in both axes")
+        # strides in units of slices, 0 for parameters of resolution 1 (Distribution2D ctor)
+        strides, slices = [0] * nparams, 1
+        for i in range(nparams - 1, -1, -1):
+            strides[i] = slices if self.param_res[i] > 1 else 0
+            slices *= self.param_res[i]
+        self.strides, self.slices = strides, slices
+        d = data.reshape(slices, self.h, self.w)
+        self.n_data = self.h * self.w
+        if enable_sampling:
+            sx, sy = 0.5 / (self.w - 1), 0.5 / (self.h - 1)
+            cond = np.cumsum(sx * (d[:, :, :-1] + d[:, :, 1:]), axis=2)      # (S, H, W-1)
+            row_tot = cond[:, :, -1]                                            # (S, H)
+            marg = np.cumsum(sy * (row_tot[:, :-1] + row_tot[:, 1:]), axis=1)  # (S, H-1)
+            norm = 1.0 / marg[:, -1] if normalize else np.ones(slices)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                self.cond = (cond * norm[:, None, None]).ravel()
+                self.marg = (marg * norm[:, None]).ravel()
+                self.data = (d * norm[:, None, None]).ravel()
+            self.n_cond = self.h * (self.w - 1)
+            self.n_marg = self.h - 1
+        else:
+            if normalize:
+                tot = (d[:, :-1, :-1] + d[:, :-1, 1:] + d[:, 1:, :-1] + d[:, 1:, 1:]).sum(axis=(1, 2))
+                d = d / (tot * (0.5 / (self.w - 1)) * (0.5 / (self.h - 1)))[:, None, None]
+            self.data = d.ravel()
+            self.cond = self.marg = None
+
+    # corners of the parameter cell: list of (slice index array, weight array)
+    def corners(self, params):
+        n = np.shape(params[0])[0] if params else 1
+        out = [(np.zeros(n, np.int64), np.ones(n))]
+        for dim, p in enumerate(params):
+            if self.param_res[dim] == 1:
+                continue
+            vals = self.param_values[dim]
+            idx = np.clip(np.searchsorted(vals, p, side="left"), 1, vals.size - 1) - 1
+            p0, p1 = vals[idx], vals[idx + 1]
+            w1 = np.clip((p - p0) / (p1 - p0), 0.0, 1.0)
+            base = self.strides[dim] * idx
+            new = []
+            for s, w in out:
+                new.append((s + base, w * (1.0 - w1)))
+                new.append((s + base + self.strides[dim], w * w1))
+            out = new
+        return out
+
+    @staticmethod
+    def _lookup(table, size, corners, index):
+        """Mitsuba ``Marginal2D::lookup``: multilinear blend over the parameter cell."""
+        acc = None
+        for s, w in corners:
+            v = table[s * size + index] * w
+            acc = v if acc is None else acc + v
+        return acc
+
+    def _cell(self, pos):
+        pos = np.clip(pos, 0.0, 1.0) * np.array([self.w - 1, self.h - 1])
+        ip = np.minimum(pos.astype(np.int64), np.array([self.w - 2, self.h - 2]))
+        return ip, pos - ip
+
+    def eval(self, pos, corners):
+        """Bilinear interpolant at ``pos`` (N, 2) (``Marginal2D::eval`` / square_to_bilinear_pdf)."""
+        ip, f = self._cell(pos)
+        i = ip[:, 1] * self.w + ip[:, 0]
+        lk = lambda o: self._lookup(self.data, self.n_data, corners, i + o)  # noqa: E731
+        v00, v10, v01, v11 = lk(0), lk(1), lk(self.w), lk(self.w + 1)
+        fx, fy = f[:, 0], f[:, 1]
+        return (1 - fy) * ((1 - fx) * v00 + fx * v10) + fy * ((1 - fx) * v01 + fx * v11)
+
+    def invert(self, sample, corners):
+        """``Marginal2D::invert_continuous``: the sample in [0,1]² mapping to ``sample``."""
+        ip, f = self._cell(sample)
+        px, py = ip[:, 0], ip[:, 1]
+        fx, fy = f[:, 0], f[:, 1]
+        i = py * self.w + px
+        lk = lambda t, n, idx: self._lookup(t, n, corners, idx)  # noqa: E731
+        v00 = lk(self.data, self.n_data, i)
+        v10 = lk(self.data, self.n_data, i + 1)
+        v01 = lk(self.data, self.n_data, i + self.w)
+        v11 = lk(self.data, self.n_data, i + self.w + 1)
+        c0 = v00 + (v01 - v00) * fy
+        c1 = v10 + (v11 - v10) * fy
+        pdf = c0 + (c1 - c0) * fx
+        # invert_segment(x, 1/(W-1), c0, c1)
+        x = fx * (c0 + (c1 - c0) * (0.5 * fx)) / (self.w - 1)
+        wm1 = self.w - 1
+        off_cond = py * wm1
+        has_prev = px > 0
+        j = off_cond + np.maximum(px - 1, 0)
+        prev0 = lk(self.cond, self.n_cond, j)
+        prev1 = lk(self.cond, self.n_cond, j + wm1)
+        x = x + np.where(has_prev, prev0 + (prev1 - prev0) * fy, 0.0)
+        r0 = lk(self.cond, self.n_cond, off_cond + wm1 - 1)
+        r1 = lk(self.cond, self.n_cond, off_cond + 2 * wm1 - 1)
+        rl = r0 + (r1 - r0) * fy
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = x / rl
+        y = fy * (r0 + (r1 - r0) * (0.5 * fy)) / (self.h - 1)
+        has_row = py > 0
+        y = y + np.where(has_row, lk(self.marg, self.n_marg, np.maximum(py - 1, 0)), 0.0)
+        return np.stack([x, y], axis=-1), pdf
+
+
+# ------------------------------------------------------------------ public classes
+@dataclass(frozen=True)
+class AngularTable:
+    """A tabulated function of one direction on the RGL angular grid.
+
+    ``values[j, k]`` is the value at ``theta[k] = (k/(K−1))² · π/2`` and
+    ``phi[j] = −π + 2π j/(J−1)``, i.e. uniform in ``u_theta = sqrt(2θ/π)`` and in
+    ``u_phi = (φ + π)/2π`` (Mitsuba ``Measured::u2theta``/``u2phi``). Values are bilinear in
+    (u_theta, u_phi) between grid points (``Marginal2D<Float, 0>::eval`` as used by the plugin).
+    For isotropic materials J = 2 and the two rows are equal (φ is irrelevant).
+    """
+
+    name: str
+    values: np.ndarray
+    theta: np.ndarray
+    phi: np.ndarray
+    u_theta: np.ndarray
+    u_phi: np.ndarray
+    doc: str
+
+    def __call__(self, theta, phi=0.0) -> np.ndarray:
+        """Interpolated value at polar angle ``theta`` and azimuth ``phi`` (radians)."""
+        theta, phi = np.broadcast_arrays(np.asarray(theta, np.float64), np.asarray(phi, np.float64))
+        warp = _Marginal2D(self.values, (), normalize=False, enable_sampling=False)
+        u = np.stack([theta_to_u(np.clip(theta, 0, np.pi / 2)).ravel(),
+                      phi_to_u(np.angle(np.exp(1j * phi.ravel())))], -1)
+        return warp.eval(u, warp.corners([])).reshape(theta.shape)
+
+
+_NDF_DOC = ("D(ωm): the microfacet normal distribution recovered by the acquisition's power "
+            "iteration (Dupuy & Jakob 2018, §4; Dupuy et al. 2015), in 1/sr, as a function of "
+            "the half vector's polar angle θm and azimuth φm in the local frame; normalised "
+            "so that ∫ D(ωm) cos θm dωm ≈ 1 (checked by tests).")
+_SIGMA_DOC = ("σ(ω) = ∫ D(ωm) max(0, ω·ωm) dωm: the projected microfacet area seen from "
+              "direction ω (θ, φ) (Dupuy & Jakob 2018, Eq. 4), dimensionless; σ(normal) ≈ 1.")
+
+
+class RGLBRDF(BRDF):
+    """A measured RGL material (``*.bsdf``), evaluated as Mitsuba 3's ``measured`` plugin.
+
+    Use :func:`read_rgl`. Attributes mirror the file's fields (``theta_i``, ``phi_i``,
+    ``ndf``, ``sigma``, ``vndf``, ``luminance``, ``rgb``, ``jacobian``, ``description``, and
+    ``wavelengths``/``spectra``/``valid``/``version`` when present); ``fields`` holds them all.
+    """
+
+    def __init__(self, fields: dict, source=None, name: str | None = None):
+        self.fields = dict(fields)
+        self.source = None if source is None else str(source)
+        path = self.source
+        f = self.fields
+
+        def need(key, ndim, dtype=np.float32):
+            if key not in f:
+                raise BRDFFormatError(path, f"expected a field {key!r} in an RGL .bsdf file, "
+                                            f"found fields {sorted(f)}")
+            a = f[key]
+            if not isinstance(a, np.ndarray) or a.ndim != ndim or a.dtype != dtype:
+                got = (type(a).__name__ if not isinstance(a, np.ndarray)
+                       else f"{a.dtype} array of shape {a.shape}")
+                raise BRDFFormatError(path, f"expected field {key!r} as a {ndim}-D "
+                                            f"{np.dtype(dtype)} array, found {got}")
+            return a
+
+        self.theta_i = need("theta_i", 1)
+        self.phi_i = need("phi_i", 1)
+        self.ndf = need("ndf", 2)
+        self.sigma = need("sigma", 2)
+        self.vndf = need("vndf", 4)
+        self.luminance = need("luminance", 4)
+        self.jacobian = bool(need("jacobian", 1, np.uint8)[0])
+        desc = f.get("description", "")
+        self.description = desc if isinstance(desc, str) else bytes(np.asarray(desc, np.uint8)).decode("utf-8", "replace")
+        self.wavelengths = f.get("wavelengths")
+        self.spectra = f.get("spectra")
+        self.rgb = f.get("rgb")
+        self.valid = f.get("valid")
+        self.version = f.get("version")
+        nphi, nth = self.phi_i.size, self.theta_i.size
+        if nphi < 1 or nth < 1:
+            raise BRDFFormatError(path, f"expected at least one θi and φi, found {nth} and {nphi}")
+        if not (np.all(np.diff(self.theta_i) > 0) and np.all(np.diff(self.phi_i) > 0)):
+            raise BRDFFormatError(path, "expected strictly increasing theta_i and phi_i, found "
+                                        f"{self.theta_i.tolist()} / {self.phi_i.tolist()}")
+        if self.vndf.shape[:2] != (nphi, nth) or min(self.vndf.shape[2:]) < 2:
+            raise BRDFFormatError(path, f"expected vndf of shape ({nphi}, {nth}, H>=2, W>=2), "
+                                        f"found {self.vndf.shape}")
+        lum = self.luminance.shape
+        if lum[:2] != (nphi, nth) or lum[2] != lum[3] or lum[2] < 2:
+            raise BRDFFormatError(path, f"expected luminance of shape ({nphi}, {nth}, n, n), "
+                                        f"found {lum}")
+        for key in ("ndf", "sigma"):
+            if min(getattr(self, key).shape) < 2:
+                raise BRDFFormatError(path, f"expected {key} of shape (J>=2, K>=2), found "
+                                            f"{getattr(self, key).shape}")
+        if self.rgb is not None:
+            rgb = need("rgb", 5)
+            if rgb.shape != (nphi, nth, 3) + lum[2:]:
+                raise BRDFFormatError(path, f"expected rgb of shape {(nphi, nth, 3) + lum[2:]}, "
+                                            f"found {rgb.shape}")
+        elif self.spectra is not None:
+            sp, wl = need("spectra", 5), need("wavelengths", 1)
+            if sp.shape != (nphi, nth, wl.size) + lum[2:]:
+                raise BRDFFormatError(path, f"expected spectra of shape "
+                                            f"{(nphi, nth, wl.size) + lum[2:]}, found {sp.shape}")
+        else:
+            raise BRDFFormatError(path, "expected an 'rgb' or a 'spectra' field, found neither")
+        for key in ("ndf", "sigma", "vndf", "luminance"):
+            if np.any(getattr(self, key) < 0):
+                raise BRDFFormatError(path, f"expected non-negative values in {key!r}, found "
+                                            f"minimum {float(getattr(self, key).min())}")
+        if self.vndf.reshape(nphi * nth, -1).sum(axis=1).min() <= 0:
+            raise BRDFFormatError(path, "expected every vndf slice to have a positive integral, "
+                                        "found an all-zero slice")
+
+        self.name = name or (Path(self.source).stem if self.source else "rgl")
+        # Measured(): m_isotropic = phi_i.shape[0] <= 2; m_reduction = rint(2π / (φ_last − φ_0))
+        self.isotropic = nphi <= 2
+        self.reduction = 0
+        if not self.isotropic:
+            self.reduction = int(np.rint(2 * np.pi / float(self.phi_i[-1] - self.phi_i[0])))
+        params = (self.phi_i, self.theta_i)
+        self._ndf = _Marginal2D(self.ndf, (), normalize=False, enable_sampling=False)
+        self._sigma = _Marginal2D(self.sigma, (), normalize=False, enable_sampling=False)
+        self._vndf = _Marginal2D(self.vndf, params)
+        self._luminance = None  # built lazily (only needed by pdf/sample, not by eval)
+        if self.rgb is not None:
+            # Warp2D3 over (φi, θi, channel) with channel values {0, 1, 2}: at an integer channel
+            # the interpolation weight is exactly 0/1, so a per-texel RGB gather is identical.
+            self._rgb_table = np.ascontiguousarray(
+                np.moveaxis(self.rgb.astype(np.float64), 2, -1)).reshape(-1, 3)
+            self._rgb_warp = _Marginal2D(self.rgb[:, :, 0], params, normalize=False,
+                                         enable_sampling=False)
+        else:
+            self._rgb_table = None
+            self._rgb_warp = None
+
+    # -------------------------------------------------------------- tables for other modules
+    def ndf_table(self) -> AngularTable:
+        """The stored NDF ``D(θm, φm)`` with its angular grid (see :class:`AngularTable`)."""
+        return self._angular("ndf", self.ndf, _NDF_DOC)
+
+    def sigma_table(self) -> AngularTable:
+        """The stored projected area ``σ(θ, φ)`` with its angular grid (see :class:`AngularTable`)."""
+        return self._angular("sigma", self.sigma, _SIGMA_DOC)
+
+    @staticmethod
+    def _angular(name, values, doc) -> AngularTable:
+        j, k = values.shape
+        ut, up = np.linspace(0.0, 1.0, k), np.linspace(0.0, 1.0, j)
+        return AngularTable(name, values.astype(np.float64), u_to_theta(ut), u_to_phi(up),
+                            ut, up, doc)
+
+    def valid_mask(self) -> np.ndarray | None:
+        """The ``valid`` field unpacked as booleans ``(Nφ, Nθ, n, n)`` (little-endian bit order).
+
+        The field is not used by Mitsuba; this reading of it (one bit per luminance texel,
+        LSB first) is our interpretation. ``None`` when absent or of another size.
+        """
+        if self.valid is None:
+            return None
+        bits = np.unpackbits(np.asarray(self.valid, np.uint8), bitorder="little").astype(bool)
+        shape = self.luminance.shape
+        return bits.reshape(shape) if bits.size == int(np.prod(shape)) else None
+
+    def describe(self):
+        d = super().describe()
+        d.update(format="rgl-bsdf", description=self.description,
+                 theta_i_deg=np.degrees(self.theta_i).round(3).tolist(), n_phi_i=int(self.phi_i.size),
+                 vndf_resolution=list(self.vndf.shape[2:]), resolution=list(self.luminance.shape[2:]),
+                 jacobian=self.jacobian, reduction=self.reduction,
+                 color="rgb" if self.rgb is not None else "spectral")
+        return d
+
+    # -------------------------------------------------------------- evaluation
+    def eval_mitsuba(self, wi_m, wo_m) -> np.ndarray:
+        """``Measured::eval`` of Mitsuba 3 (float64 port): ``f(si.wi, wo) · cos θ(wo)``.
+
+        ``wi_m`` is Mitsuba's ``si.wi`` (towards the viewer), ``wo_m`` its ``wo`` (towards the
+        light). Returns RGB ``(..., 3)``, 0 unless both are above the horizon.
+        """
+        if self._rgb_table is None:
+            raise BRDFFormatError(self.source, "expected an RGB file ('rgb' field) for RGB "
+                                               "evaluation, found a spectral file (not supported)")
+        wi_m, wo_m = _as_dirs(wi_m, wo_m)
+        shape = wi_m.shape[:-1]
+        a, b = wi_m.reshape(-1, 3), wo_m.reshape(-1, 3)
+        out = np.zeros((a.shape[0], 3))
+        for s in range(0, a.shape[0], _CHUNK):
+            out[s:s + _CHUNK] = self._eval_flat(a[s:s + _CHUNK], b[s:s + _CHUNK])
+        return out.reshape(shape + (3,))
+
+    def _eval_flat(self, wi, wo):
+        out = np.zeros((wi.shape[0], 3))
+        active = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+        if not active.any():
+            return out
+        wi, wo = wi[active].copy(), wo[active].copy()
+        if self.reduction >= 2:
+            # fold by symmetry: x, y -> mulsign_neg(·, s): negate where the sign bit of s is clear
+            sy = wi[:, 1].copy()
+            sx = wi[:, 0].copy() if self.reduction == 4 else sy
+            fx = np.where(np.signbit(sx), 1.0, -1.0)
+            fy = np.where(np.signbit(sy), 1.0, -1.0)
+            wi[:, 0] *= fx
+            wi[:, 1] *= fy
+            wo[:, 0] *= fx
+            wo[:, 1] *= fy
+        m = wi + wo
+        m /= np.linalg.norm(m, axis=-1, keepdims=True)
+        theta_i, phi_i = elevation(wi), np.arctan2(wi[:, 1], wi[:, 0])
+        theta_m, phi_m = elevation(m), np.arctan2(m[:, 1], m[:, 0])
+        u_wi = np.stack([theta_to_u(theta_i), phi_to_u(phi_i)], -1)
+        u_m = np.stack([theta_to_u(theta_m),
+                        phi_to_u(phi_m - phi_i if self.isotropic else phi_m)], -1)
+        u_m[:, 1] -= np.floor(u_m[:, 1])
+        params = [phi_i, theta_i]
+        corners = self._vndf.corners(params)          # same params for vndf and rgb
+        sample, _ = self._vndf.invert(u_m, corners)
+        # m_spectra.eval(sample, {φi, θi, channel}): bilinear texel lookup, all channels at once
+        w = self._rgb_warp
+        ip, f = w._cell(sample)
+        i = ip[:, 1] * w.w + ip[:, 0]
+        fx, fy = f[:, :1], f[:, 1:]
+        spec = 0.0
+        for s, wt in corners:
+            base = s * w.n_data + i
+            v00, v10 = self._rgb_table[base], self._rgb_table[base + 1]
+            v01, v11 = self._rgb_table[base + w.w], self._rgb_table[base + w.w + 1]
+            spec = spec + wt[:, None] * ((1 - fy) * ((1 - fx) * v00 + fx * v10)
+                                         + fy * ((1 - fx) * v01 + fx * v11))
+        if self.jacobian:
+            d = self._ndf.eval(u_m, self._ndf.corners([]))
+            sg = self._sigma.eval(u_wi, self._sigma.corners([]))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                spec = spec * (d / (4.0 * sg))[:, None]
+        out[active] = spec
+        return out
+
+    def eval(self, wi, wo) -> np.ndarray:
+        """f_r(wi, wo) in 1/sr, RGB ``(..., 3)``: ``Measured::eval(si.wi=wo, wo=wi) / cos θi``.
+
+        In ``Measured::eval``: fold (wi, wo) by the symmetry ``reduction`` (anisotropic files);
+        ωm = normalize(si.wi + wo); u_wi = (theta2u θ(si.wi), phi2u φ(si.wi)),
+        u_m = (theta2u θm, phi2u(φm − φ(si.wi)) for isotropic files, else phi2u φm) mod 1;
+        sample = vndf.invert(u_m | φ(si.wi), θ(si.wi)); value = rgb.eval(sample | φ, θ, channel),
+        times ``ndf.eval(u_m) / (4 sigma.eval(u_wi))`` when ``jacobian`` is set. That value is
+        f_r · cos θ(wo), with Mitsuba's wo being our ``wi``: we divide by cos θi.
+        """
+        wi, wo = _as_dirs(wi, wo)
+        val = self.eval_mitsuba(wo, wi)
+        cos_i = wi[..., 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            f = val / cos_i[..., None]
+        return np.where((cos_i > 0)[..., None] & (wo[..., 2] > 0)[..., None], f, 0.0)
+
+
+class IsotropicRGLBRDF(RGLBRDF, IsotropicBRDF):
+    """An isotropic RGL material (``phi_i`` has at most two entries): also offers ``eval_hd``."""
+
+
+def read_rgl(path, name: str | None = None) -> RGLBRDF:
+    """Read an RGL ``.bsdf`` file; returns :class:`IsotropicRGLBRDF` when isotropic.
+
+    Raises :class:`~brdffit.errors.BRDFFormatError` on malformed files (via
+    :func:`~brdffit.io.tensorfile.read_tensor_file` and the RGL field checks).
+    """
+    fields = read_tensor_file(path)
+    nphi = fields["phi_i"].size if isinstance(fields.get("phi_i"), np.ndarray) else 0
+    cls = IsotropicRGLBRDF if 1 <= nphi <= 2 else RGLBRDF
+    return cls(fields, source=path, name=name)
