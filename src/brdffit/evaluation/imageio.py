@@ -1,0 +1,134 @@
+"""Image input/output for the evaluation tools: linear EXR and 8-bit PNG, written atomically.
+
+* EXR (linear float32 RGB or RGBA) through the ``OpenEXR`` package (≥ 3.2 ``OpenEXR.File``
+  API), ZIP-compressed. Reading accepts any scan-line EXR with R, G, B (and optional A)
+  channels, interleaved (``"RGB"``/``"RGBA"``) or separate.
+* PNG through Pillow (a dependency of matplotlib). Float input in [0, 1] is quantised with
+  rounding; values outside are clipped.
+
+Every write goes to a temporary file next to the destination that is renamed on success
+(:func:`brdffit._atomic.atomic_path`), so an interrupted write never leaves a partial image.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .._atomic import atomic_path
+from ..errors import BRDFFormatError
+
+__all__ = ["write_exr", "read_exr", "write_png", "read_png", "write_image", "read_image"]
+
+
+def _as_image(img, path) -> np.ndarray:
+    img = np.asarray(img)
+    if img.ndim == 2:
+        img = img[..., None]
+    if img.ndim != 3 or img.shape[-1] not in (1, 3, 4):
+        raise BRDFFormatError(path, f"expected an image of shape (H, W), (H, W, 3) or (H, W, 4), "
+                                    f"found {img.shape}")
+    return img
+
+
+def write_exr(path, img) -> Path:
+    """Write a linear float image ``(H, W[, 1|3|4])`` as a float32 EXR, atomically."""
+    import OpenEXR
+
+    path = Path(path)
+    img = _as_image(img, path).astype(np.float32)
+    if img.shape[-1] == 1:
+        channels = {"Y": np.ascontiguousarray(img[..., 0])}
+    else:
+        names = "RGBA"[: img.shape[-1]]
+        channels = {names: np.ascontiguousarray(img)}
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with atomic_path(path, suffix=".exr") as tmp:
+        with OpenEXR.File(header, channels) as f:
+            f.write(str(tmp))
+    return path
+
+
+def read_exr(path) -> np.ndarray:
+    """Read an EXR as float32 ``(H, W, C)`` with C = 3 (RGB), 4 (RGBA) or 1 (Y)."""
+    import OpenEXR
+
+    path = Path(path)
+    if not path.is_file():
+        raise BRDFFormatError(path, "expected an EXR file, found no such file")
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            ch = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
+    except Exception as exc:  # OpenEXR raises plain Exceptions on corrupt files
+        raise BRDFFormatError(path, f"expected a readable OpenEXR image, could not read it: {exc}")
+    if all(c in ch for c in "RGB"):
+        names = ["R", "G", "B"] + (["A"] if "A" in ch else [])
+    elif "Y" in ch:
+        names = ["Y"]
+    else:
+        raise BRDFFormatError(path, f"expected R, G, B (or Y) channels, found {sorted(ch)}")
+    return np.stack([ch[n].astype(np.float32) for n in names], axis=-1)
+
+
+def write_png(path, img) -> Path:
+    """Write an sRGB-encoded image as 8-bit PNG, atomically.
+
+    ``img`` is uint8, or float in [0, 1] (already tone-mapped; clipped and rounded).
+    """
+    from PIL import Image
+
+    path = Path(path)
+    img = _as_image(img, path)
+    if img.dtype != np.uint8:
+        img = np.round(np.clip(np.nan_to_num(img.astype(np.float64)), 0.0, 1.0) * 255.0)
+        img = img.astype(np.uint8)
+    mode = {1: "L", 3: "RGB", 4: "RGBA"}[img.shape[-1]]
+    data = img[..., 0] if img.shape[-1] == 1 else img
+    with atomic_path(path, suffix=".png") as tmp:
+        Image.fromarray(np.ascontiguousarray(data), mode=mode).save(tmp, format="PNG")
+    return path
+
+
+def read_png(path) -> np.ndarray:
+    """Read a PNG as uint8 ``(H, W, C)``."""
+    from PIL import Image
+
+    path = Path(path)
+    if not path.is_file():
+        raise BRDFFormatError(path, "expected a PNG file, found no such file")
+    try:
+        with Image.open(path) as im:
+            arr = np.asarray(im)
+    except Exception as exc:
+        raise BRDFFormatError(path, f"expected a readable PNG image, could not read it: {exc}")
+    return arr if arr.ndim == 3 else arr[..., None]
+
+
+def write_image(path, img, **tonemap_kwargs) -> Path:
+    """Write by extension: ``.exr`` linear as is; ``.png`` tone-mapped with
+    :func:`brdffit.evaluation.tonemap.tonemap` (``tonemap_kwargs`` passed on) unless uint8."""
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext == ".exr":
+        return write_exr(path, img)
+    if ext == ".png":
+        img = np.asarray(img)
+        if img.dtype != np.uint8:
+            from .tonemap import tonemap
+
+            rgb = tonemap(img[..., :3], **tonemap_kwargs)
+            img = np.concatenate([rgb, np.clip(img[..., 3:4], 0, 1)], -1) if img.shape[-1] == 4 else rgb
+        return write_png(path, img)
+    raise BRDFFormatError(path, f"expected an output image ending in .exr or .png, found {ext!r}")
+
+
+def read_image(path) -> np.ndarray:
+    """Read ``.exr`` (float32 linear) or ``.png`` (uint8) by extension."""
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext == ".exr":
+        return read_exr(path)
+    if ext == ".png":
+        return read_png(path)
+    raise BRDFFormatError(path, f"expected an image ending in .exr or .png, found {ext!r}")
