@@ -1,0 +1,56 @@
+"""``brdffit convert IN OUT``: resample any loadable BRDF into a MERL or UTIA file.
+
+``OUT.binary`` → MERL (:func:`brdffit.io.merl.resample_to_merl`, isotropic input only);
+``OUT.bin`` → UTIA (:func:`brdffit.io.utia.write_utia`, any input). Outputs are written
+atomically: a failed conversion leaves no partial file.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ..errors import BRDFFormatError
+
+__all__ = ["register", "convert"]
+
+_OUTPUTS = {".binary": "merl", ".bin": "utia"}
+
+
+def convert(spec, out) -> dict:
+    """Load ``spec`` and write it to ``out`` (format from the extension); return a summary."""
+    from ..io import load
+
+    out = Path(out)
+    kind = _OUTPUTS.get(out.suffix.lower())
+    if kind is None:
+        raise BRDFFormatError(out, f"expected an output extension in {sorted(_OUTPUTS)} "
+                                   f"(MERL .binary, UTIA .bin), found {out.suffix or 'none'!r}")
+    brdf = load(spec)
+    if kind == "merl":
+        from ..io.merl import resample_to_merl
+
+        table = resample_to_merl(brdf, out)
+        return {"out": str(out), "format": "merl", "n_samples": table.n_samples,
+                "n_invalid": table.n_invalid, "name": getattr(brdf, "name", None)}
+    from ..io.utia import read_utia, write_utia
+
+    write_utia(brdf, out)
+    check = read_utia(out)
+    return {"out": str(out), "format": "utia", "n_samples": check.n_samples,
+            "n_invalid": check.n_invalid, "name": getattr(brdf, "name", None)}
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("convert")
+    def convert_cmd(
+        src: str = typer.Argument(..., metavar="IN",
+                                  help="A BRDF file, collection.zip:material or synthetic:NAME."),
+        dst: Path = typer.Argument(..., metavar="OUT",
+                                   help="Output file: .binary (MERL) or .bin (UTIA)."),
+    ) -> None:
+        """Resample a BRDF onto the MERL (.binary) or UTIA (.bin) grid and write it."""
+        info = convert(src, dst)
+        typer.echo(f"wrote {info['out']} ({info['format']}, {info['n_samples']} samples, "
+                   f"{info['n_invalid']} invalid) from {src}")

@@ -1,0 +1,166 @@
+"""``brdffit info FILE[:MATERIAL]``: what a BRDF file holds.
+
+Prints the format, isotropy, sample counts (stored samples and invalid ones for tables,
+network parameters for Neural-BRDF, table shapes for RGL), the per-channel value range and
+the directional albedo (:meth:`brdffit.brdf.BRDF.albedo`) at 0, 30, 60 and 75° incidence;
+``--json`` prints the same as one JSON object. A ``.zip`` collection without a material
+lists its materials.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import typer
+
+__all__ = ["register", "summarize", "ALBEDO_ANGLES_DEG"]
+
+ALBEDO_ANGLES_DEG = (0.0, 30.0, 60.0, 75.0)
+
+
+def _range_of(values: np.ndarray, valid: np.ndarray | None) -> dict:
+    v = values.reshape(-1, values.shape[-1])
+    if valid is not None:
+        v = v[valid.reshape(-1)]
+    if v.size == 0:
+        return {"min": [None] * 3, "max": [None] * 3}
+    return {"min": v.min(axis=0).tolist(), "max": v.max(axis=0).tolist()}
+
+
+def _sampled_values(brdf) -> tuple[np.ndarray, str]:
+    """Evaluate a BRDF without a stored table on a fixed, deterministic set of configurations."""
+    if getattr(brdf, "isotropic", False):
+        from ..grid import merl_phi_d, merl_theta_d, merl_theta_h
+
+        # every 3rd MERL sample (θh = 0 included: the specular peak of glossy materials)
+        th, td, pd = np.meshgrid(merl_theta_h()[::3], merl_theta_d()[::3], merl_phi_d()[::3],
+                                 indexing="ij")
+        return brdf.eval_hd(th.ravel(), td.ravel(), pd.ravel()), \
+            f"evaluated at {th.size} MERL-grid configurations (every 3rd sample)"
+    from ..geometry import spherical_to_cartesian
+
+    t = np.radians(np.arange(0.0, 90.0, 5.0))
+    p = np.radians(np.arange(0.0, 360.0, 15.0))
+    ti, pi, tv, pv = (a.ravel() for a in np.meshgrid(t, p, t, p, indexing="ij"))
+    vals = brdf.eval(spherical_to_cartesian(ti, pi), spherical_to_cartesian(tv, pv))
+    return vals, f"evaluated at {ti.size} (θi, φi, θv, φv) configurations (5°/15° steps)"
+
+
+def summarize(brdf, spec=None, *, albedo_samples: int = 65536) -> dict:
+    """A JSON-able summary of a BRDF (what ``brdffit info`` prints)."""
+    desc = {k: v for k, v in brdf.describe().items()}
+    fmt = getattr(brdf, "format", None) or desc.get("format")
+    if fmt is None:
+        model = type(brdf).__name__.lower()
+        fmt = ("rgl" if "rgl" in model else
+               "fit" if getattr(brdf, "fit_kind", "") else
+               "synthetic" if str(spec or "").startswith("synthetic:") else "analytic")
+    out = {"spec": None if spec is None else str(spec), "format": fmt,
+           "name": getattr(brdf, "name", None), "model": type(brdf).__name__,
+           "isotropic": bool(getattr(brdf, "isotropic", False)),
+           "source": getattr(brdf, "source", None)}
+    counts: dict = {}
+    table = None
+    if hasattr(brdf, "merl_table"):
+        values, valid = brdf.merl_table()
+        table = (values, valid)
+        counts = {"grid": "MERL 90 θh x 90 θd x 180 φd", "n_samples": int(valid.size),
+                  "n_invalid": int(valid.size - np.count_nonzero(valid))}
+    elif hasattr(brdf, "utia_table"):
+        values, valid = brdf.utia_table()
+        table = (values, valid)
+        counts = {"grid": "UTIA 6 θi x 48 φi x 6 θv x 48 φv", "n_samples": int(valid.size),
+                  "n_invalid": int(valid.size - np.count_nonzero(valid))}
+    elif hasattr(brdf, "n_parameters"):
+        counts = {"n_parameters": int(brdf.n_parameters), "n_samples": None, "n_invalid": None}
+    elif isinstance(getattr(brdf, "fields", None), dict):  # RGL tensor file
+        shapes = {k: list(np.shape(v)) for k, v in brdf.fields.items()
+                  if isinstance(v, np.ndarray) and k != "description"}
+        n = int(np.prod(shapes["rgb"])) // 3 if "rgb" in shapes else None
+        valid = getattr(brdf, "valid", None)
+        n_invalid = (int(np.size(valid) - np.count_nonzero(valid))
+                     if isinstance(valid, np.ndarray) else None)
+        counts = {"field_shapes": shapes, "n_samples": n, "n_invalid": n_invalid}
+    else:
+        counts = {"n_samples": None, "n_invalid": None}
+    out["samples"] = counts
+    if table is not None:
+        out["value_range"] = _range_of(*table)
+        out["value_range_of"] = "stored valid samples"
+    else:
+        vals, how = _sampled_values(brdf)
+        vals = np.asarray(vals, dtype=np.float64)
+        finite = np.all(np.isfinite(vals), axis=-1)
+        out["value_range"] = _range_of(vals, finite)
+        out["value_range_of"] = how
+    angles = np.array(ALBEDO_ANGLES_DEG)
+    alb = brdf.albedo(np.radians(angles), n_samples=albedo_samples)
+    out["albedo"] = {f"{a:g}": np.asarray(row, dtype=np.float64).tolist()
+                     for a, row in zip(angles, alb)}
+    for key in ("interpolation", "precision", "layers", "description"):
+        if key in desc and desc[key] not in (None, ""):
+            out[key] = desc[key]
+    return out
+
+
+def _fmt_rgb(v) -> str:
+    return "(" + ", ".join("n/a" if x is None else f"{x:.4g}" for x in v) + ")"
+
+
+def _print_summary(s: dict) -> None:
+    echo = typer.echo
+    echo(f"{s['spec']}")
+    echo(f"  format      {s['format']}  ({s['model']})")
+    echo(f"  name        {s['name']}")
+    echo(f"  isotropic   {'yes' if s['isotropic'] else 'no'}")
+    c = s["samples"]
+    if "grid" in c:
+        echo(f"  grid        {c['grid']}")
+    if c.get("n_samples") is not None:
+        echo(f"  samples     {c['n_samples']}  (invalid: {c['n_invalid']})")
+    if "n_parameters" in c:
+        echo(f"  parameters  {c['n_parameters']}  (network; no stored samples)")
+    if "field_shapes" in c:
+        echo("  fields      " + ", ".join(f"{k}{tuple(v)}" for k, v in c["field_shapes"].items()))
+    for key in ("interpolation", "precision"):
+        if key in s:
+            echo(f"  {key:<11} {s[key]}")
+    r = s["value_range"]
+    echo(f"  value range min RGB {_fmt_rgb(r['min'])}, max RGB {_fmt_rgb(r['max'])}")
+    echo(f"              ({s['value_range_of']})")
+    echo("  albedo      " + "  ".join(f"{a}°: {_fmt_rgb(v)}" for a, v in s["albedo"].items()))
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("info")
+    def info(
+        spec: str = typer.Argument(..., metavar="FILE[:MATERIAL]",
+                                   help="A BRDF file, collection.zip:material or synthetic:NAME."),
+        as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+        albedo_samples: int = typer.Option(65536, "--albedo-samples", min=16,
+                                           help="Monte Carlo samples per albedo angle."),
+    ) -> None:
+        """Format, isotropy, sample counts, value range and directional albedo of a BRDF."""
+        from ..io import load, resolve_spec
+        from ..io.nbrdf import list_materials
+
+        kind, path, member = resolve_spec(spec)
+        if kind == "nbrdf-collection" and not member:
+            names = list_materials(path)
+            if as_json:
+                typer.echo(json.dumps({"spec": spec, "format": "nbrdf-collection",
+                                       "path": os.fspath(path), "materials": names}))
+            else:
+                typer.echo(f"{spec}: Neural-BRDF collection with {len(names)} materials "
+                           f"(use {os.path.basename(spec)}:MATERIAL)")
+                for n in names:
+                    typer.echo(f"  {n}")
+            return
+        brdf = load(spec)
+        summary = summarize(brdf, spec, albedo_samples=albedo_samples)
+        if as_json:
+            typer.echo(json.dumps(summary, default=str))
+        else:
+            _print_summary(summary)
