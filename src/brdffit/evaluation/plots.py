@@ -28,7 +28,8 @@ import numpy as np
 from .._atomic import atomic_path
 
 __all__ = ["plot_lobes", "plot_factors", "plot_slices", "npf_tables", "has_factors",
-           "LOBE_INCIDENCES_DEG", "save_figure"]
+           "LOBE_INCIDENCES_DEG", "save_figure", "plot_colorbar", "lobe_curve",
+           "slice_values"]
 
 LOBE_INCIDENCES_DEG = (10.0, 30.0, 50.0, 70.0)
 _ANGLE_COLOURS = ("#1f77b4", "#2ca02c", "#ff7f0e", "#d62728")
@@ -277,5 +278,26 @@ def plot_slices(reference, fits: Mapping[str, object], path, title: str | None =
     axes[0][1].legend(fontsize=6)
     if title:
         fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return save_figure(fig, path)
+
+
+def plot_colorbar(path, vmax: float | None = None, cmap: str | None = None,
+                  label: str = "CIE dE2000") -> Path:
+    """The fixed dE2000 colour scale of the report (:data:`metrics.DELTA_E_VMAX`,
+    :data:`metrics.DELTA_E_CMAP`) as a small horizontal colour bar PNG."""
+    from matplotlib import colormaps
+    from matplotlib.colors import Normalize
+    from matplotlib.cm import ScalarMappable
+
+    from .metrics import DELTA_E_CMAP, DELTA_E_VMAX
+
+    plt = _plt()
+    vmax = DELTA_E_VMAX if vmax is None else vmax
+    fig, ax = plt.subplots(figsize=(2.6, 0.75))
+    fig.colorbar(ScalarMappable(Normalize(0, vmax), colormaps[cmap or DELTA_E_CMAP]), cax=ax,
+                 orientation="horizontal", extend="max")
+    ax.set_xlabel(label, fontsize=8)
+    ax.tick_params(labelsize=7)
     fig.tight_layout()
     return save_figure(fig, path)

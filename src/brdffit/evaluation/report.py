@@ -1,0 +1,451 @@
+"""Static HTML comparison report: one page per material and an index across materials.
+
+Layout of a report directory ``OUT``::
+
+    OUT/index.html                 index: per-model summary + per-material table (sortable)
+    OUT/assets/de_colorbar.png     the fixed dE2000 colour scale
+    OUT/<slug>/result.json         everything measured for one material (input of the pages)
+    OUT/<slug>/index.html          material page
+    OUT/<slug>/*.png, *.exr, fits/  renderings, dE maps, plots, saved fits
+
+Pages are plain HTML with a small inline stylesheet and inline JavaScript (table sorting),
+no external resource and no CDN, every link relative: they open from ``file://`` offline.
+The index is rebuilt from every ``OUT/*/result.json`` each time (:func:`write_index`), so
+adding a material to an existing report updates the index. Every file is written
+atomically (:mod:`brdffit._atomic`).
+
+The per-material layout follows the supplemental of Dupuy et al. 2015 (renderings, CIE dE00
+maps, lobes in the incidence plane, fitted microfacet functions), extended with the metrics
+of Bagher et al. 2016 §5 (rendered PSNR) and Bagher et al. 2012 §6.3 (normalised L2).
+"""
+
+from __future__ import annotations
+
+import html
+import json
+import math
+import re
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+from .._atomic import atomic_write
+
+__all__ = ["RESULT_NAME", "slugify", "write_result", "read_results", "write_material_page",
+           "write_index", "local_links", "missing_links", "summarize"]
+
+RESULT_NAME = "result.json"
+
+_CSS = """
+body{font-family:system-ui,-apple-system,'Segoe UI',Helvetica,Arial,sans-serif;margin:1.2em;
+color:#222;background:#fafafa}
+h1{font-size:1.4em}h2{font-size:1.15em;margin-top:1.6em;border-bottom:1px solid #ccc}
+table{border-collapse:collapse;font-size:.85em;margin:.5em 0}
+th,td{border:1px solid #ccc;padding:.25em .5em;text-align:right;vertical-align:middle}
+th{background:#eee;cursor:pointer;user-select:none}th.sorted-asc::after{content:' \\25B2'}
+th.sorted-desc::after{content:' \\25BC'}td.l,th.l{text-align:left}
+.grid{display:flex;flex-wrap:wrap;gap:10px}
+.cell{text-align:center;font-size:.8em;width:min-content}
+.cell img{display:block;image-rendering:auto;border:1px solid #999;background:#000}
+.best{font-weight:bold;background:#e6f4e6}.fail{color:#b00}
+img.plot{max-width:100%;border:1px solid #ddd;background:#fff}
+img.thumb{width:64px;height:64px;border:1px solid #999}
+pre{font-size:.75em;background:#f0f0f0;padding:.4em;max-width:60em;overflow:auto;white-space:pre-wrap}
+.note{color:#555;font-size:.85em;max-width:60em}
+"""
+
+_SORT_JS = """
+<script>
+// Click a header to sort its table (numeric when the cells are numbers, text otherwise).
+document.querySelectorAll('table.sortable').forEach(function (table) {
+  table.querySelectorAll('thead th').forEach(function (th, col) {
+    th.addEventListener('click', function () {
+      var body = table.tBodies[0];
+      var rows = Array.prototype.slice.call(body.rows);
+      var asc = !th.classList.contains('sorted-asc');
+      table.querySelectorAll('thead th').forEach(function (h) {
+        h.classList.remove('sorted-asc', 'sorted-desc'); });
+      th.classList.add(asc ? 'sorted-asc' : 'sorted-desc');
+      function key(r) {
+        var c = r.cells[col]; var v = c.getAttribute('data-sort');
+        if (v === null) v = c.textContent.trim();
+        var x = parseFloat(v);
+        return isNaN(x) ? v.toLowerCase() : x;
+      }
+      rows.sort(function (a, b) {
+        var x = key(a), y = key(b);
+        if (typeof x !== typeof y) { x = String(x); y = String(y); }
+        return (x < y ? -1 : x > y ? 1 : 0) * (asc ? 1 : -1);
+      });
+      rows.forEach(function (r) { body.appendChild(r); });
+    });
+  });
+});
+</script>
+"""
+
+
+# ------------------------------------------------------------------------------------------
+# result files
+# ------------------------------------------------------------------------------------------
+def slugify(name: str) -> str:
+    """A file-system and URL safe directory name for a material."""
+    s = re.sub(r"[^A-Za-z0-9._-]+", "-", str(name)).strip("-.")
+    return s or "material"
+
+
+def _json_default(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    return repr(obj)
+
+
+def _clean(obj):
+    """Replace non-finite floats by strings so the JSON stays standard ("inf", "nan")."""
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    if isinstance(obj, (float, np.floating)) and not math.isfinite(float(obj)):
+        return str(float(obj))
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def write_result(material_dir, result: dict) -> Path:
+    """Write ``result.json`` of one material atomically."""
+    path = Path(material_dir) / RESULT_NAME
+    with atomic_write(path, "w") as fh:
+        json.dump(_clean(result), fh, indent=1, default=_json_default, allow_nan=False)
+    return path
+
+
+def read_results(out_dir) -> list[dict]:
+    """Every ``OUT/*/result.json`` (sorted by material), each with ``slug`` set to its folder."""
+    out = []
+    for p in sorted(Path(out_dir).glob(f"*/{RESULT_NAME}")):
+        try:
+            res = json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, json.JSONDecodeError):
+            continue  # a broken result of one material must not hide the others
+        res["slug"] = p.parent.name
+        out.append(res)
+    return sorted(out, key=lambda r: str(r.get("material", r["slug"])).lower())
+
+
+# ------------------------------------------------------------------------------------------
+# formatting helpers
+# ------------------------------------------------------------------------------------------
+def _num(x) -> float | None:
+    if x is None:
+        return None
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return None
+    return v
+
+
+def _fmt(x, digits: int = 2, unit: str = "") -> str:
+    v = _num(x)
+    if v is None:
+        return "–"
+    if math.isinf(v):
+        return "∞" if v > 0 else "−∞"
+    if math.isnan(v):
+        return "nan"
+    if v != 0 and (abs(v) < 10 ** (-digits) or abs(v) >= 1e5):
+        return f"{v:.{digits}e}{unit}"
+    return f"{v:.{digits}f}{unit}"
+
+
+def _sortkey(x) -> str:
+    v = _num(x)
+    if v is None or math.isnan(v):
+        return ""
+    return repr(1e300 if v == math.inf else -1e300 if v == -math.inf else v)
+
+
+def _e(s) -> str:
+    return html.escape(str(s), quote=True)
+
+
+def _td(x, digits=2, cls="", unit=""):
+    c = f' class="{cls}"' if cls else ""
+    return f'<td{c} data-sort="{_e(_sortkey(x))}">{_e(_fmt(x, digits, unit))}</td>'
+
+
+def _page(title: str, body: str) -> str:
+    return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<meta name=\"viewport\" content=\"width=device-width\"><title>{_e(title)}</title>"
+            f"<style>{_CSS}</style></head><body>\n{body}\n{_SORT_JS}</body></html>\n")
+
+
+def _img(src, alt, cls="", width=None) -> str:
+    w = f' width="{int(width)}"' if width else ""
+    c = f' class="{cls}"' if cls else ""
+    return f'<img src="{_e(src)}" alt="{_e(alt)}"{c}{w} loading="eager">'
+
+
+def _models(result) -> list[dict]:
+    return list(result.get("models") or [])
+
+
+def _ok(m) -> bool:
+    return m.get("status", "ok") == "ok"
+
+
+# ------------------------------------------------------------------------------------------
+# material page
+# ------------------------------------------------------------------------------------------
+def write_material_page(out_dir, result: dict, colorbar: str | None = "../assets/de_colorbar.png"
+                        ) -> Path:
+    """Write ``OUT/<slug>/index.html`` for one material from its result dict."""
+    slug = result.get("slug") or slugify(result.get("material", "material"))
+    mdir = Path(out_dir) / slug
+    name = result.get("material", slug)
+    ref = result.get("reference") or {}
+    res = (result.get("scene") or {}).get("resolution") or 256
+    disp = int(min(256, max(96, int(res))))
+    models = _models(result)
+    ok_psnr = [_num(m.get("psnr")) for m in models if _ok(m) and _num(m.get("psnr")) is not None]
+    best = max(ok_psnr) if ok_psnr else None
+
+    parts = [f"<p><a href=\"../index.html\">← all materials</a></p><h1>{_e(name)}</h1>"]
+    src = result.get("source")
+    scene = result.get("scene") or {}
+    parts.append('<p class="note">' + (f"Source: <code>{_e(src)}</code>. " if src else "")
+                 + "Scene: " + _e(", ".join(f"{k}={v}" for k, v in scene.items()))
+                 + f". Tone mapping (Bagher et al. 2016 §5): exposure {_e(_fmt(result.get('exposure'), 4))},"
+                 f" gamma {_e(result.get('gamma', 2.2))}, the same for every image. "
+                 + (f"Monte Carlo noise floor (reference rendered with two seeds): "
+                    f"PSNR {_e(_fmt(result.get('noise_floor_psnr')))} dB, dE2000 "
+                    f"{_e(_fmt(result.get('noise_floor_de2000')))}."
+                    if result.get("noise_floor_psnr") is not None else "")
+                 + "</p>")
+
+    # renderings and dE maps
+    cells = []
+    if ref.get("png"):
+        cells.append(f'<div class="cell">{_img(ref["png"], "reference rendering", width=disp)}'
+                     f"<b>Reference</b><br>&nbsp;</div>")
+    for m in models:
+        label = _e(m.get("name"))
+        if _ok(m) and m.get("png"):
+            cells.append(f'<div class="cell">{_img(m["png"], str(m.get("name")) + " rendering", width=disp)}'
+                         f"<b>{label}</b><br>PSNR {_e(_fmt(m.get('psnr')))} dB</div>")
+        else:
+            cells.append(f'<div class="cell fail" style="width:{disp}px"><b>{label}</b><br>'
+                         f"failed: {_e(m.get('error', 'no image'))}</div>")
+    parts.append('<h2>Renderings</h2><div class="grid">' + "".join(cells) + "</div>")
+    cells = []
+    for m in models:
+        if _ok(m) and m.get("de_png"):
+            cells.append(f'<div class="cell">{_img(m["de_png"], str(m.get("name")) + " dE2000 map", width=disp)}'
+                         f"<b>{_e(m.get('name'))}</b><br>mean dE {_e(_fmt(m.get('mean_de2000')))}</div>")
+    if cells:
+        if colorbar:
+            cells.append(f'<div class="cell">{_img(colorbar, "dE2000 colour scale")}</div>')
+        parts.append('<h2>CIE dE2000 difference to the reference</h2><div class="grid">'
+                     + "".join(cells) + "</div>")
+
+    # metrics table
+    rows = []
+    for m in models:
+        b = m.get("brdf") or {}
+        cls = "best" if best is not None and _num(m.get("psnr")) == best else ""
+        if not _ok(m):
+            rows.append(f'<tr class="fail"><td class="l">{_e(m.get("name"))}</td>'
+                        f'<td class="l" colspan="8">failed: {_e(m.get("error"))}</td></tr>')
+            continue
+        rows.append(f'<tr class="{cls}"><td class="l">{_e(m.get("name"))}</td>'
+                    + _td(m.get("psnr")) + _td(m.get("mean_de2000"))
+                    + _td(b.get("cos_rel_error"), 4) + _td(b.get("normalized_l2"), 4)
+                    + _td(b.get("compressive_objective"), 4)
+                    + _td(m.get("fit_time"), 2, unit=" s") + _td(m.get("render_time"), 2, unit=" s")
+                    + _td(m.get("table_bytes"), 0) + "</tr>")
+    parts.append(
+        "<h2>Metrics</h2><table class=\"sortable\" id=\"metrics\"><thead><tr>"
+        "<th class=\"l\">model</th><th>PSNR (dB)</th><th>mean dE2000</th>"
+        "<th>cos-weighted rel. error</th><th>normalised L2</th><th>compressive objective</th>"
+        "<th>fit time</th><th>render time</th><th>table bytes</th></tr></thead><tbody>"
+        + "".join(rows) + "</tbody></table>"
+        '<p class="note">PSNR: linear values, foreground pixels, peak = max RGB component of '
+        "the reference foreground (Bagher et al. 2016 §5). dE2000 on the tone-mapped images "
+        "read as sRGB (D65). Cosine-weighted relative error: "
+        "Σ∫∫|f−f<sub>ref</sub>| cosθ<sub>i</sub> cosθ<sub>o</sub> / Σ∫∫|f<sub>ref</sub>| "
+        "cosθ<sub>i</sub> cosθ<sub>o</sub>. Normalised L2: Bagher et al. 2012 §6.3. "
+        "Compressive objective: Bagher et al. 2016 Eq. 7–12. – = not available.</p>")
+
+    # plots
+    plots = result.get("plots") or {}
+    titles = {"lobes": "BRDF lobes in the incidence plane (cube root applied)",
+              "factors": "Fitted microfacet functions",
+              "slices": "Backscattering (θd = 0) and θh = 0 slices"}
+    for key, title in titles.items():
+        if plots.get(key):
+            parts.append(f"<h2>{_e(title)}</h2>{_img(plots[key], title, cls='plot')}")
+
+    # parameters
+    prm = []
+    for m in models:
+        p = m.get("params")
+        info = m.get("fit_info")
+        if p or info or m.get("fit_file"):
+            link = (f' (<a href="{_e(m["fit_file"])}">fit file</a>)' if m.get("fit_file") else "")
+            prm.append(f"<h3>{_e(m.get('name'))}{link}</h3><pre>"
+                       + _e(json.dumps({"params": p, "fit_info": info}, indent=1,
+                                       default=_json_default)[:6000]) + "</pre>")
+    if prm:
+        parts.append("<h2>Fitted parameters</h2>" + "".join(prm))
+    if result.get("notes"):
+        parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{_e(n)}</li>" for n in result["notes"])
+                     + "</ul>")
+    path = mdir / "index.html"
+    with atomic_write(path, "w") as fh:
+        fh.write(_page(f"brdffit compare – {name}", "\n".join(parts)))
+    return path
+
+
+# ------------------------------------------------------------------------------------------
+# index
+# ------------------------------------------------------------------------------------------
+def summarize(results: Iterable[dict], tie_db: float = 2.0) -> dict:
+    """Per-model mean/median PSNR and dE2000 and pairwise wins/ties over materials.
+
+    Returns ``{"models": [...], "per_model": {name: {...}}, "wins": count_wins(...)}``.
+    Materials where a model failed count as missing (NaN) for that model.
+    """
+    from .metrics import count_wins
+
+    results = list(results)
+    names: list[str] = []
+    for r in results:
+        for m in _models(r):
+            if m.get("name") not in names:
+                names.append(m.get("name"))
+    psnr = {n: np.full(len(results), np.nan) for n in names}
+    de = {n: np.full(len(results), np.nan) for n in names}
+    for i, r in enumerate(results):
+        for m in _models(r):
+            if _ok(m):
+                p, d = _num(m.get("psnr")), _num(m.get("mean_de2000"))
+                psnr[m["name"]][i] = np.nan if p is None else p
+                de[m["name"]][i] = np.nan if d is None else d
+    per = {}
+    for n in names:
+        p, d = psnr[n], de[n]
+        pf = p[np.isfinite(p)]
+        df = d[np.isfinite(d)]
+        per[n] = {"n": int(np.sum(~np.isnan(p))),
+                  "mean_psnr": float(np.mean(pf)) if pf.size else None,
+                  "median_psnr": float(np.median(p[~np.isnan(p)])) if np.any(~np.isnan(p)) else None,
+                  "mean_de2000": float(np.mean(df)) if df.size else None,
+                  "median_de2000": float(np.median(df)) if df.size else None}
+    return {"models": names, "per_model": per, "wins": count_wins(psnr, tie_db) if names else {},
+            "n_materials": len(results), "tie_db": tie_db}
+
+
+def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
+    """(Re)build ``OUT/index.html`` from every material result found under ``OUT``."""
+    out_dir = Path(out_dir)
+    results = read_results(out_dir)
+    summ = summarize(results)
+    names = summ["models"]
+    parts = [f"<h1>{_e(title)}</h1>",
+             f'<p class="note">{len(results)} material(s). Click a column header to sort. '
+             "PSNR (Bagher et al. 2016 §5) in dB, higher is better; dE2000 (mean over the "
+             "foreground), lower is better.</p>"]
+    # per-model summary
+    rows = []
+    for n in names:
+        s = summ["per_model"][n]
+        rows.append(f'<tr><td class="l">{_e(n)}</td>' + _td(s["n"], 0) + _td(s["mean_psnr"])
+                    + _td(s["median_psnr"]) + _td(s["mean_de2000"]) + _td(s["median_de2000"])
+                    + "</tr>")
+    parts.append("<h2>Per model</h2><table class=\"sortable\" id=\"summary\"><thead><tr>"
+                 "<th class=\"l\">model</th><th>materials</th><th>mean PSNR</th>"
+                 "<th>median PSNR</th><th>mean dE2000</th><th>median dE2000</th></tr></thead>"
+                 "<tbody>" + "".join(rows) + "</tbody></table>")
+    # wins/ties matrix
+    if len(names) > 1:
+        head = "".join(f"<th>{_e(b)}</th>" for b in names)
+        rows = []
+        for a in names:
+            cells = []
+            for b in names:
+                if a == b:
+                    cells.append("<td>–</td>")
+                    continue
+                w = summ["wins"][a][b]
+                cells.append(f'<td data-sort="{w["wins"]}">{w["wins"]} / {w["ties"]} / '
+                             f'{w["losses"]}</td>')
+            rows.append(f'<tr><td class="l">{_e(a)}</td>{"".join(cells)}</tr>')
+        parts.append("<h2>Wins / ties / losses (row vs column, tie = PSNR within "
+                     f"{summ['tie_db']:g} dB)</h2><table class=\"sortable\" id=\"wins\"><thead>"
+                     f"<tr><th class=\"l\">model</th>{head}</tr></thead><tbody>"
+                     + "".join(rows) + "</tbody></table>")
+    # per material
+    head = "".join(f"<th>{_e(n)} PSNR</th><th>{_e(n)} dE</th>" for n in names)
+    rows = []
+    for r in results:
+        slug = r["slug"]
+        ref = r.get("reference") or {}
+        thumb = (_img(slug + "/" + ref["png"], str(r.get("material", slug)) + " reference", cls="thumb")
+                 if ref.get("png") else "")
+        by = {m.get("name"): m for m in _models(r)}
+        ps = [_num(m.get("psnr")) for m in by.values() if _ok(m) and _num(m.get("psnr")) is not None]
+        best = max(ps) if ps else None
+        cells = []
+        for n in names:
+            m = by.get(n)
+            if m is None or not _ok(m):
+                cells.append('<td class="fail" data-sort="">' + ("failed" if m else "–") + "</td><td></td>")
+                continue
+            cls = "best" if best is not None and _num(m.get("psnr")) == best else ""
+            cells.append(_td(m.get("psnr"), cls=cls) + _td(m.get("mean_de2000")))
+        rows.append(f'<tr><td class="l">{thumb}</td><td class="l" data-sort="{_e(str(r.get("material", slug)).lower())}">'
+                    f'<a href="{_e(slug)}/index.html">{_e(r.get("material", slug))}</a></td>'
+                    + _td(r.get("noise_floor_psnr")) + "".join(cells) + "</tr>")
+    parts.append("<h2>Materials</h2><table class=\"sortable\" id=\"materials\"><thead><tr>"
+                 "<th class=\"l\">reference</th><th class=\"l\">material</th><th>noise floor PSNR</th>"
+                 + head + "</tr></thead><tbody>" + "".join(rows) + "</tbody></table>")
+    path = out_dir / "index.html"
+    with atomic_write(path, "w") as fh:
+        fh.write(_page(title, "\n".join(parts)))
+    summ_path = out_dir / "summary.json"
+    with atomic_write(summ_path, "w") as fh:
+        json.dump(_clean(summ), fh, indent=1, default=_json_default, allow_nan=False)
+    return path
+
+
+# ------------------------------------------------------------------------------------------
+# link checking (used by the tests and the bench)
+# ------------------------------------------------------------------------------------------
+_LINK_RE = re.compile(r"""(?:src|href)\s*=\s*["']([^"'#]+)""", re.IGNORECASE)
+
+
+def local_links(html_path) -> list[str]:
+    """Every relative ``src``/``href`` of a page (external schemes are reported as is)."""
+    text = Path(html_path).read_text(encoding="utf-8")
+    return [html.unescape(u) for u in _LINK_RE.findall(text)]
+
+
+def missing_links(html_path) -> list[str]:
+    """Relative links of a page that do not resolve to an existing file, plus any absolute or
+    remote link (a report must not have either)."""
+    html_path = Path(html_path)
+    bad = []
+    for u in local_links(html_path):
+        if re.match(r"^[a-z][a-z0-9+.-]*:", u, re.I) or u.startswith("/"):
+            bad.append(u)
+            continue
+        if not (html_path.parent / u).is_file():
+            bad.append(u)
+    return bad

@@ -1,0 +1,119 @@
+"""Tests of the comparison report (compare + report) with a tiny NumPy stand-in renderer."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from brdffit.evaluation import compare as C
+from brdffit.evaluation import report as R
+from tests.evaluation.test_metrics import Lambert, Phongish
+from tests.evaluation.test_plots import FakeMicrofacet
+
+
+def standin_render(brdf, scene="sphere", spp=4, resolution=24, seed=0, **_):
+    """Orthographic sphere under one distant light + a constant sky term, evaluated with
+    ``brdf.eval`` per pixel; seed-dependent noise of relative size 1/sqrt(spp) mimics MC."""
+    n = int(resolution)
+    y, x = np.mgrid[0:n, 0:n]
+    px = (x + 0.5) / n * 2 - 1
+    py = 1 - (y + 0.5) / n * 2
+    r2 = px**2 + py**2
+    mask = r2 < 1
+    nz = np.sqrt(np.clip(1 - r2, 0, 1))
+    nrm = np.stack([px, py, nz], -1)
+    # local frame around the normal
+    t = np.cross(nrm, [0.0, 1.0, 0.0])
+    t /= np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1e-9)
+    b = np.cross(nrm, t)
+
+    def local(w):
+        return np.stack([np.sum(w * t, -1), np.sum(w * b, -1), np.sum(w * nrm, -1)], -1)
+
+    v = np.broadcast_to([0.0, 0.0, 1.0], nrm.shape)
+    light = np.array([0.5, 0.5, 0.707])
+    light = np.broadcast_to(light / np.linalg.norm(light), nrm.shape)
+    wi, wo = local(light), local(v)
+    f = np.asarray(brdf.eval(wi, wo))
+    img = f * np.clip(wi[..., 2:3], 0, None) * 5.0 + 0.05
+    rng = np.random.default_rng(seed)
+    img = img * (1 + rng.normal(0, 0.3 / np.sqrt(spp), img.shape))
+    return np.where(mask[..., None], np.maximum(img, 0), 0.0), mask
+
+
+def _ref():
+    ref = Phongish(30)
+    ref.name = "glossy test/material"  # slash: must be made a safe directory name
+    return ref
+
+
+@pytest.fixture(scope="module")
+def report_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("report")
+    models = {"lambert": Lambert([0.3, 0.25, 0.2]), "microfacet": FakeMicrofacet(),
+              "exact": Phongish(30), "broken": "no-such-model"}
+    res = C.compare(_ref(), models, out, renderer=standin_render, spp=16, resolution=24,
+                    brdf_metric_samples=1 << 10)
+    return out, res
+
+
+def test_compare_result_and_metrics(report_dir):
+    out, res = report_dir
+    by = {m["name"]: m for m in res["models"]}
+    assert set(by) == {"lambert", "microfacet", "exact", "broken"}
+    assert by["broken"]["status"] == "failed" and "no-such-model" in by["broken"]["error"]
+    # same scene and seed: the reference itself renders identically
+    assert by["exact"]["psnr"] == np.inf and by["exact"]["mean_de2000"] == 0.0
+    assert by["exact"]["brdf"]["cos_rel_error"] == 0.0
+    assert by["microfacet"]["psnr"] > by["lambert"]["psnr"]
+    assert by["lambert"]["mean_de2000"] > 0
+    assert np.isfinite(res["noise_floor_psnr"]) and res["noise_floor_psnr"] > by["lambert"]["psnr"]
+    saved = json.loads((out / res["slug"] / "result.json").read_text())
+    assert saved["models"][2]["psnr"] == "inf"  # non-finite floats stay valid JSON
+
+
+def test_pages_contain_every_model_and_links_resolve(report_dir):
+    out, res = report_dir
+    page = out / res["slug"] / "index.html"
+    idx = out / "index.html"
+    text = page.read_text()
+    for name in ("lambert", "microfacet", "exact", "broken", "glossy test/material"):
+        assert name in text
+    assert R.missing_links(page) == [] and R.missing_links(idx) == []
+    links = R.local_links(page)
+    assert "reference.png" in links and "lambert_de2000.png" in links and "lobes.png" in links
+    assert "factors.png" in links and "slices.png" in links
+    assert "http" not in idx.read_text() and "<script src" not in idx.read_text()
+    assert "microfacet" in idx.read_text()
+
+
+def test_index_rebuilt_when_a_material_is_added(report_dir, tmp_path):
+    out, _ = report_dir
+    other = Lambert([0.6, 0.5, 0.4])
+    other.name = "second"
+    C.compare(other, {"lambert": Lambert([0.5, 0.5, 0.5])}, out, renderer=standin_render, spp=4,
+              resolution=16, noise_floor=False, brdf_metric_samples=1 << 8)
+    text = (out / "index.html").read_text()
+    assert "second/index.html" in text and "glossy-test-material/index.html" in text
+    summ = json.loads((out / "summary.json").read_text())
+    assert summ["n_materials"] == 2 and summ["per_model"]["lambert"]["n"] == 2
+    assert R.missing_links(out / "index.html") == []
+
+
+def test_missing_links_detects_problems(tmp_path):
+    p = tmp_path / "x.html"
+    (tmp_path / "a.png").write_bytes(b"x")
+    p.write_text('<img src="a.png"><img src="b.png"><a href="https://cdn.example/x.js">'
+                 '<img src="/abs.png">')
+    assert R.missing_links(p) == ["b.png", "https://cdn.example/x.js", "/abs.png"]
+
+
+def test_summarize_counts_wins():
+    results = [{"models": [{"name": "a", "psnr": 30}, {"name": "b", "psnr": 25}]},
+               {"models": [{"name": "a", "psnr": 30}, {"name": "b", "psnr": 31}]},
+               {"models": [{"name": "a", "status": "failed"}, {"name": "b", "psnr": 20}]}]
+    s = R.summarize(results)
+    assert s["per_model"]["a"]["n"] == 2 and s["per_model"]["b"]["mean_psnr"] == pytest.approx(76 / 3)
+    assert s["wins"]["a"]["b"] == {"wins": 1, "ties": 1, "losses": 0, "n": 2}
