@@ -452,13 +452,18 @@ class RGLBRDF(BRDF):
         sample = vndf.invert(u_m | φ(si.wi), θ(si.wi)); value = rgb.eval(sample | φ, θ, channel),
         times ``ndf.eval(u_m) / (4 sigma.eval(u_wi))`` when ``jacobian`` is set. That value is
         f_r · cos θ(wo), with Mitsuba's wo being our ``wi``: we divide by cos θi.
+
+        Deliberate deviation: negative values are clamped to 0 (some RGB tables hold small
+        negative texels, e.g. 21 % of ``chm_mint_rgb``'s, from out-of-gamut colour conversion;
+        Mitsuba returns them unclamped, see :meth:`eval_mitsuba`).
         """
         wi, wo = _as_dirs(wi, wo)
         val = self.eval_mitsuba(wo, wi)
         cos_i = wi[..., 2]
         with np.errstate(divide="ignore", invalid="ignore"):
             f = val / cos_i[..., None]
-        return np.where((cos_i > 0)[..., None] & (wo[..., 2] > 0)[..., None], f, 0.0)
+        ok = (cos_i > 0)[..., None] & (wo[..., 2] > 0)[..., None] & (f > 0)
+        return np.where(ok, f, 0.0)
 
 
 class IsotropicRGLBRDF(RGLBRDF, IsotropicBRDF):

@@ -222,7 +222,7 @@ def write_tensor_file(path, fields: Mapping[str, np.ndarray | str], *, align: in
                                         f"{name!r}, found {arr.ndim}")
         if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
             raise BRDFFormatError(path, f"expected finite values in float field {name!r}, found NaN/inf")
-        arr = np.ascontiguousarray(arr, dtype=DTYPE_CODES[code])
+        arr = np.asarray(arr, dtype=DTYPE_CODES[code], order="C")  # keeps 0-d arrays 0-d
         arrays[str(name)] = (label, code, arr)
 
     header_size = _PREAMBLE + sum(2 + len(lb) + 2 + 1 + 8 + 8 * a.ndim
