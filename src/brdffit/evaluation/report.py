@@ -82,6 +82,16 @@ document.querySelectorAll('table.sortable').forEach(function (table) {
     });
   });
 });
+// After loading, record on <html> how many images loaded (used by the headless-browser check).
+window.addEventListener('load', function () {
+  var imgs = Array.prototype.slice.call(document.images);
+  var bad = imgs.filter(function (i) { return !(i.complete && i.naturalWidth > 0); });
+  var root = document.documentElement;
+  root.setAttribute('data-images-total', String(imgs.length));
+  root.setAttribute('data-images-broken', String(bad.length));
+  root.setAttribute('data-images-broken-list', bad.map(function (i) {
+    return i.getAttribute('src'); }).join('|'));
+});
 </script>
 """
 
@@ -341,11 +351,11 @@ def summarize(results: Iterable[dict], tie_db: float = 2.0) -> dict:
     per = {}
     for n in names:
         p, d = psnr[n], de[n]
-        pf = p[np.isfinite(p)]
+        pf = p[~np.isnan(p)]  # +inf (an exact match) is kept: the mean is then +inf
         df = d[np.isfinite(d)]
-        per[n] = {"n": int(np.sum(~np.isnan(p))),
+        per[n] = {"n": int(pf.size),
                   "mean_psnr": float(np.mean(pf)) if pf.size else None,
-                  "median_psnr": float(np.median(p[~np.isnan(p)])) if np.any(~np.isnan(p)) else None,
+                  "median_psnr": float(np.median(pf)) if pf.size else None,
                   "mean_de2000": float(np.mean(df)) if df.size else None,
                   "median_de2000": float(np.median(df)) if df.size else None}
     return {"models": names, "per_model": per, "wins": count_wins(psnr, tie_db) if names else {},
