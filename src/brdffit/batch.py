@@ -1,0 +1,328 @@
+"""Batch fitting of whole databases on Dask (local cluster or an existing scheduler).
+
+One task per (material, model). A task loads the material *on the worker* (only its load spec
+travels through the scheduler), fits the model, saves the fit and computes BRDF-space metrics,
+then writes its record; everything is written atomically, the record last, so a record on disk
+means the task's outputs are complete. Output layout::
+
+    OUT/fits/<material>/<model>.npz       the fitted model (brdffit fit file)
+    OUT/records/<material>/<model>.json   status, metrics, parameters, timings, task key
+    OUT/summary.csv, OUT/summary.json     one row per material × model
+
+**Resuming.** Each task has a key: a hash of the load spec, the checksum of the file behind
+it, the model name, the options and the fit-file format version. A re-run skips a task whose
+record exists with the same key (``ok``, or ``failed`` unless ``retry_failed``) and redoes it
+when the key changed. Killing a run loses at most the tasks in flight.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import time
+import traceback
+from pathlib import Path
+from typing import Any, Callable, Iterable, Sequence
+
+from ._atomic import atomic_write
+from .errors import BRDFError
+
+__all__ = ["Task", "enumerate_materials", "make_tasks", "run_task", "run_batch",
+           "read_records", "write_summary", "TIMING_FIELDS"]
+
+#: Record fields that legitimately differ between two runs of the same task.
+TIMING_FIELDS = ("fit_time_s", "metrics_time_s", "wall_time_s", "finished", "worker")
+
+_MEASURED_SUFFIXES = (".binary", ".bsdf", ".bin", ".h5")
+
+
+@dataclasses.dataclass(frozen=True)
+class Task:
+    """One unit of work: fit ``model`` to the material loaded from ``spec``."""
+
+    material: str
+    spec: str
+    model: str
+    options: tuple = ()  # sorted (key, value) pairs, hashable and JSON-able
+
+    def options_dict(self) -> dict:
+        return dict(self.options)
+
+    def key(self) -> str:
+        from .io.fitfile import FORMAT_VERSION, source_checksum
+
+        payload = {"spec": self.spec, "source_sha256": source_checksum(self.spec),
+                   "model": self.model, "options": self.options_dict(),
+                   "fit_format": FORMAT_VERSION}
+        blob = json.dumps(payload, sort_keys=True, default=str).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+    def fit_path(self, out: Path) -> Path:
+        return out / "fits" / _safe(self.material) / f"{_safe(self.model)}.npz"
+
+    def record_path(self, out: Path) -> Path:
+        return out / "records" / _safe(self.material) / f"{_safe(self.model)}.json"
+
+
+def _safe(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+
+
+def enumerate_materials(source, only: Sequence[str] | None = None,
+                        limit: int | None = None) -> list[tuple[str, str]]:
+    """``(material name, load spec)`` pairs of a database.
+
+    ``source`` is a folder of measured files (MERL ``.binary``, RGL ``.bsdf``, UTIA ``.bin``,
+    Neural-BRDF ``.h5``), a Neural-BRDF ``.zip`` collection, a list file (one load spec per
+    line, ``#`` comments), or ``synthetic:`` / ``synthetic:a,b`` for the built-in materials.
+    ``only`` keeps the named materials (an unknown name is an error); ``limit`` keeps the first N.
+    """
+    src = str(source)
+    if src.startswith("synthetic:"):
+        from .synthetic import list_synthetic
+
+        names = [n for n in src.split(":", 1)[1].split(",") if n] or list(list_synthetic())
+        pairs = [(n, f"synthetic:{n}") for n in names]
+    else:
+        from .io import _find  # the same data search path as load()
+
+        path = _find(Path(src))
+        if path is None:
+            raise BRDFError(f"{src}: no such file or folder")
+        if path.is_dir():
+            files = sorted(p for p in path.iterdir() if p.suffix in _MEASURED_SUFFIXES)
+            if not files:
+                raise BRDFError(f"{path}: expected measured BRDF files "
+                                f"({', '.join(_MEASURED_SUFFIXES)}), found none")
+            pairs = [(p.stem, str(p)) for p in files]
+        elif path.suffix == ".zip":
+            from .io.nbrdf import list_materials
+
+            pairs = [(m, f"{path}:{m}") for m in list_materials(path)]
+        else:
+            pairs = []
+            for line in path.read_text().splitlines():
+                line = line.split("#", 1)[0].strip()
+                if line:
+                    name = line.rsplit(":", 1)[-1] if ":" in line else Path(line).stem
+                    pairs.append((Path(name).stem, line))
+            if not pairs:
+                raise BRDFError(f"{path}: expected a list of load specs, found no entries")
+    if only:
+        known = {n for n, _ in pairs}
+        missing = [n for n in only if n not in known]
+        if missing:
+            raise BRDFError(f"{src}: unknown material(s) {missing}; "
+                            f"{len(known)} available, e.g. {sorted(known)[:5]}")
+        pairs = [p for p in pairs if p[0] in set(only)]
+    return pairs[:limit] if limit else pairs
+
+
+def make_tasks(materials: Iterable[tuple[str, str]], models: Sequence[str],
+               options: dict[str, dict] | None = None) -> list[Task]:
+    """The cross product of materials and models (``options`` per model name)."""
+    options = options or {}
+    return [Task(name, spec, model, tuple(sorted((options.get(model) or {}).items())))
+            for name, spec in materials for model in models]
+
+
+def _write_json(path: Path, obj: dict) -> None:
+    with atomic_write(path, "w") as fh:
+        json.dump(obj, fh, indent=1, sort_keys=True, default=_json_default)
+
+
+def _json_default(obj):
+    import numpy as np
+
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return str(obj)
+
+
+def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
+    """Run one task in this process and return its record (also written to disk).
+
+    A failure of loading, fitting or measuring is caught and recorded (``status: failed``
+    with the error), so one bad material never stops a batch.
+    """
+    import os
+    import socket
+
+    from .evaluation.compare import fit_model, model_params
+    from .io import load
+    from .io.fitfile import save_fit
+
+    out = Path(out_dir)
+    record: dict[str, Any] = {"material": task.material, "spec": task.spec, "model": task.model,
+                              "options": task.options_dict(), "key": task.key(),
+                              "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    t0 = time.perf_counter()
+    try:
+        reference = load(task.spec)
+        t_fit = time.perf_counter()
+        model = fit_model(task.model, reference, task.options_dict())
+        record["fit_time_s"] = time.perf_counter() - t_fit
+        save_fit(model, task.fit_path(out), source=task.spec, options=task.options_dict())
+        record["fit_file"] = str(task.fit_path(out).relative_to(out))
+        record["params"] = model_params(model)
+        if metrics:
+            from .evaluation.metrics import brdf_metrics
+
+            t_m = time.perf_counter()
+            record["metrics"] = brdf_metrics(reference, model)
+            record["metrics_time_s"] = time.perf_counter() - t_m
+        record["status"] = "ok"
+    except Exception as exc:  # noqa: BLE001 – recorded, the batch goes on
+        record["status"] = "failed"
+        record["error"] = f"{type(exc).__name__}: {exc}"
+        record["traceback"] = traceback.format_exc(limit=8)
+    record["wall_time_s"] = time.perf_counter() - t0
+    record["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S")
+    _write_json(task.record_path(out), record)
+    return record
+
+
+def _existing(task: Task, out: Path) -> dict | None:
+    path = task.record_path(out)
+    try:
+        rec = json.loads(path.read_text())
+    except (FileNotFoundError, json.JSONDecodeError):
+        return None
+    return rec if rec.get("key") == task.key() else None
+
+
+def read_records(out_dir) -> list[dict]:
+    """Every record under ``OUT/records`` (sorted by material, then model)."""
+    out = Path(out_dir)
+    recs = []
+    for p in sorted((out / "records").glob("*/*.json")):
+        if p.name.startswith("."):  # a temporary file left by a killed writer
+            continue
+        try:
+            recs.append(json.loads(p.read_text()))
+        except json.JSONDecodeError:
+            continue
+    return recs
+
+
+def write_summary(out_dir, records: list[dict] | None = None) -> tuple[Path, Path]:
+    """Write ``summary.json`` and ``summary.csv`` (one row per material × model)."""
+    import csv
+    import io
+
+    out = Path(out_dir)
+    records = read_records(out) if records is None else records
+    rows = []
+    for r in records:
+        row = {"material": r["material"], "model": r["model"], "status": r.get("status"),
+               "fit_time_s": r.get("fit_time_s"), "error": r.get("error", "")}
+        for k, v in (r.get("metrics") or {}).items():
+            if not isinstance(v, dict):
+                row[f"metric_{k}"] = v
+        for k, v in (r.get("params") or {}).items():
+            if isinstance(v, (int, float, str, bool)) or v is None:
+                row[f"param_{k}"] = v
+        rows.append(row)
+    _write_json(out / "summary.json", {"rows": rows})
+    fields: list[str] = []
+    for row in rows:
+        fields += [k for k in row if k not in fields]
+    buf = io.StringIO()
+    writer = csv.DictWriter(buf, fieldnames=fields)
+    writer.writeheader()
+    writer.writerows(rows)
+    with atomic_write(out / "summary.csv", "w") as fh:
+        fh.write(buf.getvalue())
+    return out / "summary.json", out / "summary.csv"
+
+
+def _client(scheduler: str | None, workers: int, memory_limit: str | None):
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        return Client(scheduler), None
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           host="127.0.0.1", dashboard_address=None,
+                           memory_limit=memory_limit or "auto", silence_logs=40)
+    return Client(cluster), cluster
+
+
+def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
+              workers: int = 2, memory_limit: str | None = None, metrics: bool = True,
+              retry_failed: bool = False, progress: Callable | bool = True) -> dict:
+    """Run ``tasks`` on Dask, skipping finished ones; return counts and the records.
+
+    ``scheduler``: address of an existing Dask scheduler (``tcp://host:port``); by default a
+    local cluster of ``workers`` processes with one thread each. ``progress``: ``True`` for a
+    Rich progress bar, ``False`` for none, or a callable ``(record) -> None``.
+    """
+    from dask.distributed import as_completed
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    todo, skipped = [], []
+    for t in tasks:
+        rec = _existing(t, out)
+        if rec is not None and (rec.get("status") == "ok" or not retry_failed):
+            skipped.append(rec)
+        else:
+            todo.append(t)
+    done: list[dict] = []
+    t0 = time.perf_counter()
+    if todo:
+        client, cluster = _client(scheduler, workers, memory_limit)
+        try:
+            futures = [client.submit(run_task, t, str(out), metrics, pure=False,
+                                     key=f"brdffit-{_safe(t.material)}-{_safe(t.model)}-{t.key()}")
+                       for t in todo]
+            with _Progress(todo, enabled=progress is True) as bar:
+                for fut in as_completed(futures):
+                    rec = fut.result()
+                    done.append(rec)
+                    bar.advance(rec)
+                    if callable(progress):
+                        progress(rec)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    records = read_records(out)
+    write_summary(out, records)
+    return {"ran": len(done), "skipped": len(skipped),
+            "failed": sum(r.get("status") != "ok" for r in done),
+            "wall_time_s": time.perf_counter() - t0, "records": records}
+
+
+class _Progress:
+    """Rich progress bar with per-model counts and ETA (no-op when disabled)."""
+
+    def __init__(self, tasks: Sequence[Task], enabled: bool):
+        self.enabled = enabled
+        self.models = sorted({t.model for t in tasks})
+        self.total = {m: sum(t.model == m for t in tasks) for m in self.models}
+
+    def __enter__(self):
+        if self.enabled:
+            from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
+                                       TimeElapsedColumn, TimeRemainingColumn)
+
+            self._p = Progress(TextColumn("{task.description:>14}"), BarColumn(),
+                               MofNCompleteColumn(), TextColumn("{task.fields[failed]} failed"),
+                               TimeElapsedColumn(), TimeRemainingColumn())
+            self._p.__enter__()
+            self._ids = {m: self._p.add_task(m, total=self.total[m], failed=0) for m in self.models}
+            self._failed = dict.fromkeys(self.models, 0)
+        return self
+
+    def advance(self, rec: dict) -> None:
+        if self.enabled:
+            m = rec["model"]
+            self._failed[m] += rec.get("status") != "ok"
+            self._p.update(self._ids[m], advance=1, failed=self._failed[m])
+
+    def __exit__(self, *exc):
+        if self.enabled:
+            self._p.__exit__(*exc)
