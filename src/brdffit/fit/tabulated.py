@@ -1,0 +1,514 @@
+"""Tabulated microfacet fit by power iteration (Dupuy, Heitz, Iehl, Poulin, Ostromoukhov 2015).
+
+Pipeline of :func:`fit_tabulated`:
+
+1. **Backscattering** ``b(o) = f_r(o, o)`` of the input (luminance, or one channel) at the
+   elevation nodes of a radial rule (:func:`brdffit.microfacet.tabulated.radial_rule`) and, for
+   anisotropic fits, at ``Nφ`` azimuths. For MERL-grid input with the ``"merl"`` rule and
+   ``N = 90`` the nodes *are* the MERL ``θh`` samples at ``θd = 0`` (supplemental Eq. 20-22),
+   so every backscattering sample is read once.
+2. **Slope PDF** ``P``: the Fredholm equation ``F0 P(õ) = ∫ K(o, h) P(h̃) dωh`` with
+   ``K = 4 f_r(o,o) cos⁵θo <o,h>₊ sec⁴θh`` (Eq. 14-15), discretised (Eq. 16-17) and solved by
+   power iteration from all ones (Eq. 18, Algorithm 1). In slope space the kernel reads
+   ``4 b(o) cos⁶θo (1 + õ·h̃)₊`` against ``dh̃``. Isotropic: the radial form (Eq. 21-23,
+   Algorithm 3) with the azimuthal integral in closed form. Anisotropic: the 2D form on a
+   ``(θ, φ)`` grid; the kernel is circulant in ``φ`` so ``K·p`` is an FFT convolution and the
+   ``N² = 8100²`` matrix is never formed.
+3. **Normalisation** (Eq. 8) with the same quadrature, continuous lookup, ``σ``/``G1``
+   tables (Eq. 3): see :class:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution`.
+4. **Fresnel** per channel: ``F(θd) = E[f_r / f_r,id | θd]`` (Eq. 19-20) with
+   ``f_r,id = D G2 / (4 cos θi cos θo)`` (Eq. 1 with F = 1 and the height-correlated Eq. 2),
+   averaged over every valid MERL sample (supplemental Eq. 33-39) for isotropic input. For
+   materials outside microfacet theory this is a *residual*, not a physical Fresnel
+   reflectance (Dupuy 2015 §4.4); it is clamped to ``[0, fresnel_max]`` and never NaN.
+
+The dominant eigenvalue is ``F0`` in the paper's notation (reported in ``fit_info``).
+
+Deliberate deviations / options (documented in the parameters): a Gauss-Legendre radial rule
+for accuracy (``rule="gauss"``, default for non-MERL input), an optional ``hotspot="G2"``
+backscattering model consistent with the height-correlated Smith term used for rendering,
+a tolerance-based stop, and per-channel distributions.
+
+Conversions to analytic roughness by slope moments (Appendix C) are in :func:`to_beckmann`,
+:func:`to_ggx`, :func:`fit_beckmann` and :func:`fit_ggx`.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..brdf import BRDF
+from ..errors import FitError
+from ..grid import N_THETA_D, N_THETA_H, merl_theta_d, tabulate_merl_grid
+from ..microfacet.tabulated import (TabulatedSlopeDistribution, _circular_kernel_apply,
+                                    azimuthal_clamped_cosine_integral, radial_rule)
+
+__all__ = ["fit_tabulated", "fit_ggx", "fit_beckmann", "to_ggx", "to_beckmann",
+           "solve_slope_pdf", "extract_fresnel", "luminance", "backscatter",
+           "PerChannelBRDF"]
+
+LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 / linear sRGB
+
+
+def luminance(rgb) -> np.ndarray:
+    """Rec. 709 luminance ``Y`` of linear RGB ``(..., 3)`` (the paper fits one distribution
+    from a luminance of the backscatter, §3)."""
+    return np.asarray(rgb, dtype=np.float64) @ LUMINANCE_WEIGHTS
+
+
+def _channel(rgb, channel):
+    rgb = np.asarray(rgb, dtype=np.float64)
+    return luminance(rgb) if channel is None else rgb[..., int(channel)]
+
+
+def _fill_invalid(u, b, ok, where: str):
+    """Replace invalid backscattering samples by interpolation over the valid ones."""
+    if np.all(ok):
+        return b
+    if not np.any(ok):
+        raise FitError(f"{where}: no valid backscattering sample (expected finite values ≥ 0)")
+    out = b.copy()
+    if b.ndim == 1:
+        out[~ok] = np.interp(u[~ok], u[ok], b[ok])
+        return out
+    for j in range(b.shape[1]):  # anisotropic: per azimuth column (Nφ ≤ a few hundred)
+        okj = ok[:, j]
+        if np.any(okj):
+            out[~okj, j] = np.interp(u[~okj], u[okj], b[okj, j])
+        else:
+            out[:, j] = np.nan
+    bad = ~np.isfinite(out)
+    if np.any(bad):  # whole columns missing: azimuthal mean of the valid columns
+        out[bad] = np.broadcast_to(np.nanmean(out, axis=1, keepdims=True), out.shape)[bad]
+    return out
+
+
+def backscatter(brdf: BRDF, theta, phi=None, rule: str | None = None):
+    """RGB backscattering ``f_r(o, o)`` at elevations ``theta`` (and azimuths ``phi``).
+
+    Returns ``(values, valid)``: ``(Nθ, 3)`` or ``(Nθ, Nφ, 3)`` and a boolean mask. A MERL
+    table (``merl_table`` attribute) read at its own ``θh`` nodes (``rule="merl"``, N = 90)
+    returns the stored samples ``(θh_k, θd = 0)`` with their validity.
+    """
+    theta = np.asarray(theta, dtype=np.float64)
+    table = getattr(brdf, "merl_table", None)
+    if (table is not None and phi is None and rule == "merl" and theta.size == N_THETA_H):
+        values, valid = table() if callable(table) else table
+        vals = np.asarray(values[:, 0, 0, :], dtype=np.float64)
+        ok = np.asarray(valid[:, 0, 0], dtype=bool) & np.all(np.isfinite(vals), -1)
+        return vals, ok
+    if phi is None:
+        o = np.stack([np.sin(theta), np.zeros_like(theta), np.cos(theta)], -1)
+    else:
+        th, ph = np.meshgrid(theta, np.asarray(phi, dtype=np.float64), indexing="ij")
+        o = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1)
+    vals = np.asarray(brdf.eval(o, o), dtype=np.float64)
+    ok = np.all(np.isfinite(vals), -1)
+    return vals, ok
+
+
+def solve_slope_pdf(b, rule: str = "merl", iterations: int = 4, tol: float | None = None,
+                    max_iterations: int = 1000, hotspot: str = "G1"):
+    """Power iteration for the slope PDF from backscattering ``b`` (Eq. 14-18, Alg. 1/3).
+
+    Parameters
+    ----------
+    b:
+        Scalar backscattering at the nodes of ``radial_rule(len(b), rule)``: ``(N,)`` for
+        the isotropic radial form (Eq. 22-24) or ``(Nθ, Nφ)`` (normal azimuth
+        ``2πj/Nφ``) for the anisotropic form (Eq. 16-18).
+    iterations:
+        Number of multiplications by ``K`` when ``tol`` is None (paper: 4).
+    tol:
+        If given, iterate until the relative change ``max|p_k − p_{k−1}| / max p_k`` of the
+        normalised iterate is ≤ ``tol`` (at most ``max_iterations``).
+    hotspot:
+        ``"G1"``: backscattering ``F0 D G1 / (4 cos²)`` (Eq. 11-12, the paper). ``"G2"``:
+        ``F0 D G2(o,o) / (4 cos²)`` with the height-correlated Eq. 2, i.e. consistent with
+        rendering: ``F0 P = 4 b cos⁶ (2 S[P] − ∫P)``; the kernel stays positive since
+        ``J ≥ 2π``, so Perron-Frobenius still applies (an extension, not in the paper).
+
+    Returns ``(p, eigenvalue, changes)`` with ``p`` normalised (Eq. 8) by the rule.
+    """
+    b = np.asarray(b, dtype=np.float64)
+    n_theta = b.shape[0]
+    _, theta, r, w_r = radial_rule(n_theta, rule)
+    c = np.cos(theta)
+    row = 4.0 * b * (c**6 if b.ndim == 1 else c[:, None] ** 6)
+    if hotspot not in ("G1", "G2"):
+        raise ValueError(f"hotspot must be 'G1' or 'G2', got {hotspot!r}")
+    g2 = hotspot == "G2"
+    if b.ndim == 1:
+        # K'_ij = 4 b_i cos⁶θi w_j J(tanθi tanθj)   (Eq. 23 in slope form, closed-form φ integral)
+        J = azimuthal_clamped_cosine_integral(r[:, None] * r[None, :])
+        if g2:
+            J = 2.0 * J - 2.0 * np.pi
+        K = row[:, None] * (J * w_r[None, :])
+
+        def apply(p):
+            return K @ p
+
+        def integral(p):
+            return 2.0 * np.pi * np.dot(w_r, p)
+    else:
+        n_phi = b.shape[1]
+        dphi = 2.0 * np.pi * np.arange(n_phi) / n_phi
+        k = np.maximum(1.0 + (r[:, None, None] * r[None, :, None]) * np.cos(dphi), 0.0)
+        kh = np.fft.rfft(k, axis=-1)
+
+        def integral(p):
+            return float(np.sum(w_r[:, None] * p) * 2.0 * np.pi / n_phi)
+
+        def apply(p):
+            ph = np.fft.rfft(p * w_r[:, None], axis=-1)
+            s = np.fft.irfft(np.einsum("ijm,jm->im", kh, ph), n=n_phi, axis=-1)
+            s *= 2.0 * np.pi / n_phi
+            if g2:
+                s = 2.0 * s - integral(p)
+            return np.maximum(row * s, 0.0)
+
+    p = np.ones_like(b)
+    p /= integral(p)
+    changes: list[float] = []
+    n_iter = iterations if tol is None else max_iterations
+    lam = float("nan")
+    for _ in range(max(int(n_iter), 1)):
+        q = apply(p)
+        lam = integral(q)  # ∫ K p with ∫ p = 1: the eigenvalue estimate
+        if not np.isfinite(lam) or lam <= 0:
+            raise FitError("power iteration produced a zero or non-finite vector "
+                           "(expected positive backscattering somewhere)")
+        q = q / lam
+        change = float(np.max(np.abs(q - p)) / np.max(q))
+        changes.append(change)
+        p = q
+        if tol is not None and change <= tol and len(changes) >= 1:
+            break
+    return p, lam, changes
+
+
+# ------------------------------------------------------------------------------------------
+# Fresnel extraction (Eq. 19-20, supplemental Eq. 33-39)
+# ------------------------------------------------------------------------------------------
+def _sigma_of_cos(dist: TabulatedSlopeDistribution, m: int = 4096):
+    """σ of an isotropic unit table tabulated on a uniform grid of ``cos θ`` ∈ [0, 1]."""
+    cg = np.linspace(0.0, 1.0, m)
+    sg = np.sqrt(np.maximum(1.0 - cg * cg, 0.0))
+    w = np.stack([sg, np.zeros_like(cg), cg], -1)
+    return dist._sigma_unit(w)
+
+
+def _lookup_uniform(table, x):
+    m = len(table) - 1
+    xi = np.clip(x, 0.0, 1.0) * m
+    i0 = np.minimum(xi.astype(np.int64), m - 1)
+    f = xi - i0
+    return table[i0] * (1.0 - f) + table[i0 + 1] * f
+
+
+def _fresnel_ratio_sums(f, valid, ci, co, sig_i, sig_o, p_h, cos_h):
+    """Per-θd sums of ``f/f_id`` and counts; arrays broadcast to ``(Nh, Nd, Nφ[, 3])``.
+
+    ``f_id = D G2/(4 ci co)`` with ``D = P/cos⁴θh`` and ``G2 = 1/(1+Λi+Λo)``, so
+    ``f/f_id = 4 f cos⁴θh (σi co + σo ci − ci co) / P`` (no division by the cosines).
+    """
+    geom = sig_i * co + sig_o * ci - ci * co
+    scale = 4.0 * cos_h**4 / p_h
+    ok = valid & (ci > 0) & (co > 0)
+    ratio = f * (np.where(ok, geom * scale, 0.0))[..., None]
+    return ratio, ok
+
+
+def extract_fresnel(brdf: BRDF, dist: TabulatedSlopeDistribution, *, merl=None,
+                    p_floor: float = 1e-6, fresnel_max: float = 100.0,
+                    aniso_grid: tuple[int, int, int] = (24, 16, 24)) -> np.ndarray:
+    """Microfacet Fresnel ``F(θd)`` per channel at the 90 MERL ``θd`` (Eq. 19-20).
+
+    Isotropic: the mean of ``f_r/f_r,id`` over every valid MERL sample ``(θh, θd, φd)`` with
+    both directions above the horizon (supplemental Eq. 33-39; the MERL table is read as
+    stored when the input has one, else evaluated with :func:`brdffit.grid.tabulate_merl_grid`).
+    Samples where the fitted ``P(θh)`` is below ``p_floor·max P`` are skipped (the ratio is
+    undefined there). Anisotropic: the same mean over a ``(θh, φh, φd)`` grid of
+    ``aniso_grid`` samples per θd (θh on the MERL u² spacing).
+
+    This is a residual, not a physical Fresnel, when the input is not a microfacet BRDF
+    (Dupuy 2015 §4.4). Returns ``(90, 3)``, clamped to ``[0, fresnel_max]``; θd rows with no
+    usable sample copy the nearest row that has one.
+    """
+    td = merl_theta_d()
+    if dist.isotropic and (merl is not None or getattr(brdf, "isotropic", False)):
+        values, valid = merl if merl is not None else tabulate_merl_grid(brdf)
+        values = np.asarray(values)
+        from ..grid import merl_phi_d, merl_theta_h
+
+        th = merl_theta_h()
+        pd = merl_phi_d()
+        sth, cth = np.sin(th), np.cos(th)
+        std, ctd = np.sin(td), np.cos(td)
+        a = cth[:, None, None] * ctd[None, :, None]
+        bb = (sth[:, None, None] * std[None, :, None]) * np.cos(pd)[None, None, :]
+        ci = a - bb  # cos θi (MERL convention, φh = 0)
+        co = a + bb
+        sigma_tab = _sigma_of_cos(dist)
+        sig_i = _lookup_uniform(sigma_tab, ci)
+        sig_o = _lookup_uniform(sigma_tab, co)
+        p_h = dist._p_unit_polar(np.tan(th))
+        usable_h = p_h >= p_floor * p_h.max()
+        p_h = np.where(usable_h, p_h, 1.0)
+        geom = sig_i * co + sig_o * ci - ci * co
+        weight = (4.0 * cth**4 / p_h)[:, None, None] * geom
+        ok = (np.asarray(valid, dtype=bool) & (ci > 0) & (co > 0) & usable_h[:, None, None])
+        vals = np.where(ok[..., None], values, 0.0)
+        vals = np.where(np.isfinite(vals), vals, 0.0)
+        sums = np.einsum("hdpc,hdp->dc", vals, np.where(ok, weight, 0.0))
+        counts = ok.sum(axis=(0, 2))
+    else:
+        n_h, n_ph, n_pd = aniso_grid
+        th = (np.arange(n_h) / n_h) ** 2 * (np.pi / 2)
+        phh = 2.0 * np.pi * np.arange(n_ph) / n_ph
+        pd = 2.0 * np.pi * np.arange(n_pd) / n_pd
+        from ..geometry import half_diff_to_io
+
+        sums = np.zeros((len(td), 3))
+        counts = np.zeros(len(td), dtype=np.int64)
+        TH, PH, PD = np.meshgrid(th, phh, pd, indexing="ij")
+        h = np.stack([np.sin(TH) * np.cos(PH), np.sin(TH) * np.sin(PH), np.cos(TH)], -1)
+        D = dist.D(h)
+        usable = D * np.cos(TH) ** 4 >= p_floor * float(dist.table.max())
+        for j, t in enumerate(td):  # 90 θd slices, each fully vectorised
+            wi, wo = half_diff_to_io(TH, PH, t, PD)
+            ci, co = wi[..., 2], wo[..., 2]
+            ok = (ci > 0) & (co > 0) & usable
+            f = np.asarray(brdf.eval(wi, wo), dtype=np.float64)
+            ok &= np.all(np.isfinite(f), -1)
+            lam = dist.Lambda(wi) + dist.Lambda(wo)
+            with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+                fid = D * 1.0 / (1.0 + lam) / (4.0 * ci * co)
+                ratio = f / fid[..., None]
+            ok &= np.isfinite(fid) & (fid > 0)
+            sums[j] = np.sum(np.where(ok[..., None], ratio, 0.0), axis=(0, 1, 2))
+            counts[j] = ok.sum()
+    F = np.full((len(td), 3), np.nan)
+    good = counts > 0
+    if not np.any(good):
+        raise FitError("Fresnel extraction: no usable sample (expected valid data where the "
+                       "fitted NDF is non-zero)")
+    F[good] = sums[good] / counts[good, None]
+    idx = np.arange(len(td))
+    nearest = np.array([idx[good][np.argmin(np.abs(idx[good] - i))] for i in idx])
+    F = F[nearest]
+    F = np.where(np.isfinite(F), F, 0.0)
+    return np.clip(F, 0.0, fresnel_max)
+
+
+# ------------------------------------------------------------------------------------------
+# The fit
+# ------------------------------------------------------------------------------------------
+def _make_model(dist, F, name, source):
+    from ..microfacet import MicrofacetBRDF, TabulatedFresnel
+
+    fres = TabulatedFresnel(merl_theta_d(), F)
+    model = MicrofacetBRDF(dist, fres)
+    try:
+        model.name = name
+        model.source = source
+    except AttributeError:  # pragma: no cover - read-only attributes
+        pass
+    return model
+
+
+def _fit_one(brdf, channel, *, n, n_phi, rule, iterations, tol, max_iterations, anisotropic,
+             hotspot, merl, fresnel_kwargs):
+    t0 = time.perf_counter()
+    u, theta, _, _ = radial_rule(n, rule)
+    if anisotropic:
+        phi = 2.0 * np.pi * np.arange(n_phi) / n_phi
+        rgb, ok = backscatter(brdf, theta, phi)
+    else:
+        rgb, ok = backscatter(brdf, theta, None, rule=rule)
+    b = _channel(rgb, channel)
+    ok = ok & np.isfinite(b)
+    b = _fill_invalid(u, np.where(ok, b, 0.0), ok, getattr(brdf, "source", None) or
+                      getattr(brdf, "name", "input"))
+    b = np.maximum(b, 0.0)  # negative measurements (noise, networks) clamp at 0
+    if not np.any(b > 0):
+        raise FitError(f"{getattr(brdf, 'name', 'input')}: backscattering is zero everywhere "
+                       "(expected a positive value somewhere)")
+    t1 = time.perf_counter()
+    p, lam, changes = solve_slope_pdf(b, rule=rule, iterations=iterations, tol=tol,
+                                      max_iterations=max_iterations, hotspot=hotspot)
+    dist = TabulatedSlopeDistribution(p, rule=rule)
+    t2 = time.perf_counter()
+    F = extract_fresnel(brdf, dist, merl=merl, **fresnel_kwargs)
+    t3 = time.perf_counter()
+    info = {"eigenvalue": float(lam), "relative_change": [float(c) for c in changes],
+            "iterations": len(changes),
+            "converged": bool(tol is None or (changes and changes[-1] <= tol)),
+            "time_backscatter": t1 - t0, "time_power_iteration": t2 - t1,
+            "time_fresnel": t3 - t2, "F0": float(luminance(F[0])),
+            "normalisation": float(dist._integral(dist.table))}
+    return dist, F, info
+
+
+def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int = 4, tol: float | None = None,
+                  anisotropic: bool | None = None, per_channel: bool = False, n_phi: int = 90,
+                  rule: str = "auto", hotspot: str = "G1", max_iterations: int = 1000,
+                  fresnel_max: float = 100.0, p_floor: float = 1e-6):
+    """Fit the tabulated microfacet model of Dupuy et al. 2015 to ``brdf``.
+
+    Parameters
+    ----------
+    brdf:
+        Any :class:`~brdffit.brdf.BRDF` (MERL tables, networks, analytic models...).
+    n:
+        Number of elevation nodes (paper: 90 for MERL, 360 for Table 1).
+    iterations, tol, max_iterations:
+        Power iterations: exactly ``iterations`` (paper: 4) or, when ``tol`` is given, until
+        the relative change is ≤ ``tol`` (see :func:`solve_slope_pdf`).
+    anisotropic:
+        2D ``(θ, φ)`` fit (``n × n_phi``) or 1D radial fit; default ``not brdf.isotropic``.
+    per_channel:
+        One distribution per RGB channel (a :class:`PerChannelBRDF`); default one
+        distribution from the luminance of the backscatter (the paper's choice).
+    rule:
+        Radial rule: ``"merl"`` (rectangles on θ = (π/2)u², supplemental Eq. 17-22),
+        ``"gauss"`` (Gauss-Legendre in u, more accurate) or ``"auto"``: ``"merl"`` for
+        MERL-grid input (``merl_table``) with ``n = 90``, else ``"gauss"``.
+    hotspot:
+        Backscattering shadowing model, ``"G1"`` (paper, Eq. 11) or ``"G2"`` (Eq. 2).
+
+    Returns a ``MicrofacetBRDF(TabulatedSlopeDistribution, TabulatedFresnel)`` with
+    ``fit_info`` (eigenvalue = F0 of the paper, relative change per iteration, timings) and
+    ``fit_options``.
+    """
+    t0 = time.perf_counter()
+    if anisotropic is None:
+        anisotropic = not bool(getattr(brdf, "isotropic", False))
+    has_merl = getattr(brdf, "merl_table", None) is not None
+    if rule == "auto":
+        rule = "merl" if (has_merl and n == N_THETA_H and not anisotropic) else "gauss"
+    merl = None
+    if not anisotropic and getattr(brdf, "isotropic", False):
+        merl = tabulate_merl_grid(brdf)
+    options = {"n": int(n), "iterations": int(iterations), "tol": tol,
+               "anisotropic": bool(anisotropic), "per_channel": bool(per_channel),
+               "n_phi": int(n_phi) if anisotropic else None, "rule": rule, "hotspot": hotspot,
+               "max_iterations": int(max_iterations), "fresnel_max": fresnel_max,
+               "p_floor": p_floor}
+    kw = dict(n=n, n_phi=n_phi, rule=rule, iterations=iterations, tol=tol,
+              max_iterations=max_iterations, anisotropic=anisotropic, hotspot=hotspot,
+              merl=merl, fresnel_kwargs={"fresnel_max": fresnel_max, "p_floor": p_floor})
+    name = getattr(brdf, "name", "brdf")
+    source = getattr(brdf, "source", None)
+    if per_channel:
+        models, infos = [], []
+        for c in range(3):
+            dist, F, info = _fit_one(brdf, c, **kw)
+            models.append(_make_model(dist, F, f"{name}[{'RGB'[c]}]", source))
+            infos.append(info)
+        model = PerChannelBRDF(models, name=name, source=source)
+        info = {"channels": infos, "eigenvalue": [i["eigenvalue"] for i in infos]}
+    else:
+        dist, F, info = _fit_one(brdf, None, **kw)
+        model = _make_model(dist, F, name, source)
+    info["time"] = time.perf_counter() - t0
+    info["time_total"] = info["time"]
+    if merl is not None:
+        info["merl_grid"] = True
+    model.fit_info = info
+    model.fit_options = options
+    return model
+
+
+class PerChannelBRDF(BRDF):
+    """Three single-channel fits (``per_channel=True``): channel ``c`` of the result is
+    channel ``c`` of ``models[c]``. Evaluation only (no fit file, no importance sampling
+    beyond the luminance-weighted mixture of the base class)."""
+
+    def __init__(self, models, name="brdf", source=None):
+        self.models = list(models)
+        self.name = name
+        self.source = source
+        self.isotropic = all(getattr(m, "isotropic", False) for m in self.models)
+        self.fit_info = None
+        self.fit_options = None
+
+    def eval(self, wi, wo):
+        return np.stack([m.eval(wi, wo)[..., c] for c, m in enumerate(self.models)], -1)
+
+
+# ------------------------------------------------------------------------------------------
+# Conversion to analytic roughness (Appendix C)
+# ------------------------------------------------------------------------------------------
+def _parts(model):
+    dist = getattr(model, "distribution", None)
+    fres = getattr(model, "fresnel", None)
+    if not isinstance(dist, TabulatedSlopeDistribution):
+        raise TypeError(f"expected a tabulated microfacet model, got {type(model).__name__}")
+    return dist, fres
+
+
+def _clip_rho(rho):
+    return float(np.clip(rho, -0.999, 0.999)) if np.isfinite(rho) else 0.0
+
+
+def beckmann_parameters(dist: TabulatedSlopeDistribution) -> tuple[float, float, float]:
+    """``(αx, αy, ρ)`` from the second slope moments (App. C, LEAN mapping):
+    ``E x̃² = αx²/2``, ``E ỹ² = αy²/2``, ``E x̃ỹ = ραxαy/2`` (exact when P is Beckmann)."""
+    m = dist.slope_moments()
+    ax, ay = np.sqrt(2.0 * m["Exx"]), np.sqrt(2.0 * m["Eyy"])
+    return float(ax), float(ay), _clip_rho(2.0 * m["Exy"] / (ax * ay))
+
+
+def ggx_parameters(dist: TabulatedSlopeDistribution) -> tuple[float, float, float]:
+    """``(αx, αy, ρ)`` from first absolute moments and angular moments (App. C):
+    ``αx = E|x̃|``, ``αy = E|ỹ|``, ``ρ = (αy/αx) b1/(b1² + b2²)`` (exact when P is GGX)."""
+    m = dist.slope_moments()
+    ax, ay = m["E|x|"], m["E|y|"]
+    b1, b2 = m["b1"], m["b2"]
+    return float(ax), float(ay), _clip_rho((ay / ax) * b1 / (b1 * b1 + b2 * b2))
+
+
+def _analytic_model(model, kind):
+    from ..microfacet import GGX, Beckmann, MicrofacetBRDF
+
+    dist, fres = _parts(model)
+    if kind == "beckmann":
+        ax, ay, rho = beckmann_parameters(dist)
+        d = Beckmann(ax, ay, rho)
+    else:
+        ax, ay, rho = ggx_parameters(dist)
+        d = GGX(ax, ay, rho)
+    out = MicrofacetBRDF(d, fres)
+    for attr in ("name", "source"):
+        try:
+            setattr(out, attr, getattr(model, attr, None))
+        except AttributeError:  # pragma: no cover
+            pass
+    info = dict(getattr(model, "fit_info", None) or {})
+    info.update({"alpha_x": ax, "alpha_y": ay, "rho": rho, "converted_from": "tabulated"})
+    out.fit_info = info
+    out.fit_options = dict(getattr(model, "fit_options", None) or {}, model=kind)
+    return out
+
+
+def to_beckmann(model):
+    """Anisotropic Beckmann ``MicrofacetBRDF`` with the same Fresnel (Appendix C)."""
+    return _analytic_model(model, "beckmann")
+
+
+def to_ggx(model):
+    """Anisotropic GGX ``MicrofacetBRDF`` with the same Fresnel (Appendix C)."""
+    return _analytic_model(model, "ggx")
+
+
+def fit_beckmann(brdf: BRDF, **kwargs):
+    """:func:`fit_tabulated` then :func:`to_beckmann`."""
+    return to_beckmann(fit_tabulated(brdf, **kwargs))
+
+
+def fit_ggx(brdf: BRDF, **kwargs):
+    """:func:`fit_tabulated` then :func:`to_ggx`."""
+    return to_ggx(fit_tabulated(brdf, **kwargs))

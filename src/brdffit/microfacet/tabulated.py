@@ -1,0 +1,577 @@
+"""Tabulated slope distribution of Dupuy et al. 2015 (the fitted microfacet NDF).
+
+The slope PDF ``P`` (Dupuy 2015 Eq. 7-9) is stored on a polar grid of the *normal* direction
+``(θ, φ)`` (slope ``h̃ = -tan θ (cos φ, sin φ)``, Eq. 5):
+
+* isotropic: a 1D radial table ``P(θk)`` (Eq. 21), ``N`` nodes;
+* anisotropic: a 2D table ``P(θk, φj)``, ``Nθ × Nφ`` nodes, ``φj = 2πj/Nφ``.
+
+The elevation nodes follow a *radial rule* (:func:`radial_rule`) in the variable
+``u = sqrt(2θ/π)`` (so ``θ = (π/2) u²``, the MERL half-angle parameterisation of the
+supplemental, Eq. 17-22):
+
+* ``"merl"``: ``u_k = k/N`` with rectangle weights ``1/N`` (supplemental Eq. 20-22, the
+  paper's choice, required for MERL-grid input so that every backscattering sample is read once);
+* ``"gauss"``: Gauss-Legendre nodes and weights in ``u`` on ``[0, 1]`` (a deliberate deviation
+  for accuracy: the integrand of Eq. 22 is smooth in ``u``, so the rule converges spectrally
+  instead of O(h⁴)).
+
+Continuous lookup (Dupuy 2015 §4.3 "linearly interpolating the values of p") is done here
+with a monotone cubic (PCHIP) Hermite interpolant of ``log P`` in ``u`` (and linear in ``φ``
+for anisotropic tables); a deliberate deviation from linear interpolation, for accuracy
+between nodes. Below the first node ``P`` is held constant, beyond the last node it decays
+linearly in ``u`` to 0 at grazing.
+
+Derived quantities:
+
+* projected area ``σ(w) = ∫ <w,m>₊ D(m) dm`` (denominator of Eq. 3) computed from ``P`` with
+  the same quadrature as the fit, using the closed-form azimuthal integral
+  ``∫₀^{2π} (1 + s cos φ)₊ dφ`` (isotropic) or an FFT circular convolution in ``φ``
+  (anisotropic); Smith ``Λ = σ/cos θ − 1`` and ``G1 = cos θ/σ``;
+* roughness editing (Eq. 9): ``D(h; αx, αy) = P(x̃/αx, ỹ/αy) sec⁴θ/(αx αy)`` with the
+  stretch invariance of ``Λ`` (Heitz 2014); ``alpha_x``/``alpha_y`` may be arrays that
+  broadcast with the directions (per-texel roughness), without refitting;
+* sampling: slopes from ``P`` by quantile tables (Appendix A; in polar form: a marginal in
+  ``u`` and conditional in ``φ``), and for isotropic tables visible normals (Heitz & d'Eon
+  2014) with a marginal table of ``P1(x̃)`` and a conditional quantile table of ``ỹ | x̃``;
+* slope moments for Appendix C (Beckmann / GGX conversion).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.interpolate import PchipInterpolator
+
+from ..geometry import normal_to_slope, slope_to_normal
+from .base import SlopeDistribution
+
+__all__ = ["TabulatedSlopeDistribution", "radial_rule", "azimuthal_clamped_cosine_integral"]
+
+_LOG_FLOOR = 1e-30  # relative floor of P before taking logs
+
+
+def radial_rule(n: int, rule: str = "merl"):
+    """Nodes and weights of the radial quadrature in ``u = sqrt(2θ/π)``.
+
+    Returns ``(u, theta, r, w_r)`` with ``r = tan θ`` the radial slope and ``w_r`` such that
+    ``∫₀^∞ f(r) r dr ≈ Σ_k w_r[k] f(r_k)`` (change of variable ``r = tan((π/2) u²)``,
+    ``dr = π u sec²θ du``; supplemental Eq. 17-18).
+    """
+    n = int(n)
+    if n < 2:
+        raise ValueError(f"radial rule needs at least 2 nodes, got {n}")
+    if rule == "merl":
+        u = np.arange(n, dtype=np.float64) / n
+        wu = np.full(n, 1.0 / n)
+    elif rule == "gauss":
+        x, w = np.polynomial.legendre.leggauss(n)
+        u = 0.5 * (x + 1.0)
+        wu = 0.5 * w
+    else:
+        raise ValueError(f"unknown radial rule {rule!r}; expected 'merl' or 'gauss'")
+    theta = 0.5 * np.pi * u**2
+    c = np.cos(theta)
+    r = np.tan(theta)
+    w_r = wu * np.pi * u / c**2 * r
+    return u, theta, r, w_r
+
+
+def azimuthal_clamped_cosine_integral(s) -> np.ndarray:
+    """``J(s) = ∫₀^{2π} (1 + s cos φ)₊ dφ`` in closed form (s ≥ 0).
+
+    ``2π`` for ``s ≤ 1``, else ``2(φ0 + s sin φ0)`` with ``φ0 = arccos(−1/s)``. With
+    ``s = tan θo tan θh`` this is the azimuthal integral of ``<o, h>₊`` of Dupuy 2015 Eq. 23
+    (divided by ``cos θo cos θh``), so no azimuthal quadrature is needed.
+    """
+    s = np.abs(np.asarray(s, dtype=np.float64))
+    with np.errstate(divide="ignore"):
+        phi0 = np.arccos(np.clip(-1.0 / np.maximum(s, 1.0), -1.0, 1.0))
+    return np.where(s <= 1.0, 2.0 * np.pi, 2.0 * (phi0 + s * np.sin(phi0)))
+
+
+def _pchip_slopes(x, y):
+    """Derivatives of the PCHIP interpolant of ``y`` (along axis 0) at nodes ``x``."""
+    return PchipInterpolator(x, y, axis=0).derivative()(x)
+
+
+def _hermite(x_nodes, y, dy, x, col=None):
+    """Cubic Hermite interpolation at ``x`` of tables ``y``/``dy`` (``(M,)`` or ``(M, C)``).
+
+    ``col`` (int array broadcast with ``x``) picks the column of 2D tables. ``x`` is clipped
+    to the node range.
+    """
+    xn = x_nodes
+    x = np.clip(x, xn[0], xn[-1])
+    k = np.clip(np.searchsorted(xn, x, side="right") - 1, 0, len(xn) - 2)
+    h = xn[k + 1] - xn[k]
+    t = (x - xn[k]) / h
+    t2, t3 = t * t, t * t * t
+    h00 = 2 * t3 - 3 * t2 + 1
+    h10 = t3 - 2 * t2 + t
+    h01 = -2 * t3 + 3 * t2
+    h11 = t3 - t2
+    if col is None:
+        y0, y1, d0, d1 = y[k], y[k + 1], dy[k], dy[k + 1]
+    else:
+        y0, y1, d0, d1 = y[k, col], y[k + 1, col], dy[k, col], dy[k + 1, col]
+    return h00 * y0 + h10 * h * d0 + h01 * y1 + h11 * h * d1
+
+
+class TabulatedSlopeDistribution(SlopeDistribution):
+    """Tabulated slope PDF ``P`` (Dupuy 2015), isotropic (1D) or anisotropic (2D).
+
+    Parameters
+    ----------
+    p:
+        Slope-PDF values at the nodes: ``(N,)`` (isotropic, radial) or ``(Nθ, Nφ)``
+        (anisotropic, normal azimuth ``φj = 2πj/Nφ``). Normalised here (Eq. 8) with the
+        quadrature of ``rule`` unless ``normalize=False``.
+    rule:
+        Radial rule of the elevation nodes, ``"merl"`` or ``"gauss"`` (:func:`radial_rule`).
+    alpha_x, alpha_y:
+        Roughness scales of Eq. 9 (1 = the fitted table). Scalars or arrays broadcasting
+        with the batch shape of the directions passed to :meth:`D`, :meth:`Lambda`, ...
+    """
+
+    def __init__(self, p, rule: str = "merl", alpha_x=1.0, alpha_y=None, normalize: bool = True):
+        p = np.asarray(p, dtype=np.float64)
+        if p.ndim not in (1, 2):
+            raise ValueError(f"tabulated P must be 1D (isotropic) or 2D (anisotropic), got {p.shape}")
+        if not np.all(np.isfinite(p)):
+            raise ValueError("tabulated P contains NaN or infinite values")
+        p = np.maximum(p, 0.0)
+        if not np.any(p > 0):
+            raise ValueError("tabulated P is identically zero")
+        self.rule = rule
+        self.isotropic = p.ndim == 1
+        n_theta = p.shape[0]
+        self.u, self.theta, self.r, self.w_r = radial_rule(n_theta, rule)
+        self.n_phi = 1 if self.isotropic else p.shape[1]
+        self.phi = 2.0 * np.pi * np.arange(self.n_phi) / self.n_phi
+        self.table = p / self._integral(p) if normalize else p
+        self.alpha_x = alpha_x
+        self.alpha_y = alpha_x if alpha_y is None else alpha_y
+        self._build_lookup()
+        self._sampling = None
+        self._visible = None
+
+    # -- construction helpers ----------------------------------------------------------------
+    def _integral(self, p) -> float:
+        """``∫ P dh̃`` with the quadrature of the table (Eq. 8)."""
+        if p.ndim == 1:
+            return float(2.0 * np.pi * np.sum(self.w_r * p))
+        return float(np.sum(self.w_r[:, None] * p) * 2.0 * np.pi / p.shape[1])
+
+    def with_roughness(self, alpha_x, alpha_y=None) -> "TabulatedSlopeDistribution":
+        """The same table with roughness scales ``(αx, αy)`` (Eq. 9), sharing all tables.
+
+        ``alpha_x``/``alpha_y`` may be arrays (per-texel roughness) broadcasting with the
+        directions later passed to the evaluation methods.
+        """
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        new.alpha_x = alpha_x
+        new.alpha_y = alpha_x if alpha_y is None else alpha_y
+        return new
+
+    def _build_lookup(self):
+        p = self.table
+        floor = _LOG_FLOOR * float(p.max())
+        logp = np.log(np.maximum(p, floor))
+        # nodes in u, extended with u=0 (P held constant) when the rule does not contain it
+        u = self.u
+        if u[0] > 0:
+            u = np.concatenate([[0.0], u])
+            logp = np.concatenate([logp[:1], logp], axis=0)
+        self._lu = u
+        self._llogp = logp
+        self._ldlogp = _pchip_slopes(u, logp)
+        self._p_last = p[-1]
+        self._u_last = u[-1]
+        # σ at the nodes and the two ends u=0 and u=1, then a PCHIP in u
+        sig = self._sigma_nodes()
+        self._sigma_table = sig
+        us = np.concatenate([[0.0], self.u, [1.0]])
+        sig_end = self._sigma_grazing()
+        sig0 = np.ones((1,) + sig.shape[1:])
+        sig_ext = np.concatenate([sig0, sig, sig_end[None]], axis=0)
+        if self.u[0] == 0.0:  # merl rule: node at u=0 already
+            us = us[1:]
+            sig_ext = sig_ext[1:]
+        self._su = us
+        self._ssig = sig_ext
+        self._sdsig = _pchip_slopes(us, sig_ext)
+
+    def _sigma_nodes(self) -> np.ndarray:
+        """``σ(θk[, φj])`` at the table nodes with the fit quadrature (Eq. 3, 22-23)."""
+        t = self.r
+        c = np.cos(self.theta)
+        if self.isotropic:
+            J = azimuthal_clamped_cosine_integral(t[:, None] * self.r[None, :])
+            return c * (J @ (self.w_r * self.table))
+        return c[:, None] * _circular_kernel_apply(t, self.r, self.w_r, self.table)
+
+    def _sigma_grazing(self) -> np.ndarray:
+        """``σ`` at θ = π/2: ``∫ (cos Δφ)₊ r P dh̃`` (limit of Eq. 3)."""
+        if self.isotropic:
+            return np.array(2.0 * np.sum(self.w_r * self.r * self.table))
+        n = self.n_phi
+        dphi = self.phi[:, None] - self.phi[None, :]  # (i, j)
+        kern = np.maximum(np.cos(dphi), 0.0) * (2.0 * np.pi / n)
+        return np.einsum("ij,kj,k->i", kern, self.table, self.w_r * self.r)
+
+    # -- unit-roughness lookups --------------------------------------------------------------
+    def _p_unit_polar(self, r, phi=None) -> np.ndarray:
+        """P of the unit-roughness table at radial slope ``r`` and normal azimuth ``phi``."""
+        theta = np.arctan(r)
+        u = np.sqrt(theta * (2.0 / np.pi))
+        if self.isotropic:
+            val = np.exp(_hermite(self._lu, self._llogp, self._ldlogp, u))
+            tail = self._p_last * (1.0 - u) / (1.0 - self._u_last)
+            return np.where(u > self._u_last, tail, val)
+        n = self.n_phi
+        x = np.mod(phi, 2.0 * np.pi) / (2.0 * np.pi) * n
+        j0 = np.floor(x).astype(np.int64) % n
+        j1 = (j0 + 1) % n
+        f = x - np.floor(x)
+        v0 = _hermite(self._lu, self._llogp, self._ldlogp, u, j0)
+        v1 = _hermite(self._lu, self._llogp, self._ldlogp, u, j1)
+        val = np.exp((1.0 - f) * v0 + f * v1)
+        tail = ((1.0 - f) * self._p_last[j0] + f * self._p_last[j1]) * (1.0 - u) / (1.0 - self._u_last)
+        return np.where(u > self._u_last, tail, val)
+
+    def _sigma_unit(self, w) -> np.ndarray:
+        """σ of the unit-roughness table for directions ``w`` (any length, z ≥ 0)."""
+        w = np.asarray(w, dtype=np.float64)
+        rho = np.hypot(w[..., 0], w[..., 1])
+        theta = np.arctan2(rho, w[..., 2])
+        u = np.sqrt(np.clip(theta, 0.0, np.pi / 2) * (2.0 / np.pi))
+        norm = np.linalg.norm(w, axis=-1)
+        if self.isotropic:
+            return norm * _hermite(self._su, self._ssig, self._sdsig, u)
+        phi = np.arctan2(w[..., 1], w[..., 0])
+        n = self.n_phi
+        x = np.mod(phi, 2.0 * np.pi) / (2.0 * np.pi) * n
+        j0 = np.floor(x).astype(np.int64) % n
+        j1 = (j0 + 1) % n
+        f = x - np.floor(x)
+        v0 = _hermite(self._su, self._ssig, self._sdsig, u, j0)
+        v1 = _hermite(self._su, self._ssig, self._sdsig, u, j1)
+        return norm * ((1.0 - f) * v0 + f * v1)
+
+    # -- SlopeDistribution API (roughness-scaled, Eq. 9) ------------------------------------
+    def _alphas(self):
+        return (np.asarray(self.alpha_x, dtype=np.float64),
+                np.asarray(self.alpha_y, dtype=np.float64))
+
+    def pdf(self, slopes) -> np.ndarray:
+        """Slope PDF ``P(x̃/αx, ỹ/αy)/(αx αy)`` (Eq. 9) at slopes ``(..., 2)``."""
+        s = np.asarray(slopes, dtype=np.float64)
+        ax, ay = self._alphas()
+        x = s[..., 0] / ax
+        y = s[..., 1] / ay
+        r = np.hypot(x, y)
+        phi = None if self.isotropic else np.arctan2(-y, -x)
+        return self._p_unit_polar(r, phi) / (ax * ay)
+
+    def D(self, m) -> np.ndarray:
+        """NDF ``D(m) = P(m̃) sec⁴θm`` (Eq. 7) with roughness (Eq. 9); 0 for ``m_z ≤ 0``."""
+        m = np.asarray(m, dtype=np.float64)
+        mz = m[..., 2]
+        safe = np.where(mz > 0, mz, 1.0)
+        slopes = -m[..., :2] / safe[..., None]
+        return np.where(mz > 0, self.pdf(slopes) / safe**4, 0.0)
+
+    def sigma(self, w) -> np.ndarray:
+        """Projected area ``σ(w)`` (Eq. 3 denominator), with roughness by stretching."""
+        w = np.asarray(w, dtype=np.float64)
+        ax, ay = self._alphas()
+        ws = np.stack(np.broadcast_arrays(w[..., 0] * ax, w[..., 1] * ay, w[..., 2]), axis=-1)
+        ns = np.linalg.norm(ws, axis=-1)
+        # σ_α(w) = cos θw (1 + Λ1(w*)), Λ1(w*) = σ1(w*)/cos θ* − 1  (stretch invariance)
+        cz = np.maximum(w[..., 2], 0.0)
+        cs = np.where(ns > 0, ws[..., 2] / np.where(ns > 0, ns, 1.0), 1.0)
+        sig1 = self._sigma_unit(ws / np.where(ns > 0, ns, 1.0)[..., None])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lam = np.where(cs > 0, sig1 / np.where(cs > 0, cs, 1.0) - 1.0, np.inf)
+            out = cz * (1.0 + lam)
+        # grazing (cos = 0): σ = σ1 of the stretched horizontal direction times |w*|/|w|-ish
+        graz = (cz <= 0) & (w[..., 2] >= 0)
+        return np.where(graz, sig1 * ns, np.where(cz > 0, out, 0.0))
+
+    def Lambda(self, w) -> np.ndarray:
+        """Smith ``Λ(w) = σ(w)/cos θw − 1`` (so ``G1 = 1/(1 + Λ)``, Eq. 3)."""
+        w = np.asarray(w, dtype=np.float64)
+        ax, ay = self._alphas()
+        ws = np.stack(np.broadcast_arrays(w[..., 0] * ax, w[..., 1] * ay, w[..., 2]), axis=-1)
+        ns = np.linalg.norm(ws, axis=-1)
+        ok = ws[..., 2] > 0
+        wn = ws / np.where(ns > 0, ns, 1.0)[..., None]
+        sig1 = self._sigma_unit(wn)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lam = sig1 / np.where(ok, wn[..., 2], 1.0) - 1.0
+        return np.where(ok, np.maximum(lam, 0.0), np.inf)
+
+    # -- sampling ----------------------------------------------------------------------------
+    def _sampling_tables(self):
+        """Polar quantile tables (Appendix A, polar form) for sampling slopes from P."""
+        if self._sampling is not None:
+            return self._sampling
+        m = 2048
+        uu = np.linspace(0.0, 1.0, m + 1)
+        uu[-1] = 1.0 - 1e-9
+        theta = 0.5 * np.pi * uu**2
+        r = np.tan(theta)
+        jac = np.pi * uu / np.cos(theta) ** 2 * r  # r dr/du
+        if self.isotropic:
+            dens = self._p_unit_polar(r) * jac * 2.0 * np.pi
+            cdf = np.concatenate([[0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(uu))])
+            cdf /= cdf[-1]
+            self._sampling = (uu, cdf, None)
+        else:
+            n = self.n_phi
+            phis = self.phi
+            pp = self._p_unit_polar(r[:, None], phis[None, :])  # (m+1, n)
+            row = pp.mean(axis=1) * 2.0 * np.pi  # ∫ P dφ (periodic trapezoid)
+            dens = row * jac
+            cdf = np.concatenate([[0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(uu))])
+            cdf /= cdf[-1]
+            # conditional φ | u: piecewise-linear P in φ, periodic; CDF over n+1 nodes
+            pe = np.concatenate([pp, pp[:, :1]], axis=1)
+            seg = 0.5 * (pe[:, 1:] + pe[:, :-1])
+            ccdf = np.concatenate([np.zeros((m + 1, 1)), np.cumsum(seg, axis=1)], axis=1)
+            tot = ccdf[:, -1:]
+            ccdf = np.where(tot > 0, ccdf / np.where(tot > 0, tot, 1.0),
+                            np.linspace(0, 1, n + 1)[None, :])
+            self._sampling = (uu, cdf, ccdf)
+        return self._sampling
+
+    def sample(self, u) -> np.ndarray:
+        """Slopes distributed with :meth:`pdf` (Appendix A quantile transform, polar form)."""
+        u = np.asarray(u, dtype=np.float64)
+        uu, cdf, ccdf = self._sampling_tables()
+        uv = np.interp(u[..., 0], cdf, uu)
+        r = np.tan(0.5 * np.pi * uv**2)
+        if self.isotropic:
+            phi = 2.0 * np.pi * u[..., 1]
+        else:
+            n = self.n_phi
+            x = np.interp(uv, uu, np.arange(len(uu)))
+            i0 = np.clip(np.floor(x).astype(np.int64), 0, len(uu) - 2)
+            f = x - i0
+            rows = (1.0 - f)[..., None] * ccdf[i0] + f[..., None] * ccdf[i0 + 1]
+            k = np.sum(rows <= u[..., 1:2], axis=-1) - 1
+            k = np.clip(k, 0, n - 1)
+            lo = np.take_along_axis(rows, k[..., None], -1)[..., 0]
+            hi = np.take_along_axis(rows, (k + 1)[..., None], -1)[..., 0]
+            frac = np.where(hi > lo, (u[..., 1] - lo) / np.where(hi > lo, hi - lo, 1.0), 0.5)
+            phi = (k + np.clip(frac, 0, 1)) * (2.0 * np.pi / n)
+        ax, ay = self._alphas()
+        # normal azimuth φ -> slope -r (cos φ, sin φ); scale by α (Eq. 9)
+        return np.stack([-r * np.cos(phi) * ax, -r * np.sin(phi) * ay], axis=-1)
+
+    def sample_normal(self, u) -> np.ndarray:
+        """Normals distributed with ``D(m) cos θm`` (slopes from :meth:`sample`, Eq. 6)."""
+        return slope_to_normal(self.sample(u))
+
+    def _visible_tables(self):
+        """Tables for visible-slope sampling of an isotropic P (Heitz & d'Eon 2014).
+
+        In the frame where ``w = (sin θ, 0, cos θ)`` the visible slope density is
+        ``cos θ (1 − x̃ tan θ)₊ P(x̃, ỹ) / σ(w)``: the marginal in ``x̃`` needs the cumulative
+        moments ``A0(x) = ∫ P1`` and ``A1(x) = ∫ x P1`` of the marginal ``P1(x̃)``, and
+        ``ỹ | x̃`` follows ``P(x̃, ỹ)/P1(x̃)`` independently of ``w``.
+        """
+        if self._visible is not None:
+            return self._visible
+        m = 512
+        v = np.linspace(0.0, 1.0, m + 1)[:-1] + 0.5 / m  # avoid the pole at v = 1
+        v = np.concatenate([[0.0], v, [1.0 - 1e-7]])
+        ygrid = np.tan(0.5 * np.pi * v**2)  # ≥ 0, dense near 0
+        xpos = ygrid
+        rr = np.hypot(xpos[:, None], ygrid[None, :])
+        pv = self._p_unit_polar(rr)  # (Mx, My)
+        # conditional CDF of |ỹ| given |x̃| (trapezoid in y)
+        dy = np.diff(ygrid)
+        seg = 0.5 * (pv[:, 1:] + pv[:, :-1]) * dy[None, :]
+        cum = np.concatenate([np.zeros((len(xpos), 1)), np.cumsum(seg, axis=1)], axis=1)
+        half = cum[:, -1]  # P1(x)/2
+        cond = cum / np.where(half > 0, half, 1.0)[:, None]
+        cond[half <= 0] = np.linspace(0, 1, len(ygrid))[None, :]
+        p1 = 2.0 * half
+        # marginal on the full x line
+        x = np.concatenate([-xpos[::-1], xpos[1:]])
+        p1f = np.concatenate([p1[::-1], p1[1:]])
+        dx = np.diff(x)
+        a0 = np.concatenate([[0.0], np.cumsum(0.5 * (p1f[1:] + p1f[:-1]) * dx)])
+        xp1 = x * p1f
+        a1 = np.concatenate([[0.0], np.cumsum(0.5 * (xp1[1:] + xp1[:-1]) * dx)])
+        tot = a0[-1]
+        a0 /= tot
+        a1 /= tot
+        cond = np.clip(cond, 0.0, 1.0)
+        self._visible = (x, a0, a1, xpos, ygrid, cond)
+        return self._visible
+
+    def _sample_visible_unit(self, t, u1, u2):
+        """Visible slopes of the unit-roughness isotropic table for ``tan θ = t`` (φ = 0)."""
+        x, a0, a1, xpos, ygrid, cond = self._visible_tables()
+        with np.errstate(divide="ignore"):
+            xstar = np.where(t > 0, 1.0 / np.where(t > 0, t, 1.0), np.inf)
+        xc = np.minimum(xstar, x[-1])
+        a0s = np.interp(xc, x, a0)
+        a1s = np.interp(xc, x, a1)
+        total = a0s - t * a1s
+        target = u1 * total
+        # binary search for the first grid index whose clamped CDF exceeds the target
+        lo = np.zeros(t.shape, dtype=np.int64)
+        hi = np.full(t.shape, len(x) - 1, dtype=np.int64)
+        for _ in range(int(np.ceil(np.log2(len(x)))) + 1):
+            mid = (lo + hi) // 2
+            fm = np.where(x[mid] < xc, a0[mid] - t * a1[mid], total)
+            go = fm < target
+            lo = np.where(go, mid, lo)
+            hi = np.where(go, hi, mid)
+        k0 = np.clip(lo, 0, len(x) - 2)
+        x0 = x[k0]
+        x1 = np.minimum(x[k0 + 1], xc)
+        f0 = a0[k0] - t * a1[k0]
+        f1 = np.where(x[k0 + 1] < xc, a0[k0 + 1] - t * a1[k0 + 1], total)
+        frac = np.where(f1 > f0, (target - f0) / np.where(f1 > f0, f1 - f0, 1.0), 0.5)
+        xs = x0 + np.clip(frac, 0.0, 1.0) * np.maximum(x1 - x0, 0.0)
+        # ỹ | x̃ from the conditional table (rows at |x̃|), sign from u2
+        sgn = np.where(u2 < 0.5, -1.0, 1.0)
+        uy = np.where(u2 < 0.5, 1.0 - 2.0 * u2, 2.0 * u2 - 1.0)
+        ax_ = np.abs(xs)
+        xi = np.interp(ax_, xpos, np.arange(len(xpos)))
+        i0 = np.clip(np.floor(xi).astype(np.int64), 0, len(xpos) - 2)
+        f = xi - i0
+        ny = len(ygrid)
+        lo = np.zeros(t.shape, dtype=np.int64)
+        hi = np.full(t.shape, ny - 1, dtype=np.int64)
+        for _ in range(int(np.ceil(np.log2(ny))) + 1):
+            mid = (lo + hi) // 2
+            cm = (1.0 - f) * cond[i0, mid] + f * cond[i0 + 1, mid]
+            go = cm < uy
+            lo = np.where(go, mid, lo)
+            hi = np.where(go, hi, mid)
+        k = np.clip(lo, 0, ny - 2)
+        c0 = (1.0 - f) * cond[i0, k] + f * cond[i0 + 1, k]
+        c1 = (1.0 - f) * cond[i0, k + 1] + f * cond[i0 + 1, k + 1]
+        fr = np.where(c1 > c0, (uy - c0) / np.where(c1 > c0, c1 - c0, 1.0), 0.5)
+        ys = ygrid[k] + np.clip(fr, 0.0, 1.0) * (ygrid[k + 1] - ygrid[k])
+        return xs, sgn * ys
+
+    def sample_visible(self, w, u) -> np.ndarray:
+        """Visible normals for direction ``w`` (Heitz & d'Eon 2014), isotropic tables.
+
+        Uses the stretch invariance for roughness (αx, αy): sample the unit table for the
+        stretched direction, then scale the slopes. Anisotropic tables raise
+        ``NotImplementedError`` (sample ``D cos θm`` with :meth:`sample_normal` instead).
+        """
+        if not self.isotropic:
+            raise NotImplementedError("visible-normal sampling is only tabulated for isotropic P")
+        w = np.asarray(w, dtype=np.float64)
+        u = np.asarray(u, dtype=np.float64)
+        ax, ay = self._alphas()
+        shape = np.broadcast_shapes(w.shape[:-1], u.shape[:-1], ax.shape, ay.shape)
+        w = np.broadcast_to(w, shape + (3,))
+        u = np.broadcast_to(u, shape + (2,))
+        wx = w[..., 0] * ax
+        wy = w[..., 1] * ay
+        wz = np.maximum(w[..., 2], 1e-12)
+        rho = np.hypot(wx, wy)
+        t = rho / wz
+        cphi = np.where(rho > 0, wx / np.where(rho > 0, rho, 1.0), 1.0)
+        sphi = np.where(rho > 0, wy / np.where(rho > 0, rho, 1.0), 0.0)
+        xs, ys = self._sample_visible_unit(t, u[..., 0], u[..., 1])
+        sx = cphi * xs - sphi * ys
+        sy = sphi * xs + cphi * ys
+        return slope_to_normal(np.stack([sx * ax, sy * ay], axis=-1))
+
+    # -- moments (Appendix C) ---------------------------------------------------------------
+    def slope_moments(self) -> dict[str, float]:
+        """Slope moments of the roughness-scaled P (Appendix C), by the table's quadrature.
+
+        Returns ``E|x̃|, E|ỹ|, E x̃², E ỹ², E x̃ỹ`` and ``b1 = E[x̃ỹ/(x̃²+ỹ²)]``,
+        ``b2 = E[ỹ²/(x̃²+ỹ²)]``. Requires scalar roughness.
+        """
+        ax, ay = (float(np.asarray(a)) for a in self._alphas())
+        r, w = self.r, self.w_r
+        if self.isotropic:
+            p = self.table
+            m1 = 4.0 * np.sum(w * p * r)  # ∫|cos φ| dφ = 4
+            m2 = np.pi * np.sum(w * p * r**2)  # ∫cos² φ dφ = π
+            ex, ey, exx, eyy, exy, b1, b2 = m1, m1, m2, m2, 0.0, 0.0, 0.5
+        else:
+            n = self.n_phi
+            p = self.table
+            cphi, sphi = np.cos(self.phi), np.sin(self.phi)  # slope = -r(cos, sin): signs cancel
+            wq = w[:, None] * p * (2.0 * np.pi / n)
+            ex = np.sum(wq * r[:, None] * np.abs(cphi)[None, :])
+            ey = np.sum(wq * r[:, None] * np.abs(sphi)[None, :])
+            exx = np.sum(wq * r[:, None] ** 2 * cphi[None, :] ** 2)
+            eyy = np.sum(wq * r[:, None] ** 2 * sphi[None, :] ** 2)
+            exy = np.sum(wq * r[:, None] ** 2 * (cphi * sphi)[None, :])
+            b1 = np.sum(wq * (cphi * sphi)[None, :])
+            b2 = np.sum(wq * (sphi**2)[None, :])
+        # roughness scaling x̃ → αx x̃, ỹ → αy ỹ
+        if not self.isotropic or ax != ay:
+            if self.isotropic:
+                # isotropic table with anisotropic scaling: b1, b2 need the angular integral
+                phis = np.linspace(0, 2 * np.pi, 721)[:-1]
+                c, s = np.cos(phis), np.sin(phis)
+                den = (ax * c) ** 2 + (ay * s) ** 2
+                b1 = float(np.mean(ax * ay * c * s / den))
+                b2 = float(np.mean((ay * s) ** 2 / den))
+            else:
+                n = self.n_phi
+                p = self.table
+                cphi, sphi = np.cos(self.phi), np.sin(self.phi)
+                den = (ax * cphi) ** 2 + (ay * sphi) ** 2
+                wq = w[:, None] * p * (2.0 * np.pi / n)
+                b1 = float(np.sum(wq * (ax * ay * cphi * sphi / den)[None, :]))
+                b2 = float(np.sum(wq * ((ay * sphi) ** 2 / den)[None, :]))
+        return {"E|x|": float(ax * ex), "E|y|": float(ay * ey), "Exx": float(ax * ax * exx),
+                "Eyy": float(ay * ay * eyy), "Exy": float(ax * ay * exy),
+                "b1": float(b1), "b2": float(b2)}
+
+    # -- state -------------------------------------------------------------------------------
+    def params(self) -> dict:
+        ax, ay = self._alphas()
+        return {"kind": "tabulated", "isotropic": self.isotropic, "rule": self.rule,
+                "n_theta": int(self.table.shape[0]), "n_phi": int(self.n_phi),
+                "alpha_x": ax.tolist(), "alpha_y": ay.tolist()}
+
+    def to_state(self) -> tuple[dict, dict[str, np.ndarray]]:
+        """``(params, arrays)``: float32 ``P`` and ``sigma`` tables (sigma kept for external
+        readers; it is recomputed from ``P`` on load)."""
+        return self.params(), {"P": self.table.astype(np.float32),
+                               "sigma": self._sigma_table.astype(np.float32)}
+
+    @classmethod
+    def from_state(cls, params: dict, arrays: dict) -> "TabulatedSlopeDistribution":
+        p = np.asarray(arrays["P"], dtype=np.float64)
+        d = cls(p, rule=params.get("rule", "merl"), normalize=False,
+                alpha_x=np.asarray(params.get("alpha_x", 1.0), dtype=np.float64),
+                alpha_y=np.asarray(params.get("alpha_y", 1.0), dtype=np.float64))
+        return d
+
+    def __repr__(self) -> str:
+        shape = "x".join(str(s) for s in self.table.shape)
+        return f"<TabulatedSlopeDistribution {shape} rule={self.rule} iso={self.isotropic}>"
+
+
+def _circular_kernel_apply(t, r, w_r, p) -> np.ndarray:
+    """``Σ_j w_r[j] (2π/Nφ) Σ_l (1 + t_i r_j cos(φm − φl))₊ p[j, l]`` for all ``(i, m)``.
+
+    The kernel depends on ``φm − φl`` only (circulant), so the azimuthal sum is a circular
+    convolution done with real FFTs: ``O(Nθ² Nφ log Nφ)`` instead of ``O(Nθ² Nφ²)``.
+    """
+    n_phi = p.shape[1]
+    dphi = 2.0 * np.pi * np.arange(n_phi) / n_phi
+    k = np.maximum(1.0 + (t[:, None, None] * r[None, :, None]) * np.cos(dphi)[None, None, :], 0.0)
+    kh = np.fft.rfft(k, axis=-1)  # (Nθ, Nθ, Nφ/2+1)
+    ph = np.fft.rfft(p * w_r[:, None], axis=-1)  # (Nθ, Nφ/2+1)
+    out = np.fft.irfft(np.einsum("ijm,jm->im", kh, ph), n=n_phi, axis=-1)
+    return out * (2.0 * np.pi / n_phi)
