@@ -117,3 +117,22 @@ def test_summarize_counts_wins():
     s = R.summarize(results)
     assert s["per_model"]["a"]["n"] == 2 and s["per_model"]["b"]["mean_psnr"] == pytest.approx(76 / 3)
     assert s["wins"]["a"]["b"] == {"wins": 1, "ties": 1, "losses": 0, "n": 2}
+
+
+def test_cli_compare(tmp_path, monkeypatch, capsys):
+    from brdffit.cli import main
+
+    monkeypatch.setattr(C, "_default_renderer", lambda: standin_render)
+    monkeypatch.setattr(C, "resolve_reference", lambda src, material=None: _ref())
+    fitters = {"lam": lambda brdf: Lambert([0.3, 0.3, 0.3]), "mf": lambda brdf: FakeMicrofacet()}
+    monkeypatch.setattr(C, "resolve_fitter", lambda name: fitters[name])
+    rc = main(["compare", "whatever.h5", "--models", "lam,mf", "--out", str(tmp_path),
+               "--spp", "4", "--resolution", "16", "--no-noise-floor", "-q"])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert "lam" in out and "mf" in out and "index.html" in out
+    page = tmp_path / "glossy-test-material" / "index.html"
+    assert page.is_file() and R.missing_links(page) == []
+    res = json.loads((tmp_path / "glossy-test-material" / "result.json").read_text())
+    assert res["scene"]["spp"] == 4 and res["scene"]["resolution"] == 16
+    assert [m["fit_time"] is not None for m in res["models"]] == [True, True]

@@ -53,21 +53,14 @@ _FALLBACK_FITTERS = {
 # inputs
 # ------------------------------------------------------------------------------------------
 def resolve_reference(source, material: str | None = None):
-    """A reference BRDF from a BRDF object, a fit file, ``synthetic:NAME``, or a load spec
-    (``path`` or ``archive.zip:member``; ``material`` is appended as ``:material``)."""
+    """A reference BRDF: a BRDF object as is, else :func:`brdffit.io.load` of the spec (a file,
+    a fit file, ``archive.zip:member``, ``synthetic:NAME``; ``material`` is appended as
+    ``:material``)."""
     if hasattr(source, "eval"):
         return source
     spec = str(source)
     if material:
         spec = f"{spec}:{material}"
-    if spec.startswith("synthetic:"):
-        from ..synthetic import synthetic
-
-        return synthetic(spec.split(":", 1)[1])
-    if spec.endswith(".npz") and Path(spec).is_file():
-        from ..io.fitfile import load_fit
-
-        return load_fit(spec)
     from ..io import load
 
     return load(spec)

@@ -1,0 +1,90 @@
+"""``brdffit compare INPUT[:MATERIAL] --models tabulated,ggx,... --out DIR``.
+
+Fits the requested models (or loads saved fit files given as ``NAME=fit.npz`` or ``fit.npz``),
+renders the reference and every model with the same scene and seed, measures rendered PSNR
+(Bagher et al. 2016 §5), dE2000 and the BRDF-space metrics, and writes the static HTML
+report (:mod:`brdffit.evaluation.report`): ``DIR/<material>/index.html`` and the index
+``DIR/index.html``, rebuilt from every material already in ``DIR``. A Neural-BRDF collection
+without ``:MATERIAL`` compares all its materials (``--limit`` keeps the first N).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+__all__ = ["register"]
+
+
+def _materials(spec: str, limit: int | None) -> list[str]:
+    if not spec.lower().endswith(".zip"):
+        return [spec]
+    from ..io import resolve_spec
+
+    kind, path, member = resolve_spec(spec)
+    if kind == "nbrdf-collection" and not member:
+        from ..io.nbrdf import list_materials
+
+        names = list_materials(path)
+        names = names[:limit] if limit else names
+        return [f"{path}:{n}" for n in names]
+    return [spec]
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("compare")
+    def compare_cmd(
+        spec: str = typer.Argument(..., metavar="INPUT[:MATERIAL]",
+                                   help="Reference BRDF: a file, collection.zip[:material], "
+                                        "synthetic:NAME or a fit file."),
+        models: str = typer.Option("tabulated,ggx,beckmann", "--models", "-m",
+                                   help="Comma-separated model names to fit, and/or saved fits "
+                                        "as NAME=fit.npz or fit.npz."),
+        out: Path = typer.Option(Path("report"), "--out", "-o", help="Report directory."),
+        scene: str = typer.Option("envmap", "--scene", help="Scene name of the renderer."),
+        spp: int = typer.Option(64, "--spp", min=1, help="Samples per pixel."),
+        resolution: int = typer.Option(128, "--resolution", min=8, help="Image side in pixels."),
+        seed: int = typer.Option(0, "--seed", help="Seed of the sample streams (all models)."),
+        exposure: str = typer.Option("auto", "--exposure",
+                                     help="Tone-mapping exposure, or 'auto' (from the reference)."),
+        gamma: float = typer.Option(2.2, "--gamma", help="Tone-mapping gamma."),
+        noise_floor: bool = typer.Option(True, "--noise-floor/--no-noise-floor",
+                                         help="Render the reference twice to measure MC noise."),
+        envmap: str = typer.Option(None, "--envmap",
+                                   help="Environment map passed to the renderer (envmap scene)."),
+        limit: int = typer.Option(None, "--limit", min=1,
+                                  help="With a collection: only its first N materials."),
+        quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress messages."),
+    ) -> None:
+        """Fit, render and measure models against a reference; write an HTML report."""
+        from ..evaluation.compare import compare, compare_many
+        from ..evaluation.report import write_index
+
+        model_list = [m.strip() for m in models.split(",") if m.strip()]
+        if not model_list:
+            raise typer.BadParameter("expected at least one model", param_hint="--models")
+        exp = exposure if exposure == "auto" else float(exposure)
+        ropts = {"envmap": envmap} if envmap else {}
+        say = (lambda msg: None) if quiet else (lambda msg: typer.echo(msg, err=True))
+        kw = dict(scene=scene, spp=spp, resolution=resolution, seed=seed, exposure=exp,
+                  gamma=gamma, noise_floor=noise_floor, render_options=ropts, progress=say)
+        specs = _materials(spec, limit)
+        if len(specs) == 1:
+            res = compare(specs[0], model_list, out, **kw)
+            results = [res]
+        else:
+            results = compare_many(specs, model_list, out, **kw)
+        write_index(out)
+        for r in results:
+            if "error" in r and "models" not in r:
+                typer.echo(f"{r['material']}: FAILED {r['error']}")
+                continue
+            cells = []
+            for m in r["models"]:
+                if m.get("status") == "ok":
+                    cells.append(f"{m['name']} {m['psnr']:.2f} dB / dE {m['mean_de2000']:.2f}")
+                else:
+                    cells.append(f"{m['name']} failed")
+            typer.echo(f"{r['material']}: " + "; ".join(cells))
+        typer.echo(f"report: {(Path(out) / 'index.html').resolve()}")
