@@ -1,0 +1,213 @@
+"""Fresnel reflectance terms ``F(cos θd) -> RGB (..., 3)``.
+
+All classes accept a scalar (broadcast to the three channels) or an RGB triple per
+parameter, and are subclasses of :class:`brdffit.microfacet.base.Fresnel`.
+
+* :class:`SchlickFresnel` – Schlick 1994: ``F = F0 + (1 − F0)(1 − cos θd)⁵``.
+* :class:`GeneralizedSchlickFresnel` – Bagher, Soler & Holzschuch 2012 **Eq. 11**:
+  ``F = F0 + (1 − F0)(1 − cos θd)⁵ − F1 cos θd`` (``F1 = 0`` gives Schlick; note that
+  ``F(0°) = F0 − F1`` and ``F(90°) = 1``).
+* :class:`DielectricFresnel` – exact unpolarised Fresnel of a dielectric interface with
+  relative index η (Walter et al. 2007 Eq. 22), total internal reflection for η < 1.
+* :class:`ConductorFresnel` – exact unpolarised Fresnel for a complex index ``η + i k``
+  (average of |r_s|² and |r_p|² with ``cos θt = √(1 − sin²θ/(η + ik)²)``; Born & Wolf §14.2).
+* :class:`TabulatedFresnel` – piecewise-linear in θd over a given grid (e.g. the Fresnel
+  curves extracted by Dupuy 2015 §4.4 or Bagher 2016), clamped outside the grid.
+
+Serialisation: ``params()`` gives JSON-able parameters (``cls(**params())`` rebuilds the
+object); :class:`TabulatedFresnel` also has ``to_state``/``from_state`` for its tables.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import Fresnel
+
+__all__ = ["SchlickFresnel", "GeneralizedSchlickFresnel", "DielectricFresnel",
+           "ConductorFresnel", "TabulatedFresnel", "GOLD_ETA", "GOLD_K"]
+
+#: Approximate RGB complex index of gold (linear sRGB primaries), as commonly tabulated for
+#: rendering (e.g. from Johnson & Christy 1972 spectral data reduced to RGB).
+GOLD_ETA = (0.143119, 0.374957, 1.44248)
+GOLD_K = (3.98316, 2.38572, 1.60322)
+
+
+def _rgb(name: str, value, lo: float | None = None, hi: float | None = None,
+         cls: str = "") -> np.ndarray:
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.ndim == 0:
+        arr = np.full(3, float(arr))
+    if arr.shape != (3,):
+        raise ValueError(f"{cls}: {name} must be a scalar or an RGB triple, got shape {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{cls}: {name} must be finite, got {arr.tolist()}")
+    if lo is not None and np.any(arr < lo):
+        raise ValueError(f"{cls}: {name} must be >= {lo}, got {arr.tolist()}")
+    if hi is not None and np.any(arr > hi):
+        raise ValueError(f"{cls}: {name} must be <= {hi}, got {arr.tolist()}")
+    return arr
+
+
+def _cos(cos_theta_d) -> np.ndarray:
+    return np.clip(np.asarray(cos_theta_d, dtype=np.float64), 0.0, 1.0)[..., None]
+
+
+class SchlickFresnel(Fresnel):
+    """Schlick's approximation ``F0 + (1 − F0)(1 − cos θd)⁵`` (Schlick 1994)."""
+
+    kind = "schlick"
+
+    def __init__(self, f0):
+        self.f0 = _rgb("f0", f0, 0.0, 1.0, "SchlickFresnel")
+
+    def eval(self, cos_theta_d) -> np.ndarray:
+        c = _cos(cos_theta_d)
+        return self.f0 + (1.0 - self.f0) * (1.0 - c) ** 5
+
+    def params(self) -> dict:
+        return {"f0": self.f0.tolist()}
+
+    def __repr__(self) -> str:
+        return f"SchlickFresnel(f0={np.round(self.f0, 4).tolist()})"
+
+
+class GeneralizedSchlickFresnel(Fresnel):
+    """Bagher et al. 2012 Eq. 11: ``F0 + (1 − F0)(1 − cos θd)⁵ − F1 cos θd``.
+
+    Values are returned as computed (they may leave [0, 1] for extreme ``F1``; a fit is
+    expected to keep ``0 <= F1 <= F0``).
+    """
+
+    kind = "generalized_schlick"
+
+    def __init__(self, F0, F1=0.0):
+        self.F0 = _rgb("F0", F0, cls="GeneralizedSchlickFresnel")
+        self.F1 = _rgb("F1", F1, cls="GeneralizedSchlickFresnel")
+
+    def eval(self, cos_theta_d) -> np.ndarray:
+        c = _cos(cos_theta_d)
+        return self.F0 + (1.0 - self.F0) * (1.0 - c) ** 5 - self.F1 * c
+
+    def params(self) -> dict:
+        return {"F0": self.F0.tolist(), "F1": self.F1.tolist()}
+
+    def __repr__(self) -> str:
+        return (f"GeneralizedSchlickFresnel(F0={np.round(self.F0, 4).tolist()}, "
+                f"F1={np.round(self.F1, 4).tolist()})")
+
+
+class DielectricFresnel(Fresnel):
+    """Exact unpolarised dielectric Fresnel, relative index ``eta = n_t / n_i`` (> 0).
+
+    ``F = ½ ((g − c)/(g + c))² (1 + ((c(g + c) − 1)/(c(g − c) + 1))²)`` with
+    ``g² = η² − 1 + c²`` (Walter et al. 2007 Eq. 22); ``F = 1`` when ``g² < 0`` (TIR).
+    """
+
+    kind = "dielectric"
+
+    def __init__(self, eta):
+        self.eta = _rgb("eta", eta, cls="DielectricFresnel")
+        if np.any(self.eta <= 0):
+            raise ValueError(f"DielectricFresnel: eta must be > 0, got {self.eta.tolist()}")
+
+    def eval(self, cos_theta_d) -> np.ndarray:
+        c = _cos(cos_theta_d)
+        g2 = self.eta**2 - 1.0 + c * c
+        tir = g2 < 0
+        g = np.sqrt(np.where(tir, 0.0, g2))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            a = (g - c) / (g + c)
+            b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+            F = 0.5 * a * a * (1.0 + b * b)
+        F = np.where(np.isfinite(F), F, 1.0)          # c = 0 and η = 1 corner cases
+        return np.where(tir, 1.0, np.clip(F, 0.0, 1.0))
+
+    def params(self) -> dict:
+        return {"eta": self.eta.tolist()}
+
+    def __repr__(self) -> str:
+        return f"DielectricFresnel(eta={np.round(self.eta, 4).tolist()})"
+
+
+class ConductorFresnel(Fresnel):
+    """Exact unpolarised Fresnel of a conductor with complex index ``eta + i k`` (RGB).
+
+    ``r_s = (cos θ − n cos θt)/(cos θ + n cos θt)``, ``r_p = (n cos θ − cos θt)/(n cos θ + cos θt)``,
+    ``n cos θt = √(n² − sin²θ)`` (principal branch), ``F = (|r_s|² + |r_p|²)/2``.
+    With ``k = 0`` and ``eta > 1`` it equals :class:`DielectricFresnel`.
+    """
+
+    kind = "conductor"
+
+    def __init__(self, eta, k):
+        self.eta = _rgb("eta", eta, cls="ConductorFresnel")
+        self.k = _rgb("k", k, 0.0, cls="ConductorFresnel")
+        if np.any(self.eta <= 0):
+            raise ValueError(f"ConductorFresnel: eta must be > 0, got {self.eta.tolist()}")
+        self._n = self.eta + 1j * self.k
+
+    def eval(self, cos_theta_d) -> np.ndarray:
+        c = _cos(cos_theta_d)
+        n = self._n
+        s2 = 1.0 - c * c
+        nct = np.sqrt(n * n - s2)                      # n cos θt
+        rs = (c - nct) / (c + nct)
+        n2c = n * n * c                                # n² cos θ
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rp = (n2c - nct) / (n2c + nct)
+        rp = np.where(np.isfinite(rp), rp, 1.0)
+        return np.clip(0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2), 0.0, 1.0)
+
+    def params(self) -> dict:
+        return {"eta": self.eta.tolist(), "k": self.k.tolist()}
+
+    def __repr__(self) -> str:
+        return (f"ConductorFresnel(eta={np.round(self.eta, 4).tolist()}, "
+                f"k={np.round(self.k, 4).tolist()})")
+
+
+class TabulatedFresnel(Fresnel):
+    """Fresnel given at increasing ``theta_d_grid`` (radians, ``(N,)``) with RGB ``values``.
+
+    Linear interpolation in θd, constant extrapolation outside the grid.
+    """
+
+    kind = "tabulated"
+
+    def __init__(self, theta_d_grid, values):
+        t = np.asarray(theta_d_grid, dtype=np.float64)
+        v = np.asarray(values, dtype=np.float64)
+        if t.ndim != 1 or t.size < 2:
+            raise ValueError(f"TabulatedFresnel: expected a 1D θd grid with >= 2 entries, "
+                             f"got shape {t.shape}")
+        if v.ndim == 1:
+            v = np.repeat(v[:, None], 3, axis=1)
+        if v.shape != (t.size, 3):
+            raise ValueError(f"TabulatedFresnel: expected values of shape ({t.size}, 3), "
+                             f"got {v.shape}")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(v))):
+            raise ValueError("TabulatedFresnel: grid and values must be finite")
+        if np.any(np.diff(t) <= 0):
+            raise ValueError("TabulatedFresnel: θd grid must be strictly increasing")
+        self.theta_d = t
+        self.values = v
+
+    def eval(self, cos_theta_d) -> np.ndarray:
+        td = np.arccos(np.clip(np.asarray(cos_theta_d, dtype=np.float64), 0.0, 1.0))
+        flat = td.reshape(-1)
+        out = np.stack([np.interp(flat, self.theta_d, self.values[:, ch]) for ch in range(3)], -1)
+        return out.reshape(td.shape + (3,))
+
+    def params(self) -> dict:
+        return {"n": int(self.theta_d.size)}
+
+    def to_state(self) -> tuple[dict, dict[str, np.ndarray]]:
+        return {"n": int(self.theta_d.size)}, {"theta_d": self.theta_d, "values": self.values}
+
+    @classmethod
+    def from_state(cls, params: dict, arrays: dict[str, np.ndarray]) -> "TabulatedFresnel":
+        return cls(arrays["theta_d"], arrays["values"])
+
+    def __repr__(self) -> str:
+        return f"TabulatedFresnel(n={self.theta_d.size})"
