@@ -44,7 +44,7 @@ from ._mitsuba import load as _load
 mi, dr = _load()
 
 __all__ = ["MERLTableEval", "Table4DEval", "MicrofacetEval", "GGXDist", "BeckmannDist",
-           "RadialTableDist", "SchlickFresnelDJ", "TableFresnelDJ", "ConstantFresnelDJ",
+           "RadialTableDist", "SumEval", "SchlickFresnelDJ", "TableFresnelDJ", "ConstantFresnelDJ",
            "fit_ggx_proxy", "half_diff", "ggx_vndf_sample", "ggx_D", "ggx_lambda",
            "cosine_sample", "to_vec3", "to_numpy"]
 
@@ -561,4 +561,39 @@ class MicrofacetEval:
         wo = _reflect(wi, m)
         if self.has_diffuse:
             wo = dr.select(u1 < self.spec_weight, wo, cosine_sample(u2))
+        return wo, self.pdf(wi, wo, alpha_scale, active)
+
+
+class SumEval:
+    """Sum of evaluators ``f = Σ f_k``; sampling picks component k with probability
+    ``1/K`` (``u1`` is rescaled and reused) and the pdf is the mixture ``Σ p_k / K``."""
+
+    kind = "sum"
+
+    def __init__(self, components):
+        self.components = list(components)
+        if not self.components:
+            raise ValueError("SumEval needs at least one component")
+        self.has_diffuse = any(getattr(c, "has_diffuse", True) for c in self.components)
+
+    def eval(self, wi, wo, alpha_scale=1.0, active=True):
+        out = mi.Color3f(0.0)
+        for c in self.components:
+            out += c.eval(wi, wo, alpha_scale, active)
+        return out
+
+    def pdf(self, wi, wo, alpha_scale=1.0, active=True):
+        p = mi.Float(0.0)
+        for c in self.components:
+            p += c.pdf(wi, wo, alpha_scale, active)
+        return p / len(self.components)
+
+    def sample(self, wi, u1, u2, alpha_scale=1.0, active=True):
+        k = len(self.components)
+        x = u1 * k
+        wo = mi.Vector3f(0.0, 0.0, 1.0)
+        for i, c in enumerate(self.components):
+            sel = (x >= i) & (x < i + 1) if i < k - 1 else (x >= i)
+            w_i, _ = c.sample(wi, dr.clip(x - i, 0.0, 0.99999994), u2, alpha_scale, active)
+            wo = dr.select(sel, w_i, wo)
         return wo, self.pdf(wi, wo, alpha_scale, active)

@@ -1,0 +1,215 @@
+"""Scenes for judging BRDF fits: Mitsuba scene dicts with a fixed camera and sampler.
+
+Every scene function takes the BSDF object (from :func:`.plugin.make_bsdf`) and returns a
+dict for ``mi.load_dict``; reference and fits rendered with the same scene name, resolution,
+spp and seed see the same camera rays and sample streams (Mitsuba's ``independent`` sampler
+seeded per render; the plugin always consumes the same sample dimensions).
+
+Scenes (:data:`SCENES`)
+-----------------------
+``sphere-env``    unit sphere under an HDR environment map (direct lighting, max depth 2)
+``sphere-point``  unit sphere lit by one point light (no environment: black background)
+``sphere-distant`` unit sphere lit by one directional light
+``knot``          a (2, 3) torus knot tube (NumPy mesh, concavities) under the environment,
+                  max depth 4 for interreflections
+``sphere-svrough`` the sphere with a spatially varying roughness texture (Dupuy 2015
+                  Fig. 1/4): the plugin scales the distribution's α per texel (Eq. 9) with
+                  :func:`roughness_texture`
+
+Environment maps: ``envmap=None`` uses :func:`procedural_envmap` (the project's own, no
+external data); a name (``"studio"``) picks ``../shared/data/envmaps/<name>.exr``; a path
+loads that EXR. Maps are clamped at 0 (the CC0 maps have small negative values).
+"""
+
+from __future__ import annotations
+
+import os
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from ...errors import BRDFFormatError
+from ._mitsuba import load as _load
+
+__all__ = ["SCENES", "scene_dict", "procedural_envmap", "load_envmap", "torus_knot",
+           "roughness_texture", "ENVMAP_DIR", "envmap_names"]
+
+ENVMAP_DIR = Path(os.environ.get("BRDFFIT_ENVMAP_DIR", "")
+                  or Path(__file__).resolve().parents[5] / "shared" / "data" / "envmaps")
+SCENES = ("sphere-env", "sphere-point", "sphere-distant", "knot", "sphere-svrough")
+
+
+def envmap_names() -> list[str]:
+    """Names of the shared CC0 environment maps (empty when the data set is absent)."""
+    return sorted(p.stem for p in ENVMAP_DIR.glob("*.exr")) if ENVMAP_DIR.is_dir() else []
+
+
+# -- procedural content (NumPy) -------------------------------------------------------------
+def procedural_envmap(width: int = 512, height: int = 256) -> np.ndarray:
+    """The built-in environment: lat-long float32 ``(height, width, 3)``, all ≥ 0.
+
+    Sky gradient (blue zenith → warm horizon), a darker ground, a sun-like blob
+    (≈ 3° Gaussian, peak radiance 400), and two rectangular area-light-like spots
+    (radiance 30 and 15) on the sides, so that both broad and sharp lobes get features to
+    reflect. Mitsuba's lat-long convention: +Y up, row 0 at the zenith.
+    """
+    v = (np.arange(height) + 0.5) / height
+    u = (np.arange(width) + 0.5) / width
+    theta = v * np.pi                      # from +Y
+    phi = u * 2.0 * np.pi
+    T, P = np.meshgrid(theta, phi, indexing="ij")
+    d = np.stack([np.sin(T) * np.sin(P), np.cos(T), -np.sin(T) * np.cos(P)], -1)
+    up = d[..., 1]
+    sky_t = np.clip(up, 0.0, 1.0)[..., None]
+    zenith, horizon = np.array([0.25, 0.45, 1.0]), np.array([1.1, 0.95, 0.8])
+    sky = horizon + (zenith - horizon) * sky_t**0.5
+    ground = np.array([0.18, 0.15, 0.12]) * (0.6 + 0.4 * np.clip(-up, 0, 1))[..., None]
+    img = np.where((up >= 0)[..., None], sky, ground)
+    sun = np.array([0.45, 0.75, 0.5])
+    sun /= np.linalg.norm(sun)
+    ang = np.arccos(np.clip(d @ sun, -1.0, 1.0))
+    img = img + 400.0 * np.exp(-0.5 * (ang / np.radians(1.5)) ** 2)[..., None] * np.array([1.0, 0.9, 0.75])
+    # two area-light-like rectangles (in θ/φ)
+    for (t0, t1, p0, p1, rad, col) in ((0.30, 0.42, 0.10, 0.22, 30.0, (1.0, 1.0, 1.0)),
+                                       (0.40, 0.48, 0.62, 0.80, 15.0, (0.7, 0.8, 1.0))):
+        box = (v[:, None] >= t0) & (v[:, None] < t1) & (u[None, :] >= p0) & (u[None, :] < p1)
+        img = img + rad * box[..., None] * np.array(col)
+    return img.astype(np.float32)
+
+
+def torus_knot(p: int = 2, q: int = 3, n_u: int = 384, n_v: int = 24, R: float = 0.62,
+               r: float = 0.28, tube: float = 0.17):
+    """Tube around a (p, q) torus knot: ``(vertices (N,3), faces (M,3) uint32, normals (N,3),
+    uv (N,2))``, outward normals and consistent counter-clockwise winding. Frame along the
+    curve: tangent from finite differences, normal from the curve's centre direction
+    (Gram-Schmidt), so it twists smoothly with no Frenet flips."""
+    t = np.arange(n_u) / n_u * 2.0 * np.pi
+    def curve(t):
+        rr = R + r * np.cos(q * t)
+        return np.stack([rr * np.cos(p * t), rr * np.sin(p * t), r * np.sin(q * t)], -1)
+    c = curve(t)
+    T = curve(t + 1e-4) - curve(t - 1e-4)
+    T /= np.linalg.norm(T, axis=-1, keepdims=True)
+    N = c - np.sum(c * T, -1, keepdims=True) * T
+    N /= np.linalg.norm(N, axis=-1, keepdims=True)
+    B = np.cross(T, N)
+    a = np.arange(n_v) / n_v * 2.0 * np.pi
+    nrm = (np.cos(a)[None, :, None] * N[:, None, :] + np.sin(a)[None, :, None] * B[:, None, :])
+    verts = c[:, None, :] + tube * nrm
+    i = np.arange(n_u)[:, None]
+    j = np.arange(n_v)[None, :]
+    i1, j1 = (i + 1) % n_u, (j + 1) % n_v
+    v00, v10, v01, v11 = i * n_v + j, i1 * n_v + j, i * n_v + j1, i1 * n_v + j1
+    faces = np.concatenate([np.stack([v00, v10, v11], -1).reshape(-1, 3),
+                            np.stack([v00, v11, v01], -1).reshape(-1, 3)])
+    # make the winding agree with the outward normals
+    vv = verts.reshape(-1, 3)
+    fn = np.cross(vv[faces[:, 1]] - vv[faces[:, 0]], vv[faces[:, 2]] - vv[faces[:, 0]])
+    nn = nrm.reshape(-1, 3)
+    if np.mean(np.sum(fn * nn[faces[:, 0]], -1)) < 0:
+        faces = faces[:, [0, 2, 1]]
+    uv = np.stack(np.meshgrid(np.arange(n_u) / n_u, np.arange(n_v) / n_v, indexing="ij"), -1)
+    return (vv.astype(np.float32), faces.astype(np.uint32), nn.astype(np.float32),
+            uv.reshape(-1, 2).astype(np.float32))
+
+
+def roughness_texture(size: int = 256) -> np.ndarray:
+    """Roughness scale texture ``(size, size)`` for the spatially varying scene: smooth
+    stripes along u (×0.35 … ×2.5, log-spaced) crossed with a checker in v, like the
+    roughness-painted spheres of Dupuy 2015 Fig. 1/4. Positive float32."""
+    u = (np.arange(size) + 0.5) / size
+    stripes = np.exp(np.log(0.35) + (np.log(2.5) - np.log(0.35)) * 0.5 * (1 + np.sin(8 * np.pi * u)))
+    checker = np.where((np.floor(u * 6) % 2) == 0, 1.0, 0.6)
+    return (checker[:, None] * stripes[None, :]).astype(np.float32)
+
+
+# -- Mitsuba objects ------------------------------------------------------------------------
+def load_envmap(envmap=None) -> np.ndarray:
+    """Environment as float32 ``(H, W, 3)``, clamped ≥ 0 (None → procedural)."""
+    if envmap is None or (isinstance(envmap, str) and envmap in ("procedural", "default")):
+        return procedural_envmap()
+    if isinstance(envmap, np.ndarray):
+        arr = np.asarray(envmap, np.float32)
+    else:
+        arr = _read_envmap(str(envmap))
+    if arr.ndim != 3 or arr.shape[-1] < 3:
+        raise BRDFFormatError(envmap if not isinstance(envmap, np.ndarray) else None,
+                              f"expected an RGB lat-long environment map, found shape {arr.shape}")
+    return np.maximum(np.nan_to_num(arr[..., :3], nan=0.0, posinf=0.0), 0.0).astype(np.float32)
+
+
+@lru_cache(maxsize=8)
+def _read_envmap(spec: str) -> np.ndarray:
+    path = Path(spec)
+    if not path.suffix and not path.exists():
+        path = ENVMAP_DIR / f"{spec}.exr"
+        if not path.is_file():
+            raise BRDFFormatError(path, f"expected an environment map named {spec!r} in "
+                                        f"{ENVMAP_DIR}, found {envmap_names() or 'none'}")
+    from ..imageio import read_exr
+
+    return read_exr(path)
+
+
+def _camera(resolution: int, spp: int, distance: float = 4.2, fov: float = 30.0):
+    mi, _ = _load()
+    return {
+        "type": "perspective", "fov": fov,
+        "to_world": mi.ScalarTransform4f().look_at(origin=[0.0, 0.0, distance],
+                                                   target=[0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0]),
+        "film": {"type": "hdrfilm", "width": int(resolution), "height": int(resolution),
+                 "rfilter": {"type": "box"}, "pixel_format": "rgba",
+                 "component_format": "float32"},
+        "sampler": {"type": "independent", "sample_count": int(spp)},
+    }
+
+
+def _env_emitter(envmap):
+    mi, _ = _load()
+    arr = load_envmap(envmap)
+    return {"type": "envmap", "bitmap": mi.Bitmap(arr),
+            "to_world": mi.ScalarTransform4f().rotate([0, 1, 0], 0.0)}
+
+
+def _knot_mesh(bsdf):
+    mi, _ = _load()
+    v, f, n, uv = torus_knot()
+    props = mi.Properties()
+    props["bsdf"] = bsdf
+    mesh = mi.Mesh("knot", v.shape[0], f.shape[0], props=props, has_vertex_normals=True,
+                   has_vertex_texcoords=True)
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(v.ravel())
+    params["faces"] = mi.UInt32(f.ravel())
+    params["vertex_normals"] = mi.Float(n.ravel())
+    params["vertex_texcoords"] = mi.Float(uv.ravel())
+    params.update()
+    return mesh
+
+
+def scene_dict(bsdf, scene: str = "sphere-env", envmap=None, spp: int = 256,
+               resolution: int = 256) -> dict:
+    """Mitsuba scene dict of the named scene with ``bsdf`` on the object."""
+    mi, _ = _load()
+    if scene not in SCENES:
+        raise ValueError(f"unknown scene {scene!r}; expected one of {', '.join(SCENES)}")
+    d = {"type": "scene", "sensor": _camera(resolution, spp),
+         "integrator": {"type": "path", "max_depth": 2, "rr_depth": 100, "hide_emitters": True}}
+    if scene in ("sphere-env", "sphere-svrough"):
+        d["emitter"] = _env_emitter(envmap)
+        d["object"] = {"type": "sphere", "bsdf": bsdf,
+                       "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], -90.0)}
+    elif scene == "sphere-point":
+        d["emitter"] = {"type": "point", "position": [3.0, 3.5, 4.0],
+                        "intensity": {"type": "rgb", "value": [40.0, 40.0, 40.0]}}
+        d["object"] = {"type": "sphere", "bsdf": bsdf}
+    elif scene == "sphere-distant":
+        d["emitter"] = {"type": "directional", "direction": [-0.5, -0.6, -0.62],
+                        "irradiance": {"type": "rgb", "value": [3.0, 3.0, 3.0]}}
+        d["object"] = {"type": "sphere", "bsdf": bsdf}
+    elif scene == "knot":
+        d["emitter"] = _env_emitter(envmap)
+        d["integrator"]["max_depth"] = 4
+        d["object"] = _knot_mesh(bsdf)
+    return d
