@@ -192,7 +192,7 @@ def solve_slope_pdf(b, rule: str = "merl", iterations: int = 4, tol: float | Non
 # ------------------------------------------------------------------------------------------
 # Fresnel extraction (Eq. 19-20, supplemental Eq. 33-39)
 # ------------------------------------------------------------------------------------------
-def _sigma_of_cos(dist: TabulatedSlopeDistribution, m: int = 4096):
+def _sigma_of_cos(dist: TabulatedSlopeDistribution, m: int = 2048):
     """σ of an isotropic unit table tabulated on a uniform grid of ``cos θ`` ∈ [0, 1]."""
     cg = np.linspace(0.0, 1.0, m)
     sg = np.sqrt(np.maximum(1.0 - cg * cg, 0.0))
@@ -208,17 +208,29 @@ def _lookup_uniform(table, x):
     return table[i0] * (1.0 - f) + table[i0 + 1] * f
 
 
-def _fresnel_ratio_sums(f, valid, ci, co, sig_i, sig_o, p_h, cos_h):
-    """Per-θd sums of ``f/f_id`` and counts; arrays broadcast to ``(Nh, Nd, Nφ[, 3])``.
+_MERL_GEOMETRY: dict = {}
+_SIGMA_M = 2048
 
-    ``f_id = D G2/(4 ci co)`` with ``D = P/cos⁴θh`` and ``G2 = 1/(1+Λi+Λo)``, so
-    ``f/f_id = 4 f cos⁴θh (σi co + σo ci − ci co) / P`` (no division by the cosines).
-    """
-    geom = sig_i * co + sig_o * ci - ci * co
-    scale = 4.0 * cos_h**4 / p_h
-    ok = valid & (ci > 0) & (co > 0)
-    ratio = f * (np.where(ok, geom * scale, 0.0))[..., None]
-    return ratio, ok
+
+def _merl_geometry():
+    """Cached geometry of the MERL grid: ``cos θi``, ``cos θo`` (float32, φh = 0), lookup
+    indices into a uniform ``cos θ`` table, and the above-horizon mask."""
+    if not _MERL_GEOMETRY:
+        from ..grid import merl_phi_d, merl_theta_h
+
+        th, td, pd = merl_theta_h(), merl_theta_d(), merl_phi_d()
+        a = np.cos(th)[:, None, None] * np.cos(td)[None, :, None]
+        bb = (np.sin(th)[:, None, None] * np.sin(td)[None, :, None]) * np.cos(pd)[None, None, :]
+        geo = {}
+        for key, c in (("i", a - bb), ("o", a + bb)):
+            x = np.clip(c, 0.0, 1.0) * (_SIGMA_M - 1)
+            i0 = np.minimum(x.astype(np.int32), _SIGMA_M - 2)
+            geo["c" + key] = c.astype(np.float32)
+            geo["i" + key] = i0
+            geo["f" + key] = (x - i0).astype(np.float32)
+        geo["up"] = (a - bb > 0) & (a + bb > 0)
+        _MERL_GEOMETRY.update(geo)
+    return _MERL_GEOMETRY
 
 
 def extract_fresnel(brdf: BRDF, dist: TabulatedSlopeDistribution, *, merl=None,
@@ -241,28 +253,29 @@ def extract_fresnel(brdf: BRDF, dist: TabulatedSlopeDistribution, *, merl=None,
     if dist.isotropic and (merl is not None or getattr(brdf, "isotropic", False)):
         values, valid = merl if merl is not None else tabulate_merl_grid(brdf)
         values = np.asarray(values)
-        from ..grid import merl_phi_d, merl_theta_h
+        from ..grid import merl_theta_h
 
         th = merl_theta_h()
-        pd = merl_phi_d()
-        sth, cth = np.sin(th), np.cos(th)
-        std, ctd = np.sin(td), np.cos(td)
-        a = cth[:, None, None] * ctd[None, :, None]
-        bb = (sth[:, None, None] * std[None, :, None]) * np.cos(pd)[None, None, :]
-        ci = a - bb  # cos θi (MERL convention, φh = 0)
-        co = a + bb
-        sigma_tab = _sigma_of_cos(dist)
-        sig_i = _lookup_uniform(sigma_tab, ci)
-        sig_o = _lookup_uniform(sigma_tab, co)
+        geo = _merl_geometry()
+        sigma_tab = _sigma_of_cos(dist, _SIGMA_M).astype(np.float32)
+        dsig = np.diff(sigma_tab)
+        sig_i = sigma_tab[geo["ii"]] + geo["fi"] * dsig[geo["ii"]]
+        sig_o = sigma_tab[geo["io"]] + geo["fo"] * dsig[geo["io"]]
+        ci, co = geo["ci"], geo["co"]
         p_h = dist._p_unit_polar(np.tan(th))
         usable_h = p_h >= p_floor * p_h.max()
-        p_h = np.where(usable_h, p_h, 1.0)
-        geom = sig_i * co + sig_o * ci - ci * co
-        weight = (4.0 * cth**4 / p_h)[:, None, None] * geom
-        ok = (np.asarray(valid, dtype=bool) & (ci > 0) & (co > 0) & usable_h[:, None, None])
-        vals = np.where(ok[..., None], values, 0.0)
-        vals = np.where(np.isfinite(vals), vals, 0.0)
-        sums = np.einsum("hdpc,hdp->dc", vals, np.where(ok, weight, 0.0))
+        scale = np.where(usable_h, 4.0 * np.cos(th) ** 4 / np.where(usable_h, p_h, 1.0), 0.0)
+        # f/f_id = f · 4 cos⁴θh (σi co + σo ci − ci co) / P(θh)
+        weight = (sig_i * co + sig_o * ci - ci * co) * scale.astype(np.float32)[:, None, None]
+        ok = geo["up"] & usable_h[:, None, None]
+        if valid is not None and not np.all(valid):
+            ok = ok & np.asarray(valid, dtype=bool)
+        weight = np.where(ok, weight, np.float32(0.0))
+        vals = values
+        if not np.all(np.isfinite(vals)):
+            vals = np.where(np.isfinite(vals), vals, 0.0)
+        sums = np.stack([np.einsum("hdp,hdp->d", vals[..., c], weight, dtype=np.float64)
+                         for c in range(3)], -1)
         counts = ok.sum(axis=(0, 2))
     else:
         n_h, n_ph, n_pd = aniso_grid
@@ -307,20 +320,14 @@ def extract_fresnel(brdf: BRDF, dist: TabulatedSlopeDistribution, *, merl=None,
 # The fit
 # ------------------------------------------------------------------------------------------
 def _make_model(dist, F, name, source):
-    from ..microfacet import MicrofacetBRDF, TabulatedFresnel
+    from ..microfacet import MicrofacetBRDF
+    from ..microfacet.tabulated import FittedFresnel
 
-    fres = TabulatedFresnel(merl_theta_d(), F)
-    model = MicrofacetBRDF(dist, fres)
-    try:
-        model.name = name
-        model.source = source
-    except AttributeError:  # pragma: no cover - read-only attributes
-        pass
-    return model
+    return MicrofacetBRDF(dist, FittedFresnel(F), name=name, source=source)
 
 
 def _fit_one(brdf, channel, *, n, n_phi, rule, iterations, tol, max_iterations, anisotropic,
-             hotspot, merl, fresnel_kwargs):
+             hotspot, merl, fresnel_kwargs, build_sampling=True):
     t0 = time.perf_counter()
     u, theta, _, _ = radial_rule(n, rule)
     if anisotropic:
@@ -340,6 +347,10 @@ def _fit_one(brdf, channel, *, n, n_phi, rule, iterations, tol, max_iterations, 
     p, lam, changes = solve_slope_pdf(b, rule=rule, iterations=iterations, tol=tol,
                                       max_iterations=max_iterations, hotspot=hotspot)
     dist = TabulatedSlopeDistribution(p, rule=rule)
+    if build_sampling:  # the sampling tables are otherwise built on first use
+        if dist.table_isotropic:
+            dist._visible_tables()
+        dist._sampling_tables()
     t2 = time.perf_counter()
     F = extract_fresnel(brdf, dist, merl=merl, **fresnel_kwargs)
     t3 = time.perf_counter()

@@ -40,12 +40,14 @@ Derived quantities:
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import PchipInterpolator
+from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from ..geometry import normal_to_slope, slope_to_normal
 from .base import SlopeDistribution
+from .fresnel import TabulatedFresnel
 
-__all__ = ["TabulatedSlopeDistribution", "radial_rule", "azimuthal_clamped_cosine_integral"]
+__all__ = ["TabulatedSlopeDistribution", "AnisotropicTabulatedSlopeDistribution",
+           "FittedFresnel", "radial_rule", "azimuthal_clamped_cosine_integral"]
 
 _LOG_FLOOR = 1e-30  # relative floor of P before taking logs
 
@@ -89,9 +91,12 @@ def azimuthal_clamped_cosine_integral(s) -> np.ndarray:
     return np.where(s <= 1.0, 2.0 * np.pi, 2.0 * (phi0 + s * np.sin(phi0)))
 
 
-def _pchip_slopes(x, y):
-    """Derivatives of the PCHIP interpolant of ``y`` (along axis 0) at nodes ``x``."""
-    return PchipInterpolator(x, y, axis=0).derivative()(x)
+def _pchip_slopes(x, y, kind: str = "spline"):
+    """Node derivatives for cubic Hermite interpolation of ``y`` (along axis 0) at ``x``:
+    ``"spline"`` (C² not-a-knot cubic spline) or ``"pchip"`` (monotone)."""
+    if kind == "pchip":
+        return PchipInterpolator(x, y, axis=0).derivative()(x)
+    return CubicSpline(x, y, axis=0).derivative()(x)
 
 
 def _hermite(x_nodes, y, dy, x, col=None):
@@ -133,6 +138,11 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         with the batch shape of the directions passed to :meth:`D`, :meth:`Lambda`, ...
     """
 
+    def __new__(cls, p=None, *args, **kwargs):
+        if cls is TabulatedSlopeDistribution and np.ndim(p) == 2:
+            cls = AnisotropicTabulatedSlopeDistribution
+        return super().__new__(cls)
+
     def __init__(self, p, rule: str = "merl", alpha_x=1.0, alpha_y=None, normalize: bool = True):
         p = np.asarray(p, dtype=np.float64)
         if p.ndim not in (1, 2):
@@ -143,14 +153,14 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         if not np.any(p > 0):
             raise ValueError("tabulated P is identically zero")
         self.rule = rule
-        self.isotropic = p.ndim == 1
+        self.table_isotropic = p.ndim == 1
         n_theta = p.shape[0]
         self.u, self.theta, self.r, self.w_r = radial_rule(n_theta, rule)
-        self.n_phi = 1 if self.isotropic else p.shape[1]
+        self.n_phi = 1 if self.table_isotropic else p.shape[1]
         self.phi = 2.0 * np.pi * np.arange(self.n_phi) / self.n_phi
         self.table = p / self._integral(p) if normalize else p
-        self.alpha_x = alpha_x
-        self.alpha_y = alpha_x if alpha_y is None else alpha_y
+        self.table = self.table.astype(np.float32).astype(np.float64)  # what a fit file stores
+        self._set_alpha(alpha_x, alpha_y)
         self._build_lookup()
         self._sampling = None
         self._visible = None
@@ -170,19 +180,28 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         """
         new = object.__new__(type(self))
         new.__dict__.update(self.__dict__)
-        new.alpha_x = alpha_x
-        new.alpha_y = alpha_x if alpha_y is None else alpha_y
+        new._set_alpha(alpha_x, alpha_y)
         return new
+
+    def _set_alpha(self, alpha_x, alpha_y=None):
+        ax = np.asarray(alpha_x, dtype=np.float64)
+        ay = ax if alpha_y is None else np.asarray(alpha_y, dtype=np.float64)
+        if np.any(~np.isfinite(ax)) or np.any(~np.isfinite(ay)) or np.any(ax <= 0) or np.any(ay <= 0):
+            raise ValueError(f"roughness scales must be finite and > 0, got {alpha_x!r}, {alpha_y!r}")
+        self.alpha_x = ax if ax.ndim else float(ax)
+        self.alpha_y = ay if ay.ndim else float(ay)
+        self.isotropic = bool(self.table_isotropic and ax.shape == ay.shape and np.all(ax == ay))
 
     def _build_lookup(self):
         p = self.table
         floor = _LOG_FLOOR * float(p.max())
         logp = np.log(np.maximum(p, floor))
-        # nodes in u, extended with u=0 (P held constant) when the rule does not contain it
+        # nodes in u mirrored to u < 0: log P is even in u (a function of tan²θ), so the
+        # spline gets the right behaviour at the pole θ = 0
         u = self.u
-        if u[0] > 0:
-            u = np.concatenate([[0.0], u])
-            logp = np.concatenate([logp[:1], logp], axis=0)
+        k0 = 1 if u[0] == 0.0 else 0
+        u = np.concatenate([-u[k0:][::-1], u])
+        logp = np.concatenate([logp[k0:][::-1], logp], axis=0)
         self._lu = u
         self._llogp = logp
         self._ldlogp = _pchip_slopes(u, logp)
@@ -206,14 +225,14 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         """``σ(θk[, φj])`` at the table nodes with the fit quadrature (Eq. 3, 22-23)."""
         t = self.r
         c = np.cos(self.theta)
-        if self.isotropic:
+        if self.table_isotropic:
             J = azimuthal_clamped_cosine_integral(t[:, None] * self.r[None, :])
             return c * (J @ (self.w_r * self.table))
         return c[:, None] * _circular_kernel_apply(t, self.r, self.w_r, self.table)
 
     def _sigma_grazing(self) -> np.ndarray:
         """``σ`` at θ = π/2: ``∫ (cos Δφ)₊ r P dh̃`` (limit of Eq. 3)."""
-        if self.isotropic:
+        if self.table_isotropic:
             return np.array(2.0 * np.sum(self.w_r * self.r * self.table))
         n = self.n_phi
         dphi = self.phi[:, None] - self.phi[None, :]  # (i, j)
@@ -225,7 +244,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         """P of the unit-roughness table at radial slope ``r`` and normal azimuth ``phi``."""
         theta = np.arctan(r)
         u = np.sqrt(theta * (2.0 / np.pi))
-        if self.isotropic:
+        if self.table_isotropic:
             val = np.exp(_hermite(self._lu, self._llogp, self._ldlogp, u))
             tail = self._p_last * (1.0 - u) / (1.0 - self._u_last)
             return np.where(u > self._u_last, tail, val)
@@ -247,7 +266,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         theta = np.arctan2(rho, w[..., 2])
         u = np.sqrt(np.clip(theta, 0.0, np.pi / 2) * (2.0 / np.pi))
         norm = np.linalg.norm(w, axis=-1)
-        if self.isotropic:
+        if self.table_isotropic:
             return norm * _hermite(self._su, self._ssig, self._sdsig, u)
         phi = np.arctan2(w[..., 1], w[..., 0])
         n = self.n_phi
@@ -271,7 +290,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         x = s[..., 0] / ax
         y = s[..., 1] / ay
         r = np.hypot(x, y)
-        phi = None if self.isotropic else np.arctan2(-y, -x)
+        phi = None if self.table_isotropic else np.arctan2(-y, -x)
         return self._p_unit_polar(r, phi) / (ax * ay)
 
     def D(self, m) -> np.ndarray:
@@ -323,7 +342,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         theta = 0.5 * np.pi * uu**2
         r = np.tan(theta)
         jac = np.pi * uu / np.cos(theta) ** 2 * r  # r dr/du
-        if self.isotropic:
+        if self.table_isotropic:
             dens = self._p_unit_polar(r) * jac * 2.0 * np.pi
             cdf = np.concatenate([[0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(uu))])
             cdf /= cdf[-1]
@@ -352,7 +371,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         uu, cdf, ccdf = self._sampling_tables()
         uv = np.interp(u[..., 0], cdf, uu)
         r = np.tan(0.5 * np.pi * uv**2)
-        if self.isotropic:
+        if self.table_isotropic:
             phi = 2.0 * np.pi * u[..., 1]
         else:
             n = self.n_phi
@@ -469,7 +488,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         stretched direction, then scale the slopes. Anisotropic tables raise
         ``NotImplementedError`` (sample ``D cos θm`` with :meth:`sample_normal` instead).
         """
-        if not self.isotropic:
+        if not self.table_isotropic:
             raise NotImplementedError("visible-normal sampling is only tabulated for isotropic P")
         w = np.asarray(w, dtype=np.float64)
         u = np.asarray(u, dtype=np.float64)
@@ -498,7 +517,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         """
         ax, ay = (float(np.asarray(a)) for a in self._alphas())
         r, w = self.r, self.w_r
-        if self.isotropic:
+        if self.table_isotropic:
             p = self.table
             m1 = 4.0 * np.sum(w * p * r)  # ∫|cos φ| dφ = 4
             m2 = np.pi * np.sum(w * p * r**2)  # ∫cos² φ dφ = π
@@ -516,8 +535,8 @@ class TabulatedSlopeDistribution(SlopeDistribution):
             b1 = np.sum(wq * (cphi * sphi)[None, :])
             b2 = np.sum(wq * (sphi**2)[None, :])
         # roughness scaling x̃ → αx x̃, ỹ → αy ỹ
-        if not self.isotropic or ax != ay:
-            if self.isotropic:
+        if not self.table_isotropic or ax != ay:
+            if self.table_isotropic:
                 # isotropic table with anisotropic scaling: b1, b2 need the angular integral
                 phis = np.linspace(0, 2 * np.pi, 721)[:-1]
                 c, s = np.cos(phis), np.sin(phis)
@@ -539,7 +558,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
     # -- state -------------------------------------------------------------------------------
     def params(self) -> dict:
         ax, ay = self._alphas()
-        return {"kind": "tabulated", "isotropic": self.isotropic, "rule": self.rule,
+        return {"kind": "tabulated", "isotropic": self.table_isotropic, "rule": self.rule,
                 "n_theta": int(self.table.shape[0]), "n_phi": int(self.n_phi),
                 "alpha_x": ax.tolist(), "alpha_y": ay.tolist()}
 
@@ -559,7 +578,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
 
     def __repr__(self) -> str:
         shape = "x".join(str(s) for s in self.table.shape)
-        return f"<TabulatedSlopeDistribution {shape} rule={self.rule} iso={self.isotropic}>"
+        return f"<TabulatedSlopeDistribution {shape} rule={self.rule} iso={self.table_isotropic}>"
 
 
 def _circular_kernel_apply(t, r, w_r, p) -> np.ndarray:
@@ -575,3 +594,53 @@ def _circular_kernel_apply(t, r, w_r, p) -> np.ndarray:
     ph = np.fft.rfft(p * w_r[:, None], axis=-1)  # (Nθ, Nφ/2+1)
     out = np.fft.irfft(np.einsum("ijm,jm->im", kh, ph), n=n_phi, axis=-1)
     return out * (2.0 * np.pi / n_phi)
+
+
+class AnisotropicTabulatedSlopeDistribution(TabulatedSlopeDistribution):
+    """A 2D ``(θ, φ)`` table (created by ``TabulatedSlopeDistribution(p2d)``).
+
+    Visible-normal sampling is not tabulated for anisotropic P: samplers use the slope
+    quantile tables (Appendix A) and the density ``D(m) cos θm`` instead.
+    """
+
+    sample_visible = SlopeDistribution.sample_visible
+
+
+class FittedFresnel(TabulatedFresnel):
+    """The extracted microfacet Fresnel of a tabulated fit (Dupuy 2015 Eq. 20).
+
+    A :class:`~brdffit.microfacet.fresnel.TabulatedFresnel` on the 90 MERL ``θd`` samples
+    (``j·π/180``) whose values are stored as float32 without the implied grid (the paper's
+    3N-float RGB table). For materials outside microfacet theory it is a residual function,
+    not a physical Fresnel reflectance.
+    """
+
+    kind = "tabulated_merl"
+
+    def __init__(self, values, theta_d_grid=None):
+        v = np.asarray(values, dtype=np.float32).astype(np.float64)
+        grid = (np.arange(v.shape[0]) * (np.pi / 2 / v.shape[0]) if theta_d_grid is None
+                else theta_d_grid)
+        super().__init__(grid, v)
+
+    def to_state(self):
+        return {"n": int(self.theta_d.size)}, {"values": self.values.astype(np.float32)}
+
+    @classmethod
+    def from_state(cls, params, arrays):
+        return cls(arrays["values"])
+
+    def __repr__(self) -> str:
+        return f"<FittedFresnel n={self.theta_d.size} F(0)={np.round(self.values[0], 4).tolist()}>"
+
+
+def _register():
+    from .model import register_distribution, register_fresnel
+
+    register_fresnel(FittedFresnel.kind, FittedFresnel)
+
+    register_distribution("tabulated", TabulatedSlopeDistribution)
+    register_distribution("tabulated_aniso", AnisotropicTabulatedSlopeDistribution)
+
+
+_register()
