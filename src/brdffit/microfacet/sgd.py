@@ -151,6 +151,7 @@ class SGD(SlopeDistribution):
     """
 
     isotropic = True
+    kind = "sgd"              # component kind in microfacet.model's registry (fit files)
 
     def __init__(self, alpha: float, p: float):
         self.alpha, self.p = _check(alpha, p)
