@@ -385,8 +385,9 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int = 4, tol: float | Non
         distribution from the luminance of the backscatter (the paper's choice).
     rule:
         Radial rule: ``"merl"`` (rectangles on θ = (π/2)u², supplemental Eq. 17-22),
-        ``"gauss"`` (Gauss-Legendre in u, more accurate) or ``"auto"``: ``"merl"`` for
-        MERL-grid input (``merl_table``) with ``n = 90``, else ``"gauss"``.
+        ``"gauss"`` (Gauss-Legendre in u: exact eigenvalue and moments, better for heavy
+        tails) or ``"auto"``: ``"merl"`` for isotropic fits with ``n = 90`` (MERL tables
+        are then read at their own samples, supplemental Eq. 20-22), else ``"gauss"``.
     hotspot:
         Backscattering shadowing model, ``"G1"`` (paper, Eq. 11) or ``"G2"`` (Eq. 2).
 
@@ -397,9 +398,8 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int = 4, tol: float | Non
     t0 = time.perf_counter()
     if anisotropic is None:
         anisotropic = not bool(getattr(brdf, "isotropic", False))
-    has_merl = getattr(brdf, "merl_table", None) is not None
     if rule == "auto":
-        rule = "merl" if (has_merl and n == N_THETA_H and not anisotropic) else "gauss"
+        rule = "merl" if (n == N_THETA_H and not anisotropic) else "gauss"
     merl = None
     if not anisotropic and getattr(brdf, "isotropic", False):
         merl = tabulate_merl_grid(brdf)
@@ -523,3 +523,53 @@ def fit_beckmann(brdf: BRDF, **kwargs):
 def fit_ggx(brdf: BRDF, **kwargs):
     """:func:`fit_tabulated` then :func:`to_ggx`."""
     return to_ggx(fit_tabulated(brdf, **kwargs))
+
+
+# ------------------------------------------------------------------------------------------
+# Summaries and registration with brdffit.fit.registry
+# ------------------------------------------------------------------------------------------
+def summary(model) -> dict:
+    """Key figures of a tabulated / converted fit: eigenvalue (F0 of the paper), fitted
+    α's (Appendix C conversions), Fresnel at normal incidence, iterations and time."""
+    info = dict(getattr(model, "fit_info", None) or {})
+    out: dict = {"model": None, "eigenvalue": info.get("eigenvalue"),
+                 "iterations": info.get("iterations"),
+                 "relative_change": (info.get("relative_change") or [None])[-1],
+                 "time_s": info.get("time")}
+    dist = getattr(model, "distribution", None)
+    fres = getattr(model, "fresnel", None)
+    if isinstance(dist, TabulatedSlopeDistribution):
+        out["model"] = "tabulated"
+        out["table"] = list(dist.table.shape)
+        out["rule"] = dist.rule
+        bx, by, br = beckmann_parameters(dist)
+        gx, gy, gr = ggx_parameters(dist)
+        out["beckmann_alpha"] = [bx, by, br]
+        out["ggx_alpha"] = [gx, gy, gr]
+    elif dist is not None:
+        out["model"] = type(dist).__name__.lower()
+        out["alpha"] = [getattr(dist, "alpha_x", None), getattr(dist, "alpha_y", None),
+                        getattr(dist, "rho", None)]
+    elif isinstance(model, PerChannelBRDF):
+        out["model"] = "tabulated-per-channel"
+        out["eigenvalue"] = info.get("eigenvalue")
+        fres = None
+        out["fresnel_0"] = [float(m.fresnel.eval(np.array(1.0))[c])
+                            for c, m in enumerate(model.models)]
+    if fres is not None:
+        out["fresnel_0"] = np.asarray(fres.eval(np.array(1.0)), dtype=float).tolist()
+    return out
+
+
+def _register_fitters() -> None:
+    from .registry import register_fitter
+
+    register_fitter("tabulated", fit_tabulated, summary,
+                    "Dupuy et al. 2015 tabulated microfacet fit by power iteration")
+    register_fitter("ggx", fit_ggx, summary,
+                    "Dupuy et al. 2015 fit converted to anisotropic GGX by slope moments")
+    register_fitter("beckmann", fit_beckmann, summary,
+                    "Dupuy et al. 2015 fit converted to anisotropic Beckmann by slope moments")
+
+
+_register_fitters()

@@ -1,0 +1,123 @@
+"""``brdffit fit INPUT[:MATERIAL] --model NAME [-o OUT] [--iterations N] [--json]``.
+
+Loads the input with :func:`brdffit.io.load`, fits it with the model registered under
+``NAME`` in :mod:`brdffit.fit.registry` (``tabulated``, ``ggx``, ``beckmann`` from Dupuy et
+al. 2015; other modules add theirs, e.g. ``sgd``, ``npf``), prints a short summary
+(eigenvalue, fitted α's, Fresnel at normal incidence, time; ``--json`` prints it as one JSON
+object) and, with ``-o``, writes the fit file (:func:`brdffit.io.fitfile.save_fit`).
+Extra fitting options go through ``--option key=value`` (values parsed as JSON when they
+can be, e.g. ``--option tol=1e-6 --option anisotropic=true``).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import typer
+
+__all__ = ["register", "parse_options", "run_fit"]
+
+
+def parse_options(items: list[str] | None) -> dict:
+    """``["k=v", ...]`` → dict, values parsed as JSON when possible (else strings)."""
+    out: dict = {}
+    for item in items or []:
+        if "=" not in item:
+            raise typer.BadParameter(f"expected key=value, found {item!r}", param_hint="--option")
+        key, val = item.split("=", 1)
+        try:
+            out[key.strip()] = json.loads(val)
+        except json.JSONDecodeError:
+            out[key.strip()] = val
+    return out
+
+
+def run_fit(spec: str, model: str = "tabulated", out: Path | None = None,
+            options: dict | None = None) -> tuple[object, dict]:
+    """Load ``spec``, fit it with ``model`` and optionally save; returns ``(fit, summary)``."""
+    from ..fit import registry
+    from ..io import load
+
+    entry = registry.get(model)
+    brdf = load(spec)
+    t0 = time.perf_counter()
+    fitted = entry.fit(brdf, **(options or {}))
+    elapsed = time.perf_counter() - t0
+    summary = registry.summarize(model, fitted)
+    summary["model"] = model
+    summary["input"] = spec
+    summary.setdefault("time_s", elapsed)
+    if summary.get("time_s") is None:
+        summary["time_s"] = elapsed
+    if out is not None:
+        from ..io.fitfile import save_fit
+
+        save_fit(fitted, out, source=spec,
+                 options=dict(getattr(fitted, "fit_options", None) or options or {}, model=model))
+        summary["output"] = str(out)
+    return fitted, summary
+
+
+def _fmt(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_fmt(x) for x in v) + "]"
+    return str(v)
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("fit")
+    def fit_cmd(
+        spec: str = typer.Argument(..., metavar="INPUT[:MATERIAL]",
+                                   help="A BRDF file, collection.zip:material or synthetic:NAME."),
+        model: str = typer.Option("tabulated", "--model", "-m",
+                                  help="Model to fit (see brdffit.fit.registry): tabulated, "
+                                       "ggx, beckmann, and those of other fitting modules."),
+        out: Path = typer.Option(None, "--output", "-o", help="Write the fit file (.npz) here."),
+        iterations: int = typer.Option(None, "--iterations", min=1,
+                                       help="Power iterations / optimiser iterations."),
+        option: list[str] = typer.Option(None, "--option", "-O",
+                                         help="Extra fitting option key=value (repeatable)."),
+        as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
+    ):
+        """Fit a model to a measured BRDF and print a short summary."""
+        from ..fit import registry
+
+        opts = parse_options(option)
+        if iterations is not None:
+            entry = registry.get(model)
+            if not entry.accepts("iterations"):
+                raise typer.BadParameter(f"model {model!r} has no 'iterations' option",
+                                         param_hint="--iterations")
+            opts["iterations"] = iterations
+        try:
+            registry.get(model)
+        except KeyError as exc:
+            raise typer.BadParameter(str(exc.args[0]), param_hint="--model") from None
+        _, summary = run_fit(spec, model, out, opts)
+        if as_json:
+            typer.echo(json.dumps(summary, default=_json_default, sort_keys=True))
+            return
+        typer.echo(f"{spec}: {model} fit in {summary.get('time_s', 0.0):.3f} s")
+        for key in ("eigenvalue", "iterations", "relative_change", "beckmann_alpha", "ggx_alpha",
+                    "alpha", "fresnel_0", "table", "rule", "output"):
+            if summary.get(key) is not None:
+                typer.echo(f"  {key:16s} {_fmt(summary[key])}")
+        shown = {"eigenvalue", "iterations", "relative_change", "beckmann_alpha", "ggx_alpha",
+                 "alpha", "fresnel_0", "table", "rule", "output", "model", "input", "time_s"}
+        for key, val in summary.items():
+            if key not in shown and val is not None and not isinstance(val, dict):
+                typer.echo(f"  {key:16s} {_fmt(val)}")
+
+
+def _json_default(obj):
+    import numpy as np
+
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    return str(obj)
