@@ -49,7 +49,7 @@ from scipy import interpolate, optimize, special
 from .base import SlopeDistribution
 from .gamma import upper_gamma
 
-__all__ = ["SGD", "g1_eq9", "sgd_log_p22", "sgd_mu_lambda"]
+__all__ = ["SGD", "SGDApproxG1", "g1_eq9", "sgd_log_p22", "sgd_mu_lambda"]
 
 _H_LOG = 0.2             # trapezoid spacing in u = ln(x − μ²)
 _N_TABLE = 384           # nodes of the μΛ(μ) table (log μ)
@@ -388,3 +388,59 @@ class SGD(SlopeDistribution):
 
     def __hash__(self) -> int:
         return hash(("SGD", self.alpha, self.p))
+
+
+class SGDApproxG1(SGD):
+    """SGD whose Smith G1 is the closed-form approximation of Bagher 2012 **Eq. 9**.
+
+    ``G1(θ) ≈ 1 + λ(1 − exp(c (θ − θ0)^k))`` for θ > θ0 (1 below); the paper uses it for GPU
+    rendering instead of the stored table. ``Λ = 1/G1 − 1``. Parameters as returned by
+    :meth:`SGD.g1_approximation` (``lambda``, ``c``, ``k``).
+    """
+
+    kind = "sgd_eq9"
+
+    def __init__(self, alpha: float, p: float, lam: float, c: float, k: float):
+        super().__init__(alpha, p)
+        self.lam, self.c, self.k = float(lam), float(c), float(k)
+        if not all(np.isfinite(v) and v > 0 for v in (self.lam, self.c, self.k)):
+            raise ValueError(f"SGDApproxG1: λ, c, k must be finite and > 0, found "
+                             f"{(self.lam, self.c, self.k)}")
+
+    def G1_theta(self, theta, exact: bool = False) -> np.ndarray:
+        if exact:
+            return super().G1_theta(theta, exact=True)
+        return g1_eq9(theta, self.lam, self.c, self.k)
+
+    def Lambda(self, w) -> np.ndarray:
+        w = np.asarray(w, dtype=np.float64)
+        cz = w[..., 2]
+        theta = np.arccos(np.clip(cz, -1.0, 1.0))
+        g = self.G1_theta(theta)
+        with np.errstate(divide="ignore"):
+            return np.where((cz > 0) & (g > 0), 1.0 / np.where(g > 0, g, 1.0) - 1.0, np.inf)
+
+    def params(self) -> dict:
+        return {"alpha": self.alpha, "p": self.p, "lam": self.lam, "c": self.c, "k": self.k}
+
+    def __repr__(self) -> str:
+        return (f"SGDApproxG1(alpha={self.alpha:.6g}, p={self.p:.6g}, lam={self.lam:.6g}, "
+                f"c={self.c:.6g}, k={self.k:.6g})")
+
+    def __eq__(self, other) -> bool:
+        return isinstance(other, SGDApproxG1) and other.params() == self.params()
+
+    def __hash__(self) -> int:
+        return hash(("SGDApproxG1",) + tuple(self.params().values()))
+
+
+def _register_components() -> None:
+    try:
+        from .model import register_distribution
+    except ImportError:      # pragma: no cover - model.py absent in a partial checkout
+        return
+    register_distribution("sgd", SGD)
+    register_distribution("sgd_eq9", SGDApproxG1)
+
+
+_register_components()
