@@ -28,37 +28,49 @@ __all__ = ["Beckmann"]
 _SQRT_PI = np.sqrt(np.pi)
 
 
-def _beckmann_visible_x(t: np.ndarray, u: np.ndarray, iterations: int = 60) -> np.ndarray:
+def _beckmann_visible_x(t: np.ndarray, u: np.ndarray, iterations: int = 80) -> np.ndarray:
     """Sample ``x < 1/t`` with density ``∝ (1 − t x) exp(−x²)`` (``t = tan θ >= 0``).
 
     Exact inversion of ``F(x) = (√π/2) erfc(−x) + t exp(−x²)/2`` by Newton steps kept inside
-    a shrinking bracket (bisection when a step leaves it).
+    a shrinking bracket (bisection when a step leaves it); only unconverged entries iterate.
     """
+    t = np.asarray(t, dtype=np.float64)
+    u = np.asarray(u, dtype=np.float64)
+    t, u = np.broadcast_arrays(t, u)
+    shape = t.shape
+    t, u = t.ravel(), u.ravel()
     with np.errstate(divide="ignore"):
         mu = np.where(t > 0, 1.0 / np.where(t > 0, t, 1.0), np.inf)
     hi = np.minimum(mu, 8.0)
     lo = np.full_like(hi, -8.0)
 
-    def F(x):
-        return 0.5 * _SQRT_PI * special.erfc(-x) + 0.5 * t * np.exp(-x * x)
+    def F(x, tt):
+        return 0.5 * _SQRT_PI * special.erfc(-x) + 0.5 * tt * np.exp(-x * x)
 
-    target = u * F(hi)
+    total = F(hi, t)
+    target = u * total
     x = np.clip(special.ndtri(np.clip(u, 1e-300, 1 - 1e-16)) / np.sqrt(2.0), lo, hi)
     x = np.where((x <= lo) | (x >= hi), 0.5 * (lo + hi), x)
+    act = np.arange(x.size)
     for _ in range(iterations):
-        f = F(x) - target
-        hi = np.where(f > 0, x, hi)
-        lo = np.where(f > 0, lo, x)
-        d = (1.0 - t * x) * np.exp(-x * x)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            xn = x - f / d
-        bad = ~np.isfinite(xn) | (xn <= lo) | (xn >= hi)
-        xn = np.where(bad, 0.5 * (lo + hi), xn)
-        if np.all(np.abs(xn - x) <= 1e-15 * np.maximum(1.0, np.abs(x))):
-            x = xn
+        if act.size == 0:
             break
-        x = xn
-    return x
+        xa, ta, la, ha = x[act], t[act], lo[act], hi[act]
+        f = F(xa, ta) - target[act]
+        pos = f > 0
+        ha = np.where(pos, xa, ha)
+        la = np.where(pos, la, xa)
+        d = (1.0 - ta * xa) * np.exp(-xa * xa)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            xn = xa - f / d
+        bad = ~np.isfinite(xn) | (xn < la) | (xn > ha)
+        xn = np.where(bad, 0.5 * (la + ha), xn)
+        done = (np.abs(f) <= 2e-16 * total[act]) | (np.abs(xn - xa) <= 1e-15 * np.maximum(1.0, np.abs(xa))) \
+            | (ha - la <= 1e-15 * np.maximum(1.0, np.abs(xa)))
+        x[act] = np.where(np.abs(f) <= 2e-16 * total[act], xa, xn)
+        lo[act], hi[act] = la, ha
+        act = act[~done]
+    return x.reshape(shape)
 
 
 class Beckmann(EllipticalSlopeDistribution):
@@ -112,8 +124,8 @@ class Beckmann(EllipticalSlopeDistribution):
         return 0.5
 
     @classmethod
-    def from_slope_moments(cls, E_x2: float, E_y2: float, E_xy: float) -> "Beckmann":
-        """Exact inverse of the 2nd-order moments (Dupuy 2015 App. C, LEAN mapping):
-        ``αx² = 2 E x̃²``, ``αy² = 2 E ỹ²``, ``ραxαy = 2 E x̃ỹ``."""
-        ax, ay = np.sqrt(2.0 * E_x2), np.sqrt(2.0 * E_y2)
-        return cls(ax, ay, 2.0 * E_xy / (ax * ay))
+    def from_slope_moments(cls, moments: dict) -> "Beckmann":
+        """Dupuy 2015 App. C (LEAN mapping), exact for Beckmann: ``αx² = 2 E x̃²``,
+        ``αy² = 2 E ỹ²``, ``ραxαy = 2 E x̃ỹ`` (``moments`` as from :meth:`slope_moments`)."""
+        ax, ay = np.sqrt(2.0 * moments["Exx"]), np.sqrt(2.0 * moments["Eyy"])
+        return cls(ax, ay, 2.0 * moments["Exy"] / (ax * ay))

@@ -77,17 +77,13 @@ class GGX(EllipticalSlopeDistribution):
         return np.inf
 
     @classmethod
-    def from_slope_moments(cls, E_abs_x: float, E_abs_y: float, E_xy_over_r2: float,
-                           E_y2_over_r2: float) -> "GGX":
-        """Exact inverse of Dupuy 2015 App. C's moments for GGX.
+    def from_slope_moments(cls, moments: dict) -> "GGX":
+        """Dupuy 2015 App. C, exact for GGX: ``αx = E|x̃|``, ``αy = E|ỹ|``,
+        ``ρ = (αy/αx) b1/(b1² + b2²)`` (``moments`` as from :meth:`slope_moments`).
 
-        ``αx = E|x̃|``, ``αy = E|ỹ|``; the angular moment matrix
-        ``M = [[1 − b2, b1], [b1, b2]] = S^{1/2}/tr S^{1/2}`` gives ``S ∝ M²`` and ρ is the
-        correlation of ``M²``. (Derived here from the angular central Gaussian law; the
-        paper's own formula for ρ is garbled in our copy.)
+        (The ρ formula is exact: with ``M = S^{1/2}/tr S^{1/2}`` = the angular moment matrix,
+        one checks ``(αy/αx) M01/(M01² + M11²) = ρ``; tested.)
         """
-        b1, b2 = float(E_xy_over_r2), float(E_y2_over_r2)
-        M = np.array([[1.0 - b2, b1], [b1, b2]])
-        M2 = M @ M
-        rho = M2[0, 1] / np.sqrt(M2[0, 0] * M2[1, 1])
-        return cls(E_abs_x, E_abs_y, rho)
+        ax, ay = float(moments["E|x|"]), float(moments["E|y|"])
+        b1, b2 = float(moments["b1"]), float(moments["b2"])
+        return cls(ax, ay, (ay / ax) * b1 / (b1 * b1 + b2 * b2))

@@ -87,28 +87,45 @@ for _c in (SchlickFresnel, GeneralizedSchlickFresnel, DielectricFresnel, Conduct
     register_fresnel(_c.kind, _c)
 
 
+def _base_of(what: str) -> type:
+    return SlopeDistribution if what == "distribution" else Fresnel
+
+
 def _kind_of(obj, registry: dict[str, type], what: str) -> str:
+    """The registered kind of ``obj``'s class; a class with its own ``kind`` attribute is
+    registered on first use."""
     for kind, cls in registry.items():
         if type(obj) is cls:
             return kind
-    kind = getattr(obj, "kind", None)
-    if kind and kind not in registry and what == "distribution" and kind == "sgd":
-        _lookup("sgd", registry, what)
-        if registry.get(kind) is type(obj):
-            return kind
+    kind = type(obj).__dict__.get("kind")
+    if isinstance(kind, str) and kind:
+        if kind in registry and registry[kind] is not type(obj):
+            # the module of the registered class may define the same name after a reload
+            if registry[kind].__qualname__ != type(obj).__qualname__:
+                raise TypeError(f"{what} kind {kind!r} is already registered for "
+                                f"{registry[kind].__name__}, not {type(obj).__name__}")
+        registry[kind] = type(obj)
+        return kind
     raise TypeError(f"{what} class {type(obj).__name__} is not registered; call "
                     f"register_{what}(kind, {type(obj).__name__}) first")
 
 
 def _lookup(kind: str, registry: dict[str, type], what: str) -> type:
-    if kind not in registry and what == "distribution" and kind == "sgd":
+    """Class registered under ``kind``; unknown kinds are looked for in the module
+    ``brdffit.microfacet.<kind>`` (a class there whose ``kind`` attribute equals ``kind``)."""
+    if kind not in registry and isinstance(kind, str) and kind.isidentifier():
         try:
-            mod = import_module(".sgd", __package__)
+            mod = import_module(f".{kind}", __package__)
         except ImportError as exc:
-            raise ValueError(f"distribution kind 'sgd' needs brdffit.microfacet.sgd, which "
-                             f"could not be imported ({exc})") from exc
-        if "sgd" not in registry and hasattr(mod, "SGD"):
-            register_distribution("sgd", mod.SGD)
+            if kind == "sgd":
+                raise ValueError(f"distribution kind 'sgd' needs brdffit.microfacet.sgd, which "
+                                 f"could not be imported ({exc})") from exc
+            mod = None
+        if mod is not None:
+            for obj in vars(mod).values():
+                if (isinstance(obj, type) and issubclass(obj, _base_of(what))
+                        and obj.__dict__.get("kind") == kind):
+                    registry.setdefault(kind, obj)
     if kind not in registry:
         raise ValueError(f"unknown {what} kind {kind!r}; registered: {sorted(registry)}")
     return registry[kind]

@@ -319,31 +319,32 @@ class EllipticalSlopeDistribution(SlopeDistribution):
         raise NotImplementedError
 
     def angular_moments(self) -> dict[str, float]:
-        """``E[x̃ỹ/(x̃²+ỹ²)]`` and ``E[ỹ²/(x̃²+ỹ²)]`` (the b1, b2 of Dupuy 2015 App. C).
+        """``b1 = E[x̃ỹ/(x̃²+ỹ²)]`` and ``b2 = E[ỹ²/(x̃²+ỹ²)]`` of Dupuy 2015 App. C.
 
         For any elliptical law the direction of ``s`` follows the angular central Gaussian
-        of ``S``, whose second moment matrix is ``S^{1/2} / tr(S^{1/2})`` (closed form).
+        of ``S``, whose second-moment matrix is ``S^{1/2} / tr(S^{1/2})`` (closed form:
+        ``E cos²ψ = √λ1/(√λ1 + √λ2)`` in the eigenbasis of S).
         """
         evals, evecs = np.linalg.eigh(self.S)
         root = (evecs * np.sqrt(evals)) @ evecs.T
         M = root / np.trace(root)
-        return {"E_xy_over_r2": float(M[0, 1]), "E_y2_over_r2": float(M[1, 1]),
-                "E_x2_over_r2": float(M[0, 0])}
+        return {"b1": float(M[0, 1]), "b2": float(M[1, 1])}
 
     def slope_moments(self) -> dict[str, float]:
-        """Closed-form slope moments (Dupuy 2015 App. C): E|x̃|, E|ỹ|, E x̃², E ỹ², E x̃ỹ.
+        """Closed-form slope moments (Dupuy 2015 App. C).
 
-        The marginals of an elliptical law are the unit marginal scaled by αx and αy, so
-        ``E|x̃| = αx E|z|`` and ``E x̃² = αx² E z²``, ``E x̃ỹ = ραxαy E z²``. Second moments are
-        ``inf`` (GGX: ``E x̃ỹ`` is then undefined, reported as NaN). The angular moments of
-        :meth:`angular_moments` are included.
+        Keys (shared with the SGD and tabulated distributions): ``"E|x|"``, ``"E|y|"``,
+        ``"Exx"``, ``"Eyy"``, ``"Exy"``, plus the angular ``"b1"``, ``"b2"``. The marginals of
+        an elliptical law are the unit marginal scaled by αx and αy, so ``E|x̃| = αx E|z|``,
+        ``E x̃² = αx² E z²`` and ``E x̃ỹ = ραxαy E z²``. For GGX the second moments are
+        ``inf`` and ``Exy`` is undefined (NaN).
         """
         a1 = self._unit_abs_moment()
         a2 = self._unit_second_moment()
         ax, ay, r = self.alpha_x, self.alpha_y, self.rho
         exy = r * ax * ay * a2 if np.isfinite(a2) else np.nan
-        out = {"E_abs_x": ax * a1, "E_abs_y": ay * a1, "E_x2": ax * ax * a2,
-               "E_y2": ay * ay * a2, "E_xy": exy}
+        out = {"E|x|": ax * a1, "E|y|": ay * a1, "Exx": ax * ax * a2, "Eyy": ay * ay * a2,
+               "Exy": exy}
         out.update(self.angular_moments())
         return out
 

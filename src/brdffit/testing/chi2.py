@@ -8,7 +8,8 @@ textbook definition of Pearson's test:
    solid angle, uniform in ``(cos θo, φo) ∈ [-1, 1] × [0, 2π)`` (``dω = d cosθ dφ``).
    ``res_theta`` is even so that the horizon is a bin edge (pdfs jump there).
 2. The expected count of each bin is ``N ∫_bin pdf(wi, wo) dωo``, integrated with an
-   ``ires × ires`` Gauss-Legendre rule per bin.
+   ``ires × ires`` Gauss-Legendre rule per bin, adaptively refined by quadrant splitting in
+   the bins where refinement changes the result (so sharp lobes are integrated accurately).
 3. ``N`` directions are drawn with ``brdf.sample(wi, u)`` and histogrammed. A sample whose
    returned pdf is 0 (or not finite) is *invalid* (e.g. a microfacet reflection below the
    horizon): it is not counted, and the pdf must then integrate to the valid fraction.
@@ -61,23 +62,17 @@ class Chi2Result:
                 f"{'PASS' if self.passed else 'FAIL'}{': ' + self.message if self.message else ''}")
 
 
-def _gauss_nodes(lo: float, hi: float, bins: int, ires: int) -> tuple[np.ndarray, np.ndarray]:
-    """Composite Gauss-Legendre nodes/weights, shape ``(bins, ires)``, over [lo, hi]."""
+def _integrate_rects(brdf, wi: np.ndarray, rects: np.ndarray, ires: int,
+                     chunk: int = 1 << 18) -> np.ndarray:
+    """``∫ pdf dωo`` over rectangles ``(c0, c1, φ0, φ1)`` in (cos θ, φ), ``ires²`` GL nodes."""
     x, w = np.polynomial.legendre.leggauss(ires)
-    edges = np.linspace(lo, hi, bins + 1)
-    half = 0.5 * (edges[1:] - edges[:-1])
-    mid = 0.5 * (edges[1:] + edges[:-1])
-    return mid[:, None] + half[:, None] * x[None, :], half[:, None] * w[None, :]
-
-
-def _bin_integrals(brdf, wi: np.ndarray, res_theta: int, res_phi: int, ires: int,
-                   chunk: int = 1 << 18) -> np.ndarray:
-    """``∫_bin pdf(wi, wo) dωo`` for every (cos θ, φ) bin, shape ``(res_theta, res_phi)``."""
-    ct, wct = _gauss_nodes(-1.0, 1.0, res_theta, ires)            # (rt, ires)
-    ph, wph = _gauss_nodes(0.0, 2.0 * np.pi, res_phi, ires)       # (rp, ires)
-    CT = np.broadcast_to(ct[:, :, None, None], (res_theta, ires, res_phi, ires)).ravel()
-    PH = np.broadcast_to(ph[None, None, :, :], (res_theta, ires, res_phi, ires)).ravel()
-    W = (wct[:, :, None, None] * wph[None, None, :, :]).ravel()
+    c0, c1, p0, p1 = rects.T
+    hc, hp = 0.5 * (c1 - c0), 0.5 * (p1 - p0)
+    CT = (0.5 * (c0 + c1))[:, None, None] + hc[:, None, None] * x[None, :, None]
+    PH = (0.5 * (p0 + p1))[:, None, None] + hp[:, None, None] * x[None, None, :]
+    CT, PH = np.broadcast_arrays(CT, PH)
+    W = (hc * hp)[:, None, None] * (w[:, None] * w[None, :])[None]
+    CT, PH, W = CT.ravel(), PH.ravel(), W.ravel()
     st = np.sqrt(np.maximum(0.0, 1.0 - CT * CT))
     wo = np.stack([st * np.cos(PH), st * np.sin(PH), CT], axis=-1)
     vals = np.empty(CT.size)
@@ -86,11 +81,54 @@ def _bin_integrals(brdf, wi: np.ndarray, res_theta: int, res_phi: int, ires: int
         vals[sl] = np.asarray(brdf.pdf(np.broadcast_to(wi, wo[sl].shape), wo[sl]),
                               dtype=np.float64).reshape(-1)
     vals = np.where(np.isfinite(vals), vals, np.nan)
-    return (vals * W).reshape(res_theta, ires, res_phi, ires).sum(axis=(1, 3))
+    return (vals * W).reshape(len(rects), -1).sum(axis=-1)
+
+
+def _split(rects: np.ndarray) -> np.ndarray:
+    """Each rectangle into its 4 quadrants, shape ``(4 K, 4)`` (children of k at 4k..4k+3)."""
+    c0, c1, p0, p1 = rects.T
+    cm, pm = 0.5 * (c0 + c1), 0.5 * (p0 + p1)
+    kids = np.stack([np.stack([c0, cm, p0, pm], -1), np.stack([cm, c1, p0, pm], -1),
+                     np.stack([c0, cm, pm, p1], -1), np.stack([cm, c1, pm, p1], -1)], 1)
+    return kids.reshape(-1, 4)
+
+
+def _adaptive(brdf, wi, rects, coarse, ires, rel_tol, abs_tol, depth) -> np.ndarray:
+    kids = _split(rects)
+    fine = _integrate_rects(brdf, wi, kids, ires).reshape(-1, 4)
+    total = fine.sum(-1)
+    bad = np.abs(total - coarse) > np.maximum(rel_tol * np.abs(total), abs_tol)
+    bad &= np.isfinite(total)
+    if depth > 0 and np.any(bad):
+        sub = fine[bad].ravel()
+        refined = _adaptive(brdf, wi, kids.reshape(-1, 4, 4)[bad].reshape(-1, 4), sub, ires,
+                            rel_tol, abs_tol / 4.0, depth - 1)
+        fine[bad] = refined.reshape(-1, 4)
+        total = fine.sum(-1)
+    return total
+
+
+def _bin_integrals(brdf, wi: np.ndarray, res_theta: int, res_phi: int, ires: int,
+                   rel_tol: float = 1e-4, abs_tol: float = 1e-8, max_depth: int = 7
+                   ) -> np.ndarray:
+    """``∫_bin pdf(wi, wo) dωo`` for every (cos θ, φ) bin, shape ``(res_theta, res_phi)``.
+
+    Gauss-Legendre with ``ires²`` nodes per bin, refined adaptively (quadrant splitting, up
+    to ``max_depth`` levels) in the bins where one level of refinement changes the integral
+    by more than ``max(rel_tol · I, abs_tol)`` — sharp lobes stay accurate.
+    """
+    ce = np.linspace(-1.0, 1.0, res_theta + 1)
+    pe = np.linspace(0.0, 2.0 * np.pi, res_phi + 1)
+    C0, P0 = np.meshgrid(ce[:-1], pe[:-1], indexing="ij")
+    C1, P1 = np.meshgrid(ce[1:], pe[1:], indexing="ij")
+    rects = np.stack([C0.ravel(), C1.ravel(), P0.ravel(), P1.ravel()], -1)
+    coarse = _integrate_rects(brdf, wi, rects, ires)
+    out = _adaptive(brdf, wi, rects, coarse, ires, rel_tol, abs_tol, max_depth)
+    return out.reshape(res_theta, res_phi)
 
 
 def pdf_integral(brdf, wi, res_theta: int = 64, res_phi: int = 128, ires: int = 6) -> float:
-    """``∫_{S²} pdf(wi, wo) dωo`` by composite Gauss-Legendre quadrature in (cos θo, φo)."""
+    """``∫_{S²} pdf(wi, wo) dωo`` by adaptive composite Gauss-Legendre in (cos θo, φo)."""
     wi = np.asarray(wi, dtype=np.float64)
     wi = wi / np.linalg.norm(wi)
     return float(np.sum(_bin_integrals(brdf, wi, res_theta, res_phi, ires)))

@@ -1,0 +1,132 @@
+"""Named synthetic materials: analytic BRDFs with known parameters for tests and the demo.
+
+``synthetic(name)`` builds a fresh BRDF whose ``source`` is ``"synthetic:NAME"``;
+``list_synthetic()`` lists the names; ``register_synthetic`` adds materials.
+
+=====================  ===================================================================
+name                   model
+=====================  ===================================================================
+``gold-ggx``           isotropic GGX α = 0.12, exact conductor Fresnel with gold's RGB
+                       complex index (η, k)
+``plastic-beckmann``   isotropic Beckmann α = 0.18, exact dielectric Fresnel η = 1.5,
+                       red Lambertian base ρd = (0.45, 0.06, 0.04)
+``aniso-ggx``          anisotropic GGX (αx, αy, ρ) = (0.06, 0.3, 0.45) — a rotated/sheared
+                       brushed-metal lobe — with aluminium's conductor Fresnel
+``sgd-paint``          SGD (Bagher 2012) α = 0.15, p = 1.2, generalised Schlick
+                       (F0, F1) = (0.06, 0.02), blue diffuse base (needs
+                       :mod:`brdffit.microfacet.sgd`)
+``two-lobe-ggx``       sum of a sharp white GGX lobe (α = 0.04) and a broad copper-coloured
+                       GGX lobe (α = 0.35): no single microfacet lobe fits it
+=====================  ===================================================================
+
+Parameters use the slope-scale α of Walter 2007 / Dupuy 2015 (not "roughness" √α).
+The RGB complex indices are approximate linear-sRGB reductions of the spectral data commonly
+used in renderers (gold: Johnson & Christy 1972; aluminium: Rakić 1995).
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+
+from .errors import BRDFError
+
+__all__ = ["synthetic", "list_synthetic", "register_synthetic", "describe_synthetic"]
+
+_REGISTRY: dict[str, tuple[Callable[[], object], str]] = {}
+
+ALUMINIUM_ETA = (1.65746, 0.880369, 0.521229)
+ALUMINIUM_K = (9.22387, 6.26952, 4.837)
+
+
+def register_synthetic(name: str, factory: Callable[[], object], description: str = "") -> None:
+    """Add a named material: ``factory()`` returns a new BRDF."""
+    _REGISTRY[str(name)] = (factory, description)
+
+
+def list_synthetic() -> list[str]:
+    """Names of the registered synthetic materials (sorted)."""
+    return sorted(_REGISTRY)
+
+
+def describe_synthetic() -> dict[str, str]:
+    """``{name: one-line description}`` of the registered materials."""
+    return {k: _REGISTRY[k][1] for k in sorted(_REGISTRY)}
+
+
+def synthetic(name: str):
+    """A new instance of the synthetic material ``name`` (``source = "synthetic:NAME"``).
+
+    Raises :class:`~brdffit.errors.BRDFError` for an unknown name (listing the known ones)
+    or when the material's model is unavailable.
+    """
+    if name not in _REGISTRY:
+        raise BRDFError(f"unknown synthetic material {name!r}; available: "
+                        f"{', '.join(list_synthetic())}")
+    factory, _ = _REGISTRY[name]
+    brdf = factory()
+    brdf.name = name
+    brdf.source = f"synthetic:{name}"
+    return brdf
+
+
+# -- built-in materials ----------------------------------------------------------------------
+def _gold_ggx():
+    from .microfacet import GGX, ConductorFresnel, MicrofacetBRDF
+    from .microfacet.fresnel import GOLD_ETA, GOLD_K
+
+    return MicrofacetBRDF(GGX(0.12), ConductorFresnel(GOLD_ETA, GOLD_K))
+
+
+def _plastic_beckmann():
+    from .microfacet import Beckmann, DielectricFresnel, MicrofacetBRDF
+
+    return MicrofacetBRDF(Beckmann(0.18), DielectricFresnel(1.5), diffuse=(0.45, 0.06, 0.04))
+
+
+def _aniso_ggx():
+    from .microfacet import GGX, ConductorFresnel, MicrofacetBRDF
+
+    return MicrofacetBRDF(GGX(0.06, 0.3, rho=0.45), ConductorFresnel(ALUMINIUM_ETA, ALUMINIUM_K))
+
+
+def _sgd_paint():
+    from .microfacet import GeneralizedSchlickFresnel, MicrofacetBRDF
+
+    try:
+        from .microfacet.sgd import SGD
+    except ImportError as exc:
+        raise BRDFError(f"synthetic material 'sgd-paint' needs the SGD distribution "
+                        f"(brdffit.microfacet.sgd), which could not be imported: {exc}") from exc
+    return MicrofacetBRDF(SGD(0.15, 1.2), GeneralizedSchlickFresnel(0.06, 0.02),
+                          diffuse=(0.04, 0.07, 0.30))
+
+
+def _two_lobe():
+    from .microfacet import GGX, MicrofacetBRDF, SchlickFresnel, SumBRDF
+
+    sharp = MicrofacetBRDF(GGX(0.04), SchlickFresnel(0.9), specular=0.35, name="sharp")
+    broad = MicrofacetBRDF(GGX(0.35), SchlickFresnel((0.95, 0.64, 0.54)), specular=0.6,
+                           name="broad")
+    return SumBRDF([sharp, broad])
+
+
+register_synthetic("gold-ggx", _gold_ggx, "isotropic GGX α=0.12, conductor Fresnel (gold)")
+register_synthetic("plastic-beckmann", _plastic_beckmann,
+                   "isotropic Beckmann α=0.18, dielectric Fresnel η=1.5, red diffuse base")
+register_synthetic("aniso-ggx", _aniso_ggx,
+                   "anisotropic GGX (αx, αy, ρ)=(0.06, 0.3, 0.45), conductor Fresnel (aluminium)")
+register_synthetic("sgd-paint", _sgd_paint,
+                   "SGD α=0.15 p=1.2, generalised Schlick (0.06, 0.02), blue diffuse base")
+register_synthetic("two-lobe-ggx", _two_lobe,
+                   "sharp white GGX α=0.04 + broad copper GGX α=0.35 (not fit by one lobe)")
+
+
+# ``brdffit.synthetic`` is both this module and (lazily) the function ``synthetic``; once the
+# module is imported, ``from brdffit import synthetic`` may return the module itself. Making
+# the module callable keeps ``brdffit.synthetic("gold-ggx")`` working either way.
+class _CallableModule(__import__("types").ModuleType):
+    def __call__(self, name: str):
+        return synthetic(name)
+
+
+__import__("sys").modules[__name__].__class__ = _CallableModule
