@@ -153,7 +153,7 @@ class _Marginal2D:
         """Mitsuba ``Marginal2D::lookup``: multilinear blend over the parameter cell."""
         acc = None
         for s, w in corners:
-            v = table[s * size + index] * w
+            v = np.take(table, s * size + index) * w
             acc = v if acc is None else acc + v
         return acc
 
@@ -431,8 +431,9 @@ class RGLBRDF(BRDF):
         spec = 0.0
         for s, wt in corners:
             base = s * w.n_data + i
-            v00, v10 = self._rgb_table[base], self._rgb_table[base + 1]
-            v01, v11 = self._rgb_table[base + w.w], self._rgb_table[base + w.w + 1]
+            t = self._rgb_table
+            v00, v10 = np.take(t, base, axis=0), np.take(t, base + 1, axis=0)
+            v01, v11 = np.take(t, base + w.w, axis=0), np.take(t, base + w.w + 1, axis=0)
             spec = spec + wt[:, None] * ((1 - fy) * ((1 - fx) * v00 + fx * v10)
                                          + fy * ((1 - fx) * v01 + fx * v11))
         if self.jacobian:
