@@ -123,3 +123,14 @@ def test_count_wins_two_db_ties():
     assert w1["a"]["b"]["wins"] == 2
     with pytest.raises(ValueError):
         M.count_wins({"a": [1.0], "b": [1.0, 2.0]})
+
+
+def test_prepared_brdf_metrics_match_direct_and_report_missing():
+    ref, fit = Phongish(20), Lambert([0.5, 0.4, 0.3])
+    bm = M.BRDFMetrics(ref, 1 << 12, seed=3)
+    out = bm.evaluate(fit)
+    assert out["cos_rel_error"] == pytest.approx(
+        M.cosine_weighted_relative_error(ref, fit, 1 << 12, seed=3), rel=1e-12)
+    assert bm.evaluate(ref)["cos_rel_error"] == 0.0
+    # these stand-ins have no eval_hd: the grid objective is unavailable, and says why
+    assert out["compressive_objective"] is None and "compressive_objective" in out["errors"]

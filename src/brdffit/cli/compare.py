@@ -42,7 +42,9 @@ def register(app: typer.Typer) -> None:
                                    help="Comma-separated model names to fit, and/or saved fits "
                                         "as NAME=fit.npz or fit.npz."),
         out: Path = typer.Option(Path("report"), "--out", "-o", help="Report directory."),
-        scene: str = typer.Option("envmap", "--scene", help="Scene name of the renderer."),
+        scene: str = typer.Option("sphere-env", "--scene",
+                                  help="Renderer scene: sphere-env, sphere-point, sphere-distant, "
+                                       "knot, sphere-svrough."),
         spp: int = typer.Option(64, "--spp", min=1, help="Samples per pixel."),
         resolution: int = typer.Option(128, "--resolution", min=8, help="Image side in pixels."),
         seed: int = typer.Option(0, "--seed", help="Seed of the sample streams (all models)."),
@@ -52,7 +54,8 @@ def register(app: typer.Typer) -> None:
         noise_floor: bool = typer.Option(True, "--noise-floor/--no-noise-floor",
                                          help="Render the reference twice to measure MC noise."),
         envmap: str = typer.Option(None, "--envmap",
-                                   help="Environment map passed to the renderer (envmap scene)."),
+                                   help="Environment map of the -env/knot scenes: a name of "
+                                        "../shared/data/envmaps or an EXR (default procedural)."),
         limit: int = typer.Option(None, "--limit", min=1,
                                   help="With a collection: only its first N materials."),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress messages."),

@@ -151,9 +151,10 @@ def fit_model(name: str, reference, options: Mapping | None = None):
 
 
 def _default_renderer():
-    from .render import render  # provided by brdffit.evaluation.render
+    """:func:`brdffit.evaluation.render.render_ex` (Mitsuba 3): returns image and mask."""
+    from .render import render_ex
 
-    return render
+    return render_ex
 
 
 def _unpack_render(out):
@@ -224,9 +225,10 @@ def _safe_name(name: str) -> str:
 # the comparison
 # ------------------------------------------------------------------------------------------
 def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report", *,
-            material: str | None = None, name: str | None = None, scene: str = "envmap",
+            material: str | None = None, name: str | None = None, scene: str = "sphere-env",
             spp: int = 64, resolution: int = 128, seed: int = 0, exposure="auto",
             gamma: float = 2.2, noise_floor: bool = True, brdf_metric_samples: int = 1 << 16,
+            brdf_metrics: Sequence[str] = M.BRDFMetrics.ALL,
             fit_options: Mapping[str, Mapping] | None = None, save_fits: bool = True,
             write_exr: bool = True, renderer: Callable | None = None,
             render_options: Mapping | None = None, update_index: bool = True,
@@ -247,8 +249,10 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
         is rebuilt from every material present (``update_index``).
     scene, spp, resolution, seed, render_options:
         Passed to the renderer (``render(brdf, scene=..., spp=..., resolution=..., seed=...,
-        **render_options)`` returning a linear image and a foreground mask). ``renderer``
-        replaces :func:`brdffit.evaluation.render.render` (tests use a tiny stand-in).
+        **render_options)`` returning a linear image and a foreground mask, as a tuple or an
+        object with ``image``/``mask``; e.g. ``render_options={"envmap": "studio"}``).
+        ``renderer`` replaces :func:`brdffit.evaluation.render.render_ex` (Mitsuba 3; tests use
+        a tiny NumPy stand-in).
     exposure, gamma:
         Tone mapping of the PNGs and of the dE2000 conversion (Bagher et al. 2016 §5);
         ``"auto"`` picks one exposure from the reference (:func:`.tonemap.auto_exposure`).
@@ -257,6 +261,9 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
         two reference renderings.
     fit_options:
         Per-model keyword arguments of the fitters.
+    brdf_metric_samples, brdf_metrics:
+        Sample pairs of the cosine-weighted relative error and which BRDF-space metrics to
+        compute (:class:`.metrics.BRDFMetrics`; the reference is prepared once).
 
     Returns the result dict that is also written to ``out_dir/<slug>/result.json``.
     """
@@ -359,6 +366,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
         result["noise_floor_de2000"] = M.mean_delta_e2000(ref_img, img2, mask, **de_kw)
 
     # ---- render and measure each model -----------------------------------------------
+    bm = None
     for rec in records:
         if rec["status"] != "ok":
             continue
@@ -384,7 +392,11 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
             rec["traceback"] = traceback.format_exc(limit=4)
             continue
         try:
-            rec["brdf"] = M.brdf_metrics(reference, model, n_samples=brdf_metric_samples, seed=seed)
+            if bm is None:
+                say(f"{mat_name}: preparing BRDF-space metrics")
+                bm = M.BRDFMetrics(reference, brdf_metric_samples, seed, brdf_metrics)
+                result["brdf_metrics_setup"] = bm.timings
+            rec["brdf"] = bm.evaluate(model)
         except Exception as exc:  # noqa: BLE001
             rec["brdf"] = {"errors": {"all": f"{type(exc).__name__}: {exc}"}}
 

@@ -38,7 +38,7 @@ import numpy as np
 __all__ = [
     "DELTA_E_VMAX", "DELTA_E_CMAP", "npf_tonemap", "foreground_mask", "rendered_psnr",
     "to_lab", "delta_e2000_image", "mean_delta_e2000", "colorize_delta_e",
-    "cosine_weighted_relative_error", "count_wins", "brdf_metrics",
+    "cosine_weighted_relative_error", "count_wins", "brdf_metrics", "BRDFMetrics",
     "normalized_l2", "compressive_objective",
 ]
 
@@ -260,25 +260,110 @@ def cosine_weighted_relative_error(reference, test, n_samples: int = 1 << 17, se
     return float(num.sum() / den.sum())
 
 
-def brdf_metrics(reference, test, n_samples: int = 1 << 16, seed: int = 0) -> dict:
-    """All available BRDF-space metrics of ``test`` against ``reference`` as a dict.
+class BRDFMetrics:
+    """BRDF-space metrics of several fits against one reference, the reference prepared once.
 
-    Keys: ``cos_rel_error`` always; ``normalized_l2`` and ``compressive_objective`` when the
-    modules implementing them are present and succeed (otherwise the value is ``None`` and
-    the reason is recorded under ``errors``).
+    ``BRDFMetrics(ref).evaluate(fit)`` returns a dict with
+
+    * ``cos_rel_error`` – :func:`cosine_weighted_relative_error` (always);
+    * ``normalized_l2`` – Bagher et al. 2012 §6.3 via :class:`brdffit.evaluation.l2.L2Reference`
+      (MERL-grid quadrature for isotropic references, Monte Carlo otherwise);
+    * ``compressive_objective`` – Eq. 7 of Bagher et al. 2016 with the weights of Eq. 8-12
+      (:mod:`brdffit.evaluation.objective`), *normalised* by the objective of the all-zero
+      model (``Σ w ρ*²``) so that it is comparable across materials; isotropic references only.
+
+    A metric whose module is missing or that fails is ``None``, with the reason under
+    ``errors``. ``metrics`` restricts which ones are computed.
     """
-    out: dict = {"cos_rel_error": cosine_weighted_relative_error(reference, test, n_samples, seed)}
-    errors = {}
-    for key in ("normalized_l2", "compressive_objective"):
-        try:
-            fn = __getattr__(key)
-            out[key] = float(fn(reference, test))
-        except Exception as exc:  # noqa: BLE001 – optional metrics must not break a report
+
+    ALL = ("cos_rel_error", "normalized_l2", "compressive_objective")
+
+    def __init__(self, reference, n_samples: int = 1 << 16, seed: int = 0,
+                 metrics: Sequence[str] = ALL):
+        self.reference = reference
+        self.metrics = tuple(metrics)
+        self.errors: dict[str, str] = {}
+        self.timings: dict[str, float] = {}
+        import time
+
+        t0 = time.perf_counter()
+        self._wi, self._wo = _sobol_pairs(n_samples, seed)
+        self._ref_vals = np.nan_to_num(np.asarray(reference.eval(self._wi, self._wo), float))
+        self.timings["cos_rel_error_setup"] = time.perf_counter() - t0
+        self._l2 = None
+        if "normalized_l2" in self.metrics:
+            t0 = time.perf_counter()
+            try:
+                from .l2 import L2Reference
+
+                iso = bool(getattr(reference, "isotropic", False)) and hasattr(reference, "eval_hd")
+                self._l2 = L2Reference(reference, "grid" if iso else "mc", seed=seed)
+            except Exception as exc:  # noqa: BLE001 – optional metric
+                self.errors["normalized_l2"] = f"{type(exc).__name__}: {exc}"
+            self.timings["normalized_l2_setup"] = time.perf_counter() - t0
+        self._obj = None
+        if "compressive_objective" in self.metrics:
+            t0 = time.perf_counter()
+            try:
+                if not getattr(reference, "isotropic", False):
+                    raise ValueError("the compressive objective needs an isotropic reference")
+                from ..grid import merl_phi_d, merl_theta_d, merl_theta_h, tabulate_merl_grid
+                from .objective import prepare_objective
+
+                vals, valid = tabulate_merl_grid(reference)
+                self._obj = prepare_objective(vals, valid, source=getattr(reference, "name", None))
+                th, td, pd = np.meshgrid(merl_theta_h(), merl_theta_d(), merl_phi_d(),
+                                         indexing="ij")
+                idx = self._obj.index
+                self._obj_coords = (th.ravel()[idx], td.ravel()[idx], pd.ravel()[idx])
+                self._obj_ref_energy = self._obj.reference_energy()
+            except Exception as exc:  # noqa: BLE001
+                self.errors["compressive_objective"] = f"{type(exc).__name__}: {exc}"
+            self.timings["compressive_objective_setup"] = time.perf_counter() - t0
+
+    def cos_rel_error(self, test, per_channel: bool = False):
+        """:func:`cosine_weighted_relative_error` on the prepared sample pairs."""
+        ft = np.nan_to_num(np.asarray(test.eval(self._wi, self._wo), float))
+        num = np.abs(ft - self._ref_vals).sum(axis=0)
+        den = np.abs(self._ref_vals).sum(axis=0)
+        if per_channel:
+            return np.where(den > 0, num / np.where(den > 0, den, 1.0), np.inf)
+        if den.sum() <= 0:
+            raise ValueError("reference BRDF: expected a non-zero reflectance, found 0 everywhere")
+        return float(num.sum() / den.sum())
+
+    def evaluate(self, test) -> dict:
+        import time
+
+        out: dict = {}
+        errors = dict(self.errors)
+        timings = {}
+        for key in self.metrics:
+            t0 = time.perf_counter()
             out[key] = None
-            errors[key] = f"{type(exc).__name__}: {exc}"
-    if errors:
-        out["errors"] = errors
-    return out
+            try:
+                if key == "cos_rel_error":
+                    out[key] = self.cos_rel_error(test)
+                elif key == "normalized_l2" and self._l2 is not None:
+                    out[key] = float(self._l2.error(test).value)
+                elif key == "compressive_objective" and self._obj is not None:
+                    fv = np.asarray(test.eval_hd(*self._obj_coords), dtype=np.float64)
+                    fv = np.nan_to_num(fv).T
+                    out[key] = float(self._obj.value(fv).sum() / self._obj_ref_energy.sum())
+            except Exception as exc:  # noqa: BLE001 – optional metrics must not break a report
+                errors[key] = f"{type(exc).__name__}: {exc}"
+            timings[key] = time.perf_counter() - t0
+        if errors:
+            out["errors"] = errors
+        out["seconds"] = timings
+        return out
+
+
+def brdf_metrics(reference, test, n_samples: int = 1 << 16, seed: int = 0,
+                 metrics: Sequence[str] = BRDFMetrics.ALL) -> dict:
+    """All available BRDF-space metrics of ``test`` against ``reference`` as a dict
+    (see :class:`BRDFMetrics`; use that class directly for several fits)."""
+    return BRDFMetrics(reference, n_samples, seed, metrics).evaluate(test)
 
 
 # ------------------------------------------------------------------------------------------

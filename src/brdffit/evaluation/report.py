@@ -291,7 +291,8 @@ def write_material_page(out_dir, result: dict, colorbar: str | None = "../assets
         "read as sRGB (D65). Cosine-weighted relative error: "
         "Σ∫∫|f−f<sub>ref</sub>| cosθ<sub>i</sub> cosθ<sub>o</sub> / Σ∫∫|f<sub>ref</sub>| "
         "cosθ<sub>i</sub> cosθ<sub>o</sub>. Normalised L2: Bagher et al. 2012 §6.3. "
-        "Compressive objective: Bagher et al. 2016 Eq. 7–12. – = not available.</p>")
+        "Compressive objective: Bagher et al. 2016 Eq. 7–12 divided by that of the all-zero "
+        "model. – = not available.</p>")
 
     # plots
     plots = result.get("plots") or {}

@@ -1,0 +1,215 @@
+"""Benchmark of the comparison report (issue 5, "Figures to reach").
+
+Single-material mode (default): time of a complete one-material report — fitting every model,
+rendering the reference, the noise floor and every fit, metrics, plots, HTML — with the
+reference and six fits. Target: ≤ 2 minutes on the project machine. Writes
+``bench/results/report.json``.
+
+    DRJIT_LIBLLVM_PATH=/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1 \\
+        .venv/bin/python bench/bench_report.py [--material merl_nbrdf.zip:gold-metallic-paint]
+        [--models tabulated,ggx,beckmann,sgd,npf,...] [--spp 64] [--resolution 128]
+
+Database mode (``--database``): the database-wide figure — for the 100 Neural-BRDF MERL
+materials and the RGL materials, one fixed scene set (``--scenes``), mean and median
+rendered PSNR and dE2000 per model and pairwise wins / ties within 2 dB (Bagher et al. 2016
+§5). Each (scene, material) report lands in ``OUT/<scene>/<material>/``; materials already
+done are skipped (``--resume``, default on), so the run can be interrupted and continued.
+``--limit N`` keeps the first N materials of each collection. Writes
+``bench/results/report_database.json``.
+
+    .venv/bin/python bench/bench_report.py --database --limit 3 --out /tmp/brdffit-db
+
+Timings on a shared machine are pessimistic; re-run to update the figures.
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+RESULTS = ROOT / "bench" / "results"
+SHARED = ROOT.parent / "shared" / "data"
+
+FALLBACK_MODELS = ["tabulated", "ggx", "beckmann", "sgd", "npf"]
+
+
+def default_models() -> list[str]:
+    """Every model the fit registry knows (first six), else the fall-back list."""
+    try:
+        from brdffit.fit import registry  # noqa: F401
+    except ImportError:
+        return FALLBACK_MODELS
+    for fn in ("list_fitters", "available", "names"):
+        f = getattr(registry, fn, None)
+        if callable(f):
+            try:
+                return list(f())[:6]
+            except Exception:  # noqa: BLE001
+                pass
+    for tab in ("FITTERS", "REGISTRY", "_REGISTRY"):
+        t = getattr(registry, tab, None)
+        if isinstance(t, dict) and t:
+            return list(t)[:6]
+    return FALLBACK_MODELS
+
+
+def database_specs(collections: list[str], limit: int | None) -> list[str]:
+    """Material specs of the database: every member of the given Neural-BRDF zips and every
+    RGL ``*_rgb.bsdf`` matching the given globs."""
+    from brdffit.io.nbrdf import list_materials
+
+    specs = []
+    for c in collections:
+        if c.endswith(".zip"):
+            path = Path(c) if Path(c).exists() else SHARED / "nbrdf" / c
+            names = list_materials(path)
+            specs += [f"{path}:{n}" for n in (names[:limit] if limit else names)]
+        else:
+            files = sorted(glob.glob(c if os.path.isabs(c) else str(SHARED / c)))
+            specs += files[:limit] if limit else files
+    return specs
+
+
+def machine() -> dict:
+    return {"python": platform.python_version(), "cpus": os.cpu_count(),
+            "load_avg": os.getloadavg() if hasattr(os, "getloadavg") else None,
+            "date_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+
+
+def write_json(path: Path, obj) -> None:
+    from brdffit._atomic import atomic_write
+    from brdffit.evaluation.report import _clean
+
+    with atomic_write(path, "w") as fh:
+        json.dump(_clean(obj), fh, indent=1, default=str, allow_nan=False)
+
+
+def bench_single(args) -> dict:
+    from brdffit.evaluation.compare import compare
+
+    models = args.models.split(",") if args.models else default_models()
+    out = Path(args.out or "/tmp/brdffit-bench-report")
+    t0 = time.perf_counter()
+    res = compare(args.material, models, out, scene=args.scene, spp=args.spp,
+                  resolution=args.resolution, seed=0,
+                  render_options={"envmap": args.envmap} if args.envmap else None,
+                  progress=lambda m: print(f"  [{time.perf_counter() - t0:6.1f} s] {m}", flush=True))
+    total = time.perf_counter() - t0
+    rows = []
+    for m in res["models"]:
+        rows.append({k: m.get(k) for k in ("name", "status", "error", "fit_time", "render_time",
+                                            "psnr", "mean_de2000")}
+                    | {"cos_rel_error": (m.get("brdf") or {}).get("cos_rel_error")})
+    fig = {"benchmark": "one-material report (reference + fits)", "material": args.material,
+           "models": models, "scene": res["scene"], "total_seconds": total,
+           "target_seconds": 120.0, "meets_target": total <= 120.0,
+           "reference_render_seconds": res["reference"]["render_time"],
+           "noise_floor_psnr": res.get("noise_floor_psnr"), "per_model": rows,
+           "report": str(out / "index.html"), "machine": machine()}
+    print(f"total {total:.1f} s for {len(models)} models (target 120 s); report {out}/index.html")
+    for r in rows:
+        print(f"  {r['name']:>14}: {r['status']:6} fit {r['fit_time'] or 0:6.1f} s  render "
+              f"{r['render_time'] or 0:5.1f} s  PSNR {r['psnr'] if r['psnr'] is not None else float('nan'):6.2f}"
+              f"  dE {r['mean_de2000'] if r['mean_de2000'] is not None else float('nan'):5.2f}"
+              + (f"  ({r['error']})" if r.get("error") else ""))
+    write_json(RESULTS / "report.json", fig)
+    return fig
+
+
+def bench_database(args) -> dict:
+    from brdffit.evaluation.compare import compare, resolve_reference
+    from brdffit.evaluation.report import read_results, slugify, summarize, write_index
+
+    models = args.models.split(",") if args.models else default_models()
+    out = Path(args.out or "/tmp/brdffit-bench-database")
+    specs = database_specs(args.collections.split(","), args.limit)
+    scenes = args.scenes.split(",")
+    t0 = time.perf_counter()
+    failures = []
+    slugs: dict[str, set] = {}
+    for scene in scenes:
+        sdir = out / scene
+        slugs[scene] = set()
+        for k, spec in enumerate(specs):
+            try:
+                ref = resolve_reference(spec)
+            except Exception as exc:  # noqa: BLE001
+                failures.append({"spec": spec, "scene": scene, "error": f"load: {exc}"})
+                continue
+            slugs[scene].add(slugify(ref.name))
+            if args.resume and (sdir / slugify(ref.name) / "result.json").is_file():
+                continue
+            print(f"[{time.perf_counter() - t0:7.1f} s] {scene} {k + 1}/{len(specs)} {spec}",
+                  flush=True)
+            try:
+                compare(ref, models, sdir, scene=scene, spp=args.spp, resolution=args.resolution,
+                        seed=0, noise_floor=args.noise_floor, update_index=False,
+                        render_options={"envmap": args.envmap} if args.envmap else None)
+            except Exception as exc:  # noqa: BLE001
+                failures.append({"spec": spec, "scene": scene, "error": f"{type(exc).__name__}: {exc}"})
+        write_index(sdir, title=f"brdffit database comparison – {scene}")
+    # one summary over every (scene, material) rendering (Bagher 2016 count 4 per material)
+    all_results = []
+    for scene in scenes:
+        for r in read_results(out / scene):
+            if r["slug"] in slugs[scene]:
+                r["scene_name"] = scene
+                all_results.append(r)
+    summ = summarize(all_results)
+    total = time.perf_counter() - t0
+    ranking = sorted(((n, s["mean_psnr"]) for n, s in summ["per_model"].items()
+                      if s["mean_psnr"] is not None), key=lambda x: -x[1])
+    fig = {"benchmark": "database comparison", "collections": args.collections,
+           "limit": args.limit, "n_specs": len(specs), "scenes": scenes, "spp": args.spp,
+           "resolution": args.resolution, "models": models, "n_renderings": len(all_results),
+           "summary": summ, "ranking_by_mean_psnr": ranking, "failures": failures,
+           "seconds": total, "reports": [str(out / s / "index.html") for s in scenes],
+           "machine": machine()}
+    print(f"{len(all_results)} renderings of {len(specs)} materials x {len(scenes)} scenes in "
+          f"{total:.0f} s")
+    for n, s in summ["per_model"].items():
+        print(f"  {n:>14}: n={s['n']:3d} PSNR mean {s['mean_psnr'] if s['mean_psnr'] is not None else float('nan'):6.2f}"
+              f" median {s['median_psnr'] if s['median_psnr'] is not None else float('nan'):6.2f}"
+              f" | dE2000 mean {s['mean_de2000'] if s['mean_de2000'] is not None else float('nan'):5.2f}"
+              f" median {s['median_de2000'] if s['median_de2000'] is not None else float('nan'):5.2f}")
+    names = summ["models"]
+    for a in names:
+        print(f"  {a:>14} vs " + ", ".join(
+            f"{b}: {w['wins']}/{w['ties']}/{w['losses']}" for b, w in summ["wins"][a].items()))
+    write_json(RESULTS / "report_database.json", fig)
+    return fig
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--material", default="merl_nbrdf.zip:gold-metallic-paint")
+    ap.add_argument("--models", default=None, help="comma-separated (default: registry, 6)")
+    ap.add_argument("--scene", default="sphere-env")
+    ap.add_argument("--envmap", default=None)
+    ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--resolution", type=int, default=128)
+    ap.add_argument("--out", default=None)
+    ap.add_argument("--database", action="store_true")
+    ap.add_argument("--collections", default="merl_nbrdf.zip,rgl/*_rgb.bsdf")
+    ap.add_argument("--scenes", default="sphere-env")
+    ap.add_argument("--limit", type=int, default=None)
+    ap.add_argument("--noise-floor", action=argparse.BooleanOptionalAction, default=False)
+    ap.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True)
+    args = ap.parse_args(argv)
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    (bench_database if args.database else bench_single)(args)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
