@@ -1,0 +1,390 @@
+"""Non-parametric factor microfacet fits (Bagher, Snyder & Nowrouzezahrai 2016, ACM TOG).
+
+:func:`fit_npf` fits, per colour channel, one of
+
+* ``"independent-g"`` – Eq. 3 with an independent tabulated G (§4.3), multiple starts;
+* ``"g-from-d"`` – Eq. 3 with G derived from D by Smith's integrals (Eq. 19 ff.);
+* ``"naive"`` – Eq. 4 (D(θh) F(θd) H(φd));
+* ``"bivariate"`` – Eq. 5 (B(θh, θd), one weighted-average step),
+
+minimising the compressive-weighted objective (Eq. 7-12, :mod:`brdffit.evaluation.objective`)
+with alternating weighted least squares (AWLS, §4.2; solvers in :mod:`._solver`).
+
+Deviations from the paper (deliberate, documented):
+
+* G is linearly interpolated in θ, so a sample touches two G components; the G(θi) and G(θo)
+  updates solve the corresponding (tridiagonal) weighted least-squares normal equations
+  exactly instead of Eq. 14's one-component-per-sample form.
+* Independent-G does one G step per outer iteration (D, F, G, ρ), with the golden-section
+  search whenever that step increases the objective (the paper iterates G "until it converges
+  or increases the objective").
+* Objective weights at cell centres (see :mod:`brdffit.evaluation.objective`).
+* The start "from the SGD fit" uses :func:`brdffit.fit.sgd.fit_sgd` when that module exists
+  (the paper used its authors' earlier Bagher et al. 2012 fits); otherwise it is skipped and
+  ``fit_info["starts"]`` says so.
+
+Stopping rule: see :mod:`._solver` (relative decrease below ``tol`` for 3 iterations, exact
+fit, or ``max_iter``).
+
+Scale ambiguity: Eq. 3 is invariant under ``(ρs, D, F, G) → (ρs/(a b c²), a D, b F, c G)``;
+the fit fixes it by max-normalising each factor (max component = 1, ρs absorbing the scale).
+The naive model has the same ambiguity in (ρs, D, F, H).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Iterable
+
+import numpy as np
+
+from ...errors import FitError
+from ...evaluation.objective import ObjectiveData, ObjectiveOptions, prepare_objective
+from ...grid import tabulate_merl_grid
+from ...microfacet.npf_model import (NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF,
+                                     smith_g_from_d)
+from . import _solver
+from ._solver import MFState, NaiveState, Samples
+
+__all__ = ["fit_npf", "VARIANTS", "ALL_STARTS", "summary"]
+
+VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
+ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
+DEFAULT_MAX_ITER = {"independent-g": 1000, "g-from-d": 300, "naive": 3000}
+
+
+def _resolve_input(brdf, data):
+    if data is not None:
+        values, valid = data
+        return np.asarray(values, dtype=np.float64), valid, None
+    if isinstance(brdf, str):
+        from ...io import load
+
+        brdf = load(brdf)
+    values, valid = tabulate_merl_grid(brdf)
+    return values, valid, brdf
+
+
+def _slice_start(values, valid):
+    """D from the θd = 0 slice, F from the θh = 0 slice (mean over φd), G = 1 (channel-first)."""
+    v = np.where(valid[..., None], np.maximum(values, 0.0), np.nan)
+    with np.errstate(invalid="ignore"):
+        D = np.nanmean(v[:, 0, :, :], axis=1).T            # (3, 90)
+        F = np.nanmean(v[0, :, :, :], axis=1).T
+    D = np.where(np.isfinite(D), D, 0.0)
+    F = np.where(np.isfinite(F), F, 0.0)
+    D = np.maximum(D - 0.9 * D.min(axis=1, keepdims=True), 1e-3 * D.max(axis=1, keepdims=True))
+    F = np.maximum(F, 1e-3 * np.maximum(F.max(axis=1, keepdims=True), 1e-300))
+    return MFState(D=np.where(D > 0, D, 1.0), F=np.where(F > 0, F, 1.0), G=np.ones((3, 90)),
+                   rho_d=np.zeros(3), rho_s=np.ones(3))
+
+
+def _ones_start():
+    return MFState(D=np.ones((3, 90)), F=np.ones((3, 90)), G=np.ones((3, 90)),
+                   rho_d=np.zeros(3), rho_s=np.ones(3))
+
+
+def _random_start(rng):
+    return MFState(D=rng.uniform(0.05, 1.0, (3, 90)), F=rng.uniform(0.05, 1.0, (3, 90)),
+                   G=rng.uniform(0.05, 1.0, (3, 90)), rho_d=np.zeros(3), rho_s=np.ones(3))
+
+
+def _sgd_start(brdf, values, valid):
+    """Factors of an SGD fit (Bagher et al. 2012) if ``brdffit.fit.sgd`` exists.
+
+    Uses the fitted model's distribution ``D(m)``/``G1(w)`` and Fresnel when it exposes them
+    (``distribution``/``fresnel`` attributes); otherwise the θd = 0 / θh = 0 slices of the
+    fitted BRDF. Returns ``(state, note)``; state is None when unavailable.
+    """
+    try:
+        from ..sgd import fit_sgd
+    except ImportError as exc:
+        return None, f"skipped: brdffit.fit.sgd not available ({exc})"
+    if brdf is None:
+        from ...brdf import IsotropicBRDF
+
+        class _Table(IsotropicBRDF):
+            name = "table"
+
+            def merl_table(self):
+                return values, valid
+
+            def eval_hd(self, th, td, pd):  # pragma: no cover - fit_sgd should use the table
+                from ...grid import phi_d_to_index, theta_d_to_index, theta_h_to_index
+                i = np.minimum(theta_h_to_index(th).astype(int), 89)
+                j = np.minimum(theta_d_to_index(td).astype(int), 89)
+                k = np.minimum(phi_d_to_index(pd).astype(int), 179)
+                return np.maximum(values[i, j, k], 0.0)
+
+        brdf = _Table()
+    try:
+        model = fit_sgd(brdf)
+    except Exception as exc:  # noqa: BLE001 - a failing optional start must not kill the fit
+        return None, f"skipped: fit_sgd failed ({type(exc).__name__}: {exc})"
+    from ...microfacet.npf_model import D_THETA_H, F_THETA_D, G_THETA
+
+    dist = getattr(model, "distribution", None)
+    fres = getattr(model, "fresnel", None)
+    try:
+        if dist is not None and fres is not None:
+            m = np.stack([np.sin(D_THETA_H), 0 * D_THETA_H, np.cos(D_THETA_H)], -1)
+            D = np.broadcast_to(np.asarray(dist.D(m), float)[:, None], (90, 3)).T
+            F = np.asarray(fres.eval(np.cos(F_THETA_D)), float).reshape(90, -1)
+            F = np.broadcast_to(F, (90, 3)).T
+            w = np.stack([np.sin(G_THETA), 0 * G_THETA, np.cos(G_THETA)], -1)
+            G = np.broadcast_to(np.asarray(dist.G1(w), float)[:, None], (90, 3)).T
+            st = MFState(D=np.array(D), F=np.array(F), G=np.array(G), rho_d=np.zeros(3),
+                         rho_s=np.ones(3))
+            note = "from fit_sgd factors"
+        else:
+            vals, ok = tabulate_merl_grid(model)
+            st = _slice_start(vals, ok)
+            note = "from slices of the fit_sgd model (no distribution/fresnel attributes)"
+    except Exception as exc:  # noqa: BLE001
+        return None, f"skipped: could not read factors of the SGD fit ({exc})"
+    if not all(np.all(np.isfinite(a)) for a in (st.D, st.F, st.G)):
+        return None, "skipped: SGD factors not finite"
+    st.D, st.F, st.G = (np.maximum(a, 1e-6) for a in (st.D, st.F, st.G))
+    return st, note
+
+
+def _mf_model(st: MFState, variant, name, source):
+    return NPFMicrofacetBRDF(st.D.T, st.F.T, st.G.T, st.rho_d, st.rho_s, variant=variant,
+                             name=name, source=source)
+
+
+def _check_state(arrays, what):
+    for a in arrays:
+        if not np.all(np.isfinite(a)):
+            raise FitError(f"{what}: expected finite factors, found NaN/inf")
+        if np.any(np.asarray(a) < 0):
+            raise FitError(f"{what}: expected non-negative factors, found negative values")
+
+
+def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
+            compressive: bool = True, restrict_deg: float | None = None,
+            p: float = 1.4, max_theta_io_deg: float = 89.0,
+            max_iter: int | None = None, tol: float = 1e-6,
+            starts: Iterable[str] | None = None, n_random: int = 4, seed: int = 0,
+            g_smoothing: float = 1.0, dr_epsilon: float | None = None,
+            start_max_iter: int | None = None, init: str = "slices",
+            name: str | None = None, callback=None, verbose: bool = False):
+    """Fit a non-parametric factor model (Bagher, Snyder & Nowrouzezahrai 2016).
+
+    Parameters
+    ----------
+    brdf:
+        An isotropic BRDF (tabulated on the MERL grid with
+        :func:`brdffit.grid.tabulate_merl_grid`) or a load spec for :func:`brdffit.io.load`.
+    variant:
+        ``"independent-g"``, ``"g-from-d"``, ``"naive"`` or ``"bivariate"``.
+    data:
+        Optional ``(values (90, 90, 180, 3), valid (90, 90, 180))`` instead of ``brdf``.
+    compressive, restrict_deg, p, max_theta_io_deg:
+        Objective options (:class:`~brdffit.evaluation.objective.ObjectiveOptions`): wC on/off
+        (Fig. 7), restricted angular range (Fig. 15), compressive power, θi/θo cut (89°).
+    max_iter, tol:
+        Stopping rule (see :mod:`._solver`); ``max_iter`` defaults per variant
+        (independent-G 1000, G-from-D 300, naive 3000).
+    starts:
+        Independent-G starts, any of ``ALL_STARTS`` (default: all, as the paper:
+        ``n_random`` random starts, all-ones, SGD fit, G-from-D fit, data slices). The best
+        final objective is kept. Deterministic for a given ``seed``.
+    start_max_iter:
+        Iteration cap for each start (default ``max_iter``).
+    g_smoothing:
+        σ (in G samples) of the Gaussian smoothing of G in independent-G (0 disables).
+    dr_epsilon:
+        Dynamic-range clamp (default 1e-6 for independent-G, 0 for G-from-D and naive).
+    init:
+        Start of G-from-D / naive: ``"slices"`` (default), ``"ones"`` or ``"random"``.
+
+    Returns
+    -------
+    NPFMicrofacetBRDF, NPFNaiveBRDF or NPFBivariateBRDF with ``fit_info`` (objective, history,
+    iterations, GSS calls, timings, starts) and ``fit_options``.
+    """
+    if variant not in VARIANTS:
+        raise ValueError(f"variant: expected one of {VARIANTS}, found {variant!r}")
+    t_start = time.perf_counter()
+    values, valid, brdf_obj = _resolve_input(brdf, data)
+    source = getattr(brdf_obj, "source", None) or (brdf if isinstance(brdf, str) else None)
+    mat_name = name or getattr(brdf_obj, "name", None) or "npf"
+    opts = ObjectiveOptions(p=p, compressive=compressive, max_theta_io_deg=max_theta_io_deg,
+                            restrict_deg=restrict_deg)
+    obj = prepare_objective(values, valid, opts, source=source)
+    eps = dr_epsilon if dr_epsilon is not None else (1e-6 if variant == "independent-g" else 0.0)
+    max_iter = max_iter or DEFAULT_MAX_ITER.get(variant, 1)
+    options = {"variant": variant, "objective": opts.to_dict(), "max_iter": max_iter, "tol": tol,
+               "dr_epsilon": eps, "seed": seed}
+    ref = obj.reference_energy()
+    info: dict = {"variant": variant, "n_samples": obj.n_samples, "rho_bar": obj.rho_bar.tolist(),
+                  "reference_energy": ref.tolist()}
+
+    def finish(model, E, extra):
+        E = np.asarray(E, dtype=np.float64)
+        info.update(extra)
+        info.update(objective=float(E.sum()), objective_per_channel=E.tolist(),
+                    normalised_objective=float(E.sum() / ref.sum()),
+                    time_s=time.perf_counter() - t_start)
+        model.fit_info = info
+        model.fit_options = options
+        return model
+
+    if variant == "bivariate":
+        B, E = _solver.fit_bivariate_table(obj)
+        _check_state([B], "bivariate fit")
+        model = NPFBivariateBRDF(np.moveaxis(B, 0, -1), name=mat_name, source=source)
+        return finish(model, E, {"iterations": 1, "gss_calls": 0, "history": [float(E.sum())],
+                                 "stop_reason": "closed form"})
+
+    if variant == "naive":
+        options["init"] = init
+        W, WZ = _solver.dense_tensors(obj)
+        st0 = _start_state(init, values, valid, np.random.default_rng(seed))
+        st = NaiveState(D=st0.D, F=st0.F, H=np.ones((3, 180)), rho_d=st0.rho_d, rho_s=st0.rho_s)
+        res = _solver.run_naive(st, W, WZ, ref, eps=eps, tol=tol, max_iter=max_iter,
+                                callback=callback)
+        st = res.state
+        _check_state([st.D, st.F, st.H, st.rho_d, st.rho_s], "naive fit")
+        E = _solver.naive_exact_objective(st, obj)
+        model = NPFNaiveBRDF(st.D.T, st.F.T, st.H.T, st.rho_d, st.rho_s, name=mat_name,
+                             source=source)
+        return finish(model, E, _run_info(res))
+
+    smp = Samples.from_objective(obj)
+    if variant == "g-from-d":
+        options["init"] = init
+        st = _start_state(init, values, valid, np.random.default_rng(seed))
+        res = _solver.run_g_from_d(st, smp, eps=eps, tol=tol, max_iter=max_iter,
+                                   callback=callback)
+        _check_state(_arrays(res.state), "G-from-D fit")
+        return finish(_mf_model(res.state, "g-from-d", mat_name, source), res.E, _run_info(res))
+
+    # independent-G with multiple starts
+    starts = tuple(ALL_STARTS if starts is None else starts)
+    bad = [s for s in starts if s not in ALL_STARTS]
+    if bad or not starts:
+        raise ValueError(f"starts: expected a non-empty subset of {ALL_STARTS}, found {starts}")
+    options.update(starts=list(starts), n_random=n_random, g_smoothing=g_smoothing,
+                   start_max_iter=start_max_iter or max_iter)
+    rng = np.random.default_rng(seed)
+    start_states: list[tuple[str, MFState | None, str]] = []
+    for s in starts:
+        if s == "random":
+            for k in range(n_random):
+                start_states.append((f"random-{k}", _random_start(rng), f"uniform(0.05, 1), seed {seed}"))
+        elif s == "ones":
+            start_states.append(("ones", _ones_start(), "all ones"))
+        elif s == "slices":
+            start_states.append(("slices", _slice_start(values, valid),
+                                 "D from θd=0, F from θh=0, G=1"))
+        elif s == "sgd":
+            st, note = _sgd_start(brdf_obj, values, valid)
+            start_states.append(("sgd", st, note))
+        elif s == "g-from-d":
+            gres = _solver.run_g_from_d(_slice_start(values, valid), smp, eps=0.0, tol=tol,
+                                        max_iter=DEFAULT_MAX_ITER["g-from-d"])
+            g = gres.state
+            info["g_from_d_start"] = {"objective": float(gres.E.sum()),
+                                      "iterations": gres.iterations, "time_s": gres.seconds}
+            start_states.append(("g-from-d", MFState(np.maximum(g.D, eps), np.maximum(g.F, eps),
+                                                     np.maximum(g.G, eps), g.rho_d, g.rho_s),
+                                 "G-from-D fit"))
+    runs = []
+    best = None
+    for label, st, note in start_states:
+        if st is None:
+            runs.append({"start": label, "status": note})
+            continue
+        res = _solver.run_independent_g(st, smp, eps=eps, smoothing=g_smoothing, tol=tol,
+                                        max_iter=start_max_iter or max_iter,
+                                        callback=callback)
+        ok = all(np.all(np.isfinite(a)) for a in _arrays(res.state))
+        entry = {"start": label, "status": "ok" if ok else "non-finite", "note": note,
+                 "objective": float(res.E.sum()), "objective_per_channel": res.E.tolist(),
+                 **_run_info(res)}
+        runs.append(entry)
+        if verbose:
+            print(f"[npf] start {label}: E={entry['objective']:.6g} it={res.iterations} "
+                  f"t={res.seconds:.1f}s ({res.reason})")
+        if ok:
+            # keep the best objective per channel (channels are independent problems)
+            if best is None:
+                best = (MFState(*(np.array(a) for a in _arrays(res.state))), res.E.copy(),
+                        [label] * 3)
+            else:
+                bst, bE, blab = best
+                better = res.E < bE
+                for nm in ("D", "F", "G"):
+                    setattr(bst, nm, np.where(better[:, None], getattr(res.state, nm),
+                                              getattr(bst, nm)))
+                for nm in ("rho_d", "rho_s"):
+                    setattr(bst, nm, np.where(better, getattr(res.state, nm), getattr(bst, nm)))
+                bE[:] = np.where(better, res.E, bE)
+                best = (bst, bE, [label if b else l for b, l in zip(better, blab)])
+    if best is None:
+        raise FitError(f"{source or mat_name}: independent-G fit: no start produced a valid "
+                       f"model ({[r.get('status') for r in runs]})")
+    bst, bE, blab = best
+    _check_state(_arrays(bst), "independent-G fit")
+    ok_runs = [r for r in runs if r.get("status") == "ok"]
+    extra = {"starts": runs, "best_start_per_channel": blab,
+             "iterations": int(sum(r["iterations"] for r in ok_runs)),
+             "gss_calls": int(sum(r["gss_calls"] for r in ok_runs)),
+             "history": next((r["history"] for r in ok_runs if r["start"] == blab[1]),
+                             ok_runs[0]["history"])}
+    return finish(_mf_model(bst, "independent-g", mat_name, source), bE, extra)
+
+
+def _arrays(st: MFState):
+    return [st.D, st.F, st.G, st.rho_d, st.rho_s]
+
+
+def _run_info(res) -> dict:
+    return {"iterations": res.iterations, "gss_calls": res.gss_calls,
+            "gss_evals": res.gss_evals, "stop_reason": res.reason, "run_time_s": res.seconds,
+            "history": [float(h) for h in res.history]}
+
+
+def _start_state(init, values, valid, rng) -> MFState:
+    if init == "slices":
+        return _slice_start(values, valid)
+    if init == "ones":
+        return _ones_start()
+    if init == "random":
+        return _random_start(rng)
+    raise ValueError(f"init: expected 'slices', 'ones' or 'random', found {init!r}")
+
+
+def summary(model) -> dict:
+    """Key figures of a fitted NPF model (for the CLI)."""
+    info = model.fit_info or {}
+    return {"model": model.fit_kind, "variant": getattr(model, "variant", None),
+            "objective": info.get("objective"),
+            "normalised_objective": info.get("normalised_objective"),
+            "iterations": info.get("iterations"), "gss_calls": info.get("gss_calls"),
+            "time_s": info.get("time_s")}
+
+
+def _register_cli() -> None:
+    """Register the CLI fitters ``npf``, ``npf-g-from-d``, ``npf-naive``, ``npf-bivariate``
+    with :mod:`brdffit.fit.registry` when it exists."""
+    try:
+        from ..registry import register_fitter
+    except ImportError:
+        return
+    for cli_name, var in (("npf", "independent-g"), ("npf-g-from-d", "g-from-d"),
+                          ("npf-naive", "naive"), ("npf-bivariate", "bivariate")):
+        def fn(brdf, _v=var, **kw):
+            return fit_npf(brdf, variant=_v, **kw)
+        fn.__name__ = f"fit_{cli_name.replace('-', '_')}"
+        fn.__doc__ = f"fit_npf(variant={var!r}) (Bagher, Snyder & Nowrouzezahrai 2016)"
+        try:
+            register_fitter(cli_name, fn, summary)
+        except Exception:  # noqa: BLE001 - a registry API mismatch must not break imports
+            pass
+
+
+_register_cli()
+_ = (ObjectiveData, smith_g_from_d)

@@ -1,0 +1,525 @@
+"""AWLS solvers of Bagher, Snyder & Nowrouzezahrai 2016 (§4.2-4.3).
+
+All state is channel-first: ``D, F, G`` (3, 90), ``H`` (3, 180), ``rho_d, rho_s`` (3,).
+The three colour channels are independent problems solved side by side.
+
+Sufficient statistics. For fixed G, every sample of bin (θh, θd) enters the D, F, ρd, ρs
+updates and the objective only through ``S1 = Σ w P``, ``S2 = Σ w P²``, ``Spz = Σ w P z``
+(``P = G(θi) G(θo)/(cos θi cos θo)``) and the G-independent ``Σ w``, ``Σ w z``, ``Σ w z²``.
+One pass over the samples (:func:`._kernels.p_stats`) per change of G therefore replaces the
+per-factor passes; the D and F updates (Eq. 14) and Cramer's rule (Eq. 15-18) are then sums
+over the 90 × 90 bins. G updates need a second pass (:func:`._kernels.g_normal_equations`).
+
+Stopping rule (all variants): stop after ``patience`` (3) consecutive iterations whose
+relative decrease of the total objective ``(E_prev − E)/E`` is below ``tol``, or when
+``E ≤ 1e-14 · Σ w ρ*²`` (exact fit), or after ``max_iter`` iterations.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import solve_banded
+from scipy.ndimage import gaussian_filter1d
+
+from ...evaluation.objective import ObjectiveData
+from ...microfacet.npf_model import smith_g_from_d
+from . import _kernels
+
+NH = ND = NG = 90
+NP = 180
+_GR = (math.sqrt(5.0) - 1.0) / 2.0
+
+
+@dataclass
+class Samples:
+    """Per-sample precomputation, built once per fit (see :mod:`._kernels`)."""
+
+    hd: np.ndarray
+    ip: np.ndarray
+    gi0: np.ndarray
+    gti: np.ndarray
+    go0: np.ndarray
+    gto: np.ndarray
+    inv_cc: np.ndarray
+    w: np.ndarray
+    z: np.ndarray
+    sum_w: np.ndarray = field(default=None)
+    sum_wz: np.ndarray = field(default=None)
+    sum_wzz: np.ndarray = field(default=None)
+
+    @classmethod
+    def from_objective(cls, data: ObjectiveData) -> "Samples":
+        ih, idd, ip = np.unravel_index(data.index, (NH, ND, NP))
+        hd = (ih * ND + idd).astype(np.int64)
+
+        def cell(cos):
+            deg = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+            i0 = np.minimum(np.floor(deg), NG - 2).astype(np.int64)
+            return i0, np.clip(deg - i0, 0.0, 1.0)
+
+        gi0, gti = cell(data.cos_i)
+        go0, gto = cell(data.cos_o)
+        w = np.ascontiguousarray(data.w, dtype=np.float64)
+        z = np.ascontiguousarray(data.z, dtype=np.float64)
+        s = cls(hd=hd, ip=ip.astype(np.int64), gi0=gi0, gti=gti, go0=go0, gto=gto,
+                inv_cc=1.0 / (data.cos_i * data.cos_o), w=w, z=z)
+        s.sum_w = w.sum(axis=1)
+        s.sum_wz = (w * z).sum(axis=1)
+        s.sum_wzz = (w * z * z).sum(axis=1)
+        return s
+
+    def stats(self, G, X, rho_d):
+        """One pass: ``(E, (S1, S2, Spz))`` for G (3, 90), X = ρs D F (3, 8100)."""
+        S1 = np.empty((3, NH * ND))
+        S2 = np.empty_like(S1)
+        Spz = np.empty_like(S1)
+        E = _kernels.p_stats(self.hd, self.gi0, self.gti, self.go0, self.gto, self.inv_cc,
+                             self.w, self.z, np.ascontiguousarray(G, dtype=np.float64),
+                             np.ascontiguousarray(X, dtype=np.float64),
+                             np.ascontiguousarray(rho_d, dtype=np.float64), S1, S2, Spz)
+        return E, (S1, S2, Spz)
+
+    def g_system(self, G, X, rho_d):
+        arrs = [np.empty((3, NG)), np.empty((3, NG)), np.empty((3, NG)),
+                np.empty((3, NG)), np.empty((3, NG)), np.empty((3, NG))]
+        _kernels.g_normal_equations(self.hd, self.gi0, self.gti, self.go0, self.gto,
+                                    self.inv_cc, self.w, self.z,
+                                    np.ascontiguousarray(G, dtype=np.float64),
+                                    np.ascontiguousarray(X, dtype=np.float64),
+                                    np.ascontiguousarray(rho_d, dtype=np.float64), *arrs)
+        return arrs
+
+
+# -- shared algebra ---------------------------------------------------------------------------
+def outer_df(D, F):
+    return (D[:, :, None] * F[:, None, :]).reshape(3, NH * ND)
+
+
+def ls_update(num, den, old):
+    """Eq. 14 per component; components without data (den ≈ 0) keep their old value."""
+    ok = den > 1e-300 * np.maximum(den.max(axis=1, keepdims=True), 1e-300)
+    ok &= den > 0
+    return np.where(ok, num / np.where(ok, den, 1.0), old)
+
+
+def normalise(factor, rho_s, eps, power=1):
+    """Max-normalise (max = 1), ρs absorbing ``max**power``; then clamp at ``eps`` (§4.3)."""
+    m = factor.max(axis=1)
+    good = m > 0
+    m = np.where(good, m, 1.0)
+    out = factor / m[:, None]
+    out = np.maximum(out, eps)
+    return out, rho_s * m**power
+
+
+def cramer(sw, sx, sxx, sy, sxy):
+    """ρd, ρs from Eq. 16-17, with the a < 0 clamp of Eq. 18 (also applied when b ≤ 0)."""
+    det = sw * sxx - sx * sx
+    okd = det > 1e-14 * np.maximum(sw * sxx, 1e-300)
+    a = np.where(okd, (sy * sxx - sx * sxy) / np.where(okd, det, 1.0), -1.0)
+    b = np.where(okd, (sw * sxy - sx * sy) / np.where(okd, det, 1.0), 0.0)
+    # a < 0 (Eq. 18), and also b <= 0 (a vanishing specular term would stall the factor
+    # updates, whose Eq. 14 denominators are proportional to ρs²): a = 0, b = Σwxy/Σwx² ≥ 0
+    neg = (a < 0) | (b <= 0)
+    b1 = np.where(sxx > 0, sxy / np.where(sxx > 0, sxx, 1.0), 0.0)
+    a = np.where(neg, 0.0, a)
+    b = np.where(neg, b1, b)
+    return a, np.maximum(b, 0.0)
+
+
+class Monitor:
+    """Objective history and the documented stopping rule."""
+
+    def __init__(self, ref_energy, tol, max_iter, patience=3):
+        self.ref = float(np.sum(ref_energy))
+        self.tol = tol
+        self.max_iter = max_iter
+        self.patience = patience
+        self.history: list[float] = []
+        self.small = 0
+        self.reason = "max_iter"
+
+    def push(self, E) -> bool:
+        """Record the objective; return True when the fit should stop."""
+        e = float(np.sum(E))
+        prev = self.history[-1] if self.history else None
+        self.history.append(e)
+        if not np.isfinite(e):
+            self.reason = "non-finite objective"
+            return True
+        if e <= 1e-14 * self.ref:
+            self.reason = "exact fit"
+            return True
+        if prev is not None:
+            rel = (prev - e) / max(e, 1e-300)
+            self.small = self.small + 1 if rel < self.tol else 0
+            if self.small >= self.patience:
+                self.reason = f"relative decrease < {self.tol:g} for {self.patience} iterations"
+                return True
+        if len(self.history) >= self.max_iter:
+            self.reason = "max_iter"
+            return True
+        return False
+
+
+def golden_section(fun, need, e0, max_eval=12):
+    """Per-channel golden-section search of ``t ∈ [0, 1]`` minimising ``fun(t) -> (E, aux)``
+    for the channels in ``need`` (others are evaluated at t = 1). ``e0`` is ``E(0)``.
+    Returns ``(t, E, aux)`` of the best point evaluated; t = 0 (no change) if nothing beat
+    ``e0``. Press et al. 2007 §10.2."""
+    best_t = np.where(need, 0.0, 1.0)
+    best_e = np.where(need, e0, np.inf)
+    best_aux = None
+    a = np.zeros(3)
+    b = np.ones(3)
+    c = b - _GR * (b - a)
+    d = a + _GR * (b - a)
+    n_eval = 0
+
+    def ev(t):
+        nonlocal best_aux, n_eval
+        tt = np.where(need, t, 1.0)
+        E, aux = fun(tt)
+        n_eval += 1
+        better = E < best_e
+        if best_aux is None:
+            best_aux = aux
+            better = better | ~need
+        else:
+            best_aux = tuple(np.where(better[:, None], x, y) if np.ndim(x) == 2 else
+                             np.where(better, x, y) for x, y in zip(aux, best_aux))
+        best_t[:] = np.where(better, tt, best_t)
+        best_e[:] = np.where(better, E, best_e)
+        return E
+
+    fc = ev(c)
+    fd = ev(d)
+    while n_eval < max_eval:
+        left = fc < fd
+        b = np.where(left, d, b)
+        a = np.where(left, a, c)
+        nc = b - _GR * (b - a)
+        nd = a + _GR * (b - a)
+        newt = np.where(left, nc, nd)
+        fn = ev(newt)
+        c, d, fc, fd = (np.where(left, nc, d), np.where(left, c, nd),
+                        np.where(left, fn, fd), np.where(left, fc, fn))
+    return best_t, best_e, best_aux, n_eval
+
+
+# -- microfacet models (independent-G, G-from-D) ----------------------------------------------
+@dataclass
+class MFState:
+    D: np.ndarray
+    F: np.ndarray
+    G: np.ndarray
+    rho_d: np.ndarray
+    rho_s: np.ndarray
+
+
+def _rho_update(st: MFState, smp: Samples, S):
+    S1, S2, Spz = S
+    x = outer_df(st.D, st.F)
+    st.rho_d, st.rho_s = cramer(smp.sum_w, (x * S1).sum(1), (x * x * S2).sum(1),
+                                smp.sum_wz, (x * Spz).sum(1))
+
+
+def expanded_objective(st: MFState, smp: Samples, S):
+    """Eq. 7 from the sufficient statistics (no pass over the samples)."""
+    S1, S2, Spz = S
+    x = st.rho_s[:, None] * outer_df(st.D, st.F)
+    a = st.rho_d
+    E = (a * a * smp.sum_w + smp.sum_wzz - 2 * a * smp.sum_wz
+         + (x * x * S2).sum(1) + 2 * a * (x * S1).sum(1) - 2 * (x * Spz).sum(1))
+    return np.maximum(E, 0.0)
+
+
+def _d_update(st: MFState, S):
+    S1, S2, Spz = (s.reshape(3, NH, ND) for s in S)
+    r = Spz - st.rho_d[:, None, None] * S1
+    num = st.rho_s[:, None] * np.einsum("chd,cd->ch", r, st.F)
+    den = st.rho_s[:, None] ** 2 * np.einsum("chd,cd->ch", S2, st.F * st.F)
+    return ls_update(num, den, st.D)
+
+
+def _f_update(st: MFState, S):
+    S1, S2, Spz = (s.reshape(3, NH, ND) for s in S)
+    r = Spz - st.rho_d[:, None, None] * S1
+    num = st.rho_s[:, None] * np.einsum("chd,ch->cd", r, st.D)
+    den = st.rho_s[:, None] ** 2 * np.einsum("chd,ch->cd", S2, st.D * st.D)
+    return ls_update(num, den, st.F)
+
+
+def _solve_tridiag(diag, off, rhs, old):
+    """Solve the (3 channels of) tridiagonal normal equations with a tiny ridge towards the
+    old value (keeps components without data unchanged)."""
+    out = np.empty_like(old)
+    for c in range(3):
+        lam = 1e-10 * max(float(diag[c].max()), 1e-300)
+        ab = np.zeros((3, NG))
+        ab[0, 1:] = off[c, :-1]
+        ab[1] = diag[c] + lam
+        ab[2, :-1] = off[c, :-1]
+        try:
+            out[c] = solve_banded((1, 1), ab, rhs[c] + lam * old[c])
+        except (np.linalg.LinAlgError, ValueError):
+            out[c] = old[c]
+    return np.where(np.isfinite(out), out, old)
+
+
+@dataclass
+class RunResult:
+    state: object
+    E: np.ndarray
+    iterations: int
+    history: list
+    reason: str
+    gss_calls: int
+    gss_evals: int
+    seconds: float
+
+
+def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol=1e-6,
+                      max_iter=1000, gss_max_eval=12, callback=None) -> RunResult:
+    """Independent-G AWLS (§4.2-4.3): D, F (Eq. 14), G(θi) and G(θo) updates averaged and
+    Gaussian-smoothed (σ = ``smoothing`` samples; golden-section search along the step when
+    the objective increases), ρd/ρs by Cramer's rule, max-normalisation and DR clamping at
+    ``eps``."""
+    t0 = time.perf_counter()
+    for name in ("D", "F", "G"):
+        f, st.rho_s = normalise(getattr(st, name), st.rho_s, eps, 2 if name == "G" else 1)
+        setattr(st, name, f)
+    X = st.rho_s[:, None] * outer_df(st.D, st.F)
+    E, S = smp.stats(st.G, X, st.rho_d)
+    _rho_update(st, smp, S)
+    mon = Monitor(smp.sum_wzz, tol, max_iter)
+    gss_calls = gss_evals = 0
+    E = expanded_objective(st, smp, S)
+    mon.history.append(float(E.sum()))
+    while True:
+        st.D, st.rho_s = normalise(_d_update(st, S), st.rho_s, eps)
+        st.F, st.rho_s = normalise(_f_update(st, S), st.rho_s, eps)
+        _rho_update(st, smp, S)
+        e_before = expanded_objective(st, smp, S)
+        X = st.rho_s[:, None] * outer_df(st.D, st.F)
+        Ai_d, Ai_o, bi, Ao_d, Ao_o, bo = smp.g_system(st.G, X, st.rho_d)
+        g_new = 0.5 * (_solve_tridiag(Ai_d, Ai_o, bi, st.G) + _solve_tridiag(Ao_d, Ao_o, bo, st.G))
+        if smoothing and smoothing > 0:
+            g_new = gaussian_filter1d(g_new, smoothing, axis=1, mode="nearest")
+        g_new = np.maximum(g_new, eps)
+        e_new, S_new = smp.stats(g_new, X, st.rho_d)
+        need = e_new > e_before
+        if np.any(need):
+            gss_calls += 1
+            g_old = st.G
+
+            def fun(t):
+                g = np.maximum(g_old + t[:, None] * (g_new - g_old), eps)
+                e, s = smp.stats(g, X, st.rho_d)
+                return e, (g,) + s
+
+            t, e_best, aux, n = golden_section(fun, need, e_before, gss_max_eval)
+            gss_evals += n
+            # channels that did not need the search keep the full step
+            g_acc = np.where(need[:, None], aux[0], g_new)
+            S_new = tuple(np.where(need[:, None], a, b) for a, b in zip(aux[1:], S_new))
+            # where the search found nothing better than t = 0, keep the old G and stats
+            keep = need & (t == 0.0)
+            g_acc = np.where(keep[:, None], g_old, g_acc)
+            S_new = tuple(np.where(keep[:, None], a, b) for a, b in zip(S, S_new))
+            st.G = g_acc
+        else:
+            st.G = g_new
+        S = S_new
+        # max-normalise G: P scales by 1/m², S1, Spz by 1/m², S2 by 1/m⁴
+        m = st.G.max(axis=1)
+        m = np.where(m > 0, m, 1.0)
+        st.G = np.maximum(st.G / m[:, None], eps)
+        st.rho_s = st.rho_s * m**2
+        S = (S[0] / m[:, None] ** 2, S[1] / m[:, None] ** 4, S[2] / m[:, None] ** 2)
+        _rho_update(st, smp, S)
+        E = expanded_objective(st, smp, S)
+        if callback is not None:
+            callback(len(mon.history), float(E.sum()))
+        if mon.push(E):
+            break
+    X = st.rho_s[:, None] * outer_df(st.D, st.F)
+    E, _ = smp.stats(st.G, X, st.rho_d)        # exact final objective
+    return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, gss_calls,
+                     gss_evals, time.perf_counter() - t0)
+
+
+def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
+                 gss_max_eval=12, callback=None) -> RunResult:
+    """G-from-D AWLS (§4.3): D by Eq. 14, G from D (Eq. 19 + Smith Λ), objective check and
+    golden-section search along D's step when it increases; F by Eq. 14; ρd/ρs by Cramer;
+    negative components clamped to 0 (``eps``)."""
+    t0 = time.perf_counter()
+    st.D, st.rho_s = normalise(np.maximum(st.D, eps), st.rho_s, eps)
+    st.F, st.rho_s = normalise(np.maximum(st.F, eps), st.rho_s, eps)
+    st.G = smith_g_from_d(st.D.T).T
+    X = st.rho_s[:, None] * outer_df(st.D, st.F)
+    _, S = smp.stats(st.G, X, st.rho_d)
+    _rho_update(st, smp, S)
+    E = expanded_objective(st, smp, S)
+    mon = Monitor(smp.sum_wzz, tol, max_iter)
+    mon.history.append(float(E.sum()))
+    gss_calls = gss_evals = 0
+    while True:
+        A_old = st.rho_s[:, None] * st.D                      # ρs·D, the scale-free quantity
+        d_raw = np.maximum(_d_update(st, S), eps)
+        A_new = st.rho_s[:, None] * d_raw
+        e_before = E
+
+        def make(A):
+            m = A.max(axis=1)
+            m = np.where(m > 0, m, 1.0)
+            D = np.maximum(A / m[:, None], eps)
+            G = smith_g_from_d(D.T).T
+            e, s = smp.stats(G, m[:, None] * outer_df(D, st.F), st.rho_d)
+            return e, (D, G, m) + s
+
+        e_new, aux = make(A_new)
+        need = e_new > e_before
+        if np.any(need):
+            gss_calls += 1
+
+            def fun(t):
+                return make(A_old + t[:, None] * (A_new - A_old))
+
+            t, _, aux_g, n = golden_section(fun, need, e_before, gss_max_eval)
+            gss_evals += n
+            aux = tuple(np.where(need[:, None] if np.ndim(a) == 2 else need, a, b)
+                        for a, b in zip(aux_g, aux))
+            keep = need & (t == 0.0)
+        else:
+            keep = np.zeros(3, bool)
+        D, G, m = aux[0], aux[1], aux[2]
+        S_new = aux[3:]
+        st.D = np.where(keep[:, None], st.D, D)
+        st.G = np.where(keep[:, None], st.G, G)
+        st.rho_s = np.where(keep, st.rho_s, m)
+        S = tuple(np.where(keep[:, None], a, b) for a, b in zip(S, S_new))
+        st.F, st.rho_s = normalise(np.maximum(_f_update(st, S), eps), st.rho_s, eps)
+        _rho_update(st, smp, S)
+        E = expanded_objective(st, smp, S)
+        if callback is not None:
+            callback(len(mon.history), float(E.sum()))
+        if mon.push(E):
+            break
+    X = st.rho_s[:, None] * outer_df(st.D, st.F)
+    E, _ = smp.stats(st.G, X, st.rho_d)
+    return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, gss_calls,
+                     gss_evals, time.perf_counter() - t0)
+
+
+# -- naive model (Eq. 4) ----------------------------------------------------------------------
+@dataclass
+class NaiveState:
+    D: np.ndarray
+    F: np.ndarray
+    H: np.ndarray
+    rho_d: np.ndarray
+    rho_s: np.ndarray
+
+
+def dense_tensors(data: ObjectiveData):
+    """Dense (3, 8100, 180) weight and weight·measurement tensors (0 where excluded)."""
+    W = np.zeros((3, NH * ND * NP))
+    W[:, data.index] = data.w
+    WZ = np.zeros_like(W)
+    WZ[:, data.index] = data.w * data.z
+    return W.reshape(3, NH * ND, NP), WZ.reshape(3, NH * ND, NP)
+
+
+def run_naive(st: NaiveState, W, WZ, sum_wzz, *, eps=0.0, tol=1e-6, max_iter=3000,
+              callback=None) -> RunResult:
+    """Naive-model AWLS: D, F, H by Eq. 14 (each sample maps to exactly one component of
+    each factor), ρd/ρs by Cramer's rule, max-normalisation, clamping at ``eps``."""
+    t0 = time.perf_counter()
+    sum_w = W.sum(axis=(1, 2))
+    sum_wz = WZ.sum(axis=(1, 2))
+    mon = Monitor(sum_wzz, tol, max_iter)
+    for name in ("D", "F", "H"):
+        f, st.rho_s = normalise(np.maximum(getattr(st, name), eps), st.rho_s, eps)
+        setattr(st, name, f)
+
+    def p_sums(X):
+        return (np.einsum("ck,ckp->cp", X, W), np.einsum("ck,ckp->cp", X * X, W),
+                np.einsum("ck,ckp->cp", X, WZ))
+
+    def rho_and_E(B1, B2, Bz):
+        H = st.H
+        sx, sxx, sxy = (H * B1).sum(1), (H * H * B2).sum(1), (H * Bz).sum(1)
+        st.rho_d, st.rho_s = cramer(sum_w, sx, sxx, sum_wz, sxy)
+        a, b = st.rho_d, st.rho_s
+        E = a * a * sum_w + sum_wzz - 2 * a * sum_wz + b * b * sxx + 2 * a * b * sx - 2 * b * sxy
+        return np.maximum(E, 0.0)
+
+    E = rho_and_E(*p_sums(outer_df(st.D, st.F)))
+    mon.history.append(float(E.sum()))
+    while True:
+        H = st.H
+        A1 = np.einsum("ckp,cp->ck", W, H).reshape(3, NH, ND)
+        A2 = np.einsum("ckp,cp->ck", W, H * H).reshape(3, NH, ND)
+        Az = np.einsum("ckp,cp->ck", WZ, H).reshape(3, NH, ND)
+        r = Az - st.rho_d[:, None, None] * A1
+        rs = st.rho_s[:, None]
+        num = rs * np.einsum("chd,cd->ch", r, st.F)
+        den = rs**2 * np.einsum("chd,cd->ch", A2, st.F**2)
+        st.D, st.rho_s = normalise(np.maximum(ls_update(num, den, st.D), eps), st.rho_s, eps)
+        rs = st.rho_s[:, None]
+        num = rs * np.einsum("chd,ch->cd", r, st.D)
+        den = rs**2 * np.einsum("chd,ch->cd", A2, st.D**2)
+        st.F, st.rho_s = normalise(np.maximum(ls_update(num, den, st.F), eps), st.rho_s, eps)
+        X = outer_df(st.D, st.F)
+        B1, B2, Bz = p_sums(X)
+        rs = st.rho_s[:, None]
+        num = rs * (Bz - st.rho_d[:, None] * B1)
+        den = rs**2 * B2
+        st.H, st.rho_s = normalise(np.maximum(ls_update(num, den, st.H), eps), st.rho_s, eps)
+        E = rho_and_E(B1, B2, Bz)
+        if callback is not None:
+            callback(len(mon.history), float(E.sum()))
+        if mon.push(E):
+            break
+    return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, 0, 0,
+                     time.perf_counter() - t0)
+
+
+def naive_exact_objective(st: NaiveState, data: ObjectiveData) -> np.ndarray:
+    ih, idd, ip = np.unravel_index(data.index, (NH, ND, NP))
+    model = (st.rho_d[:, None] + st.rho_s[:, None] * st.D[:, ih] * st.F[:, idd] * st.H[:, ip])
+    r = model - data.z
+    return np.einsum("cn,cn->c", data.w, r * r)
+
+
+# -- bivariate (Eq. 5) ------------------------------------------------------------------------
+def fit_bivariate_table(data: ObjectiveData) -> tuple[np.ndarray, np.ndarray]:
+    """B(θh, θd) = Σ_φd w ρ* / Σ_φd w (Eq. 14 with y = 1), per channel, in one step; bins
+    without any included sample take the value of the nearest bin that has one."""
+    from scipy.ndimage import distance_transform_edt
+
+    ih, idd, _ = np.unravel_index(data.index, (NH, ND, NP))
+    hd = ih * ND + idd
+    B = np.zeros((3, NH * ND))
+    has = np.zeros(NH * ND, bool)
+    has[hd] = True
+    for c in range(3):
+        num = np.bincount(hd, weights=data.w[c] * data.z[c], minlength=NH * ND)
+        den = np.bincount(hd, weights=data.w[c], minlength=NH * ND)
+        ok = den > 0
+        B[c] = np.where(ok, num / np.where(ok, den, 1.0), 0.0)
+        has &= ok
+    grid_has = has.reshape(NH, ND)
+    if not grid_has.all():
+        _, (ii, jj) = distance_transform_edt(~grid_has, return_indices=True)
+        B = B.reshape(3, NH, ND)[:, ii, jj].reshape(3, NH * ND)
+    model = B[:, hd]
+    r = model - data.z
+    E = np.einsum("cn,cn->c", data.w, r * r)
+    return np.maximum(B.reshape(3, NH, ND), 0.0), E

@@ -1,0 +1,439 @@
+"""Non-parametric factor BRDF models of Bagher, Snyder & Nowrouzezahrai 2016 (ACM TOG).
+
+* :class:`NPFMicrofacetBRDF` – Eq. 3, per colour channel
+  ``ρ = ρd + ρs D(θh) F(θd) G(θi) G(θo) / (cos θi cos θo)`` with 90-sample tables D (uniform
+  in ``θ'h = sqrt(θh)``, Eq. 6, i.e. the MERL θh grid), F (uniform in θd, the MERL θd grid)
+  and G (uniform in θ, ``θ_k = k°``, k = 0…89, linearly interpolated in θi and θo, §4.3).
+  Size: ``3 · (3·90 + 2) · 4 = 3,264`` bytes of float32 (§3): tables ``D, F, G`` of shape
+  (90, 3) and ``rho`` = (ρd, ρs) of shape (2, 3).
+* :class:`NPFNaiveBRDF` – Eq. 4, ``ρ = ρd + ρs D(θh) F(θd) H(φd)``, H with 180 samples over
+  φd ∈ [0, π) (periodic by reciprocity): 4,344 bytes.
+* :class:`NPFBivariateBRDF` – Eq. 5, ``ρ = B(θh, θd)`` on the 90 × 90 MERL (θ'h, θd) grid,
+  3 channels: 97,200 bytes.
+
+Between samples, D and F are interpolated linearly in the continuous MERL index (on MERL
+samples this is exact, as in the paper); G is linear in θ. Deliberate deviation for directions
+outside the fitted range: beyond the last G sample (89°) G is tapered linearly to 0 at 90°,
+which keeps ``G/cos θ`` bounded at grazing angles (the paper fits and renders only up to 89°).
+
+Importance sampling (all three models): a mixture of cosine-weighted hemisphere sampling
+(diffuse part) and half-vector sampling from a tabulated, piecewise-constant (per θ'h cell)
+density proportional to an upper bound of the specular factor in θh times cos θh, with φh
+uniform, followed by reflection of ``wi`` about the half vector (the CDF-based approach of the
+paper's rendering appendix reduced to the factor that carries the peak). ``pdf`` is the exact
+density of ``sample`` (the half vector ±h ambiguity is resolved by using the upper-hemisphere
+representative, for which both give the same ``wo``).
+
+:func:`smith_g_from_d` implements G-from-D (§4.3, Eq. 19 and the Λ formulas after it) with
+15-point Gauss–Legendre quadrature.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..brdf import IsotropicBRDF, _as_dirs, cosine_hemisphere_pdf, cosine_hemisphere_sample
+from ..geometry import io_to_half_diff
+from ..grid import N_PHI_D, N_THETA_D, N_THETA_H
+from ..io.fitfile import SerializableModel
+
+__all__ = ["NPFMicrofacetBRDF", "NPFNaiveBRDF", "NPFBivariateBRDF", "smith_g_from_d",
+           "normalise_d", "G_THETA", "D_THETA_H", "F_THETA_D", "H_PHI_D"]
+
+N_G = 90
+#: θh of the D samples (the MERL θh grid, uniform in θ'h = sqrt(θh), Eq. 6)
+D_THETA_H = (np.arange(N_THETA_H) / N_THETA_H) ** 2 * (np.pi / 2)
+#: θd of the F samples
+F_THETA_D = np.arange(N_THETA_D) * (np.pi / 2 / N_THETA_D)
+#: θ of the G samples (k degrees, k = 0…89)
+G_THETA = np.arange(N_G) * (np.pi / 180.0)
+#: φd of the H samples
+H_PHI_D = np.arange(N_PHI_D) * (np.pi / N_PHI_D)
+
+
+# -- table look-ups ---------------------------------------------------------------------------
+def _lerp(table: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Linear interpolation of ``table`` (n, C) at continuous indices ``u`` (clamped)."""
+    n = table.shape[0]
+    u = np.clip(u, 0.0, n - 1.0)
+    i0 = np.minimum(u.astype(np.int64), n - 2)
+    t = (u - i0)[..., None]
+    return table[i0] * (1.0 - t) + table[i0 + 1] * t
+
+
+def _u_theta_h(theta_h):
+    return np.sqrt(np.clip(theta_h, 0.0, np.pi / 2) / (np.pi / 2)) * N_THETA_H
+
+
+def _u_theta_d(theta_d):
+    return np.clip(theta_d, 0.0, np.pi / 2) / (np.pi / 2 / N_THETA_D)
+
+
+def _lerp_g(G: np.ndarray, theta) -> np.ndarray:
+    """G at θ (radians), linear in θ, tapered to 0 at 90° beyond the last sample."""
+    ext = np.concatenate([G, np.zeros((1,) + G.shape[1:])], axis=0)     # knot 90° = 0
+    return _lerp(ext, np.clip(theta, 0.0, np.pi / 2) * (180.0 / np.pi))
+
+
+def _lerp_periodic(table: np.ndarray, u: np.ndarray) -> np.ndarray:
+    n = table.shape[0]
+    u = np.mod(u, n)
+    i0 = np.floor(u).astype(np.int64) % n
+    t = (u - np.floor(u))[..., None]
+    return table[i0] * (1.0 - t) + table[(i0 + 1) % n] * t
+
+
+def _as_table(x, n, name) -> np.ndarray:
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim == 1:
+        a = np.repeat(a[:, None], 3, axis=1)
+    if a.shape != (n, 3):
+        raise ValueError(f"{name}: expected shape ({n}, 3) or ({n},), found {a.shape}")
+    return a
+
+
+def _as_rgb(x, name) -> np.ndarray:
+    a = np.broadcast_to(np.asarray(x, dtype=np.float64), (3,)).copy()
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name}: expected finite values, found {a}")
+    return a
+
+
+# -- G from D (§4.3) --------------------------------------------------------------------------
+_GL_X, _GL_W = np.polynomial.legendre.leggauss(15)
+
+
+def normalise_d(D) -> tuple[np.ndarray, np.ndarray]:
+    """``D̄ = 2π ∫ D(θ) cos θ sin θ dθ`` (Eq. 19) and ``D̃ = D / D̄`` for tables (90, C).
+
+    D is piecewise linear in θ'h between samples (constant beyond the last one); the integral
+    is computed exactly enough with 4-point Gauss–Legendre per θ'h cell.
+    """
+    D = np.asarray(D, dtype=np.float64)
+    squeeze = D.ndim == 1
+    D2 = D[:, None] if squeeze else D
+    x, w = np.polynomial.legendre.leggauss(4)
+    cells = np.arange(N_THETA_H)
+    tp = (cells[:, None] + 0.5 + 0.5 * x[None, :]) / N_THETA_H           # θ' in [0, 1]
+    theta = tp**2 * (np.pi / 2)
+    vals = _lerp(D2, tp * N_THETA_H)                                      # (90, 4, C)
+    jac = np.pi * tp / N_THETA_H * 0.5                                     # dθ = π θ' dθ'
+    integrand = vals * (np.cos(theta) * np.sin(theta) * jac)[..., None]
+    dbar = 2.0 * np.pi * np.einsum("ikc,k->c", integrand, w)
+    dtilde = D2 / np.where(dbar > 0, dbar, 1.0)
+    return (dbar[0], dtilde[:, 0]) if squeeze else (dbar, dtilde)
+
+
+def smith_g_from_d(D) -> np.ndarray:
+    """G on the 90 G samples from a tabulated D (Bagher et al. 2016, §4.3).
+
+    ``D̃ = D/D̄`` (Eq. 19); ``G(θ) = 1/(1 + Λ(cot θ))`` with
+    ``Λ(μ) = 1/μ ∫_{atan μ}^{π/2} (tan ω − μ)(1 + tan² ω) p2(tan ω) dω``,
+    ``p2(r) = 2 ∫_0^{π/2} p22(r² + tan² ψ)(tan² ψ + 1) dψ``,
+    ``p22(u) = D̃(atan √u) cos⁴(atan √u)``, each integral by 15-point Gauss–Legendre
+    quadrature (as the paper), D̃ linearly interpolated (in θ'h). ``D`` is (90,) or (90, C);
+    the result has the same shape. ``G(0) = 1``. A D that is identically 0 gives G = 1.
+    """
+    D = np.maximum(np.asarray(D, dtype=np.float64), 0.0)
+    squeeze = D.ndim == 1
+    D2 = D[:, None] if squeeze else D
+    _, dt = normalise_d(D2)                                                # (90, C)
+    theta = G_THETA[1:]                                                     # (89,)
+    mu = 1.0 / np.tan(theta)
+    a = np.arctan(mu)
+    omega = a[:, None] + (np.pi / 2 - a)[:, None] * (_GL_X[None, :] + 1.0) * 0.5   # (89, 15)
+    r = np.tan(omega)
+    psi = (np.pi / 2) * (_GL_X + 1.0) * 0.5                                # (15,)
+    q2 = np.tan(psi) ** 2
+    u = r[..., None] ** 2 + q2                                             # (89, 15, 15)
+    th = np.arctan(np.sqrt(u))
+    p22 = _lerp(dt, _u_theta_h(th)) * (np.cos(th) ** 4)[..., None]         # (89, 15, 15, C)
+    p2 = 2.0 * (np.pi / 4) * np.einsum("abgc,g->abc", p22 * (q2 + 1.0)[None, None, :, None],
+                                      _GL_W)                              # (89, 15, C)
+    integrand = ((r - mu[:, None]) * (1.0 + r**2))[..., None] * p2
+    lam = np.einsum("abc,b->ac", integrand, _GL_W) * ((np.pi / 2 - a) * 0.5 / mu)[:, None]
+    G = np.ones_like(D2)
+    G[1:] = 1.0 / (1.0 + np.maximum(lam, 0.0))
+    return G[:, 0] if squeeze else G
+
+
+# -- importance sampling ----------------------------------------------------------------------
+_CELL_EDGES = (np.arange(N_THETA_H + 1) / N_THETA_H) ** 2 * (np.pi / 2)     # θh cell edges
+
+
+class _HalfVectorSampling:
+    """Mixture of cosine sampling and tabulated half-vector sampling (see module docstring)."""
+
+    def _spec_profile(self) -> np.ndarray:
+        """Non-negative scalar profile over the 90 θh knots (upper bound of the specular
+        part's θh dependence)."""
+        raise NotImplementedError
+
+    def _diffuse_fraction(self) -> float:
+        raise NotImplementedError
+
+    def _build_sampler(self):
+        s = np.maximum(np.asarray(self._spec_profile(), dtype=np.float64), 0.0)
+        s = np.concatenate([s, s[-1:]])                                   # knot at π/2
+        peak = max(float(s.max()), 1e-300)
+        t = np.maximum(s[:-1], s[1:]) * np.cos(_CELL_EDGES[:-1]) + 1e-4 * peak
+        dcos = np.cos(_CELL_EDGES[:-1]) - np.cos(_CELL_EDGES[1:])
+        mass = t * dcos
+        total = mass.sum()
+        self._h_density = t / (2.0 * np.pi * total)                       # pdf of h per cell
+        self._h_cdf = np.concatenate([[0.0], np.cumsum(mass) / total])
+        self._mix = float(np.clip(self._diffuse_fraction(), 0.05, 0.95))
+
+    def _ensure_sampler(self):
+        if getattr(self, "_h_cdf", None) is None:
+            self._build_sampler()
+
+    def _h_pdf(self, h):
+        th = np.arccos(np.clip(np.abs(h[..., 2]), -1.0, 1.0))
+        cell = np.minimum(_u_theta_h(th).astype(np.int64), N_THETA_H - 1)
+        return self._h_density[cell]
+
+    def sample(self, wi, u):
+        self._ensure_sampler()
+        wi = np.asarray(wi, dtype=np.float64)
+        u = np.asarray(u, dtype=np.float64)
+        shape = np.broadcast_shapes(wi.shape[:-1], u.shape[:-1])
+        wi = np.broadcast_to(wi, shape + (3,))
+        u = np.broadcast_to(u, shape + (2,))
+        s = self._mix
+        diffuse = u[..., 0] < s
+        u0 = np.where(diffuse, u[..., 0] / s, (u[..., 0] - s) / (1.0 - s))
+        u0 = np.clip(u0, 0.0, np.nextafter(1.0, 0.0))
+        wo_d = cosine_hemisphere_sample(np.stack([u0, u[..., 1]], axis=-1))
+        # half vector: cell from the CDF, then cos θ uniform inside the cell (constant density
+        # per solid angle within a cell), φ uniform
+        cell = np.clip(np.searchsorted(self._h_cdf, u0, side="right") - 1, 0, N_THETA_H - 1)
+        lo, hi = self._h_cdf[cell], self._h_cdf[cell + 1]
+        frac = np.clip((u0 - lo) / np.maximum(hi - lo, 1e-300), 0.0, 1.0)
+        ca, cb = np.cos(_CELL_EDGES[cell]), np.cos(_CELL_EDGES[cell + 1])
+        ct = ca - frac * (ca - cb)
+        st = np.sqrt(np.maximum(0.0, 1.0 - ct * ct))
+        phi = 2.0 * np.pi * u[..., 1]
+        h = np.stack([st * np.cos(phi), st * np.sin(phi), ct], axis=-1)
+        wo_s = 2.0 * np.sum(wi * h, axis=-1, keepdims=True) * h - wi
+        wo = np.where(diffuse[..., None], wo_d, wo_s)
+        return wo, self.pdf(wi, wo)
+
+    def pdf(self, wi, wo):
+        self._ensure_sampler()
+        wi, wo = _as_dirs(wi, wo)
+        h = wi + wo
+        n = np.linalg.norm(h, axis=-1, keepdims=True)
+        h = np.where(n > 1e-12, h / np.where(n > 1e-12, n, 1.0), np.array([0.0, 0.0, 1.0]))
+        h = np.where((h[..., 2] < 0)[..., None], -h, h)
+        wih = np.abs(np.sum(wi * h, axis=-1))
+        p_spec = np.where(wih > 1e-12, self._h_pdf(h) / (4.0 * np.maximum(wih, 1e-12)), 0.0)
+        p = self._mix * cosine_hemisphere_pdf(wo) + (1.0 - self._mix) * p_spec
+        return np.where(wi[..., 2] > 0, p, 0.0)
+
+
+def _estimate_diffuse_fraction(brdf, diffuse_albedo: float) -> float:
+    """Mixture weight of the cosine lobe: diffuse albedo / total albedo at normal incidence."""
+    total = float(np.mean(IsotropicBRDF.albedo(brdf, [0.0], n_samples=4096, seed=0)))
+    if not np.isfinite(total) or total <= 0:
+        return 0.5
+    return diffuse_albedo / total
+
+
+# -- the models -------------------------------------------------------------------------------
+class NPFMicrofacetBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
+    """Non-parametric factor microfacet BRDF (Bagher et al. 2016, Eq. 3).
+
+    Parameters: tables ``D`` (90, 3), ``F`` (90, 3), ``G`` (90, 3) (see the module docstring
+    for their abscissae), ``rho_d`` and ``rho_s`` (3,). ``variant`` records how G was fitted
+    (``"independent-g"`` or ``"g-from-d"``). The scale of each factor is only defined up to the
+    model's ambiguity ``(ρs, D, F, G) ~ (ρs/(a b c²), a D, b F, c G)``; fitted models are
+    max-normalised (max of each factor = 1, ρs absorbs the scale, §4.3).
+    """
+
+    fit_kind = "npf"
+
+    def __init__(self, D, F, G, rho_d, rho_s, *, variant: str = "independent-g",
+                 name: str = "npf", source: str | None = None):
+        self.D = _as_table(D, N_THETA_H, "D")
+        self.F = _as_table(F, N_THETA_D, "F")
+        self.G = _as_table(G, N_G, "G")
+        self.rho_d = _as_rgb(rho_d, "rho_d")
+        self.rho_s = _as_rgb(rho_s, "rho_s")
+        self.variant = str(variant)
+        self.name = name
+        self.source = source
+        self._h_cdf = None
+
+    # evaluation
+    def _spec(self, theta_h, theta_d, theta_i, theta_o, cos_i, cos_o):
+        d = _lerp(self.D, _u_theta_h(theta_h))
+        f = _lerp(self.F, _u_theta_d(theta_d))
+        g = _lerp_g(self.G, theta_i) * _lerp_g(self.G, theta_o)
+        cc = cos_i * cos_o
+        ok = (cos_i > 0) & (cos_o > 0)
+        inv = np.where(ok, 1.0 / np.where(ok, cc, 1.0), 0.0)[..., None]
+        return d * f * g * inv
+
+    def eval(self, wi, wo):
+        wi, wo = _as_dirs(wi, wo)
+        th, _, td, _ = io_to_half_diff(wi, wo)
+        ci, co = wi[..., 2], wo[..., 2]
+        ti, to = np.arccos(np.clip(ci, -1, 1)), np.arccos(np.clip(co, -1, 1))
+        f = self.rho_d + self.rho_s * self._spec(th, td, ti, to, ci, co)
+        return np.where(((ci > 0) & (co > 0))[..., None], f, 0.0)
+
+    def eval_hd(self, theta_h, theta_d, phi_d):
+        th, td, pd = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)
+                                           for a in (theta_h, theta_d, phi_d)))
+        a = np.cos(th) * np.cos(td)
+        b = np.sin(th) * np.sin(td) * np.cos(pd)
+        ci, co = a - b, a + b                                             # Eq. 1-2
+        ti, to = np.arccos(np.clip(ci, -1, 1)), np.arccos(np.clip(co, -1, 1))
+        f = self.rho_d + self.rho_s * self._spec(th, td, ti, to, ci, co)
+        return np.where(((ci > 0) & (co > 0))[..., None], f, 0.0)
+
+    # sampling
+    def _spec_profile(self):
+        return (self.rho_s * self.D * self.F.max(axis=0) * self.G.max(axis=0) ** 2).mean(axis=1)
+
+    def _diffuse_fraction(self):
+        return _estimate_diffuse_fraction(self, float(np.pi * self.rho_d.mean()))
+
+    # serialisation
+    def to_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        arrays = {"D": self.D.astype(np.float32), "F": self.F.astype(np.float32),
+                  "G": self.G.astype(np.float32),
+                  "rho": np.stack([self.rho_d, self.rho_s]).astype(np.float32)}
+        return {"variant": self.variant, "name": self.name,
+                "layout": "D[θ'h],F[θd],G[θ=k°] (90,3); rho=(ρd,ρs) (2,3)"}, arrays
+
+    @classmethod
+    def from_state(cls, params, arrays):
+        rho = np.asarray(arrays["rho"], dtype=np.float64)
+        if rho.shape != (2, 3):
+            raise ValueError(f"rho: expected shape (2, 3), found {rho.shape}")
+        return cls(arrays["D"], arrays["F"], arrays["G"], rho[0], rho[1],
+                   variant=params.get("variant", "independent-g"),
+                   name=params.get("name", "npf"))
+
+    def factors(self) -> dict[str, np.ndarray]:
+        return {"D": self.D, "F": self.F, "G": self.G, "rho_d": self.rho_d, "rho_s": self.rho_s}
+
+    def describe(self) -> dict[str, Any]:
+        d = super().describe()
+        d.update(variant=self.variant, rho_d=self.rho_d.tolist(), rho_s=self.rho_s.tolist())
+        return d
+
+
+class NPFNaiveBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
+    """The naive orthogonal factor model (Bagher et al. 2016, Eq. 4):
+    ``ρ = ρd + ρs D(θh) F(θd) H(φd)``, H tabulated at 180 φd samples in [0, π)."""
+
+    fit_kind = "npf-naive"
+
+    def __init__(self, D, F, H, rho_d, rho_s, *, name: str = "npf-naive",
+                 source: str | None = None):
+        self.D = _as_table(D, N_THETA_H, "D")
+        self.F = _as_table(F, N_THETA_D, "F")
+        self.H = _as_table(H, N_PHI_D, "H")
+        self.rho_d = _as_rgb(rho_d, "rho_d")
+        self.rho_s = _as_rgb(rho_s, "rho_s")
+        self.variant = "naive"
+        self.name = name
+        self.source = source
+        self._h_cdf = None
+
+    def eval_hd(self, theta_h, theta_d, phi_d):
+        th, td, pd = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)
+                                           for a in (theta_h, theta_d, phi_d)))
+        spec = (_lerp(self.D, _u_theta_h(th)) * _lerp(self.F, _u_theta_d(td))
+                * _lerp_periodic(self.H, np.mod(pd, np.pi) / (np.pi / N_PHI_D)))
+        a = np.cos(th) * np.cos(td)
+        b = np.sin(th) * np.sin(td) * np.cos(pd)
+        above = (a - b > 0) & (a + b > 0)
+        return np.where(above[..., None], self.rho_d + self.rho_s * spec, 0.0)
+
+    def _spec_profile(self):
+        return (self.rho_s * self.D * self.F.max(axis=0) * self.H.max(axis=0)).mean(axis=1)
+
+    def _diffuse_fraction(self):
+        return _estimate_diffuse_fraction(self, float(np.pi * self.rho_d.mean()))
+
+    def to_state(self):
+        arrays = {"D": self.D.astype(np.float32), "F": self.F.astype(np.float32),
+                  "H": self.H.astype(np.float32),
+                  "rho": np.stack([self.rho_d, self.rho_s]).astype(np.float32)}
+        return {"name": self.name, "layout": "D,F (90,3); H[φd=k°] (180,3); rho (2,3)"}, arrays
+
+    @classmethod
+    def from_state(cls, params, arrays):
+        rho = np.asarray(arrays["rho"], dtype=np.float64)
+        if rho.shape != (2, 3):
+            raise ValueError(f"rho: expected shape (2, 3), found {rho.shape}")
+        return cls(arrays["D"], arrays["F"], arrays["H"], rho[0], rho[1],
+                   name=params.get("name", "npf-naive"))
+
+    def factors(self) -> dict[str, np.ndarray]:
+        return {"D": self.D, "F": self.F, "H": self.H, "rho_d": self.rho_d, "rho_s": self.rho_s}
+
+
+class NPFBivariateBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
+    """The bivariate model (Romeiro et al. 2008 as used by Bagher et al. 2016, Eq. 5):
+    ``ρ = B(θh, θd)``, B (90, 90, 3) on the MERL (θ'h, θd) grid, bilinear in between."""
+
+    fit_kind = "npf-bivariate"
+
+    def __init__(self, B, *, name: str = "npf-bivariate", source: str | None = None):
+        B = np.asarray(B, dtype=np.float64)
+        if B.shape != (N_THETA_H, N_THETA_D, 3):
+            raise ValueError(f"B: expected shape (90, 90, 3), found {B.shape}")
+        self.B = B
+        self.variant = "bivariate"
+        self.name = name
+        self.source = source
+        self._h_cdf = None
+
+    def eval_hd(self, theta_h, theta_d, phi_d):
+        th, td, pd = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)
+                                           for a in (theta_h, theta_d, phi_d)))
+        uh = np.clip(_u_theta_h(th), 0.0, N_THETA_H - 1.0)
+        ud = np.clip(_u_theta_d(td), 0.0, N_THETA_D - 1.0)
+        i0 = np.minimum(uh.astype(np.int64), N_THETA_H - 2)
+        j0 = np.minimum(ud.astype(np.int64), N_THETA_D - 2)
+        s = (uh - i0)[..., None]
+        t = (ud - j0)[..., None]
+        B = self.B
+        v = ((1 - s) * (1 - t) * B[i0, j0] + s * (1 - t) * B[i0 + 1, j0]
+             + (1 - s) * t * B[i0, j0 + 1] + s * t * B[i0 + 1, j0 + 1])
+        a = np.cos(th) * np.cos(td)
+        b = np.sin(th) * np.sin(td) * np.cos(pd)
+        above = (a - b > 0) & (a + b > 0)
+        return np.where(above[..., None], v, 0.0)
+
+    def _spec_profile(self):
+        return self.B.max(axis=1).mean(axis=1)
+
+    def _diffuse_fraction(self):
+        return 0.25
+
+    def to_state(self):
+        return {"name": self.name, "layout": "B[θ'h, θd] (90,90,3)"}, \
+            {"B": self.B.astype(np.float32)}
+
+    @classmethod
+    def from_state(cls, params, arrays):
+        return cls(arrays["B"], name=params.get("name", "npf-bivariate"))
+
+    def factors(self) -> dict[str, np.ndarray]:
+        return {"B": self.B}
+
+
+def _check_math():  # pragma: no cover - tiny import-time sanity of the constants
+    assert math.isclose(G_THETA[-1], math.radians(89.0))
+
+
+_check_math()
