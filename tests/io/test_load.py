@@ -142,11 +142,11 @@ def test_rgl_and_synthetic():
         import brdffit.synthetic as syn
     except ImportError:
         pytest.skip("brdffit.synthetic not available yet")
-    names = getattr(syn, "SYNTHETIC_NAMES", None) or getattr(syn, "names", lambda: [])()
-    if not names:
-        pytest.skip("no synthetic names listed")
-    name = sorted(names)[0]
-    assert bio.load(f"synthetic:{name}") is not None
+    for name in syn.list_synthetic()[:2]:
+        b = bio.load(f"synthetic:{name}")
+        assert b.eval([0, 0, 1.0], [0, 0, 1.0]).shape == (3,)
+    with pytest.raises(Exception, match="no-such-material"):
+        bio.load("synthetic:no-such-material")
 
 
 def test_public_exports():

@@ -255,3 +255,27 @@ def test_resample_to_merl(tmp_path):
     with pytest.raises(BRDFFormatError, match="isotropic"):
         resample_to_merl(_Aniso(), tmp_path / "x.binary")
     assert not (tmp_path / "x.binary").exists()
+
+
+def test_fast_half_diff_matches_geometry_and_base_eval(rng):
+    from brdffit.geometry import io_to_half_diff
+    from brdffit.io.merl import fast_half_diff
+
+    wi = rng.normal(size=(20000, 3))
+    wo = rng.normal(size=(20000, 3))
+    wo[:10] = wi[:10]   # θd = 0
+    wo[10:20] = -wi[10:20]  # degenerate half vector
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    th, td, pd, above = fast_half_diff(wi, wo)
+    rth, _, rtd, rpd = io_to_half_diff(wi, wo)
+    np.testing.assert_allclose(th, rth, atol=1e-12)
+    np.testing.assert_allclose(td, rtd, atol=1e-9)
+    dphi = np.abs(pd - rpd)
+    dphi = np.minimum(dphi, 2 * np.pi - dphi)
+    assert np.all(dphi[rtd > 1e-6] < 1e-9)  # φd is undefined at θd = 0
+    np.testing.assert_array_equal(above, (wi[:, 2] > 0) & (wo[:, 2] > 0))
+    b = MERLBRDF(rng.random((90, 90, 180, 3)))
+    np.testing.assert_allclose(b.eval(wi[20:], wo[20:]), IsotropicBRDF.eval(b, wi[20:], wo[20:]),
+                               rtol=1e-9, atol=1e-12)
+    assert b.eval(wi[0], wo[0]).shape == (3,)

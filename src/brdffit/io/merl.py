@@ -140,6 +140,65 @@ def _merl_trilinear(table, u, v, w):
     return out.reshape(shape + (3,))
 
 
+def _half_diff_kernel(wi, wo, th, td, pd):  # pragma: no cover  (compiled by numba)
+    """Per-sample equivalent of :func:`brdffit.geometry.io_to_half_diff` (fewer trig calls)."""
+    twopi = 2.0 * np.pi
+    for s in range(wi.shape[0]):
+        hx = wi[s, 0] + wo[s, 0]
+        hy = wi[s, 1] + wo[s, 1]
+        hz = wi[s, 2] + wo[s, 2]
+        n = np.sqrt(hx * hx + hy * hy + hz * hz)
+        if n < 1e-12:
+            hx, hy, hz = 0.0, 0.0, 1.0
+        else:
+            hx, hy, hz = hx / n, hy / n, hz / n
+        # rotations by -φh about z and -θh about y, with cos/sin taken from h itself
+        st = np.sqrt(hx * hx + hy * hy)
+        if st > 0:
+            cp, sp = hx / st, hy / st
+        else:
+            cp, sp = 1.0, 0.0
+        x = cp * wi[s, 0] + sp * wi[s, 1]
+        y = -sp * wi[s, 0] + cp * wi[s, 1]
+        z = wi[s, 2]
+        theta_h = np.arccos(min(max(hz, -1.0), 1.0))
+        ct, stt = min(max(hz, -1.0), 1.0), st
+        dx = ct * x - stt * z
+        dy = y
+        dz = stt * x + ct * z
+        n = np.sqrt(dx * dx + dy * dy + dz * dz)
+        if n > 0:
+            dx, dy, dz = dx / n, dy / n, dz / n
+        th[s] = theta_h
+        td[s] = np.arccos(min(max(dz, -1.0), 1.0))
+        p = np.arctan2(dy, dx)
+        pd[s] = p + twopi if p < 0 else p
+
+
+if _numba is not None:
+    _half_diff_kernel = _numba.njit(cache=True, nogil=True)(_half_diff_kernel)
+
+
+def fast_half_diff(wi, wo):
+    """``(θh, θd, φd, above)`` of direction pairs, as :func:`brdffit.geometry.io_to_half_diff`
+    (compiled when numba is available); ``above`` is ``wi_z > 0 and wo_z > 0``."""
+    from ..brdf import _as_dirs
+
+    wi, wo = _as_dirs(wi, wo)
+    shape = wi.shape[:-1]
+    above = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+    if _numba is None:  # pragma: no cover
+        from ..geometry import io_to_half_diff
+
+        th, _, td, pd = io_to_half_diff(wi, wo)
+        return th, td, pd, above
+    a = np.ascontiguousarray(wi).reshape(-1, 3)
+    b = np.ascontiguousarray(wo).reshape(-1, 3)
+    th, td, pd = (np.empty(a.shape[0]) for _ in range(3))
+    _half_diff_kernel(a, b, th, td, pd)
+    return th.reshape(shape), td.reshape(shape), pd.reshape(shape), above
+
+
 def _pack(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
     flat_v = values.reshape(-1, values.shape[-1])
     flat_m = valid.reshape(-1)
@@ -242,6 +301,11 @@ class MERLBRDF(IsotropicBRDF):
         return self._packed
 
     # -- evaluation -----------------------------------------------------------------------
+    def eval(self, wi, wo) -> np.ndarray:
+        """f_r(wi, wo) via the table lookup in Rusinkiewicz coordinates; 0 below the horizon."""
+        th, td, pd, above = fast_half_diff(wi, wo)
+        return np.where(above[..., None], self.eval_hd(th, td, pd), 0.0)
+
     def eval_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
         """BRDF at Rusinkiewicz coordinates (radians), ``(..., 3)`` in scaled MERL units."""
         th, td, pd = np.broadcast_arrays(np.asarray(theta_h, np.float64),

@@ -94,6 +94,13 @@ class NBRDF(IsotropicBRDF):
                 np.maximum(h, 0, out=h)
         return h
 
+    def eval(self, wi, wo) -> np.ndarray:
+        """f_r(wi, wo) (Rusinkiewicz conversion compiled when numba is available)."""
+        from .merl import fast_half_diff
+
+        th, td, pd, above = fast_half_diff(wi, wo)
+        return np.where(above[..., None], self.eval_hd(th, td, pd), 0.0)
+
     def eval_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
         """BRDF at Rusinkiewicz coordinates (radians): ``max(exp(MLP(x)) − 1, 0)``, ``(..., 3)``."""
         th, td, pd = np.broadcast_arrays(np.asarray(theta_h, np.float64),
