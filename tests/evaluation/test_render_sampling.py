@@ -21,6 +21,8 @@ def _models():
                                       diffuse=[0.1, 0.1, 0.2]),
         "beckmann-aniso": MicrofacetBRDF(Beckmann(0.35, 0.12),
                                          ConductorFresnel([0.2, 0.9, 1.1], [3.9, 2.4, 2.2])),
+        "ggx-rho": MicrofacetBRDF(GGX(0.3, 0.08, 0.5), None, diffuse=0.05),
+        "beckmann-rho": MicrofacetBRDF(Beckmann(0.25, 0.1, -0.4), SchlickFresnel(0.5)),
         "sum": SumBRDF([MicrofacetBRDF(GGX(0.06), None), MicrofacetBRDF(GGX(0.4), None, diffuse=0.3)]),
     }
 
@@ -61,7 +63,7 @@ def _check_sampling(ev, brdf, theta_deg, n=1 << 17, alpha_scale=1.0, ref_albedo=
     return est
 
 
-@pytest.mark.parametrize("name", ["ggx+diffuse", "beckmann-aniso", "sum"])
+@pytest.mark.parametrize("name", ["ggx+diffuse", "beckmann-aniso", "ggx-rho", "beckmann-rho", "sum"])
 @pytest.mark.parametrize("theta", [25.0, 70.0])
 def test_closed_form_sampling_consistent(name, theta):
     from brdffit.evaluation.render.translate import to_evaluator
@@ -130,8 +132,8 @@ def test_anisotropic_generic_table():
     from brdffit.evaluation.render.translate import resampling_error, to_evaluator
     from brdffit.microfacet import GGX, MicrofacetBRDF
 
-    brdf = MicrofacetBRDF(GGX(0.4, 0.15, 0.3), None, diffuse=0.1)  # ρ ≠ 0: no closed form here
-    ev = to_evaluator(brdf)
+    brdf = MicrofacetBRDF(GGX(0.4, 0.15, 0.3), None, diffuse=0.1)
+    ev = to_evaluator(brdf, mode="table")
     assert ev.kind == "table4d"
     err = resampling_error(brdf, ev, n=1 << 14)
     assert err["rel_cos"] < 0.05

@@ -291,65 +291,114 @@ class Table4DEval(_ProxySampling):
 
 
 # -- distributions --------------------------------------------------------------------------
-class GGXDist:
-    """GGX (Trowbridge-Reitz) in closed form, anisotropic, VNDF sampling (Heitz 2018)."""
+class _Elliptical:
+    """Scale matrix ``S = [[αx², ραxαy], [ραxαy, αy²]]`` (Dupuy 2015 App. C), Cholesky
+    ``L = [[αx, 0], [ραy, αy√(1−ρ²)]]``; a roughness scale ``s`` multiplies ``L`` by ``s``.
 
-    kind = "ggx"
+    ``q_inv(m) = m_xyᵀ S⁻¹ m_xy`` (for the NDF) and ``q(w) = w_xyᵀ S w_xy`` (for Λ); for
+    ρ = 0 these are the usual ``mx²/αx² + my²/αy²`` and ``αx² wx² + αy² wy²``.
+    """
 
-    def __init__(self, alpha_x, alpha_y=None):
+    def __init__(self, alpha_x, alpha_y=None, rho=0.0):
         self.ax = float(alpha_x)
         self.ay = float(alpha_x if alpha_y is None else alpha_y)
+        self.rho = float(rho)
+        if not (self.ax > 0 and self.ay > 0 and -1.0 < self.rho < 1.0):
+            raise ValueError(f"invalid (alpha_x, alpha_y, rho) = ({self.ax}, {self.ay}, {self.rho})")
+        self.sr = float(np.sqrt(1.0 - self.rho**2))
 
-    def D(self, m, s=1.0):
-        return ggx_D(m, self.ax * s, self.ay * s)
+    def _q_inv(self, x, y, s):
+        X, Y = x / (self.ax * s), y / (self.ay * s)
+        if self.rho == 0.0:
+            return dr.square(X) + dr.square(Y)
+        return (dr.square(X) - 2.0 * self.rho * X * Y + dr.square(Y)) / (self.sr * self.sr)
 
-    def Lambda(self, w, s=1.0):
-        return ggx_lambda(w, self.ax * s, self.ay * s)
-
-    def sample(self, wi, u, s=1.0):
-        """Returns ``(m, pdf_m)`` with the visible-normal density ``G1 <wi,m> D / cos θi``."""
+    def _q(self, x, y, s):
         ax, ay = self.ax * s, self.ay * s
-        m = ggx_vndf_sample(wi, u, ax, ay)
-        return m, self.pdf_m(wi, m, s)
+        if self.rho == 0.0:
+            return dr.square(ax * x) + dr.square(ay * y)
+        return dr.square(ax * x) + 2.0 * self.rho * ax * ay * x * y + dr.square(ay * y)
+
+    def _det_sqrt(self, s):
+        return self.ax * self.ay * self.sr * s * s
+
+    def _L(self, x, y, s):
+        """``L (x, y)``."""
+        return (self.ax * s * x, self.rho * self.ay * s * x + self.ay * self.sr * s * y)
+
+    def _Lt(self, x, y, s):
+        """``Lᵀ (x, y)``."""
+        return (self.ax * s * x + self.rho * self.ay * s * y, self.ay * self.sr * s * y)
 
     def pdf_m(self, wi, m, s=1.0):
+        """Visible-normal density ``G1(wi) <wi, m>₊ D(m) / cos θi`` (Heitz & d'Eon 2014)."""
         g1 = 1.0 / (1.0 + self.Lambda(wi, s))
         return g1 * dr.maximum(dr.dot(wi, m), 0.0) * self.D(m, s) / dr.maximum(wi.z, 1e-7)
 
 
-class BeckmannDist:
-    """Beckmann in closed form: ``D = exp(−x̃²/αx² − ỹ²/αy²)/(π αx αy cos⁴θ)`` (Dupuy 2015
-    Eq. 9 on the Gaussian slope PDF), Smith Λ with ``erf`` (Walter 2007 Eq. 27 /Heitz 2014);
-    visible-normal sampling through Mitsuba's own ``MicrofacetDistribution``."""
+class GGXDist(_Elliptical):
+    """GGX in closed form with (αx, αy, ρ) (Dupuy App. C; ``brdffit.microfacet.GGX``):
+    ``D = 1/(π √|S| (m_z² + m_xyᵀ S⁻¹ m_xy)²)``, ``Λ = (−1 + √(1 + q(w)/w_z²))/2``;
+    visible normals by Heitz 2018 on the unit GGX seen from ``(Lᵀ w_xy, w_z)``, mapped back
+    with ``L`` (for ρ = 0: Heitz's stretch)."""
+
+    kind = "ggx"
+
+    def D(self, m, s=1.0):
+        cz = dr.maximum(m.z, 1e-7)
+        t = dr.square(cz) + self._q_inv(m.x, m.y, s)
+        return dr.select(m.z > 0, 1.0 / (dr.pi * self._det_sqrt(s) * dr.square(t)), 0.0)
+
+    def Lambda(self, w, s=1.0):
+        wz2 = dr.maximum(dr.square(w.z), 1e-14)
+        return 0.5 * (dr.sqrt(1.0 + self._q(w.x, w.y, s) / wz2) - 1.0)
+
+    def sample(self, wi, u, s=1.0):
+        """Returns ``(m, pdf_m)`` with the visible-normal density."""
+        x, y = self._Lt(wi.x, wi.y, s)
+        n0 = ggx_vndf_sample(mi.Vector3f(x, y, wi.z), u, 1.0, 1.0)
+        mx, my = self._L(n0.x, n0.y, s)
+        m = dr.normalize(mi.Vector3f(mx, my, n0.z))
+        return m, self.pdf_m(wi, m, s)
+
+
+class BeckmannDist(_Elliptical):
+    """Beckmann in closed form with (αx, αy, ρ): ``D = exp(−q⁻¹(m)/m_z²)/(π √|S| m_z⁴)``,
+    Smith ``Λ = (erf(a) − 1)/2 + exp(−a²)/(2a√π)`` with ``a = w_z/√q(w)`` (Walter 2007
+    Eq. 27, Heitz 2014). Sampling: visible normals through Mitsuba's own
+    ``MicrofacetDistribution`` when ρ = 0; for ρ ≠ 0 the NDF itself (``D cos θ``: Gaussian
+    slopes ``L z``, Walter 2007 Eq. 28 generalised), with the matching pdf."""
 
     kind = "beckmann"
 
-    def __init__(self, alpha_x, alpha_y=None):
-        self.ax = float(alpha_x)
-        self.ay = float(alpha_x if alpha_y is None else alpha_y)
-
     def D(self, m, s=1.0):
-        ax, ay = self.ax * s, self.ay * s
         cz = dr.maximum(m.z, 1e-7)
-        e = dr.square(m.x / (ax * cz)) + dr.square(m.y / (ay * cz))
-        d = dr.exp(-e) / (dr.pi * ax * ay * dr.square(dr.square(cz)))
+        e = self._q_inv(m.x, m.y, s) / dr.square(cz)
+        d = dr.exp(-e) / (dr.pi * self._det_sqrt(s) * dr.square(dr.square(cz)))
         return dr.select(m.z > 0, d, 0.0)
 
     def Lambda(self, w, s=1.0):
-        ax, ay = self.ax * s, self.ay * s
-        at = dr.sqrt(dr.square(ax * w.x) + dr.square(ay * w.y)) / dr.maximum(dr.abs(w.z), 1e-7)
+        at = dr.sqrt(self._q(w.x, w.y, s)) / dr.maximum(dr.abs(w.z), 1e-7)
         a = 1.0 / dr.maximum(at, 1e-7)
         lam = 0.5 * (dr.erf(a) - 1.0) + dr.exp(-dr.square(a)) / (2.0 * a * dr.sqrt(dr.pi))
         return dr.select(a > 20.0, 0.0, dr.maximum(lam, 0.0))
 
     def sample(self, wi, u, s=1.0):
-        md = mi.MicrofacetDistribution(mi.MicrofacetType.Beckmann, self.ax * s, self.ay * s, True)
-        m, _ = md.sample(wi, u)
+        if self.rho == 0.0:
+            md = mi.MicrofacetDistribution(mi.MicrofacetType.Beckmann, self.ax * s,
+                                           self.ay * s, True)
+            m, _ = md.sample(wi, u)
+        else:
+            r = dr.sqrt(-dr.log(dr.maximum(1.0 - u.x, 1e-12)))
+            sp, cp = dr.sincos(2.0 * dr.pi * u.y)
+            mx, my = self._L(r * cp, r * sp, s)
+            m = dr.normalize(mi.Vector3f(mx, my, 1.0))
         return m, self.pdf_m(wi, m, s)
 
     def pdf_m(self, wi, m, s=1.0):
-        g1 = 1.0 / (1.0 + self.Lambda(wi, s))
-        return g1 * dr.maximum(dr.dot(wi, m), 0.0) * self.D(m, s) / dr.maximum(wi.z, 1e-7)
+        if self.rho == 0.0:
+            return _Elliptical.pdf_m(self, wi, m, s)
+        return dr.select(m.z > 0, self.D(m, s) * m.z, 0.0)
 
 
 class RadialTableDist:

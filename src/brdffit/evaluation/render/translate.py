@@ -56,7 +56,7 @@ def _rgb(x, default):
 # -- built-in translators -------------------------------------------------------------------
 def translate_distribution(dist):
     """Dr.Jit distribution for a :class:`~brdffit.microfacet.base.SlopeDistribution`:
-    GGX/Beckmann with ρ = 0 (also behind a ``ScaledDistribution``, Dupuy Eq. 9) in closed
+    GGX/Beckmann with any (αx, αy, ρ) (also behind a ``ScaledDistribution``, Dupuy Eq. 9) in closed
     form; any other isotropic distribution as a radial table (``RadialTableDist``); ``None``
     for other anisotropic ones (the caller falls back to the 4D table)."""
     dj = _dj()
@@ -67,12 +67,12 @@ def translate_distribution(dist):
         sy *= float(base.ay if base.ay is not None else base.ax)
         base = base.base
     kind = getattr(base, "kind", None)
-    rho = float(np.max(np.abs(getattr(base, "rho", 0.0) or 0.0)))
+    rho = getattr(base, "rho", 0.0) or 0.0
     ax, ay = getattr(base, "alpha_x", None), getattr(base, "alpha_y", None)
-    if (kind in ("ggx", "beckmann") and ax is not None and rho == 0.0
-            and np.ndim(ax) == 0 and np.ndim(ay) == 0):
+    if (kind in ("ggx", "beckmann") and ax is not None
+            and np.ndim(ax) == 0 and np.ndim(ay) == 0 and np.ndim(rho) == 0):
         cls = dj.GGXDist if kind == "ggx" else dj.BeckmannDist
-        return cls(float(ax) * sx, float(ay if ay is not None else ax) * sy)
+        return cls(float(ax) * sx, float(ay if ay is not None else ax) * sy, float(rho))
     if getattr(dist, "isotropic", False):
         return dj.RadialTableDist.from_distribution(dist)
     return None
