@@ -87,3 +87,10 @@ def test_slices_values():
     np.testing.assert_allclose(f, 0.5 / np.pi)
     with pytest.raises(ValueError):
         plots.slice_values(Lambert([0.5] * 3), "nope")
+
+
+def test_npf_default_sample_angles():
+    d = plots.npf_sample_angles("D", 90)
+    assert d[0] == 0 and d[1] == pytest.approx((1 / 90) ** 2 * np.pi / 2)  # sqrt(θh) uniform
+    assert np.degrees(plots.npf_sample_angles("G", 90))[-1] == pytest.approx(89.0)
+    assert np.degrees(plots.npf_sample_angles("H", 180))[-1] == pytest.approx(179.0)

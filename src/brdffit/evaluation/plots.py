@@ -28,7 +28,7 @@ import numpy as np
 from .._atomic import atomic_path
 
 __all__ = ["plot_lobes", "plot_factors", "plot_slices", "npf_tables", "has_factors",
-           "LOBE_INCIDENCES_DEG", "save_figure", "plot_colorbar", "lobe_curve",
+           "LOBE_INCIDENCES_DEG", "save_figure", "plot_colorbar", "lobe_curve", "npf_sample_angles",
            "slice_values"]
 
 LOBE_INCIDENCES_DEG = (10.0, 30.0, 50.0, 70.0)
@@ -124,8 +124,10 @@ def npf_tables(model) -> dict[str, np.ndarray] | None:
 
     Looks, in order, for a ``factor_tables()`` / ``factors()`` method returning a dict, or
     attributes ``D_table``/``F_table``/``G_table`` or ``d_table``/``f_table``/``g_table``.
-    Tables may be ``(n,)`` or ``(n, 3)``; they are sampled uniformly over their angle range
-    (θh, θd, θ in [0, π/2]) unless the dict has ``theta_D``/``theta_F``/``theta_G``.
+    Tables may be ``(n,)`` or ``(n, 3)``. Unless the dict has ``theta_D``/``theta_F``/
+    ``theta_G``/``theta_H``, the sample positions are those of Bagher et al. 2016 (Eq. 6,
+    §4.3): D on the MERL θh grid ``θh = (i/n)² π/2`` (uniform in ``sqrt(θh)``), F and G at
+    ``θ = i · (π/2)/n`` (1° steps for n = 90), the naive model's H at ``φd = i · π/n``.
     """
     for meth in ("factor_tables", "factors"):
         fn = getattr(model, meth, None)
@@ -134,7 +136,7 @@ def npf_tables(model) -> dict[str, np.ndarray] | None:
                 tabs = fn()
             except Exception:  # noqa: BLE001
                 tabs = None
-            if isinstance(tabs, Mapping) and any(k in tabs for k in "DFG"):
+            if isinstance(tabs, Mapping) and any(k in tabs for k in "DFGH"):
                 return {k: np.asarray(v, float) for k, v in tabs.items()}
     found = {}
     for k in "DFG":
@@ -146,6 +148,16 @@ def npf_tables(model) -> dict[str, np.ndarray] | None:
     if found:
         return found
     return None
+
+
+def npf_sample_angles(key: str, n: int) -> np.ndarray:
+    """Default sample positions (radians) of NPF table ``key`` with ``n`` samples."""
+    i = np.arange(n)
+    if key == "D":
+        return (i / n) ** 2 * (np.pi / 2)
+    if key == "H":
+        return i * (np.pi / n)
+    return i * (np.pi / 2 / n)
 
 
 def has_factors(model) -> bool:
@@ -208,14 +220,15 @@ def plot_factors(fits: Mapping[str, object], path, n: int = 200, title: str | No
                 ax.legend(fontsize=6)
         row = 1
     for name, tabs in npf.items():
-        for j, (key, label) in enumerate((("D", "θh"), ("F", "θd"), ("G", "θ"))):
+        third = ("G", "θ") if "G" in tabs or "H" not in tabs else ("H", "φd")
+        for j, (key, label) in enumerate((("D", "θh"), ("F", "θd"), third)):
             ax = axes[row][j]
             tab = tabs.get(key)
             if tab is None:
                 ax.set_axis_off()
                 continue
             tab = tab.reshape(tab.shape[0], -1)
-            x = np.asarray(tabs.get(f"theta_{key}", _angles(tab.shape[0])), float)
+            x = np.asarray(tabs.get(f"theta_{key}", npf_sample_angles(key, tab.shape[0])), float)
             for c in range(min(3, tab.shape[1])):
                 col = _RGB[c] if tab.shape[1] > 1 else "k"
                 if key == "D":
