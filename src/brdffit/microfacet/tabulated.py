@@ -19,8 +19,8 @@ supplemental, Eq. 17-22):
 Continuous lookup (Dupuy 2015 §4.3 "linearly interpolating the values of p") is done here
 with a monotone cubic (PCHIP) Hermite interpolant of ``log P`` in ``u`` (and linear in ``φ``
 for anisotropic tables); a deliberate deviation from linear interpolation, for accuracy
-between nodes. Below the first node ``P`` is held constant, beyond the last node it decays
-linearly in ``u`` to 0 at grazing.
+between nodes. ``log P`` is mirrored to ``u < 0`` (P is even in the slope), and beyond the
+last node ``P`` decays as ``r⁻⁴`` (the GGX tail: integrable, with a finite ``D`` at grazing).
 
 Derived quantities:
 
@@ -91,15 +91,29 @@ def azimuthal_clamped_cosine_integral(s) -> np.ndarray:
     return np.where(s <= 1.0, 2.0 * np.pi, 2.0 * (phi0 + s * np.sin(phi0)))
 
 
-def _pchip_slopes(x, y, kind: str = "spline"):
-    """Node derivatives for cubic Hermite interpolation of ``y`` (along axis 0) at ``x``:
-    ``"spline"`` (C² not-a-knot cubic spline) or ``"pchip"`` (monotone)."""
+def _pchip_slopes(x, y, kind: str = "hyman"):
+    """Node derivatives for cubic Hermite interpolation of ``y`` (along axis 0) at ``x``.
+
+    ``"hyman"`` (default): not-a-knot cubic-spline slopes passed through Hyman's (1983)
+    monotonicity filter (zero at local extrema, ``|d| ≤ 3 min|Δ|``), i.e. spline accuracy on
+    smooth data, no overshoot on noisy or clipped data. ``"spline"`` or ``"pchip"`` as named.
+    """
     if kind == "pchip":
         return PchipInterpolator(x, y, axis=0).derivative()(x)
-    return CubicSpline(x, y, axis=0).derivative()(x)
+    d = CubicSpline(x, y, axis=0).derivative()(x)
+    if kind == "spline":
+        return d
+    h = np.diff(x).reshape((-1,) + (1,) * (y.ndim - 1))
+    delta = np.diff(y, axis=0) / h
+    left = np.concatenate([delta[:1], delta], axis=0)
+    right = np.concatenate([delta, delta[-1:]], axis=0)
+    sgn = np.sign(right)
+    mono = left * right > 0
+    lim = 3.0 * np.minimum(np.abs(left), np.abs(right))
+    return np.where(mono, sgn * np.minimum(np.maximum(sgn * d, 0.0), lim), 0.0)
 
 
-def _hermite(x_nodes, y, dy, x, col=None):
+def _hermite(x_nodes, y, dy, x, col=None, clamp=False):
     """Cubic Hermite interpolation at ``x`` of tables ``y``/``dy`` (``(M,)`` or ``(M, C)``).
 
     ``col`` (int array broadcast with ``x``) picks the column of 2D tables. ``x`` is clipped
@@ -119,7 +133,10 @@ def _hermite(x_nodes, y, dy, x, col=None):
         y0, y1, d0, d1 = y[k], y[k + 1], dy[k], dy[k + 1]
     else:
         y0, y1, d0, d1 = y[k, col], y[k + 1, col], dy[k, col], dy[k + 1, col]
-    return h00 * y0 + h10 * h * d0 + h01 * y1 + h11 * h * d1
+    out = h00 * y0 + h10 * h * d0 + h01 * y1 + h11 * h * d1
+    if clamp:  # no overshoot above the larger end value (noisy tables, zeros in log P)
+        out = np.minimum(out, np.maximum(y0, y1))
+    return out
 
 
 class TabulatedSlopeDistribution(SlopeDistribution):
@@ -159,6 +176,9 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         self.n_phi = 1 if self.table_isotropic else p.shape[1]
         self.phi = 2.0 * np.pi * np.arange(self.n_phi) / self.n_phi
         self.table = p / self._integral(p) if normalize else p
+        self._build_p_lookup()
+        if normalize:  # Eq. 8 for the *continuous* (interpolated) P, not only the nodes
+            self.table = self.table / self._interpolant_integral()
         self.table = self.table.astype(np.float32).astype(np.float64)  # what a fit file stores
         self._set_alpha(alpha_x, alpha_y)
         self._build_lookup()
@@ -192,7 +212,27 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         self.alpha_y = ay if ay.ndim else float(ay)
         self.isotropic = bool(self.table_isotropic and ax.shape == ay.shape and np.all(ax == ay))
 
+    def _interpolant_integral(self, m: int = 4096) -> float:
+        """``∫ P dh̃`` of the interpolated table: trapezoid on a fine ``u`` grid up to the
+        last node, plus the ``r⁻⁴`` tail in closed form (``π P_last r_last²``)."""
+        uu = np.linspace(0.0, self._u_last, m + 1)
+        theta = 0.5 * np.pi * uu**2
+        r = np.tan(theta)
+        jac = np.pi * uu / np.cos(theta) ** 2 * r
+        if self.table_isotropic:
+            f = self._p_unit_polar(r) * jac * 2.0 * np.pi
+            tail = np.pi * self._p_last * self._r_last**2
+        else:
+            pp = self._p_unit_polar(r[:, None], self.phi[None, :])
+            f = pp.mean(axis=1) * jac * 2.0 * np.pi
+            tail = np.pi * float(np.mean(self._p_last)) * self._r_last**2
+        return float(np.trapezoid(f, uu) + tail)
+
     def _build_lookup(self):
+        self._build_p_lookup()
+        self._build_sigma_lookup()
+
+    def _build_p_lookup(self):
         p = self.table
         floor = _LOG_FLOOR * float(p.max())
         logp = np.log(np.maximum(p, floor))
@@ -207,6 +247,9 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         self._ldlogp = _pchip_slopes(u, logp)
         self._p_last = p[-1]
         self._u_last = u[-1]
+        self._r_last = float(np.tan(0.5 * np.pi * u[-1] ** 2))
+
+    def _build_sigma_lookup(self):
         # σ at the nodes and the two ends u=0 and u=1, then a PCHIP in u
         sig = self._sigma_nodes()
         self._sigma_table = sig
@@ -246,7 +289,8 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         u = np.sqrt(theta * (2.0 / np.pi))
         if self.table_isotropic:
             val = np.exp(_hermite(self._lu, self._llogp, self._ldlogp, u))
-            tail = self._p_last * (1.0 - u) / (1.0 - self._u_last)
+            with np.errstate(divide="ignore", over="ignore"):
+                tail = self._p_last * (self._r_last / np.maximum(r, self._r_last)) ** 4
             return np.where(u > self._u_last, tail, val)
         n = self.n_phi
         x = np.mod(phi, 2.0 * np.pi) / (2.0 * np.pi) * n
@@ -256,7 +300,9 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         v0 = _hermite(self._lu, self._llogp, self._ldlogp, u, j0)
         v1 = _hermite(self._lu, self._llogp, self._ldlogp, u, j1)
         val = np.exp((1.0 - f) * v0 + f * v1)
-        tail = ((1.0 - f) * self._p_last[j0] + f * self._p_last[j1]) * (1.0 - u) / (1.0 - self._u_last)
+        with np.errstate(divide="ignore", over="ignore"):
+            tail = (((1.0 - f) * self._p_last[j0] + f * self._p_last[j1])
+                    * (self._r_last / np.maximum(r, self._r_last)) ** 4)
         return np.where(u > self._u_last, tail, val)
 
     def _sigma_unit(self, w) -> np.ndarray:
