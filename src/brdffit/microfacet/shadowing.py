@@ -127,12 +127,21 @@ def sigma_numerical(dist: SlopeDistribution, w, n: int = 96, chunk: int = 32) ->
         sl = slice(s0, s0 + chunk)
         k = wz[sl].size
         with np.errstate(divide="ignore", invalid="ignore"):
-            rmax = np.where(front[None, :] & (bn[sl, None] > 0),
-                            wz[sl, None] / (bn[sl, None] * cosd[None, :]), np.inf)
-        rmax = np.where(rmax < 0, 0.0, rmax)                           # wz < 0: empty front
-        vmax = (2.0 / np.pi) * np.arctan(rmax / c)                     # (k, 2n)
-        v = 0.5 * vmax[:, :, None] * (x[None, None, :] + 1.0)         # (k, 2n, n)
-        vw = 0.5 * vmax[:, :, None] * xw[None, None, :]
+            rb = wz[sl, None] / (bn[sl, None] * cosd[None, :])          # boundary radius
+        up = wz[sl, None] >= 0
+        fr = front[None, :]
+        # positive part along each ray: front arc [0, rb] (wz >= 0) or empty (wz < 0);
+        # back arc [0, ∞) (wz >= 0) or [rb, ∞) (wz < 0); no boundary when b = 0.
+        flat = ~(bn[sl, None] > 0)
+        rlo = np.where(up | flat, 0.0, np.where(fr, 0.0, rb))
+        rhi = np.where(flat, np.where(up, np.inf, 0.0),
+                       np.where(fr, np.where(up, rb, 0.0), np.inf))
+        rlo = np.nan_to_num(np.maximum(rlo, 0.0), nan=0.0)
+        rhi = np.nan_to_num(np.maximum(rhi, rlo), nan=0.0, posinf=np.inf)
+        vlo = (2.0 / np.pi) * np.arctan(rlo / c)
+        vhi = (2.0 / np.pi) * np.arctan(rhi / c)                       # (k, 2n)
+        v = vlo[:, :, None] + 0.5 * (vhi - vlo)[:, :, None] * (x[None, None, :] + 1.0)
+        vw = 0.5 * (vhi - vlo)[:, :, None] * xw[None, None, :]
         t = np.tan(0.5 * np.pi * v)
         r = c * t
         jac = c * 0.5 * np.pi * (1.0 + t * t) * vw * r                # dr · r
