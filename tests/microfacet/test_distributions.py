@@ -167,7 +167,7 @@ def test_height_correlated_g2_bounds():
 
 @pytest.mark.parametrize("d", DISTS, ids=IDS)
 def test_slope_moments_vs_monte_carlo(d):
-    u = np.random.default_rng(2).random((400_000, 2))
+    u = np.random.default_rng(2).random((200_000, 2))
     s = d.sample(u)
     m = d.slope_moments()
     n = len(s)
