@@ -30,8 +30,71 @@ from ..errors import BRDFFormatError
 __all__ = ["NBRDF", "read_nbrdf", "read_nbrdf_collection", "list_materials"]
 
 _ACTIVATIONS = ("relu", "linear")
+
+try:
+    import numba as _numba
+except ImportError:  # pragma: no cover
+    _numba = None
+
+
+def _dense_t(w, b, x, relu):  # pragma: no cover  (compiled by numba)
+    """``relu?(w @ x + b)`` with samples on the last (contiguous, SIMD-friendly) axis."""
+    nout, nin = w.shape
+    m = x.shape[1]
+    out = np.empty((nout, m), dtype=x.dtype)
+    for j in range(nout):
+        bj = b[j]
+        for s in range(m):
+            out[j, s] = bj
+        for i in range(nin):
+            wji = w[j, i]
+            for s in range(m):
+                out[j, s] += wji * x[i, s]
+        if relu:
+            for s in range(m):
+                if out[j, s] < 0:
+                    out[j, s] = 0
+    return out
+
+
+def _inputs_t(th, td, pd, xt):  # pragma: no cover  (compiled by numba)
+    """Network inputs, one column per sample (see :meth:`NBRDF.eval_hd`)."""
+    for s in range(th.shape[0]):
+        sd = np.sin(td[s])
+        xt[0, s] = np.sin(th[s])
+        xt[1, s] = 0.0
+        xt[2, s] = np.cos(th[s])
+        xt[3, s] = sd * np.cos(pd[s])
+        xt[4, s] = sd * np.sin(pd[s])
+        xt[5, s] = np.cos(td[s])
+
+
+def _finish(yt, out):  # pragma: no cover  (compiled by numba)
+    """``out[s, c] = max(exp(y[c, s]) − 1, 0)`` in float64; NaN/inf → 0."""
+    for s in range(yt.shape[1]):
+        for c in range(3):
+            v = np.expm1(np.float64(yt[c, s]))
+            out[s, c] = v if (v > 0 and v < np.inf) else 0.0
+
+
+if _numba is not None:
+    _inputs_t = _numba.njit(cache=True, nogil=True)(_inputs_t)
+    _finish = _numba.njit(cache=True, nogil=True)(_finish)
+    # fastmath only lets the sums vectorise (reassociation); no transcendental is involved
+    _dense_t = _numba.njit(cache=True, nogil=True, fastmath=True)(_dense_t)
+else:  # pragma: no cover  (vectorised NumPy fall-backs)
+    def _inputs_t(th, td, pd, xt):
+        sd = np.sin(td)
+        xt[:] = [np.sin(th), np.zeros_like(th), np.cos(th), sd * np.cos(pd), sd * np.sin(pd),
+                 np.cos(td)]
+
+    def _finish(yt, out):
+        v = np.expm1(yt.T.astype(np.float64))
+        out[:] = np.where(np.isfinite(v) & (v > 0), v, 0.0)
+
+
 _DEFAULT_ACTIVATIONS = ["relu", "relu", "linear"]
-_CHUNK = 1 << 16
+_CHUNK = 1 << 14
 
 
 class NBRDF(IsotropicBRDF):
@@ -80,17 +143,32 @@ class NBRDF(IsotropicBRDF):
     def n_parameters(self) -> int:
         return int(sum(k.size + b.size for k, b, _ in self.layers))
 
-    def _forward(self, x: np.ndarray) -> np.ndarray:
+    def _weights(self):
         dtype = np.float32 if self.precision == "float32" else np.float64
         cache = getattr(self, "_cast", None)
         if cache is None or cache[0] != dtype:
-            cache = (dtype, [(k.astype(dtype), b.astype(dtype), a) for k, b, a in self.layers])
+            cache = (dtype, [(np.ascontiguousarray(k.T, dtype=dtype), b.astype(dtype), a == "relu")
+                             for k, b, a in self.layers])
             self._cast = cache
-        h = x.astype(dtype, copy=False)
-        for kernel, bias, act in cache[1]:
-            h = h @ kernel
-            h += bias
-            if act == "relu":
+        return cache
+
+    def _forward_t(self, xt: np.ndarray) -> np.ndarray:
+        """MLP output ``(3, m)`` for inputs ``(6, m)`` (before ``exp(y) − 1``).
+
+        Samples sit on the contiguous axis. float32 runs a compiled kernel (BLAS is slow for
+        6- and 21-wide products and oversubscribes a busy machine with threads); float64
+        uses NumPy matrix products, the reference.
+        """
+        dtype, layers = self._weights()
+        h = np.ascontiguousarray(xt, dtype=dtype)
+        if dtype == np.float32 and _numba is not None:
+            for wt, bias, relu in layers:
+                h = _dense_t(wt, bias, h, relu)
+            return h
+        for wt, bias, relu in layers:
+            h = wt @ h
+            h += bias[:, None]
+            if relu:
                 np.maximum(h, 0, out=h)
         return h
 
@@ -102,26 +180,23 @@ class NBRDF(IsotropicBRDF):
         return np.where(above[..., None], self.eval_hd(th, td, pd), 0.0)
 
     def eval_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
-        """BRDF at Rusinkiewicz coordinates (radians): ``max(exp(MLP(x)) − 1, 0)``, ``(..., 3)``."""
+        """BRDF at Rusinkiewicz coordinates (radians): ``max(exp(MLP(x)) − 1, 0)``, ``(..., 3)``.
+
+        The network input is ``(sin θh, 0, cos θh, sin θd cos φd, sin θd sin φd, cos θd)``
+        (half and difference vectors with φh = 0, as the networks were trained).
+        """
         th, td, pd = np.broadcast_arrays(np.asarray(theta_h, np.float64),
                                          np.asarray(theta_d, np.float64),
                                          np.asarray(phi_d, np.float64))
         shape = th.shape
         th, td, pd = th.ravel(), td.ravel(), pd.ravel()
         out = np.empty((th.size, 3))
+        dtype = self._weights()[0]
         for s in range(0, th.size, _CHUNK):
             sl = slice(s, s + _CHUNK)
-            st, sd = np.sin(th[sl]), np.sin(td[sl])
-            x = np.empty((st.size, 6))
-            x[:, 0] = st
-            x[:, 1] = 0.0
-            x[:, 2] = np.cos(th[sl])
-            x[:, 3] = sd * np.cos(pd[sl])
-            x[:, 4] = sd * np.sin(pd[sl])
-            x[:, 5] = np.cos(td[sl])
-            y = self._forward(x).astype(np.float64)
-            out[sl] = np.maximum(np.expm1(y), 0.0)
-        out[~np.isfinite(out)] = 0.0
+            xt = np.empty((6, th[sl].size), dtype=dtype)
+            _inputs_t(th[sl], td[sl], pd[sl], xt)
+            _finish(self._forward_t(xt), out[sl])
         return out.reshape(shape + (3,))
 
     def describe(self) -> dict:
