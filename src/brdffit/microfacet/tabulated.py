@@ -299,7 +299,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         f = x - np.floor(x)
         v0 = _hermite(self._lu, self._llogp, self._ldlogp, u, j0)
         v1 = _hermite(self._lu, self._llogp, self._ldlogp, u, j1)
-        val = np.exp((1.0 - f) * v0 + f * v1)
+        val = (1.0 - f) * np.exp(v0) + f * np.exp(v1)  # linear in φ: exact φ-trapezoid
         with np.errstate(divide="ignore", over="ignore"):
             tail = (((1.0 - f) * self._p_last[j0] + f * self._p_last[j1])
                     * (self._r_last / np.maximum(r, self._r_last)) ** 4)
@@ -392,7 +392,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
             dens = self._p_unit_polar(r) * jac * 2.0 * np.pi
             cdf = np.concatenate([[0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(uu))])
             cdf /= cdf[-1]
-            self._sampling = (uu, cdf, None)
+            self._sampling = (uu, cdf, None, None)
         else:
             n = self.n_phi
             phis = self.phi
@@ -408,13 +408,13 @@ class TabulatedSlopeDistribution(SlopeDistribution):
             tot = ccdf[:, -1:]
             ccdf = np.where(tot > 0, ccdf / np.where(tot > 0, tot, 1.0),
                             np.linspace(0, 1, n + 1)[None, :])
-            self._sampling = (uu, cdf, ccdf)
+            self._sampling = (uu, cdf, ccdf, pp)
         return self._sampling
 
     def sample(self, u) -> np.ndarray:
         """Slopes distributed with :meth:`pdf` (Appendix A quantile transform, polar form)."""
         u = np.asarray(u, dtype=np.float64)
-        uu, cdf, ccdf = self._sampling_tables()
+        uu, cdf, ccdf, pnode = self._sampling_tables()
         uv = np.interp(u[..., 0], cdf, uu)
         r = np.tan(0.5 * np.pi * uv**2)
         if self.table_isotropic:
@@ -429,7 +429,17 @@ class TabulatedSlopeDistribution(SlopeDistribution):
             k = np.clip(k, 0, n - 1)
             lo = np.take_along_axis(rows, k[..., None], -1)[..., 0]
             hi = np.take_along_axis(rows, (k + 1)[..., None], -1)[..., 0]
-            frac = np.where(hi > lo, (u[..., 1] - lo) / np.where(hi > lo, hi - lo, 1.0), 0.5)
+            # the density is linear in φ inside a cell: invert its quadratic CDF exactly
+            dens = (1.0 - f)[..., None] * pnode[i0] + f[..., None] * pnode[i0 + 1]
+            dens = np.concatenate([dens, dens[..., :1]], axis=-1)
+            p0 = np.take_along_axis(dens, k[..., None], -1)[..., 0]
+            p1 = np.take_along_axis(dens, (k + 1)[..., None], -1)[..., 0]
+            c = np.clip(u[..., 1] - lo, 0.0, None) / np.where(hi > lo, hi - lo, 1.0) * 0.5 * (p0 + p1)
+            dp = p1 - p0
+            with np.errstate(invalid="ignore", divide="ignore"):
+                tq = (-p0 + np.sqrt(np.maximum(p0 * p0 + 2.0 * dp * c, 0.0))) / dp
+            tl = np.where(p0 > 0, c / np.where(p0 > 0, p0, 1.0), 0.5)
+            frac = np.where(np.abs(dp) > 1e-12 * np.maximum(p0 + p1, 1e-300), tq, tl)
             phi = (k + np.clip(frac, 0, 1)) * (2.0 * np.pi / n)
         ax, ay = self._alphas()
         # normal azimuth φ -> slope -r (cos φ, sin φ); scale by α (Eq. 9)
@@ -451,7 +461,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
             return self._visible
         m = 512
         v = np.linspace(0.0, 1.0, m + 1)[:-1] + 0.5 / m  # avoid the pole at v = 1
-        v = np.concatenate([[0.0], v, [1.0 - 1e-7]])
+        v = np.concatenate([[0.0], v])  # |slope| ≤ tan(89.8°): the mass beyond is negligible
         ygrid = np.tan(0.5 * np.pi * v**2)  # ≥ 0, dense near 0
         xpos = ygrid
         rr = np.hypot(xpos[:, None], ygrid[None, :])
