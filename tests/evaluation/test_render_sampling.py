@@ -138,3 +138,45 @@ def test_anisotropic_generic_table():
     err = resampling_error(brdf, ev, n=1 << 14)
     assert err["rel_cos"] < 0.05
     _check_sampling(ev, brdf, 45.0, n=1 << 16, ref_albedo=brdf.albedo([np.radians(45)], 1 << 16)[0])
+
+
+def test_non_reciprocal_brdf_gets_full_phi_table():
+    """A non-reciprocal isotropic BRDF is tabulated over φd ∈ [0, 2π) (no folding)."""
+    from brdffit.brdf import IsotropicBRDF
+    from brdffit.evaluation.render import drjit_eval as dj
+    from brdffit.evaluation.render.translate import (is_reciprocal, resampling_error,
+                                                     to_evaluator)
+
+    base = _models()["ggx+diffuse"]
+
+    class Skewed(IsotropicBRDF):
+        name = "skewed"
+
+        def eval(self, wi, wo):  # isotropic (depends on wi·wo and the cosines) but not reciprocal
+            wi, wo = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wo, float))
+            return base.eval(wi, wo) * (1.0 + 0.8 * wi[..., 2] ** 2)[..., None]
+
+    b = Skewed()
+    assert not is_reciprocal(b) and is_reciprocal(base)
+    ev = to_evaluator(b)
+    assert ev.kind == "merl-table" and ev.n_phi == 360
+    full = resampling_error(b, ev, n=1 << 14)["rel_cos"]
+    from brdffit.grid import tabulate_merl_grid
+
+    folded = resampling_error(b, dj.MERLTableEval(tabulate_merl_grid(b)[0]), n=1 << 14)["rel_cos"]
+    assert full < 0.01 < folded
+
+
+def test_log_interpolation_reduces_peak_bias():
+    """Sharp lobe: log-space trilinear is less biased than linear (energy of the table)."""
+    from brdffit.evaluation.render import drjit_eval as dj
+    from brdffit.evaluation.render.translate import resampling_error
+    from brdffit.grid import tabulate_merl_grid
+    from brdffit.microfacet import GGX, MicrofacetBRDF
+
+    b = MicrofacetBRDF(GGX(0.01), None, diffuse=0.05)
+    values, _ = tabulate_merl_grid(b)
+    e_log = resampling_error(b, dj.MERLTableEval(values, interp="log"), n=1 << 15)
+    e_lin = resampling_error(b, dj.MERLTableEval(values, interp="linear"), n=1 << 15)
+    assert e_log["albedo_rel"] < e_lin["albedo_rel"]
+    assert e_log["rel_cos"] < 0.1

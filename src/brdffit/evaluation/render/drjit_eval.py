@@ -43,7 +43,7 @@ from ._mitsuba import load as _load
 
 mi, dr = _load()
 
-__all__ = ["MERLTableEval", "Table4DEval", "MicrofacetEval", "GGXDist", "BeckmannDist",
+__all__ = ["MERLTableEval", "tabulate_full_phi", "Table4DEval", "MicrofacetEval", "GGXDist", "BeckmannDist",
            "RadialTableDist", "SumEval", "SchlickFresnelDJ", "TableFresnelDJ", "ConstantFresnelDJ",
            "fit_ggx_proxy", "half_diff", "ggx_vndf_sample", "ggx_D", "ggx_lambda",
            "cosine_sample", "to_vec3", "to_numpy"]
@@ -193,49 +193,87 @@ class _ProxySampling:
 
 # -- generic tables -------------------------------------------------------------------------
 class MERLTableEval(_ProxySampling):
-    """Trilinear lookup in a MERL-grid table ``(90, 90, 180, 3)`` (generic isotropic path).
+    """Trilinear lookup in a MERL-grid table ``(90, 90, Nφ, 3)`` (generic isotropic path).
 
     θh index ``sqrt(θh/(π/2))·90`` (MERL's mapping, :mod:`brdffit.grid`), clamped to the
-    last sample; θd index ``θd/(π/2)·90`` clamped; φd index ``(φd mod π)/π·180`` periodic
-    (reciprocity). Invalid samples (``valid == False``) are replaced by 0, as MERL's readers do.
+    last sample; θd index ``θd/(π/2)·90`` clamped; φd periodic. ``Nφ = 180`` is MERL's own
+    grid on [0, π) (reciprocity folds φd mod π); ``Nφ = 360`` covers [0, 2π) with the same
+    1° spacing and is used for BRDFs that are *not* reciprocal (Neural-BRDF networks and RGL
+    measurements are not exactly: swapping wi and wo changes them by a few %), so that
+    nothing is folded away. Invalid samples (``valid == False``) are replaced by 0, as MERL's
+    readers do.
+
+    ``interp="log"`` (default) interpolates ``log(f + ε)`` and returns ``exp(·) − ε`` with
+    ``ε = 0.05 · median(f)``: the specular peak is close to exponential between samples, where
+    linear interpolation is biased upwards (measured on the Neural-BRDF chrome-steel: albedo
+    error 2.3 % linear vs 0.2 % log; cosine-weighted L1 2.9 % vs 1.7 %; on diffuse and
+    glossy paints both are ≈ 0.1 %). ``interp="linear"`` is plain trilinear.
     """
 
     kind = "merl-table"
 
-    def __init__(self, values, valid=None):
-        from ...grid import N_PHI_D, N_THETA_D, N_THETA_H
+    def __init__(self, values, valid=None, interp: str = "log"):
+        from ...grid import N_THETA_D, N_THETA_H, merl_theta_h
 
+        if interp not in ("log", "linear"):
+            raise ValueError(f"interp must be 'log' or 'linear', got {interp!r}")
         v = np.asarray(values, dtype=np.float64)
-        if v.shape != (N_THETA_H, N_THETA_D, N_PHI_D, 3):
-            raise ValueError(f"expected a MERL table of shape (90, 90, 180, 3), found {v.shape}")
+        if v.ndim != 4 or v.shape[:2] != (N_THETA_H, N_THETA_D) or v.shape[2] not in (180, 360) \
+                or v.shape[3] != 3:
+            raise ValueError(f"expected a MERL table of shape (90, 90, 180|360, 3), found {v.shape}")
         v = np.where(np.isfinite(v), np.maximum(v, 0.0), 0.0)
         if valid is not None:
             v = np.where(np.asarray(valid, bool)[..., None], v, 0.0)
+        self.n_phi = v.shape[2]
+        self.period = np.pi if self.n_phi == 180 else 2.0 * np.pi
         self.values = v.astype(np.float32)
-        self.buffer = mi.Float(self.values.ravel())
-        from ...grid import merl_theta_h
-
+        self.interp = interp
+        if interp == "log":
+            pos = v[v > 0]
+            self.eps = float(max(0.05 * np.median(pos), 1e-6)) if pos.size else 1e-6
+            self.buffer = mi.Float(np.log(v + self.eps).astype(np.float32).ravel())
+        else:
+            self.eps = 0.0
+            self.buffer = mi.Float(self.values.ravel())
         lum = self.values[:, 0, 0, :] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
         self.proxy_alpha, self.proxy_weight = fit_ggx_proxy(merl_theta_h(), lum)
 
     def eval(self, wi, wo, alpha_scale=1.0, active=True):
         th, td, pd, _ = half_diff(wi, wo)
+        n_phi, period = self.n_phi, self.period
         xh = dr.clip(dr.sqrt(th * (2.0 / dr.pi)) * 90.0, 0.0, 89.0)
         xd = dr.clip(td * (180.0 / dr.pi), 0.0, 89.0)
-        pdm = pd - dr.pi * dr.floor(pd * INV_PI)
-        xp = dr.clip(pdm * (180.0 / dr.pi), 0.0, 179.99998)
+        pdm = pd - period * dr.floor(pd / period)
+        xp = dr.clip(pdm * (n_phi / period), 0.0, n_phi - 1e-4)
         ih0 = mi.UInt32(dr.floor(xh)); fh = xh - mi.Float(ih0); ih1 = dr.minimum(ih0 + 1, 89)
         id0 = mi.UInt32(dr.floor(xd)); fd = xd - mi.Float(id0); id1 = dr.minimum(id0 + 1, 89)
         ip0 = mi.UInt32(dr.floor(xp)); fp = xp - mi.Float(ip0)
-        ip1 = dr.select(ip0 + 1 >= 180, 0, ip0 + 1)
+        ip1 = dr.select(ip0 + 1 >= n_phi, 0, ip0 + 1)
         ok = active & (wi.z > 0) & (wo.z > 0)
         out = mi.Color3f(0.0)
         for ih, wh in ((ih0, 1.0 - fh), (ih1, fh)):
             for idd, wd in ((id0, 1.0 - fd), (id1, fd)):
-                base = (ih * 90 + idd) * 180
+                base = (ih * 90 + idd) * n_phi
                 for ip, wp in ((ip0, 1.0 - fp), (ip1, fp)):
                     out += (wh * wd * wp) * dr.gather(mi.Color3f, self.buffer, base + ip, ok)
+        if self.interp == "log":
+            out = dr.maximum(dr.exp(out) - self.eps, 0.0)
         return dr.select(ok, out, 0.0)
+
+
+def tabulate_full_phi(brdf, chunk: int = 1 << 18) -> np.ndarray:
+    """Evaluate an isotropic BRDF on the MERL θh × θd grid with 360 φd samples on [0, 2π)
+    (1° steps, no reciprocity folding): ``(90, 90, 360, 3)``."""
+    from ...grid import merl_theta_d, merl_theta_h
+
+    pd_axis = np.arange(360) * (np.pi / 180.0)
+    th, td, pd = (a.ravel() for a in np.meshgrid(merl_theta_h(), merl_theta_d(), pd_axis,
+                                                  indexing="ij"))
+    out = np.empty((th.size, 3))
+    for s in range(0, th.size, chunk):
+        sl = slice(s, s + chunk)
+        out[sl] = brdf.eval_hd(th[sl], td[sl], pd[sl])
+    return out.reshape(90, 90, 360, 3)
 
 
 class Table4DEval(_ProxySampling):

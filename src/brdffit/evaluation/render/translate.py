@@ -10,7 +10,8 @@ Resolution order of :func:`to_evaluator` (``mode="auto"``):
    tabulated radial table for any other isotropic distribution; Schlick in closed form, any
    other Fresnel tabulated over cos θd);
 3. the generic table: isotropic → MERL grid + trilinear (:class:`.drjit_eval.MERLTableEval`),
-   anisotropic → 4D (θh, φh, θd, φd) table + quadrilinear (:class:`.drjit_eval.Table4DEval`).
+   (360 φd samples over [0, 2π) instead of MERL's 180 over [0, π) when the BRDF is not
+   reciprocal, see :func:`is_reciprocal`), anisotropic → 4D (θh, φh, θd, φd) table + quadrilinear (:class:`.drjit_eval.Table4DEval`).
 
 Every translated (non-table) evaluator is *verified* against ``brdf.eval`` at random
 directions (cosine-weighted relative error, :func:`resampling_error`); above
@@ -28,7 +29,7 @@ import numpy as np
 
 from ...errors import BRDFError
 
-__all__ = ["to_evaluator", "register_translator", "resampling_error", "tabulate_4d",
+__all__ = ["to_evaluator", "is_reciprocal", "register_translator", "resampling_error", "tabulate_4d",
            "evaluate_drjit", "TABLE4D_SHAPE"]
 
 _TRANSLATORS: dict[str, Callable] = {}
@@ -136,12 +137,17 @@ def tabulate_4d(brdf, shape=TABLE4D_SHAPE, chunk: int = 1 << 18) -> np.ndarray:
     return out.reshape(*shape, 3)
 
 
-def _table_evaluator(brdf, table4d_shape=TABLE4D_SHAPE):
+def _table_evaluator(brdf, table4d_shape=TABLE4D_SHAPE, reciprocal=None):
     dj = _dj()
     if getattr(brdf, "isotropic", False) and hasattr(brdf, "eval_hd"):
-        from ...grid import tabulate_merl_grid
+        if reciprocal is None:
+            reciprocal = is_reciprocal(brdf)
+        if getattr(brdf, "merl_table", None) is not None or reciprocal:
+            from ...grid import tabulate_merl_grid
 
-        values, valid = tabulate_merl_grid(brdf)
+            values, valid = tabulate_merl_grid(brdf)   # MERL's own grid, φd ∈ [0, π)
+        else:
+            values, valid = dj.tabulate_full_phi(brdf), None
         ev = dj.MERLTableEval(values, valid)
     else:
         from ...grid import merl_theta_h
@@ -155,6 +161,16 @@ def _table_evaluator(brdf, table4d_shape=TABLE4D_SHAPE):
         ev = dj.Table4DEval(values, alpha, w)
     ev.source_kind = "table"
     return ev
+
+
+def is_reciprocal(brdf, n: int = 4096, tol: float = 1e-3, seed: int = 1) -> bool:
+    """True when ``f(wi, wo) = f(wo, wi)`` at random cosine-distributed pairs (cosine-weighted
+    relative L1 difference below ``tol``). Decides whether the MERL grid's reciprocity
+    folding (φd mod π) is lossless for this BRDF."""
+    wi, wo = _random_pairs(n, seed)
+    a = np.nan_to_num(np.asarray(brdf.eval(wi, wo), np.float64))
+    b = np.nan_to_num(np.asarray(brdf.eval(wo, wi), np.float64))
+    return bool(np.abs(a - b).sum() <= tol * max(np.abs(a).sum(), 1e-300))
 
 
 def to_evaluator(brdf, mode: str = "auto", verify_tol: float = 0.02, seed: int = 0):
