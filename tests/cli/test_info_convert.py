@@ -92,15 +92,10 @@ def test_convert_nbrdf_collection_to_merl(tmp_path, capsys, monkeypatch):
     assert len(listing["materials"]) == 100 and "gold-metallic-paint" in listing["materials"]
 
 
-def test_subprocess_entry_point(merl_with_holes, tmp_path):
-    path, _, valid = merl_with_holes
-    env = dict(os.environ)
-    cmd = [sys.executable, "-m", "brdffit.cli", "info", str(path), "--json",
-           "--albedo-samples", "256"]
-    res = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=120)
-    assert res.returncode == 0, res.stderr
-    assert json.loads(res.stdout)["samples"]["n_invalid"] == int((~valid).sum())
-    bad = subprocess.run([sys.executable, "-m", "brdffit.cli", "info", str(tmp_path / "no.bin")],
-                         capture_output=True, text=True, env=env, timeout=120)
-    assert bad.returncode == 1 and "Traceback" not in bad.stderr
-    assert bad.stderr.strip().count("\n") == 0 and "no.bin" in bad.stderr
+def test_subprocess_entry_point(tmp_path):
+    """The real entry point: a failing command prints one line, no traceback, exit 1."""
+    res = subprocess.run([sys.executable, "-m", "brdffit.cli", "info", str(tmp_path / "no.bin")],
+                         capture_output=True, text=True, env=dict(os.environ), timeout=120)
+    assert res.returncode == 1 and "Traceback" not in res.stderr
+    assert res.stderr.startswith("brdffit: error:") and res.stderr.strip().count("\n") == 0
+    assert "no.bin" in res.stderr and res.stdout == ""
