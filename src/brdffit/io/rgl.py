@@ -204,6 +204,63 @@ class _Marginal2D:
         y = y + np.where(has_row, lk(self.marg, self.n_marg, np.maximum(py - 1, 0)), 0.0)
         return np.stack([x, y], axis=-1), pdf
 
+    @staticmethod
+    def _lower_bound(n, start, end, pred):
+        """``dr::binary_search``: first index in [start, end] where ``pred`` is false."""
+        lo = np.full(n, start, np.int64)
+        hi = np.full(n, end, np.int64)
+        iterations = int(np.floor(np.log2(end - start))) + 1 if end > start else 0
+        for _ in range(iterations):
+            mid = (lo + hi) >> 1
+            cond = pred(mid)
+            lo, hi = np.where(cond, np.minimum(mid + 1, hi), lo), np.where(cond, hi, mid)
+        return lo
+
+    @staticmethod
+    def _sample_segment(sample, inv_width, v0, v1):
+        """``Marginal2D::sample_segment``: invert the CDF of a linear segment."""
+        non_const = np.abs(v0 - v1) > 1e-4 * (v0 + v1)
+        divisor = np.where(non_const, v0 - v1, v0 + v1)
+        sample = sample * (2.0 * inv_width)
+        sample = np.where(non_const, v0 - np.sqrt(np.maximum(v0 * v0 + sample * (v1 - v0), 0.0)),
+                          sample)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(divisor != 0, sample / divisor, sample)
+
+    def sample(self, u, corners):
+        """``Marginal2D::sample_continuous``: warp uniform ``u`` (N, 2); returns (pos, pdf)."""
+        eps = 2.0 ** -24                         # dr::Epsilon<float>, OneMinusEpsilon
+        u = np.clip(np.asarray(u, np.float64), eps, 1.0 - eps)
+        x, y = u[:, 0].copy(), u[:, 1].copy()
+        n = x.shape[0]
+        lk = lambda t, n, idx: self._lookup(t, n, corners, idx)  # noqa: E731
+        wm1, nm = self.w - 1, self.n_marg
+        row = self._lower_bound(n, 0, nm - 1, lambda i: lk(self.marg, nm, i) < y)
+        y = y - np.where(row > 0, lk(self.marg, nm, np.maximum(row - 1, 0)), 0.0)
+        off_cond = row * wm1
+        r0 = lk(self.cond, self.n_cond, off_cond + wm1 - 1)
+        r1 = lk(self.cond, self.n_cond, off_cond + 2 * wm1 - 1)
+        y = self._sample_segment(y, self.h - 1, r0, r1)
+        x = x * (r0 + (r1 - r0) * y)
+
+        def cond_at(i):
+            v0 = lk(self.cond, self.n_cond, off_cond + i)
+            v1 = lk(self.cond, self.n_cond, off_cond + i + wm1)
+            return v0 + (v1 - v0) * y
+
+        col = self._lower_bound(n, 0, wm1, lambda i: cond_at(i) < x)
+        x = x - np.where(col > 0, cond_at(np.maximum(col - 1, 0)), 0.0)
+        i = row * self.w + col
+        v00 = lk(self.data, self.n_data, i)
+        v10 = lk(self.data, self.n_data, i + 1)
+        v01 = lk(self.data, self.n_data, i + self.w)
+        v11 = lk(self.data, self.n_data, i + self.w + 1)
+        c0 = v00 + (v01 - v00) * y
+        c1 = v10 + (v11 - v10) * y
+        x = self._sample_segment(x, wm1, c0, c1)
+        pos = np.stack([(col + x) / wm1, (row + y) / (self.h - 1)], axis=-1)
+        return pos, c0 + (c1 - c0) * x
+
 
 # ------------------------------------------------------------------ public classes
 @dataclass(frozen=True)
@@ -329,7 +386,7 @@ class RGLBRDF(BRDF):
         self._ndf = _Marginal2D(self.ndf, (), normalize=False, enable_sampling=False)
         self._sigma = _Marginal2D(self.sigma, (), normalize=False, enable_sampling=False)
         self._vndf = _Marginal2D(self.vndf, params)
-        self._luminance = None  # built lazily (only needed by pdf/sample, not by eval)
+        self._luminance = _Marginal2D(self.luminance, params)   # used by sample/pdf only
         if self.rgb is not None:
             # Warp2D3 over (φi, θi, channel) with channel values {0, 1, 2}: at an integer channel
             # the interpolation weight is exactly 0/1, so a per-texel RGB gather is identical.
@@ -403,23 +460,15 @@ class RGLBRDF(BRDF):
             return out
         wi, wo = wi[active].copy(), wo[active].copy()
         if self.reduction >= 2:
-            # fold by symmetry: x, y -> mulsign_neg(·, s): negate where the sign bit of s is clear
-            sy = wi[:, 1].copy()
-            sx = wi[:, 0].copy() if self.reduction == 4 else sy
-            fx = np.where(np.signbit(sx), 1.0, -1.0)
-            fy = np.where(np.signbit(sy), 1.0, -1.0)
+            fx, fy = self._fold(wi)       # symmetry reduction (see _fold)
             wi[:, 0] *= fx
             wi[:, 1] *= fy
             wo[:, 0] *= fx
             wo[:, 1] *= fy
         m = wi + wo
         m /= np.linalg.norm(m, axis=-1, keepdims=True)
-        theta_i, phi_i = elevation(wi), np.arctan2(wi[:, 1], wi[:, 0])
-        theta_m, phi_m = elevation(m), np.arctan2(m[:, 1], m[:, 0])
+        theta_i, phi_i, u_m = self._warp_angles(wi, m)
         u_wi = np.stack([theta_to_u(theta_i), phi_to_u(phi_i)], -1)
-        u_m = np.stack([theta_to_u(theta_m),
-                        phi_to_u(phi_m - phi_i if self.isotropic else phi_m)], -1)
-        u_m[:, 1] -= np.floor(u_m[:, 1])
         params = [phi_i, theta_i]
         corners = self._vndf.corners(params)          # same params for vndf and rgb
         sample, _ = self._vndf.invert(u_m, corners)
@@ -443,6 +492,113 @@ class RGLBRDF(BRDF):
                 spec = spec * (d / (4.0 * sg))[:, None]
         out[active] = spec
         return out
+
+    def _fold(self, wi):
+        """Symmetry reduction of ``Measured``: per-sample sign multipliers for x and y.
+
+        ``mulsign_neg(v, s)`` negates ``v`` where the sign bit of ``s`` is clear. With
+        ``reduction`` 2, s = wi.y for both axes (rotation by π into φi ∈ [−π, 0]); with 4,
+        s = (wi.x, wi.y) (mirrors into φi ∈ [−π, −π/2]). Identity otherwise.
+        """
+        if self.reduction < 2:
+            one = np.ones(wi.shape[0])
+            return one, one
+        sy = wi[:, 1]
+        sx = wi[:, 0] if self.reduction == 4 else sy
+        return np.where(np.signbit(sx), 1.0, -1.0), np.where(np.signbit(sy), 1.0, -1.0)
+
+    def _warp_angles(self, wi, m):
+        theta_i, phi_i = elevation(wi), np.arctan2(wi[:, 1], wi[:, 0])
+        theta_m, phi_m = elevation(m), np.arctan2(m[:, 1], m[:, 0])
+        u_m = np.stack([theta_to_u(theta_m),
+                        phi_to_u(phi_m - phi_i if self.isotropic else phi_m)], -1)
+        u_m[:, 1] -= np.floor(u_m[:, 1])
+        return theta_i, phi_i, u_m
+
+    def pdf_mitsuba(self, wi_m, wo_m) -> np.ndarray:
+        """``Measured::pdf``: solid-angle density of ``wo_m`` drawn by :meth:`sample_mitsuba`.
+
+        vndf.invert gives the warped sample and the VNDF density in (u_θ, u_φ); times the
+        luminance density there; divided by the Jacobian
+        ``max(2π² u_θ sin θm, 1e-6) · 4 (wi·m)`` from (u_θ, u_φ) of the half vector to ωo.
+        """
+        wi_m, wo_m = _as_dirs(wi_m, wo_m)
+        shape = wi_m.shape[:-1]
+        wi, wo = wi_m.reshape(-1, 3).copy(), wo_m.reshape(-1, 3).copy()
+        out = np.zeros(wi.shape[0])
+        active = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+        if active.any():
+            wi, wo = wi[active], wo[active]
+            fx, fy = self._fold(wi)
+            wi[:, 0] *= fx; wi[:, 1] *= fy; wo[:, 0] *= fx; wo[:, 1] *= fy  # noqa: E702
+            m = wi + wo
+            m /= np.linalg.norm(m, axis=-1, keepdims=True)
+            theta_i, phi_i, u_m = self._warp_angles(wi, m)
+            corners = self._vndf.corners([phi_i, theta_i])
+            sample, vndf_pdf = self._vndf.invert(u_m, corners)
+            lum_pdf = self._luminance.eval(sample, corners)
+            sin_m = np.sqrt(np.maximum(1.0 - m[:, 2] ** 2, 0.0))
+            jac = np.maximum(2 * np.pi ** 2 * u_m[:, 0] * sin_m, 1e-6) * 4 * np.sum(wi * m, -1)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                p = vndf_pdf * lum_pdf / jac
+            out[active] = np.where(np.isfinite(p) & (p > 0), p, 0.0)
+        return out.reshape(shape)
+
+    def sample_mitsuba(self, wi_m, u) -> tuple[np.ndarray, np.ndarray]:
+        """``Measured::sample`` (importance sampling by luminance then VNDF): ``(wo, pdf)``.
+
+        ``u`` (..., 2) plays Mitsuba's ``sample2``; the luminance warp is fed ``(u.y, u.x)``,
+        its output warped by the VNDF to the half vector's (u_θ, u_φ) (φ relative to φi for
+        isotropic files), and ``wo`` is the reflection of ``wi`` about it. ``pdf`` is 0 for
+        directions below the horizon.
+        """
+        wi_m = np.asarray(wi_m, np.float64)
+        u = np.asarray(u, np.float64)
+        shape = np.broadcast_shapes(wi_m.shape[:-1], u.shape[:-1])
+        wi = np.broadcast_to(wi_m, shape + (3,)).reshape(-1, 3).copy()
+        uu = np.broadcast_to(u, shape + (2,)).reshape(-1, 2)
+        wo_out = np.zeros_like(wi)
+        wo_out[:, 2] = 1.0
+        pdf_out = np.zeros(wi.shape[0])
+        active = wi[:, 2] > 0
+        if active.any():
+            wi, uu = wi[active], uu[active]
+            fx, fy = self._fold(wi)
+            wi[:, 0] *= fx
+            wi[:, 1] *= fy
+            theta_i, phi_i = elevation(wi), np.arctan2(wi[:, 1], wi[:, 0])
+            corners = self._vndf.corners([phi_i, theta_i])
+            s, lum_pdf = self._luminance.sample(uu[:, ::-1], corners)
+            u_m, ndf_pdf = self._vndf.sample(s, corners)
+            phi_m, theta_m = u_to_phi(u_m[:, 1]), u_to_theta(u_m[:, 0])
+            if self.isotropic:
+                phi_m = phi_m + phi_i
+            st = np.sin(theta_m)
+            m = np.stack([np.cos(phi_m) * st, np.sin(phi_m) * st, np.cos(theta_m)], -1)
+            dot = np.sum(wi * m, -1)
+            jac = np.maximum(2 * np.pi ** 2 * u_m[:, 0] * st, 1e-6) * 4 * dot
+            wo = m * (2 * dot)[:, None] - wi
+            wo[:, 0] *= fx
+            wo[:, 1] *= fy
+            with np.errstate(divide="ignore", invalid="ignore"):
+                p = ndf_pdf * lum_pdf / jac
+            ok = (wo[:, 2] > 0) & np.isfinite(p) & (p > 0)
+            wo_out[active] = wo
+            pdf_out[active] = np.where(ok, p, 0.0)
+        return wo_out.reshape(shape + (3,)), pdf_out.reshape(shape)
+
+    def sample(self, wi, u) -> tuple[np.ndarray, np.ndarray]:
+        """Importance-sample ``wo`` given ``wi`` as Mitsuba's ``Measured::sample`` does.
+
+        Mitsuba samples the light direction given ``si.wi`` ∝ f·cos of the sampled
+        direction; by reciprocity the same warp, fed our ``wi`` as ``si.wi``, samples our
+        ``wo`` ∝ f_r(wi, wo) cos θo. ``pdf`` is the solid-angle density (0 if invalid).
+        """
+        return self.sample_mitsuba(wi, u)
+
+    def pdf(self, wi, wo) -> np.ndarray:
+        """Solid-angle density of :meth:`sample` (``Measured::pdf`` with si.wi = ``wi``)."""
+        return self.pdf_mitsuba(wi, wo)
 
     def eval(self, wi, wo) -> np.ndarray:
         """f_r(wi, wo) in 1/sr, RGB ``(..., 3)``: ``Measured::eval(si.wi=wo, wo=wi) / cos θi``.
