@@ -1,0 +1,169 @@
+"""Rendering benchmark (issue 5): Mitsuba 3 sphere renders per model, noise floor, and the
+resampling error of the Dr.Jit evaluators.
+
+Run: ``.venv/bin/python bench/bench_render.py`` (``--quick`` for a 64², 32 spp smoke run,
+``--fits`` to also fit and render the registered models of ``brdffit.fit``). Writes
+``bench/results/render.json`` (atomically) and prints a table.
+
+Figures (per model, 256×256 sphere at 256 spp under an environment map, target ≤ 5 s):
+
+* ``setup_s``: BRDF → Dr.Jit evaluator (tabulation for the generic path) + scene load;
+* ``first_render_s``: first render (includes tracing the plugin and LLVM compilation);
+* ``render_s``: second render (other seed, kernels cached) = steady-state cost;
+* ``noise_floor_psnr``: PSNR (Bagher 2016 §5) between the two seeds;
+* ``resampling``: :func:`brdffit.evaluation.render.translate.resampling_error` (cosine-
+  weighted relative L1 / L2 / albedo error of the Dr.Jit evaluator vs ``brdf.eval``);
+* for fits: ``psnr_vs_reference`` (same seed as the reference's first render).
+
+Timings depend on machine load (shared 2-core machine during development): re-run to update.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+SHARED = ROOT.parent / "shared" / "data"
+NBRDF = SHARED / "nbrdf" / "merl_nbrdf.zip"
+DEFAULT_MATERIALS = [f"{NBRDF}:{m}" for m in ("blue-metallic-paint", "chrome-steel",
+                                               "white-paint", "gold-metallic-paint")] + [
+    str(SHARED / "rgl" / "paper_white_rgb.bsdf")]
+DEFAULT_SYNTHETIC = ["synthetic:gold-ggx", "synthetic:plastic-beckmann", "synthetic:aniso-ggx",
+                     "synthetic:sgd-paint", "synthetic:two-lobe-ggx"]
+
+
+def _bench_one(label, brdf, args, reference=None, mode="auto"):
+    from brdffit.evaluation.render import Renderer, psnr
+    from brdffit.evaluation.render.translate import resampling_error
+
+    r = Renderer(brdf, scene=args.scene, envmap=args.envmap, spp=args.spp,
+                 resolution=args.resolution, mode=mode)
+    a = r.render(0)
+    b = r.render(1)
+    t0 = time.perf_counter()
+    err = resampling_error(brdf, r.evaluator, n=1 << 16)
+    t_err = time.perf_counter() - t0
+    out = {
+        "label": label, "model": type(brdf).__name__,
+        "evaluator": a.info["evaluator"], "path": a.info["path"],
+        "setup_s": round(r.setup_seconds, 3), "first_render_s": round(a.seconds, 3),
+        "render_s": round(b.seconds, 3),
+        "noise_floor_psnr": round(psnr(a.image, b.image, a.mask), 2),
+        "resampling": {k: (round(v, 6) if isinstance(v, float) else v) for k, v in err.items()},
+        "resampling_s": round(t_err, 3),
+        "foreground_fraction": round(float(a.mask.mean()), 4),
+    }
+    if reference is not None:
+        out["psnr_vs_reference"] = round(psnr(reference.image, a.image, reference.mask), 2)
+    print(f"  {label:<34} {out['evaluator']:<11} {out['path']:<11} setup {out['setup_s']:6.2f} s  "
+          f"first {out['first_render_s']:6.2f} s  render {out['render_s']:6.2f} s  "
+          f"noise-floor {out['noise_floor_psnr']:6.2f} dB  resampling L1 {err['rel_cos']:.2e} "
+          f"albedo {err['albedo_rel']:.2e}"
+          + (f"  PSNR vs ref {out['psnr_vs_reference']:.2f} dB" if reference is not None else ""),
+          flush=True)
+    return out, a
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--materials", nargs="*", default=None)
+    ap.add_argument("--synthetic", nargs="*", default=DEFAULT_SYNTHETIC)
+    ap.add_argument("--scene", default="sphere-env")
+    ap.add_argument("--envmap", default="studio")
+    ap.add_argument("--spp", type=int, default=256)
+    ap.add_argument("--resolution", type=int, default=256)
+    ap.add_argument("--fits", nargs="*", default=None,
+                    help="fit and render these registered models (no value: all registered)")
+    ap.add_argument("--quick", action="store_true", help="64², 32 spp, one material")
+    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "render.json"))
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.spp, args.resolution = 32, 64
+    from brdffit.evaluation.render import available, envmap_names
+
+    if not available():
+        print("Mitsuba 3 LLVM back-end unavailable: nothing to benchmark", file=sys.stderr)
+        return 1
+    if args.envmap not in envmap_names() and not Path(args.envmap).is_file():
+        print(f"envmap {args.envmap!r} not found; using the procedural environment")
+        args.envmap = None
+    materials = args.materials
+    if materials is None:
+        materials = [m for m in DEFAULT_MATERIALS if Path(m.split(".zip:")[0] + (".zip" if ".zip:" in m else "")).exists()]
+        if args.quick:
+            materials = materials[:1]
+    from brdffit.io import load
+
+    results = {"settings": {"scene": args.scene, "envmap": args.envmap, "spp": args.spp,
+                            "resolution": args.resolution},
+               "machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
+                           "load_avg_start": os.getloadavg()},
+               "measured": [], "synthetic": [], "fits": []}
+    print(f"{args.resolution}² sphere, {args.spp} spp, scene {args.scene}, envmap "
+          f"{args.envmap or 'procedural'}")
+    print("measured materials (generic MERL-grid table path):")
+    refs = {}
+    for spec in materials:
+        brdf = load(spec)
+        rec, img = _bench_one(brdf.name, brdf, args)
+        rec["spec"] = spec
+        results["measured"].append(rec)
+        refs[spec] = (brdf, img)
+    print("analytic models (closed-form path; and the table path for comparison):")
+    for spec in (args.synthetic if not args.quick else args.synthetic[:1]):
+        brdf = load(spec)
+        rec, img = _bench_one(spec.split(":", 1)[1], brdf, args)
+        rec["spec"] = spec
+        trec, _ = _bench_one(spec.split(":", 1)[1] + " [table]", brdf, args, reference=img,
+                             mode="table")
+        rec["table_path"] = trec
+        results["synthetic"].append(rec)
+    if args.fits is not None:
+        from brdffit.fit.registry import fit as run_fit, list_fitters
+
+        names = args.fits or [f if isinstance(f, str) else f.name for f in list_fitters()]
+        print(f"fits ({', '.join(names)}) of each measured material:")
+        for spec, (brdf, ref_img) in refs.items():
+            for name in names:
+                t0 = time.perf_counter()
+                try:
+                    model = run_fit(name, brdf)
+                except Exception as exc:  # a fit that fails is recorded, not fatal
+                    print(f"  {brdf.name}/{name}: fit failed: {exc}")
+                    results["fits"].append({"material": brdf.name, "fit": name, "error": str(exc)})
+                    continue
+                t_fit = time.perf_counter() - t0
+                rec, _ = _bench_one(f"{brdf.name}/{name}", model, args, reference=ref_img)
+                rec.update({"material": brdf.name, "fit": name, "fit_s": round(t_fit, 2)})
+                results["fits"].append(rec)
+    results["machine"]["load_avg_end"] = os.getloadavg()
+    all_recs = (results["measured"] + results["synthetic"]
+                + [r["table_path"] for r in results["synthetic"] if "table_path" in r]
+                + [r for r in results["fits"] if "render_s" in r])
+    rt = [r["render_s"] for r in all_recs if "render_s" in r]
+    results["summary"] = {
+        "render_s_max": max(rt) if rt else None, "render_s_median": float(np.median(rt)) if rt else None,
+        "target_s": 5.0, "within_target": bool(rt) and max(rt) <= 5.0,
+        "noise_floor_psnr_min": min(r["noise_floor_psnr"] for r in all_recs) if all_recs else None,
+    }
+    from brdffit._atomic import atomic_write
+
+    with atomic_write(args.out, "w") as fh:
+        json.dump(results, fh, indent=1, default=float)
+    print(f"summary: {results['summary']}")
+    print(f"wrote {args.out}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
