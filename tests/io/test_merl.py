@@ -87,9 +87,9 @@ def test_nearest_reproduces_stored_values_at_grid_points(merl_file):
     values, _ = b.merl_table()
     th, td, pd = _grid()
     np.testing.assert_array_equal(b.eval_hd(th, td, pd), values)
-    # MERL's lookup truncates the index: just inside a cell gives the cell's first sample
-    eps_h = np.diff(merl_theta_h())[:, None, None] * 0.3
-    got = b.eval_hd(th[:-1] + eps_h, td[:-1] + 0.3 * np.pi / 180, pd[:-1] + 0.3 * np.pi / 180)
+    # MERL's lookup truncates the index (not rounding): 70% into a cell gives its first sample
+    eps_h = np.diff(merl_theta_h())[:, None, None] * 0.7
+    got = b.eval_hd(th[:-1] + eps_h, td[:-1] + 0.7 * np.pi / 180, pd[:-1] + 0.7 * np.pi / 180)
     np.testing.assert_array_equal(got, values[:-1])
 
 
