@@ -386,8 +386,9 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int = 4, tol: float | Non
     rule:
         Radial rule: ``"merl"`` (rectangles on θ = (π/2)u², supplemental Eq. 17-22),
         ``"gauss"`` (Gauss-Legendre in u: exact eigenvalue and moments, better for heavy
-        tails) or ``"auto"``: ``"merl"`` for isotropic fits with ``n = 90`` (MERL tables
-        are then read at their own samples, supplemental Eq. 20-22), else ``"gauss"``.
+        tails) or ``"auto"``: ``"merl"`` for isotropic fits of MERL-grid input
+        (``merl_table``) with ``n = 90`` (read at their own samples, supplemental Eq. 20-22),
+        else ``"gauss"``.
     hotspot:
         Backscattering shadowing model, ``"G1"`` (paper, Eq. 11) or ``"G2"`` (Eq. 2).
 
@@ -399,7 +400,8 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int = 4, tol: float | Non
     if anisotropic is None:
         anisotropic = not bool(getattr(brdf, "isotropic", False))
     if rule == "auto":
-        rule = "merl" if (n == N_THETA_H and not anisotropic) else "gauss"
+        has_merl = getattr(brdf, "merl_table", None) is not None
+        rule = "merl" if (has_merl and n == N_THETA_H and not anisotropic) else "gauss"
     merl = None
     if not anisotropic and getattr(brdf, "isotropic", False):
         merl = tabulate_merl_grid(brdf)
