@@ -52,11 +52,12 @@ def summarize(brdf, spec=None, *, albedo_samples: int = 65536) -> dict:
     """A JSON-able summary of a BRDF (what ``brdffit info`` prints)."""
     desc = {k: v for k, v in brdf.describe().items()}
     fmt = getattr(brdf, "format", None) or desc.get("format")
-    if fmt is None:
+    if str(spec or "").startswith("synthetic:"):
+        fmt = "synthetic"
+    elif fmt is None:
         model = type(brdf).__name__.lower()
         fmt = ("rgl" if "rgl" in model else
-               "fit" if getattr(brdf, "fit_kind", "") else
-               "synthetic" if str(spec or "").startswith("synthetic:") else "analytic")
+               "fit" if str(spec or "").lower().endswith(".npz") else "analytic")
     out = {"spec": None if spec is None else str(spec), "format": fmt,
            "name": getattr(brdf, "name", None), "model": type(brdf).__name__,
            "isotropic": bool(getattr(brdf, "isotropic", False)),
