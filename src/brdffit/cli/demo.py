@@ -1,0 +1,55 @@
+"""``brdffit demo``: the main job on built-in synthetic materials (or real data)."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import typer
+
+DEMO_MODELS = "tabulated,ggx,beckmann,sgd,npf-g-from-d,npf"
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("demo")
+    def demo(
+        out: str = typer.Option("demo-out", "--out", "-o", help="Report folder."),
+        data: str = typer.Option("", "--data", help="Run on real data instead: a folder, a "
+                                                     "Neural-BRDF .zip collection or a list file."),
+        limit: int = typer.Option(0, "--limit", help="With --data: first N materials only."),
+        models: str = typer.Option(DEMO_MODELS, "--models", "-m", help="Models to fit."),
+        spp: int = typer.Option(64, "--spp", help="Samples per pixel of the renderings."),
+        resolution: int = typer.Option(128, "--resolution", help="Image size in pixels."),
+    ):
+        """Fit every model to built-in synthetic materials, render, and write the HTML report.
+
+        No external data or network is needed. Example: brdffit demo --out demo-out
+        """
+        from ..batch import enumerate_materials
+        from ..evaluation.compare import compare
+
+        source = data or "synthetic:"
+        materials = enumerate_materials(source, limit=limit or None)
+        model_list = [m.strip() for m in models.split(",") if m.strip()]
+        typer.echo(f"brdffit demo: {len(materials)} materials × {len(model_list)} models "
+                   f"({', '.join(model_list)}) → {out}/")
+        t0 = time.perf_counter()
+        failures = 0
+        for k, (name, spec) in enumerate(materials):
+            t = time.perf_counter()
+            result = compare(spec, model_list, out, name=name, spp=spp, resolution=resolution,
+                             update_index=k == len(materials) - 1)
+            rows = []
+            for m in result.get("models", []):
+                psnr = (m.get("metrics") or {}).get("psnr")
+                if m.get("status") != "ok":
+                    failures += 1
+                    rows.append(f"{m['name']}: FAILED ({m.get('error', '?')})")
+                else:
+                    rows.append(f"{m['name']} {psnr:.1f} dB" if psnr is not None else m["name"])
+            typer.echo(f"  [{k + 1}/{len(materials)}] {name} ({time.perf_counter() - t:.1f} s): "
+                       + "; ".join(rows))
+        index = Path(out).resolve() / "index.html"
+        typer.echo(f"done in {time.perf_counter() - t0:.0f} s; report: {index}")
+        if failures:
+            raise typer.Exit(3)
