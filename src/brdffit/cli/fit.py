@@ -23,9 +23,11 @@ __all__ = ["register", "parse_options", "run_fit"]
 def parse_options(items: list[str] | None) -> dict:
     """``["k=v", ...]`` → dict, values parsed as JSON when possible (else strings)."""
     out: dict = {}
+    import click
+
     for item in items or []:
         if "=" not in item:
-            raise typer.BadParameter(f"expected key=value, found {item!r}", param_hint="--option")
+            raise click.BadParameter(f"expected key=value, found {item!r}", param_hint="--option")
         key, val = item.split("=", 1)
         try:
             out[key.strip()] = json.loads(val)
@@ -86,17 +88,18 @@ def register(app: typer.Typer) -> None:
         """Fit a model to a measured BRDF and print a short summary."""
         from ..fit import registry
 
+        import click  # the CLI entry point reports click's usage errors (exit status 2)
+
+        try:
+            entry = registry.get(model)
+        except KeyError as exc:
+            raise click.BadParameter(str(exc.args[0]), param_hint="--model") from None
         opts = parse_options(option)
         if iterations is not None:
-            entry = registry.get(model)
             if not entry.accepts("iterations"):
-                raise typer.BadParameter(f"model {model!r} has no 'iterations' option",
+                raise click.BadParameter(f"model {model!r} has no 'iterations' option",
                                          param_hint="--iterations")
             opts["iterations"] = iterations
-        try:
-            registry.get(model)
-        except KeyError as exc:
-            raise typer.BadParameter(str(exc.args[0]), param_hint="--model") from None
         _, summary = run_fit(spec, model, out, opts)
         if as_json:
             typer.echo(json.dumps(summary, default=_json_default, sort_keys=True))
