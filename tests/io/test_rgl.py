@@ -219,6 +219,36 @@ def test_anisotropic_files_fold_by_symmetry(aniso_files, rng):
         b4.eval_hd  # noqa: B018  (anisotropic: no Rusinkiewicz evaluation)
 
 
+def test_importance_sampling_passes_chi2(tmp_path):
+    """sample() draws wo with the density pdf() reports (Pearson χ², Šidák-corrected)."""
+    from brdffit.testing.chi2 import check_sampling
+    ok, res = check_sampling(rgl("paper_white"), [[0.0, 0.0, 1.0], [0.9, 0.1, 0.4243]],
+                             sample_count=60_000, res_theta=16, res_phi=32)
+    assert ok, "\n".join(map(str, res))
+    aniso = make_anisotropic(shared_data_path("rgl", "paper_white_rgb.bsdf"),
+                             tmp_path / "a4.bsdf", *ANISO[4])   # matte: cheap quadrature
+    ok, res = check_sampling(read_rgl(aniso), [[-0.5, 0.6, 0.6245]],
+                             sample_count=60_000, res_theta=16, res_phi=32)
+    assert ok, "\n".join(map(str, res))
+    r = res[0]
+    assert r.pdf_integral == pytest.approx(r.valid_fraction, abs=0.01)
+
+
+def test_sampling_is_useful_and_pdf_positive_where_f_is(rng):
+    b = rgl("cc_ibiza_sunset")
+    wi = np.tile([0.5, 0.0, np.sqrt(0.75)], (20000, 1))
+    wo, pdf = b.sample(wi, rng.random((20000, 2)))
+    ok = pdf > 0
+    assert ok.mean() > 0.9 and np.allclose(np.linalg.norm(wo[ok], axis=1), 1.0)
+    np.testing.assert_allclose(b.pdf(wi[ok], wo[ok]), pdf[ok], rtol=1e-4)
+    # importance sampling: the estimator f cos / pdf of the albedo has a low variance
+    est = (b.eval(wi[ok], wo[ok]).sum(-1) * wo[ok, 2] / pdf[ok])
+    wc = random_hemisphere(rng, 20000)
+    uni = b.eval(wi, wc).sum(-1) * wc[:, 2] * 2 * np.pi
+    assert est.std() < 0.5 * uni.std()
+    assert est.mean() == pytest.approx(uni.mean(), rel=0.1)
+
+
 # ----------------------------------------------------------------------------- errors
 def _rewrite(tmp_path, **changes):
     f = read_tensor_file(shared_data_path("rgl", "paper_white_rgb.bsdf"))
@@ -299,6 +329,24 @@ def _cross_check(mi, b, path, seed, n=3000):
     f = b.eval(wi, wo)                             # f_r = Mitsuba value / cos θ(light)
     expect = np.maximum(ref / wi[:, 2:3], 0.0)
     assert np.allclose(f, expect, rtol=1e-3, atol=1e-6 * expect.max())
+    # pdf and sample: Mitsuba's Measured::pdf / Measured::sample with the same inputs
+    bsdf = mi.load_dict({"type": "measured", "filename": str(path)})
+    si = mi.SurfaceInteraction3f()
+    si.wi = mi.Vector3f(wi.T.astype(np.float32))
+    ctx = mi.BSDFContext()
+    ref_pdf = np.array(bsdf.pdf(ctx, si, mi.Vector3f(wo.T.astype(np.float32))))
+    pdf = b.pdf(wi, wo)
+    prel = np.abs(pdf - ref_pdf) / np.maximum(ref_pdf, 1e-3 * ref_pdf.max())
+    assert prel.max() < 1e-3, prel.max()
+    u = rng.random((n, 2)).astype(np.float32).astype(np.float64)
+    bs, _ = bsdf.sample(ctx, si, 0.5, mi.Point2f(u.T.astype(np.float32)))
+    ref_wo, ref_spdf = np.array(bs.wo).T, np.array(bs.pdf)
+    wo_s, spdf = b.sample(wi, u)
+    valid = ref_wo[:, 2] > 0
+    assert valid.mean() > 0.9 and np.all(spdf[~valid] == 0)
+    assert np.abs(wo_s - ref_wo)[valid].max() < 1e-3
+    srel = np.abs(spdf - ref_spdf) / np.maximum(ref_spdf, 1e-3 * ref_spdf.max())
+    assert srel[valid].max() < 1e-2 and np.median(srel[valid]) < 1e-5
     return rel.max()
 
 
