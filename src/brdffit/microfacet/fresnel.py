@@ -62,8 +62,11 @@ class SchlickFresnel(Fresnel):
         self.f0 = _rgb("f0", f0, 0.0, 1.0, "SchlickFresnel")
 
     def eval(self, cos_theta_d) -> np.ndarray:
-        c = _cos(cos_theta_d)
-        return self.f0 + (1.0 - self.f0) * (1.0 - c) ** 5
+        x = 1.0 - _cos(cos_theta_d)
+        x5 = x * x
+        x5 *= x5
+        x5 *= x
+        return self.f0 + (1.0 - self.f0) * x5
 
     def params(self) -> dict:
         return {"f0": self.f0.tolist()}
@@ -87,7 +90,11 @@ class GeneralizedSchlickFresnel(Fresnel):
 
     def eval(self, cos_theta_d) -> np.ndarray:
         c = _cos(cos_theta_d)
-        return self.F0 + (1.0 - self.F0) * (1.0 - c) ** 5 - self.F1 * c
+        x = 1.0 - c
+        x5 = x * x
+        x5 *= x5
+        x5 *= x
+        return self.F0 + (1.0 - self.F0) * x5 - self.F1 * c
 
     def params(self) -> dict:
         return {"F0": self.F0.tolist(), "F1": self.F1.tolist()}

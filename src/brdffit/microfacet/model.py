@@ -275,20 +275,23 @@ class MicrofacetBRDF(BRDF, SerializableModel):
         ci, co = wi[..., 2], wo[..., 2]
         ok = (ci > 0) & (co > 0)
         h = wi + wo
-        hn = np.sqrt(np.sum(h * h, axis=-1))
-        h = h / np.where(hn > 0, hn, 1.0)[..., None]
-        cos_d = np.sum(wi * h, axis=-1)
-        D = self.distribution.D(h)
+        hn = np.sqrt(np.einsum("...k,...k->...", h, h))
+        h /= np.where(hn > 0, hn, 1.0)[..., None]
+        cos_d = np.einsum("...k,...k->...", wi, h)
+        dist = self.distribution
+        D = dist.D(h)
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             if self.correlated:
-                G = self.distribution.G2(wi, wo)
+                lam_i, lam_o = dist.Lambda(wi), dist.Lambda(wo)
+                G = 1.0 / (1.0 + lam_i + lam_o)                       # Dupuy Eq. 2
             else:
-                G = self.distribution.G1(wi) * self.distribution.G1(wo)
+                G = dist.G1(wi) * dist.G1(wo)
             spec = D * G / (4.0 * np.where(ok, ci * co, 1.0))
         spec = np.where(ok & (cos_d > 0), spec, 0.0)
-        f = self._fresnel(cos_d) * spec[..., None]
+        f = self._fresnel(cos_d)
+        f *= spec[..., None]
         if self.diffuse is not None:
-            f = f + np.where(ok, 1.0, 0.0)[..., None] * (self.diffuse / np.pi)
+            f += np.where(ok, 1.0, 0.0)[..., None] * (self.diffuse / np.pi)
         return f
 
     def eval_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:

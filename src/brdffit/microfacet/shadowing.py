@@ -252,7 +252,9 @@ class EllipticalSlopeDistribution(SlopeDistribution):
     def _quad(self, x, y):
         """``(x, y) S (x, y)ᵀ`` (projected squared roughness times |w_xy|²)."""
         ax, ay = self.alpha_x, self.alpha_y
-        return ax * ax * x * x + 2.0 * self.rho * ax * ay * x * y + ay * ay * y * y
+        if self.rho == 0.0:
+            return (ax * ax) * (x * x) + (ay * ay) * (y * y)
+        return (ax * ax) * (x * x) + (2.0 * self.rho * ax * ay) * (x * y) + (ay * ay) * (y * y)
 
     # -- profile hooks -----------------------------------------------------------------------
     def _g(self, r2):  # pragma: no cover - abstract
