@@ -8,8 +8,10 @@ multiplied on read by the colour scales ``(1, 1.15, 1.66)/1500``; every value a
 :class:`MERLBRDF` holds or returns is in these *scaled* "MERL units".
 
 The grid (θh sampled uniformly in ``sqrt(θh/(π/2))``, φd folded into [0, π) by reciprocity)
-is the one of :mod:`brdffit.grid`. Negative entries mark samples that were not measured;
-they are kept as a validity mask and never leak out of :meth:`MERLBRDF.eval_hd`.
+is the one of :mod:`brdffit.grid`. Negative entries mark samples that were not measured (a
+sample is invalid when any of its three channels is negative); they are kept as a validity
+mask and never leak out of :meth:`MERLBRDF.eval_hd`. A table read from a file keeps the raw
+numbers too, so that :func:`write_merl` writes it back bit-exactly.
 """
 
 from __future__ import annotations
