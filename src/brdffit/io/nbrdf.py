@@ -95,6 +95,7 @@ else:  # pragma: no cover  (vectorised NumPy fall-backs)
 
 _DEFAULT_ACTIVATIONS = ["relu", "relu", "linear"]
 _CHUNK = 1 << 14
+_MAX_MEMBER_BYTES = 64 << 20  # a 6-21-21-3 network is ~20 kB; refuse absurd members
 
 
 class NBRDF(IsotropicBRDF):
@@ -336,6 +337,10 @@ def read_nbrdf_collection(zip_path, material: str, *, precision: str = "float32"
                                             f"({len(members)} materials), found no {key!r}{hint}")
         h5name = members[key]
         where = f"{zip_path}:{key}"
+        size = zf.getinfo(h5name).file_size
+        if size > _MAX_MEMBER_BYTES:
+            raise BRDFFormatError(where, f"expected a small network file (< {_MAX_MEMBER_BYTES} "
+                                         f"bytes), found {size} bytes")
         try:
             blob = zf.read(h5name)
             js = h5name[:-3] + ".json"
