@@ -24,7 +24,7 @@ from pathlib import Path
 
 from ..errors import BRDFFormatError
 
-__all__ = ["load", "resolve_spec", "data_search_path", "read_merl", "write_merl",
+__all__ = ["load", "resolve_spec", "data_search_path", "find_data_file", "read_merl", "write_merl",
            "resample_to_merl", "read_nbrdf", "read_nbrdf_collection", "list_materials",
            "read_utia", "write_utia", "read_rgl", "save_fit", "load_fit", "SUPPORTED_FORMATS"]
 
@@ -62,7 +62,10 @@ def data_search_path() -> list[Path]:
     return [d for d in dirs if d.is_dir()]
 
 
-def _find(path: Path) -> Path | None:
+def find_data_file(path) -> Path | None:
+    """``path`` if it exists, else the first match under :func:`data_search_path` (relative
+    paths only), else ``None``."""
+    path = Path(path)
     if path.exists():
         return path
     if not path.is_absolute():
@@ -70,6 +73,9 @@ def _find(path: Path) -> Path | None:
             if (d / path).exists():
                 return d / path
     return None
+
+
+_find = find_data_file  # used by brdffit.batch
 
 
 def _sniff(path: Path) -> str | None:
