@@ -49,6 +49,18 @@ def test_conductor_with_zero_k_is_dielectric():
                                DielectricFresnel(1.7).eval(cs), atol=1e-12)
 
 
+def test_conductor_matches_complex_amplitudes():
+    cs = np.linspace(0.0, 1.0, 101)
+    for n, k in [(0.2, 3.9), (1.5, 0.5), (1.66, 9.2), (0.5, 0.0)]:
+        N = n + 1j * k
+        nct = np.sqrt(N * N - (1 - cs**2))
+        rs = (cs - nct) / (cs + nct)
+        rp = (N * N * cs - nct) / (N * N * cs + nct)
+        ref = 0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2)
+        np.testing.assert_allclose(ConductorFresnel(n, k).eval(cs)[:, 0], ref, rtol=1e-9,
+                                   atol=1e-12)
+
+
 def test_conductor_is_high_and_monotone_for_gold():
     cs = np.linspace(0.02, 1, 200)
     F = ConductorFresnel(GOLD_ETA, GOLD_K).eval(cs)

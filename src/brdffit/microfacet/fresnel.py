@@ -155,16 +155,27 @@ class ConductorFresnel(Fresnel):
         self._n = self.eta + 1j * self.k
 
     def eval(self, cos_theta_d) -> np.ndarray:
+        """Exact, in real arithmetic: with ``s² = 1 − c²``, ``t0 = η² − k² − s²``,
+        ``a² + b² = √(t0² + 4η²k²)``, ``a = √((a² + b² + t0)/2)``:
+        ``Rs = (a²+b² − 2ac + c²)/(a²+b² + 2ac + c²)``,
+        ``Rp = Rs (c²(a²+b²) − 2acs² + s⁴)/(c²(a²+b²) + 2acs² + s⁴)`` (the classic
+        closed form of |r_s|², |r_p|², e.g. Cook & Torrance 1982 / PBRT)."""
         c = _cos(cos_theta_d)
-        n = self._n
-        s2 = 1.0 - c * c
-        nct = np.sqrt(n * n - s2)                      # n cos θt
-        rs = (c - nct) / (c + nct)
-        n2c = n * n * c                                # n² cos θ
+        c2 = c * c
+        s2 = 1.0 - c2
+        eta2, k2 = self.eta**2, self.k**2
+        t0 = eta2 - k2 - s2
+        a2b2 = np.sqrt(t0 * t0 + 4.0 * eta2 * k2)
+        a = np.sqrt(np.maximum(0.5 * (a2b2 + t0), 0.0))
+        t1 = a2b2 + c2
+        t2 = 2.0 * a * c
         with np.errstate(divide="ignore", invalid="ignore"):
-            rp = (n2c - nct) / (n2c + nct)
-        rp = np.where(np.isfinite(rp), rp, 1.0)
-        return np.clip(0.5 * (np.abs(rs) ** 2 + np.abs(rp) ** 2), 0.0, 1.0)
+            Rs = (t1 - t2) / (t1 + t2)
+            t3 = c2 * a2b2 + s2 * s2
+            t4 = t2 * s2
+            Rp = Rs * (t3 - t4) / (t3 + t4)
+        F = 0.5 * (Rs + Rp)
+        return np.clip(np.where(np.isfinite(F), F, 1.0), 0.0, 1.0)
 
     def params(self) -> dict:
         return {"eta": self.eta.tolist(), "k": self.k.tolist()}
