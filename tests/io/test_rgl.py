@@ -249,6 +249,84 @@ def test_sampling_is_useful_and_pdf_positive_where_f_is(rng):
     assert est.mean() == pytest.approx(uni.mean(), rel=0.1)
 
 
+# ----------------------------------------------------------------------------- spectral
+LAMBDAS = np.array([380, 430, 480, 530, 580, 630, 680, 730], np.float32)
+
+
+def make_spectral(src, dst, mix):
+    """A spectral file whose spectrum at LAMBDAS[k] is mix[k] · (R, G, B) of an RGB file."""
+    f = read_tensor_file(src)
+    rgb = f.pop("rgb")
+    f["spectra"] = np.einsum("lc,ptcyx->ptlyx", mix, rgb).astype(np.float32)
+    f["wavelengths"] = LAMBDAS
+    return write_tensor_file(dst, f)
+
+
+@pytest.fixture(scope="module")
+def spectral_file(tmp_path_factory):
+    mix = np.abs(np.random.default_rng(0).normal(size=(LAMBDAS.size, 3))).astype(np.float32)
+    src = shared_data_path("rgl", "cc_iris_purple_gem_rgb.bsdf")
+    return make_spectral(src, tmp_path_factory.mktemp("spec") / "spec.bsdf", mix), mix
+
+
+def test_spectral_files_evaluate_consistently(spectral_file, rng):
+    from brdffit.io.rgl import spectral_to_srgb_weights
+    path, mix = spectral_file
+    b, ref = read_rgl(path), rgl("cc_iris_purple_gem")
+    assert b.rgb is None and b.spectra.shape[2] == LAMBDAS.size
+    wi, wo = random_hemisphere(rng, 2000), random_hemisphere(rng, 2000)
+    # the evaluation is linear in the table: at a stored wavelength, mix · RGB value
+    spec = b.eval_spectral_mitsuba(wo, wi, LAMBDAS.astype(np.float64))
+    tol = dict(rtol=2e-5, atol=1e-7 * spec.max())    # spectra are stored as float32
+    np.testing.assert_allclose(spec, ref.eval_mitsuba(wo, wi) @ mix.T.astype(np.float64), **tol)
+    # halfway between two samples: the average (linear in wavelength); clamped outside
+    mid = b.eval_spectral_mitsuba(wo, wi, [405.0, 300.0, 900.0])
+    np.testing.assert_allclose(mid[:, 0], 0.5 * (spec[:, 0] + spec[:, 1]), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(mid[:, 1], spec[:, 0], rtol=1e-9)
+    np.testing.assert_allclose(mid[:, 2], spec[:, -1], rtol=1e-9)
+    # RGB of a spectral file = sRGB weights applied to the spectral table
+    w = spectral_to_srgb_weights(LAMBDAS)
+    np.testing.assert_allclose(w.sum(axis=1), 1.0, atol=2e-3)     # flat spectrum -> grey
+    rgbv = b.eval_mitsuba(wo, wi)
+    np.testing.assert_allclose(rgbv, ref.eval_mitsuba(wo, wi) @ (w @ mix.astype(np.float64)).T,
+                               rtol=2e-5, atol=1e-7 * np.abs(rgbv).max())
+    with pytest.raises(BRDFFormatError, match="spectral file"):
+        ref.eval_spectral_mitsuba(wo, wi, [500.0])
+
+
+@pytest.mark.render
+def test_spectral_matches_mitsuba_spectral_variant(spectral_file, mitsuba):
+    """Mitsuba's spectral variant, in a subprocess (the session's variant stays llvm_ad_rgb)."""
+    import json
+    import subprocess
+    import sys
+    path, _ = spectral_file
+    script = f"""
+import json, numpy as np, mitsuba as mi
+mi.set_variant('llvm_ad_spectral')
+from brdffit.io.rgl import read_rgl
+rng = np.random.default_rng(1); n = 3000
+def rh(n):
+    v = rng.normal(size=(n, 3)); v /= np.linalg.norm(v, axis=1, keepdims=True); v[:, 2] = abs(v[:, 2])
+    return v.astype(np.float32).astype(np.float64)
+wi, wo = rh(n), rh(n)
+wl = rng.uniform(360, 830, size=(n, 4)).astype(np.float32).astype(np.float64)
+bs = mi.load_dict({{'type': 'measured', 'filename': {str(path)!r}}})
+si = mi.SurfaceInteraction3f(); si.wi = mi.Vector3f(wo.T); si.wavelengths = mi.Spectrum(wl.T)
+ref = np.array(bs.eval(mi.BSDFContext(), si, mi.Vector3f(wi.T))).T
+ours = read_rgl({str(path)!r}).eval_spectral_mitsuba(wo, wi, wl)
+rel = np.abs(ours - ref) / np.maximum(np.abs(ref), 1e-3 * np.abs(ref).max())
+print(json.dumps({{"max": float(rel.max()), "median": float(np.median(rel))}}))
+"""
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         env=dict(os.environ), timeout=300)
+    if out.returncode != 0 and "llvm_ad_spectral" in out.stderr:
+        pytest.skip(f"Mitsuba llvm_ad_spectral unavailable: {out.stderr[-300:]}")
+    assert out.returncode == 0, out.stderr[-2000:]
+    rel = json.loads(out.stdout.strip().splitlines()[-1])
+    assert rel["max"] < 1e-3 and rel["median"] < 1e-5, rel
+
+
 # ----------------------------------------------------------------------------- errors
 def _rewrite(tmp_path, **changes):
     f = read_tensor_file(shared_data_path("rgl", "paper_white_rgb.bsdf"))

@@ -43,7 +43,7 @@ from ..brdf import BRDF, IsotropicBRDF, _as_dirs
 from ..errors import BRDFFormatError
 from .tensorfile import read_tensor_file
 
-__all__ = ["RGLBRDF", "IsotropicRGLBRDF", "read_rgl", "AngularTable",
+__all__ = ["RGLBRDF", "IsotropicRGLBRDF", "read_rgl", "AngularTable", "spectral_to_srgb_weights",
            "theta_to_u", "u_to_theta", "phi_to_u", "u_to_phi", "elevation"]
 
 _CHUNK = 1 << 17
@@ -262,6 +262,30 @@ class _Marginal2D:
         return pos, c0 + (c1 - c0) * x
 
 
+def spectral_to_srgb_weights(wavelengths) -> np.ndarray:
+    """Weights ``W`` (3, L) with ``rgb = W @ spectrum`` for spectra sampled at ``wavelengths``.
+
+    The spectrum is the piecewise-linear interpolant of the samples, clamped outside their
+    range (as Mitsuba interpolates the ``spectra`` table), treated as a reflectance under CIE
+    D65: linear sRGB = M_XYZ→sRGB · ∫ S D65 (x̄, ȳ, z̄) dλ / ∫ D65 ȳ dλ over 360–830 nm with the
+    CIE 1931 2° observer (colour-science tables), so a flat spectrum c maps to (c, c, c)
+    up to the rounding of the sRGB matrix. This conversion is ours: Mitsuba's RGB variants
+    refuse spectral files.
+    """
+    import colour
+
+    lam = np.asarray(wavelengths, np.float64).ravel()
+    grid = np.arange(360.0, 831.0)
+    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
+    cmf = np.stack([np.interp(grid, cmfs.wavelengths, cmfs.values[:, k]) for k in range(3)])
+    d65 = colour.SDS_ILLUMINANTS["D65"]
+    ill = np.interp(grid, d65.wavelengths, d65.values)
+    hats = np.stack([np.interp(grid, lam, np.eye(lam.size)[k]) for k in range(lam.size)])
+    xyz = (cmf * ill) @ hats.T / np.sum(cmf[1] * ill)         # (3, L); 1 nm steps cancel
+    m = np.asarray(colour.RGB_COLOURSPACES["sRGB"].matrix_XYZ_to_RGB, np.float64)
+    return m @ xyz
+
+
 # ------------------------------------------------------------------ public classes
 @dataclass(frozen=True)
 class AngularTable:
@@ -387,16 +411,22 @@ class RGLBRDF(BRDF):
         self._sigma = _Marginal2D(self.sigma, (), normalize=False, enable_sampling=False)
         self._vndf = _Marginal2D(self.vndf, params)
         self._luminance = _Marginal2D(self.luminance, params)   # used by sample/pdf only
+        self._spectral = None
         if self.rgb is not None:
-            # Warp2D3 over (φi, θi, channel) with channel values {0, 1, 2}: at an integer channel
-            # the interpolation weight is exactly 0/1, so a per-texel RGB gather is identical.
-            self._rgb_table = np.ascontiguousarray(
-                np.moveaxis(self.rgb.astype(np.float64), 2, -1)).reshape(-1, 3)
-            self._rgb_warp = _Marginal2D(self.rgb[:, :, 0], params, normalize=False,
-                                         enable_sampling=False)
+            rgb = self.rgb.astype(np.float64)
         else:
-            self._rgb_table = None
-            self._rgb_warp = None
+            if not np.all(np.diff(self.wavelengths) > 0):
+                raise BRDFFormatError(path, "expected strictly increasing wavelengths, found "
+                                            f"{self.wavelengths.tolist()}")
+            self._spectral = _Marginal2D(self.spectra, params + (self.wavelengths,),
+                                         normalize=False, enable_sampling=False)
+            # linear in the table: converting texels first = converting evaluated spectra
+            rgb = np.einsum("cl,ptlyx->ptcyx", spectral_to_srgb_weights(self.wavelengths),
+                            self.spectra.astype(np.float64))
+        # Warp2D3 over (φi, θi, channel) with channel values {0, 1, 2}: at an integer channel
+        # the interpolation weight is exactly 0/1, so a per-texel RGB gather is identical.
+        self._rgb_table = np.ascontiguousarray(np.moveaxis(rgb, 2, -1)).reshape(-1, 3)
+        self._rgb_warp = _Marginal2D(rgb[:, :, 0], params, normalize=False, enable_sampling=False)
 
     # -------------------------------------------------------------- tables for other modules
     def ndf_table(self) -> AngularTable:
@@ -440,11 +470,11 @@ class RGLBRDF(BRDF):
         """``Measured::eval`` of Mitsuba 3 (float64 port): ``f(si.wi, wo) · cos θ(wo)``.
 
         ``wi_m`` is Mitsuba's ``si.wi`` (towards the viewer), ``wo_m`` its ``wo`` (towards the
-        light). Returns RGB ``(..., 3)``, 0 unless both are above the horizon.
+        light). Returns RGB ``(..., 3)``, 0 unless both are above the horizon. For spectral
+        files (which Mitsuba's RGB variants refuse) the RGB is that of
+        :func:`spectral_to_srgb_weights` applied to the spectral value (see
+        :meth:`eval_spectral_mitsuba` for the spectral evaluation itself).
         """
-        if self._rgb_table is None:
-            raise BRDFFormatError(self.source, "expected an RGB file ('rgb' field) for RGB "
-                                               "evaluation, found a spectral file (not supported)")
         wi_m, wo_m = _as_dirs(wi_m, wo_m)
         shape = wi_m.shape[:-1]
         a, b = wi_m.reshape(-1, 3), wo_m.reshape(-1, 3)
@@ -452,6 +482,43 @@ class RGLBRDF(BRDF):
         for s in range(0, a.shape[0], _CHUNK):
             out[s:s + _CHUNK] = self._eval_flat(a[s:s + _CHUNK], b[s:s + _CHUNK])
         return out.reshape(shape + (3,))
+
+    def eval_spectral_mitsuba(self, wi_m, wo_m, wavelengths) -> np.ndarray:
+        """Spectral ``Measured::eval`` (Mitsuba's spectral variants): ``(..., L)`` values.
+
+        ``wavelengths`` (nm) broadcast against the directions' leading shape plus a last axis
+        of L wavelengths; the ``spectra`` table is interpolated linearly in wavelength (clamped
+        outside the stored range), as ``Warp2D3`` does with parameters (φi, θi, λ).
+        Only for spectral files (``spectra`` + ``wavelengths`` fields).
+        """
+        if self._spectral is None:
+            raise BRDFFormatError(self.source, "expected a spectral file ('spectra' and "
+                                               "'wavelengths' fields), found an RGB file")
+        wi_m, wo_m = _as_dirs(wi_m, wo_m)
+        shape = wi_m.shape[:-1]
+        lam = np.asarray(wavelengths, np.float64)
+        lam = np.broadcast_to(lam, shape + lam.shape[-1:]).reshape(-1, lam.shape[-1])
+        wi, wo = wi_m.reshape(-1, 3).copy(), wo_m.reshape(-1, 3).copy()
+        out = np.zeros(lam.shape)
+        active = (wi[:, 2] > 0) & (wo[:, 2] > 0)
+        if active.any():
+            wi, wo, lam_a = wi[active], wo[active], lam[active]
+            fx, fy = self._fold(wi)
+            wi[:, 0] *= fx; wi[:, 1] *= fy; wo[:, 0] *= fx; wo[:, 1] *= fy  # noqa: E702
+            m = wi + wo
+            m /= np.linalg.norm(m, axis=-1, keepdims=True)
+            theta_i, phi_i, u_m = self._warp_angles(wi, m)
+            u_wi = np.stack([theta_to_u(theta_i), phi_to_u(phi_i)], -1)
+            sample, _ = self._vndf.invert(u_m, self._vndf.corners([phi_i, theta_i]))
+            val = np.stack([self._spectral.eval(sample, self._spectral.corners(
+                [phi_i, theta_i, lam_a[:, k]])) for k in range(lam.shape[1])], -1)
+            if self.jacobian:
+                d = self._ndf.eval(u_m, self._ndf.corners([]))
+                sg = self._sigma.eval(u_wi, self._sigma.corners([]))
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    val = val * (d / (4.0 * sg))[:, None]
+            out[active] = val
+        return out.reshape(shape + (lam.shape[1],))
 
     def _eval_flat(self, wi, wo):
         out = np.zeros((wi.shape[0], 3))
