@@ -62,7 +62,8 @@ def main() -> dict:
 
     zspec = SHARED / "nbrdf" / "merl_nbrdf.zip"
     results: dict = {"n_evals": args.n, "repeat": args.repeat, "cpu_count": os.cpu_count(),
-                     "machine": platform.machine(), "python": platform.python_version()}
+                     "machine": platform.machine(), "python": platform.python_version(),
+                     "loadavg_1min_before": os.getloadavg()[0]}
     wi, wo = _directions(args.n)
     with tempfile.TemporaryDirectory() as tmp:
         merl_path = Path(tmp) / "bench.binary"
@@ -112,6 +113,9 @@ def main() -> dict:
         print(f"UTIA eval {args.n:.0e} pairs:           {t:.3f} s  "
               f"(runs {', '.join(f'{x:.3f}' for x in all_t)})")
 
+    results["loadavg_1min_after"] = os.getloadavg()[0]
+    print(f"load average (1 min) before/after: {results['loadavg_1min_before']:.1f} / "
+          f"{results['loadavg_1min_after']:.1f} on {os.cpu_count()} CPUs")
     args.out.parent.mkdir(parents=True, exist_ok=True)
     with atomic_write(args.out, "w") as fh:
         json.dump(results, fh, indent=2)
