@@ -11,6 +11,11 @@ The input is the pair of Rusinkiewicz half and difference vectors with φh = 0,
 value (not cosine-weighted) in MERL units after colour scaling. Outputs are clamped at 0
 (the networks can return slightly negative values where the BRDF is near zero).
 
+The networks are evaluated as they are, over the full φd range [0, 2π): they are not exactly
+reciprocal (for ``merl_nbrdf.zip`` the median relative difference between φd and φd + π is
+3-6 %), so :func:`brdffit.io.merl.resample_to_merl` sees the [0, π) half only. No
+symmetrisation is applied.
+
 Collections (``merl_nbrdf.zip``…) are read in memory, never extracted to disk.
 """
 
