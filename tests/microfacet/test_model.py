@@ -171,3 +171,27 @@ def test_constructor_validation():
         MicrofacetBRDF("ggx", None)
     with pytest.raises(ValueError):
         MicrofacetBRDF(GGX(0.2), None, diffuse=[0.1, -0.2, 0.3])
+
+
+def test_registering_a_new_distribution_kind(tmp_path):
+    from brdffit.microfacet import register_distribution
+
+    class Stretched(GGX):                     # a "new" distribution with a table argument
+        def __init__(self, alpha, table):
+            super().__init__(alpha)
+            self.table = np.asarray(table, dtype=float)
+
+        def to_state(self):
+            return {"alpha": self.alpha_x}, {"table": self.table}
+
+        @classmethod
+        def from_state(cls, params, arrays):
+            return cls(params["alpha"], arrays["table"])
+
+    register_distribution("test-stretched", Stretched)
+    m = MicrofacetBRDF(Stretched(0.3, [1.0, 2.0]), SchlickFresnel(0.2))
+    back = load_fit(save_fit(m, tmp_path / "s.npz"))
+    assert type(back.distribution) is Stretched
+    np.testing.assert_array_equal(back.distribution.table, [1.0, 2.0])
+    wi = np.array([[0.3, 0.1, 0.95]]) / np.linalg.norm([0.3, 0.1, 0.95])
+    np.testing.assert_array_equal(back.eval(wi, wi[:, [1, 0, 2]]), m.eval(wi, wi[:, [1, 0, 2]]))

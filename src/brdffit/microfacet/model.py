@@ -32,8 +32,11 @@ Serialisation and the component registry
     ``cls(**params)``; a class with tables implements ``to_state() -> (params, arrays)`` and
     ``classmethod from_state(params, arrays)`` instead (see :class:`TabulatedFresnel`).
     Built in: distributions ``beckmann``, ``ggx``, ``scaled``; Fresnels ``schlick``,
-    ``generalized_schlick``, ``dielectric``, ``conductor``, ``tabulated``. The kind ``sgd``
-    is resolved lazily from :mod:`brdffit.microfacet.sgd`.
+    ``generalized_schlick``, ``dielectric``, ``conductor``, ``tabulated``. A class with its
+    own ``kind`` class attribute is registered automatically the first time it is saved.
+    When a file names an unregistered kind, ``brdffit.microfacet.<kind>`` and the modules in
+    ``_COMPONENT_MODULES`` (``sgd``, ``tabulated``) are imported so they can register
+    themselves (this is how ``sgd`` and the tabulated distributions load lazily).
 """
 
 from __future__ import annotations
@@ -62,6 +65,8 @@ __all__ = ["MicrofacetBRDF", "SumBRDF", "register_distribution", "register_fresn
 # ----------------------------------------------------------------------------------------
 _DISTRIBUTIONS: dict[str, type] = {}
 _FRESNELS: dict[str, type] = {}
+#: sibling modules imported when a fit file names a kind that is not registered yet
+_COMPONENT_MODULES = ("sgd", "tabulated")
 
 
 def register_distribution(kind: str, cls: type) -> type:
@@ -126,6 +131,12 @@ def _lookup(kind: str, registry: dict[str, type], what: str) -> type:
                 if (isinstance(obj, type) and issubclass(obj, _base_of(what))
                         and obj.__dict__.get("kind") == kind):
                     registry.setdefault(kind, obj)
+    if kind not in registry:
+        for name in _COMPONENT_MODULES:      # modules that register kinds on import
+            try:
+                import_module(f".{name}", __package__)
+            except ImportError:
+                pass
     if kind not in registry:
         raise ValueError(f"unknown {what} kind {kind!r}; registered: {sorted(registry)}")
     return registry[kind]
