@@ -349,6 +349,10 @@ def test_rgl_structure_errors(tmp_path):
         (dict(vndf=-f["vndf"]), "non-negative"),
         (dict(vndf=np.zeros_like(f["vndf"])), "positive integral"),
         (dict(luminance=f["luminance"][:, :, :, :5]), "luminance of shape"),
+        (dict(luminance=np.zeros_like(f["luminance"])), "luminance slice"),
+        (dict(jacobian=np.zeros(0, np.uint8)), "jacobian flag"),
+        (dict(spectra=f["rgb"], wavelengths=np.array([500, 400, 600], np.float32), rgb=None),
+         "increasing wavelengths"),
     ]
     for change, match in cases:
         p = _rewrite(tmp_path, **change)
