@@ -239,3 +239,23 @@ def test_isotropy_flag_and_params():
     assert not Beckmann(0.2, 0.2, 0.1).isotropic
     assert GGX(0.2, 0.3, 0.1).params() == {"alpha_x": 0.2, "alpha_y": 0.3, "rho": 0.1}
     assert pdf_integral(_NormalSampler(GGX(0.4)), [0, 0, 1]) == pytest.approx(1.0, abs=2e-3)
+
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+
+@settings(max_examples=40, deadline=None)
+@given(ax=st.floats(0.02, 2.0), ay=st.floats(0.02, 2.0), rho=st.floats(-0.95, 0.95),
+       theta=st.floats(0.0, 1.56), phi=st.floats(0.0, 6.28), beck=st.booleans())
+def test_visible_normals_are_visible_and_g1_bounded(ax, ay, rho, theta, phi, beck):
+    d = (Beckmann if beck else GGX)(ax, ay, rho)
+    w = np.array([math.sin(theta) * math.cos(phi), math.sin(theta) * math.sin(phi),
+                  math.cos(theta)])
+    u = np.random.default_rng(0).random((256, 2))
+    m = d.sample_visible(w, u)
+    assert np.all(np.isfinite(m))
+    np.testing.assert_allclose(np.linalg.norm(m, axis=-1), 1.0, atol=1e-12)
+    assert np.all(m[:, 2] >= 0) and np.all(m @ w >= -1e-12)
+    g = d.G1(w)
+    assert 0.0 < g <= 1.0
+    assert d.sigma(w) - d.sigma(-w) == pytest.approx(w[2], abs=1e-12)

@@ -195,3 +195,15 @@ def test_registering_a_new_distribution_kind(tmp_path):
     np.testing.assert_array_equal(back.distribution.table, [1.0, 2.0])
     wi = np.array([[0.3, 0.1, 0.95]]) / np.linalg.norm([0.3, 0.1, 0.95])
     np.testing.assert_array_equal(back.eval(wi, wi[:, [1, 0, 2]]), m.eval(wi, wi[:, [1, 0, 2]]))
+
+
+def test_pickle_keeps_class_and_values():
+    import pickle
+
+    for m in (MicrofacetBRDF(GGX(0.2), SchlickFresnel(0.3), diffuse=0.1),
+              MicrofacetBRDF(Beckmann(0.2, 0.3, 0.4)), MODELS[-1][1]):
+        c = pickle.loads(pickle.dumps(m))
+        assert type(c) is type(m)
+        rng = np.random.default_rng(8)
+        wi, wo = _dirs(rng, 50), _dirs(rng, 50)
+        np.testing.assert_array_equal(c.eval(wi, wo), m.eval(wi, wo))
