@@ -279,3 +279,31 @@ def test_conversions_reuse_fresnel_and_return_microfacet_brdfs():
     assert g.fresnel is model.fresnel and b.fresnel is model.fresnel
     assert g.distribution.alpha_x == pytest.approx(0.15, rel=0.02)
     assert g.distribution.alpha_y == pytest.approx(0.3, rel=0.02)
+
+
+def test_per_channel_distributions_differ_by_channel():
+    class TwoRoughness(BRDF):
+        """Red channel from a rough lobe, green/blue from a sharp one."""
+
+        isotropic = True
+
+        def __init__(self):
+            self.rough = MicrofacetBRDF(Beckmann(0.4), None)
+            self.sharp = MicrofacetBRDF(Beckmann(0.1), None)
+
+        def eval(self, wi, wo):
+            r, s = self.rough.eval(wi, wo), self.sharp.eval(wi, wo)
+            return np.concatenate([r[..., :1], s[..., 1:]], -1)
+
+        def eval_hd(self, th, td, pd):
+            from brdffit.geometry import half_diff_to_io
+
+            return self.eval(*half_diff_to_io(th, 0.0, td, pd))
+
+    model = fit_tabulated(TwoRoughness(), per_channel=True, hotspot="G2", tol=1e-8, n=48)
+    a = [beckmann_parameters(m.distribution)[0] for m in model.models]
+    assert a[0] == pytest.approx(0.4, rel=5e-3) and a[1] == pytest.approx(0.1, rel=5e-3)
+    w = dirs(np.array([0.0, 0.35]))
+    f = model.eval(w, w)
+    assert f.shape == (2, 3)
+    assert f[0, 0] < f[0, 1] and f[1, 0] > f[1, 1]  # sharp green peak, rough red tail

@@ -19,7 +19,8 @@ supplemental, Eq. 17-22):
 Continuous lookup (Dupuy 2015 §4.3 "linearly interpolating the values of p") is done here
 with a monotone cubic (PCHIP) Hermite interpolant of ``log P`` in ``u`` (and linear in ``φ``
 for anisotropic tables); a deliberate deviation from linear interpolation, for accuracy
-between nodes. ``log P`` is mirrored to ``u < 0`` (P is even in the slope), and beyond the
+between nodes. The interpolated variable is ``log(P sec⁴θ)`` (the log-NDF, smooth up to
+grazing for ``r⁻⁴`` tails), mirrored to ``u < 0`` (P is even in the slope); beyond the
 last node ``P`` decays as ``r⁻⁴`` (the GGX tail: integrable, with a finite ``D`` at grazing).
 
 Derived quantities:
@@ -235,7 +236,10 @@ class TabulatedSlopeDistribution(SlopeDistribution):
     def _build_p_lookup(self):
         p = self.table
         floor = _LOG_FLOOR * float(p.max())
-        logp = np.log(np.maximum(p, floor))
+        # interpolated variable: log(P sec⁴θ) = log(P (1 + r²)²) (log of the NDF), which
+        # stays smooth up to grazing for r⁻⁴ (GGX-like) tails where log P itself is singular
+        lift = 2.0 * np.log1p(self.r**2)
+        logp = np.log(np.maximum(p, floor)) + (lift if p.ndim == 1 else lift[:, None])
         # nodes in u mirrored to u < 0: log P is even in u (a function of tan²θ), so the
         # spline gets the right behaviour at the pole θ = 0
         u = self.u
@@ -288,7 +292,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         theta = np.arctan(r)
         u = np.sqrt(theta * (2.0 / np.pi))
         if self.table_isotropic:
-            val = np.exp(_hermite(self._lu, self._llogp, self._ldlogp, u))
+            val = np.exp(_hermite(self._lu, self._llogp, self._ldlogp, u) - 2.0 * np.log1p(r * r))
             with np.errstate(divide="ignore", over="ignore"):
                 tail = self._p_last * (self._r_last / np.maximum(r, self._r_last)) ** 4
             return np.where(u > self._u_last, tail, val)
@@ -299,7 +303,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         f = x - np.floor(x)
         v0 = _hermite(self._lu, self._llogp, self._ldlogp, u, j0)
         v1 = _hermite(self._lu, self._llogp, self._ldlogp, u, j1)
-        val = (1.0 - f) * np.exp(v0) + f * np.exp(v1)  # linear in φ: exact φ-trapezoid
+        val = ((1.0 - f) * np.exp(v0) + f * np.exp(v1)) / (1.0 + r * r) ** 2  # linear in φ
         with np.errstate(divide="ignore", over="ignore"):
             tail = (((1.0 - f) * self._p_last[j0] + f * self._p_last[j1])
                     * (self._r_last / np.maximum(r, self._r_last)) ** 4)
@@ -619,10 +623,14 @@ class TabulatedSlopeDistribution(SlopeDistribution):
                 "alpha_x": ax.tolist(), "alpha_y": ay.tolist()}
 
     def to_state(self) -> tuple[dict, dict[str, np.ndarray]]:
-        """``(params, arrays)``: float32 ``P`` and ``sigma`` tables (sigma kept for external
-        readers; it is recomputed from ``P`` on load)."""
-        return self.params(), {"P": self.table.astype(np.float32),
-                               "sigma": self._sigma_table.astype(np.float32)}
+        """``(params, arrays)``: the float32 ``P`` table, plus for isotropic tables the
+        float32 ``sigma`` (G1) table of the paper's 6N-float layout, kept for external
+        readers; ``σ`` is always recomputed from ``P`` on load (so evaluation is identical).
+        Anisotropic files hold ``P`` only (the 2D ``σ`` would double the size)."""
+        arrays = {"P": self.table.astype(np.float32)}
+        if self.table_isotropic:
+            arrays["sigma"] = self._sigma_table.astype(np.float32)
+        return self.params(), arrays
 
     @classmethod
     def from_state(cls, params: dict, arrays: dict) -> "TabulatedSlopeDistribution":

@@ -1,0 +1,359 @@
+"""Benchmark of the Dupuy et al. 2015 tabulated fit (issue 3). Writes bench/results/tabulated.json.
+
+Sections (all re-runnable; timings depend on the machine's load):
+
+* ``table1``: paper Table 1 — max relative error of the backscattering ``F0 D G1/(4cos²)``
+  of the fit (its eigenvalue, interpolated D and σ tables) against analytic Beckmann (and GGX)
+  backscattering of Eq. 12, α = 0.01, 0.02, 0.05, 0.15, N = 360 and 90, both radial rules,
+  4 power iterations (paper) and converged (tol 1e-10). Error over θ where the reference is
+  above 1e-6 of its peak (dense grid between the nodes, not only at them).
+* ``round_trip``: synthetic GGX/Beckmann microfacet BRDFs (height-correlated G2) → fit →
+  Appendix C conversion. ``hotspot="G2"`` (consistent with the synthetic) and the paper's
+  ``"G1"`` are both reported.
+* ``fresnel``: max |F_fit − F_Schlick| for θd ≤ 80° (isotropic and anisotropic inputs).
+* ``speed``: median wall time of complete fits (P, σ/G1, Fresnel, sampling tables):
+  isotropic on MERL-grid input (a table with ``merl_table``, N = 90, file reading excluded),
+  anisotropic 90×90 on an analytic anisotropic GGX material.
+* ``--real``: all 100 Neural-BRDF MERL materials and the 7 RGL materials: failures, NaN,
+  P ≥ 0, ∫P (interpolant), iterations needed for tol 1e-4 / 1e-6, and for RGL the
+  difference between the fitted NDF and the file's stored ``ndf`` table.
+
+Usage: ``.venv/bin/python bench/bench_tabulated.py [--real] [--quick]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.special import erf
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from brdffit._atomic import atomic_write  # noqa: E402
+from brdffit.fit.tabulated import (backscatter, beckmann_parameters, fit_tabulated,  # noqa: E402
+                                   ggx_parameters, luminance, solve_slope_pdf)
+from brdffit.microfacet import GGX, Beckmann, MicrofacetBRDF, SchlickFresnel  # noqa: E402
+from brdffit.microfacet.tabulated import TabulatedSlopeDistribution, radial_rule  # noqa: E402
+
+SHARED = ROOT.parent / "shared" / "data"
+OUT = ROOT / "bench" / "results" / "tabulated.json"
+
+
+# ------------------------------------------------------------------------------ references
+def beckmann_P(r, a):
+    return np.exp(-(r / a) ** 2) / (np.pi * a * a)
+
+
+def beckmann_lambda(theta, a):
+    t = np.tan(theta)
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+        nu = 1.0 / (a * t)
+        lam = 0.5 * (erf(nu) - 1.0) + np.exp(-nu * nu) / (2.0 * nu * np.sqrt(np.pi))
+    return np.where(t > 0, np.nan_to_num(lam, nan=0.0), 0.0)
+
+
+def ggx_P(r, a):
+    return 1.0 / (np.pi * a * a * (1.0 + (r / a) ** 2) ** 2)
+
+
+def ggx_lambda(theta, a):
+    t = np.tan(theta)
+    return 0.5 * (-1.0 + np.sqrt(1.0 + (a * t) ** 2))
+
+
+def eq12(theta, a, kind):
+    c = np.cos(theta)
+    P, lam = (beckmann_P, beckmann_lambda) if kind == "beckmann" else (ggx_P, ggx_lambda)
+    return P(np.tan(theta), a) / c**4 / (1.0 + lam(theta, a)) / (4.0 * c * c)
+
+
+def dirs(theta, phi=0.0):
+    theta, phi = np.broadcast_arrays(theta, phi)
+    return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], -1)
+
+
+# ------------------------------------------------------------------------------ sections
+def table1(quick=False):
+    rows = []
+    for kind in ("beckmann", "ggx"):
+        for n in (360, 90):
+            for rule in ("merl", "gauss"):
+                for mode, kw in (("4 iterations", {"iterations": 4}), ("tol 1e-10", {"tol": 1e-10})):
+                    for a in (0.01, 0.02, 0.05, 0.15):
+                        _, theta, _, _ = radial_rule(n, rule)
+                        p, lam, ch = solve_slope_pdf(eq12(theta, a, kind), rule=rule, **kw)
+                        d = TabulatedSlopeDistribution(p, rule=rule)
+                        tt = np.linspace(0.0, np.radians(89.0), 40001)
+                        ref = eq12(tt, a, kind)
+                        sel = ref >= 1e-6 * ref.max()
+                        tt, ref = tt[sel], ref[sel]
+                        w = dirs(tt)
+                        fit = lam * d.D(w) * d.G1(w) / (4.0 * np.cos(tt) ** 2)
+                        rows.append({"distribution": kind, "N": n, "rule": rule, "mode": mode,
+                                     "alpha": a, "max_rel_error": float(np.max(np.abs(fit / ref - 1))),
+                                     "eigenvalue_error": float(lam - 1.0),
+                                     "iterations": len(ch), "theta_max_deg": float(np.degrees(tt[-1]))})
+    return rows
+
+
+def _white_backscatter(dist, theta, phi=None):
+    o = dirs(theta) if phi is None else dirs(*np.meshgrid(theta, phi, indexing="ij"))
+    return MicrofacetBRDF(dist, None).eval(o, o)[..., 0]
+
+
+def round_trip():
+    rows = []
+    cases = [(c, (a, a, 0.0)) for c in ("beckmann", "ggx") for a in (0.05, 0.1, 0.2, 0.4, 0.6, 0.8)]
+    cases += [(c, p) for c in ("beckmann", "ggx")
+              for p in ((0.2, 0.45, 0.0), (0.3, 0.12, 0.5), (0.15, 0.25, -0.35), (0.06, 0.3, 0.45))]
+    for kind, (ax, ay, rho) in cases:
+        d0 = (Beckmann if kind == "beckmann" else GGX)(ax, ay, rho)
+        aniso = not (ax == ay and rho == 0.0)
+        conv = beckmann_parameters if kind == "beckmann" else ggx_parameters
+        for hotspot in ("G2", "G1"):
+            for mode, kw in (("tol 1e-10", {"tol": 1e-10}), ("4 iterations", {"iterations": 4})):
+                _, theta, _, _ = radial_rule(90, "gauss")
+                phi = 2 * np.pi * np.arange(90) / 90 if aniso else None
+                b = _white_backscatter(d0, theta, phi)
+                t0 = time.perf_counter()
+                p, lam, ch = solve_slope_pdf(b, rule="gauss", hotspot=hotspot, **kw)
+                d = TabulatedSlopeDistribution(p, rule="gauss")
+                fx, fy, fr = conv(d)
+                rows.append({"distribution": kind, "alpha": [ax, ay, rho], "anisotropic": aniso,
+                             "hotspot": hotspot, "mode": mode, "fitted": [fx, fy, fr],
+                             "rel_error_x": fx / ax - 1, "rel_error_y": fy / ay - 1,
+                             "abs_error_rho": fr - rho, "iterations": len(ch),
+                             "time_s": time.perf_counter() - t0})
+    return rows
+
+
+def fresnel():
+    rows = []
+    for name, brdf, kw in (
+            ("iso GGX 0.25, Schlick (0.95,0.64,0.54)",
+             MicrofacetBRDF(GGX(0.25), SchlickFresnel([0.95, 0.64, 0.54])), {}),
+            ("iso Beckmann 0.1, Schlick 0.04",
+             MicrofacetBRDF(Beckmann(0.1), SchlickFresnel(0.04)), {}),
+            ("aniso Beckmann (0.3, 0.15, 0.3), Schlick (0.9,0.5,0.3)",
+             MicrofacetBRDF(Beckmann(0.3, 0.15, 0.3), SchlickFresnel([0.9, 0.5, 0.3])),
+             {"n": 48, "n_phi": 48})):
+        f0 = np.asarray(brdf.fresnel.f0 if hasattr(brdf.fresnel, "f0") else 0.0)
+        for hotspot in ("G2", "G1"):
+            m = fit_tabulated(brdf, hotspot=hotspot, tol=1e-8, **kw)
+            td = m.fresnel.theta_d
+            ref = brdf.fresnel.eval(np.cos(td))
+            sel = td <= np.radians(80) + 1e-9
+            rows.append({"material": name, "hotspot": hotspot,
+                         "max_abs_error_theta_d_le_80": float(np.max(np.abs(m.fresnel.values - ref)[sel])),
+                         "max_abs_error_all": float(np.max(np.abs(m.fresnel.values - ref))),
+                         "F0_fit": m.fresnel.values[0].tolist(), "F0_true": np.broadcast_to(f0, 3).tolist()})
+    return rows
+
+
+class _MerlGridInput:
+    """A MERL-grid table in memory (what a MERL reader returns), from an analytic BRDF."""
+
+    isotropic = True
+
+    def __init__(self, brdf, name):
+        from brdffit.grid import tabulate_merl_grid
+
+        self._table = tabulate_merl_grid(brdf)
+        self.name = name
+        self.source = None
+        self._brdf = brdf
+
+    def merl_table(self):
+        return self._table
+
+    def eval(self, wi, wo):
+        return self._brdf.eval(wi, wo)
+
+
+def speed(repeats=7):
+    out = {}
+    iso = _MerlGridInput(MicrofacetBRDF(Beckmann(0.2), SchlickFresnel([0.9, 0.6, 0.3]),
+                                        diffuse=0.1), "merl-grid beckmann+diffuse")
+    fit_tabulated(iso)  # warm-up (caches)
+    ts, parts = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        m = fit_tabulated(iso)
+        ts.append(time.perf_counter() - t0)
+        parts.append({k: m.fit_info[k] for k in ("time_backscatter", "time_power_iteration",
+                                                  "time_fresnel")})
+    out["isotropic_merl_grid_N90"] = {"median_s": statistics.median(ts), "all_s": ts,
+                                      "breakdown_last": parts[-1], "target_s": 0.1}
+    aniso = MicrofacetBRDF(GGX(0.06, 0.3, 0.45), SchlickFresnel(0.9))
+    fit_tabulated(aniso, n=90, n_phi=90)
+    ts, parts = [], []
+    for _ in range(max(3, repeats // 2)):
+        t0 = time.perf_counter()
+        m = fit_tabulated(aniso, n=90, n_phi=90)
+        ts.append(time.perf_counter() - t0)
+        parts.append({k: m.fit_info[k] for k in ("time_backscatter", "time_power_iteration",
+                                                  "time_fresnel")})
+    out["anisotropic_90x90_analytic_input"] = {
+        "median_s": statistics.median(ts), "all_s": ts, "breakdown_last": parts[-1],
+        "target_s": 1.0,
+        "note": "time_fresnel includes evaluating the input BRDF at 24x16x24x90 configurations"}
+    return out
+
+
+# ------------------------------------------------------------------------------ real data
+def _interpolant_integral(d):
+    th = np.linspace(0, np.pi / 2 - 1e-6, 20001)
+    r = np.tan(th)
+    if d.table_isotropic:
+        f = d.pdf(np.stack([r, 0 * r], -1)) * r / np.cos(th) ** 2 * 2 * np.pi
+    else:
+        phis = np.linspace(0, 2 * np.pi, 181)[:-1]
+        s = np.stack(np.broadcast_arrays(-r[:, None] * np.cos(phis), -r[:, None] * np.sin(phis)), -1)
+        f = d.pdf(s).mean(1) * r / np.cos(th) ** 2 * 2 * np.pi
+    return float(np.trapezoid(f, th))
+
+
+def _iterations_needed(brdf, model, tols=(1e-4, 1e-6)):
+    d = model.distribution
+    n = d.table.shape[0]
+    _, theta, _, _ = radial_rule(n, d.rule)
+    rgb, ok = backscatter(brdf, theta, None, rule=d.rule)
+    b = np.maximum(np.where(ok, luminance(rgb), 0.0), 0.0)
+    out = {}
+    for tol in tols:
+        _, _, ch = solve_slope_pdf(b, rule=d.rule, tol=tol, max_iterations=500)
+        out[f"{tol:g}"] = len(ch) if ch[-1] <= tol else None
+    return out
+
+
+def _check(model):
+    d = model.distribution
+    F = model.fresnel.values
+    return {"eigenvalue": model.fit_info["eigenvalue"],
+            "nan": bool(not (np.all(np.isfinite(d.table)) and np.all(np.isfinite(F)))),
+            "P_nonnegative": bool(np.all(d.table >= 0)),
+            "P_integral": _interpolant_integral(d),
+            "last_relative_change": model.fit_info["relative_change"][-1],
+            "F0": F[0].tolist(), "time_s": model.fit_info["time"]}
+
+
+def real_data(limit=None):
+    from brdffit.io import load
+    from brdffit.io.nbrdf import list_materials
+
+    res = {"nbrdf_merl": [], "rgl": []}
+    z = SHARED / "nbrdf" / "merl_nbrdf.zip"
+    names = list_materials(z)[:limit] if limit else list_materials(z)
+    for name in names:
+        row = {"material": name}
+        try:
+            brdf = load(f"{z}:{name}")
+            m = fit_tabulated(brdf)
+            row.update(_check(m))
+            row["iterations_to_tol"] = _iterations_needed(brdf, m)
+            row["ggx_alpha"] = ggx_parameters(m.distribution)[0]
+        except Exception as exc:  # noqa: BLE001 - the benchmark reports failures
+            row["failure"] = f"{type(exc).__name__}: {exc}"
+        res["nbrdf_merl"].append(row)
+        print(name, {k: row.get(k) for k in ("eigenvalue", "P_integral", "failure")}, flush=True)
+    for path in sorted((SHARED / "rgl").glob("*.bsdf"))[: limit or None]:
+        row = {"material": path.stem}
+        try:
+            brdf = load(str(path))
+            m = fit_tabulated(brdf)
+            row.update(_check(m))
+            row["iterations_to_tol"] = _iterations_needed(brdf, m)
+            nd = brdf.ndf_table()
+            th = np.radians(np.linspace(0, 80, 161))
+            D_ref = nd(th)
+            D_fit = m.distribution.D(dirs(th))
+            big = D_ref > 1e-3 * D_ref.max()
+            # both NDFs satisfy ∫ D cos dω = 1 (Eq. 4); compare where the stored one is > 1e-3 peak
+            row["ndf_vs_stored"] = {
+                "max_rel_diff": float(np.max(np.abs(D_fit[big] / D_ref[big] - 1))),
+                "median_rel_diff": float(np.median(np.abs(D_fit[big] / D_ref[big] - 1))),
+                "peak_ratio_fit_over_stored": float(D_fit[0] / D_ref[0]),
+                "L1_rel": float(np.trapezoid(np.abs(D_fit - D_ref) * np.cos(th) * np.sin(th), th)
+                                / np.trapezoid(D_ref * np.cos(th) * np.sin(th), th)),
+                "theta_deg": [0, 10, 20, 40, 60, 80],
+                "fit": m.distribution.D(dirs(np.radians([0, 10, 20, 40, 60, 80]))).tolist(),
+                "stored": nd(np.radians([0, 10, 20, 40, 60, 80])).tolist()}
+        except Exception as exc:  # noqa: BLE001
+            row["failure"] = f"{type(exc).__name__}: {exc}"
+        res["rgl"].append(row)
+        print(path.stem, {k: row.get(k) for k in ("eigenvalue", "P_integral", "failure")},
+              row.get("ndf_vs_stored", {}).get("median_rel_diff"), flush=True)
+    for key in ("nbrdf_merl", "rgl"):
+        rows = res[key]
+        ok = [r for r in rows if "failure" not in r]
+        its = [r["iterations_to_tol"] for r in ok]
+        res[f"{key}_summary"] = {
+            "materials": len(rows), "failures": len(rows) - len(ok),
+            "with_nan": sum(r["nan"] for r in ok),
+            "P_negative": sum(not r["P_nonnegative"] for r in ok),
+            "P_integral_range": [min((r["P_integral"] for r in ok), default=None),
+                                 max((r["P_integral"] for r in ok), default=None)],
+            "iterations_tol_1e-4": _stats([i["0.0001"] for i in its]),
+            "iterations_tol_1e-6": _stats([i["1e-06"] for i in its]),
+            "last_change_after_4_iterations": _stats([r["last_relative_change"] for r in ok]),
+        }
+    return res
+
+
+def _stats(values):
+    v = [x for x in values if x is not None]
+    if not v:
+        return None
+    return {"min": min(v), "median": statistics.median(v), "max": max(v),
+            "not_converged": len(values) - len(v)}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--real", action="store_true", help="also fit the real materials")
+    ap.add_argument("--limit", type=int, default=None, help="first N real materials only")
+    ap.add_argument("--only-real", action="store_true", help="skip the synthetic sections")
+    args = ap.parse_args(argv)
+    results = {}
+    if OUT.exists():
+        try:
+            results = json.loads(OUT.read_text())
+        except json.JSONDecodeError:
+            results = {}
+    results["machine_note"] = "2-core machine shared with other jobs: timings are pessimistic"
+    if not args.only_real:
+        t0 = time.time()
+        results["table1"] = table1()
+        print("table1 done", time.time() - t0, flush=True)
+        for r in results["table1"]:
+            if r["mode"] == "4 iterations":
+                print(f"  {r['distribution']:8s} N={r['N']:3d} {r['rule']:5s} α={r['alpha']:.2f} "
+                      f"max rel err {r['max_rel_error']:.2e}  |λ-1| {abs(r['eigenvalue_error']):.1e}")
+        results["round_trip"] = round_trip()
+        for r in results["round_trip"]:
+            if r["mode"] == "tol 1e-10":
+                print(f"  {r['distribution']:8s} {r['alpha']} {r['hotspot']} -> "
+                      f"{np.round(r['fitted'], 4).tolist()}")
+        results["fresnel"] = fresnel()
+        for r in results["fresnel"]:
+            print("  fresnel", r["material"], r["hotspot"], f"{r['max_abs_error_theta_d_le_80']:.2e}")
+        results["speed"] = speed()
+        print("  speed", json.dumps(results["speed"], indent=1), flush=True)
+    if args.real or args.only_real:
+        results["real"] = real_data(args.limit)
+        print(json.dumps({k: v for k, v in results["real"].items() if k.endswith("summary")},
+                         indent=1))
+    with atomic_write(OUT, "w") as fh:
+        json.dump(results, fh, indent=1, default=float)
+    print("wrote", OUT)
+
+
+if __name__ == "__main__":
+    main()
