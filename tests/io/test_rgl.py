@@ -155,6 +155,10 @@ def test_eval_finite_nonnegative_zero_below_horizon(name, rng):
     assert one.shape == (5, 3)
     np.testing.assert_allclose(one[0], f[0])
     np.testing.assert_allclose(one, b.eval(np.tile(wi[0], (5, 1)), wo[:5]))
+    edge = np.array([[1, 0, 1e-12], [0, 1, 1e-7], [0, 0, 1], [1e-9, 0, 1], [-1, 0, 1e-5]])
+    edge /= np.linalg.norm(edge, axis=1, keepdims=True)
+    fe = b.eval(np.repeat(edge, 5, 0), np.tile(edge, (5, 1)))     # grazing / normal pairs
+    assert np.all(np.isfinite(fe)) and np.all(fe >= 0)
     th, _, td, pd = io_to_half_diff(wi[:50], wo[:50])
     np.testing.assert_allclose(b.eval_hd(th, td, pd), f[:50], rtol=1e-6, atol=1e-9)
 

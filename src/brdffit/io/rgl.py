@@ -698,7 +698,9 @@ class RGLBRDF(BRDF):
 
         Deliberate deviation: negative values are clamped to 0 (some RGB tables hold small
         negative texels, e.g. 21 % of ``chm_mint_rgb``'s, from out-of-gamut colour conversion;
-        Mitsuba returns them unclamped, see :meth:`eval_mitsuba`).
+        Mitsuba returns them unclamped, see :meth:`eval_mitsuba`). Where the tabulated value
+        does not vanish at grazing light (cos θi → 0), f_r grows like 1/cos θi (not clamped);
+        results are always finite.
         """
         wi, wo = _as_dirs(wi, wo)
         val = self.eval_mitsuba(wo, wi)
