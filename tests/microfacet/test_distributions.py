@@ -219,6 +219,26 @@ def test_roughness_scaling_eq9(d):
     assert ds.scaled(1 / ax, 1 / ay).params() == pytest.approx(d.params())
 
 
+def test_generic_scaled_method_of_the_base_class():
+    from brdffit.microfacet.base import SlopeDistribution
+
+    class Plain(SlopeDistribution):           # only pdf/sample/Lambda (unit isotropic GGX)
+        def pdf(self, s):
+            return GGX(1.0).pdf(s)
+
+        def sample(self, u):
+            return GGX(1.0).sample(u)
+
+        def Lambda(self, w):
+            return GGX(1.0).Lambda(w)
+
+    d = Plain().scaled(0.3, 0.5)
+    assert isinstance(d, ScaledDistribution)
+    w = _random_dirs(np.random.default_rng(0), 50)
+    np.testing.assert_allclose(d.G1(w), GGX(0.3, 0.5).G1(w), rtol=1e-12)
+    np.testing.assert_allclose(d.D(w), GGX(0.3, 0.5).D(w), rtol=1e-12)
+
+
 def test_scaled_visible_sampling_chi2():
     d = ScaledDistribution(GGX(0.5), 0.4, 1.2)
     ok, res = check_sampling(_VisibleSampler(d), [[0.5, 0.3, 0.81]], sample_count=30_000,

@@ -104,6 +104,17 @@ class SlopeDistribution(abc.ABC):
         """Parameters as a JSON-serialisable dict (for the fit file and reports)."""
         return {}
 
+    # -- roughness ---------------------------------------------------------------------------
+    def scaled(self, ax: float, ay: float | None = None) -> "SlopeDistribution":
+        """Roughness scaling of Dupuy 2015 Eq. 9: ``P(x̃/ax, ỹ/ay)/(ax ay)``.
+
+        Generic version: a :class:`~brdffit.microfacet.shadowing.ScaledDistribution` wrapper
+        (Λ and visible normals by stretch invariance); closed-form families override it.
+        """
+        from .shadowing import ScaledDistribution
+
+        return ScaledDistribution(self, ax, ay)
+
 
 class Fresnel(abc.ABC):
     """A Fresnel reflectance as a function of ``cos θd`` returning RGB ``(..., 3)``."""
