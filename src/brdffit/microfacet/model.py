@@ -299,8 +299,7 @@ class MicrofacetBRDF(BRDF, SerializableModel):
                 G = dist.G1(wi) * dist.G1(wo)
             spec = D * G / (4.0 * np.where(ok, ci * co, 1.0))
         spec = np.where(ok & (cos_d > 0), spec, 0.0)
-        f = self._fresnel(cos_d)
-        f *= spec[..., None]
+        f = self._fresnel(cos_d) * spec[..., None]        # (user Fresnels may be read-only)
         if self.diffuse is not None:
             f += np.where(ok, 1.0, 0.0)[..., None] * (self.diffuse / np.pi)
         return f
