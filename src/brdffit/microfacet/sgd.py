@@ -72,16 +72,17 @@ def _log_norm(alpha, p):
     return np.log(alpha) + np.log(upper_gamma(1.0 - np.asarray(p, float), alpha))
 
 
-def sgd_log_p22(x, alpha, p) -> np.ndarray:
+def sgd_log_p22(x, alpha, p, log_norm=None) -> np.ndarray:
     """``ln P22(x)`` with the paper's normalisation (∫_0^∞ P22 dx = 1, Bagher 2012 §4.2).
 
     ``P22(x) = t^{−p} e^{−t} / (α Γ(1−p, α))`` with ``t = α + x/α``; broadcasts over
-    ``x``, ``alpha``, ``p`` (vectorised for the fits).
+    ``x``, ``alpha``, ``p`` (vectorised for the fits). ``log_norm`` may pass a precomputed
+    ``ln(α Γ(1−p, α))``.
     """
     x = np.asarray(x, dtype=np.float64)
     alpha = np.asarray(alpha, dtype=np.float64)
     t = alpha + x / alpha
-    return -p * np.log(t) - t - _log_norm(alpha, p)
+    return -p * np.log(t) - t - (_log_norm(alpha, p) if log_norm is None else log_norm)
 
 
 def _z_minus_arctan(z):
@@ -94,11 +95,12 @@ def _z_minus_arctan(z):
     return np.where(small, ser, z - np.arctan(z))
 
 
-def sgd_mu_lambda(mu, alpha, p, h: float = _H_LOG) -> np.ndarray:
+def sgd_mu_lambda(mu, alpha, p, h: float = _H_LOG, log_norm=None) -> np.ndarray:
     """``μ Λ(μ)`` of the SGD for ``μ = cot θ ≥ 0`` by quadrature of Eq. 6 (see module doc).
 
     Vectorised over ``mu`` (1D/any shape; ``alpha``, ``p`` scalars). At ``μ = 0`` the value
-    is ``E[|slope|]/π`` (so ``Λ ~ E|x̃| / (2μ)`` at grazing angles).
+    is ``E[|slope|]/π`` (so ``Λ ~ E|x̃| / (2μ)`` at grazing angles). ``log_norm``: see
+    :func:`sgd_log_p22`.
     """
     alpha, p = _check(alpha, p)
     mu = np.asarray(mu, dtype=np.float64)
@@ -113,7 +115,7 @@ def sgd_mu_lambda(mu, alpha, p, h: float = _H_LOG) -> np.ndarray:
     y = np.exp(u)
     y = np.where(y <= y_hi * 1.0000001, y, np.nan)     # nodes past the cut-off contribute 0
     x = mu2 + y
-    logp = sgd_log_p22(x, alpha, p) - np.log(np.pi)    # slope pdf (∫_R² = 1)
+    logp = sgd_log_p22(x, alpha, p, log_norm) - np.log(np.pi)    # slope pdf (∫_R² = 1)
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.sqrt(y) / np.where(mu > 0, mu, 1.0)
         g = np.where(mu > 0, mu * _z_minus_arctan(z), np.sqrt(y))
@@ -332,19 +334,17 @@ class SGD(SlopeDistribution):
             return g1_eq9(theta, lam, c, k)
 
         best = None
-        for lam0 in (0.05, 0.5, 5.0):
-            for kk in (1.5, 3.0):
-                for wf in (0.6, 1.0):
-                    q0 = np.log([lam0, w0 * wf, kk])
-                    try:
-                        res = optimize.least_squares(
-                            lambda q: model(q) - g, q0, method="trf",
-                            bounds=(np.log([1e-6, 1e-7, 0.05]), np.log([1e6, np.pi / 2, 50.0])),
-                            xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=400)
-                    except (ValueError, FloatingPointError):
-                        continue
-                    if best is None or res.cost < best.cost:
-                        best = res
+        for lam0, kk in ((0.01, 2.0), (0.3, 4.0), (3.0, 8.0)):
+            q0 = np.log([lam0, w0, kk])
+            try:
+                res = optimize.least_squares(
+                    lambda q: model(q) - g, q0, method="trf",
+                    bounds=(np.log([1e-6, 1e-7, 0.05]), np.log([1e6, np.pi / 2, 50.0])),
+                    xtol=1e-12, ftol=1e-14, gtol=1e-14, max_nfev=150)
+            except (ValueError, FloatingPointError):
+                continue
+            if best is None or res.cost < best.cost:
+                best = res
         lam, w, k = np.exp(best.x)
         c = np.log1p(1.0 / lam) / w**k
         err = model(best.x) - g
