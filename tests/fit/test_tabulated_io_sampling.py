@@ -130,3 +130,52 @@ def test_summary_reports_alphas(iso_fit):
     assert s["eigenvalue"] == pytest.approx(0.6, rel=1e-3)  # F0 of Schlick(0.6), white
     g = to_ggx(iso_fit)
     assert registry.summarize("ggx", g)["alpha"][0] == pytest.approx(0.3, rel=5e-3)
+
+
+class _MerlTable:
+    """A MERL-grid table in memory, as the MERL reader exposes it (``merl_table``)."""
+
+    isotropic = True
+    name = "merl-grid"
+    source = None
+
+    def __init__(self, values, valid):
+        self._t = (values, valid)
+
+    def merl_table(self):
+        return self._t
+
+    def eval(self, wi, wo):  # pragma: no cover - the fit reads the table only
+        raise AssertionError("a MERL-grid fit must read the table, not evaluate the BRDF")
+
+
+def test_merl_grid_input_with_invalid_samples():
+    from brdffit.grid import tabulate_merl_grid
+
+    brdf = MicrofacetBRDF(Beckmann(0.15), SchlickFresnel([0.9, 0.7, 0.4]))
+    values, valid = tabulate_merl_grid(brdf)
+    clean = fit_tabulated(_MerlTable(values, valid), hotspot="G2")
+    assert clean.distribution.rule == "merl"
+    bad_vals, bad_valid = values.copy(), valid.copy()
+    rng = np.random.default_rng(0)
+    idx = rng.random(valid.shape) < 0.05
+    idx[5, 0, 0] = idx[20, 0, :] = True  # invalid backscattering samples too
+    bad_vals[idx] = -1.0  # MERL's marker of missing data
+    bad_valid[idx] = False
+    noisy = fit_tabulated(_MerlTable(bad_vals, bad_valid), hotspot="G2")
+    d0, d1 = clean.distribution, noisy.distribution
+    big = d0.table > 1e-3 * d0.table.max()
+    np.testing.assert_allclose(d1.table[big], d0.table[big], rtol=2e-2)
+    np.testing.assert_allclose(noisy.fresnel.values, clean.fresnel.values, atol=2e-3)
+    assert np.all(np.isfinite(noisy.fresnel.values))
+
+
+def test_real_neural_brdf_material(shared_data):
+    from brdffit.io import load
+
+    z = shared_data("nbrdf", "merl_nbrdf.zip")
+    model = fit_tabulated(load(f"{z}:gold-metallic-paint"))
+    d = model.distribution
+    assert np.all(d.table >= 0) and np.all(np.isfinite(model.fresnel.values))
+    assert d._interpolant_integral() == pytest.approx(1.0, abs=1e-6)
+    assert 0 < model.fit_info["eigenvalue"] < 10
