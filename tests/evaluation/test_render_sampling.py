@@ -74,12 +74,19 @@ def test_closed_form_sampling_consistent(name, theta):
     _check_sampling(ev, brdf, theta)
 
 
-@pytest.mark.parametrize("theta", [25.0, 70.0])
-def test_table_sampling_consistent_and_resampling_error(theta):
-    from brdffit.evaluation.render.translate import resampling_error, to_evaluator
+@pytest.fixture(scope="module")
+def ggx_table():
+    from brdffit.evaluation.render.translate import to_evaluator
 
     brdf = _models()["ggx+diffuse"]
-    ev = to_evaluator(brdf, mode="table")
+    return brdf, to_evaluator(brdf, mode="table")
+
+
+@pytest.mark.parametrize("theta", [25.0, 70.0])
+def test_table_sampling_consistent_and_resampling_error(theta, ggx_table):
+    from brdffit.evaluation.render.translate import resampling_error
+
+    brdf, ev = ggx_table
     assert ev.kind == "merl-table"
     # the GGX proxy recovers the lobe width of the table
     assert 0.12 < ev.proxy_alpha < 0.3
@@ -147,17 +154,19 @@ def test_non_reciprocal_brdf_gets_full_phi_table():
     from brdffit.evaluation.render.translate import (is_reciprocal, resampling_error,
                                                      to_evaluator)
 
-    base = _models()["ggx+diffuse"]
-
     class Skewed(IsotropicBRDF):
         name = "skewed"
 
         def eval(self, wi, wo):  # isotropic (depends on wi·wo and the cosines) but not reciprocal
             wi, wo = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wo, float))
-            return base.eval(wi, wo) * (1.0 + 0.8 * wi[..., 2] ** 2)[..., None]
+            r = wo * np.array([-1.0, -1.0, 1.0])               # mirror direction of wo
+            lobe = 0.1 + 3.0 * np.maximum(np.sum(wi * r, -1), 0.0) ** 30
+            ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+            f = np.where(ok, lobe * (1.0 + 0.8 * wi[..., 2] ** 2), 0.0)
+            return np.repeat(f[..., None], 3, -1)
 
     b = Skewed()
-    assert not is_reciprocal(b) and is_reciprocal(base)
+    assert not is_reciprocal(b) and is_reciprocal(_models()["ggx+diffuse"])
     ev = to_evaluator(b)
     assert ev.kind == "merl-table" and ev.n_phi == 360
     full = resampling_error(b, ev, n=1 << 14)["rel_cos"]
@@ -180,3 +189,12 @@ def test_log_interpolation_reduces_peak_bias():
     e_lin = resampling_error(b, dj.MERLTableEval(values, interp="linear"), n=1 << 15)
     assert e_log["albedo_rel"] < e_lin["albedo_rel"]
     assert e_log["rel_cos"] < 0.1
+    # a genuine sharp peak is not a spike; injected isolated outliers are
+    assert dj.despike(values)[1] == 0
+    spiky = values.copy()
+    spiky[40, 88, 10] = 1e9
+    spiky[12, 60, 100] = 5e4
+    cleaned, n = dj.despike(spiky)
+    assert n == 2 and cleaned.max() < 1e4
+    np.testing.assert_array_equal(np.delete(cleaned.ravel(), []), np.where(
+        spiky > 1e4, cleaned, spiky).ravel())

@@ -22,7 +22,9 @@ __all__ = ["RenderResult", "Renderer", "render", "render_ex", "noise_floor", "ps
 @dataclasses.dataclass
 class RenderResult:
     """A rendering: ``image`` (H, W, 3) linear float32, ``alpha`` (H, W) coverage,
-    ``mask`` (H, W) bool foreground, ``seconds`` (render only, excluding set-up),
+    ``mask`` (H, W) bool foreground, ``seconds`` (render only, excluding set-up, wall
+    clock), ``cpu_seconds`` (CPU time of the process during the render, all threads: a
+    load-independent cost on a shared machine),
     ``setup_seconds`` (tabulation, translation, scene load) and ``info`` (scene, spp, seed,
     evaluator path/kind)."""
 
@@ -32,6 +34,7 @@ class RenderResult:
     seconds: float
     setup_seconds: float
     info: dict
+    cpu_seconds: float = float("nan")
 
 
 def foreground_mask(alpha, threshold: float = 0.999) -> np.ndarray:
@@ -53,6 +56,12 @@ def psnr(reference, test, mask=None) -> float:
     if peak <= 0.0:
         return float("-inf")
     return float(10.0 * np.log10(peak**2 / mse))
+
+
+def describe_evaluator(ev) -> str:
+    """Short description of a Dr.Jit evaluator (kind and, for microfacet ones, components)."""
+    d = getattr(ev, "describe", None)
+    return d() if callable(d) else getattr(ev, "kind", type(ev).__name__)
 
 
 class Renderer:
@@ -88,19 +97,21 @@ class Renderer:
 
     def render(self, seed: int = 0, spp: int | None = None) -> RenderResult:
         spp = self.spp if spp is None else int(spp)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         img = self.mi.render(self.scene, seed=int(seed), spp=spp)
         arr = np.array(img, dtype=np.float32)  # forces evaluation
         seconds = time.perf_counter() - t0
+        cpu = time.process_time() - c0
         rgb = np.ascontiguousarray(arr[..., :3])
         alpha = np.ascontiguousarray(arr[..., 3]) if arr.shape[-1] > 3 else np.ones(arr.shape[:2], np.float32)
         info = {"scene": self.scene_name, "spp": spp, "seed": int(seed),
                 "resolution": self.resolution,
                 "envmap": None if self.envmap is None or isinstance(self.envmap, np.ndarray)
                 else str(self.envmap),
-                "evaluator": getattr(self.evaluator, "kind", type(self.evaluator).__name__),
+                "evaluator": describe_evaluator(self.evaluator),
                 "path": getattr(self.evaluator, "path", None)}
-        return RenderResult(rgb, alpha, foreground_mask(alpha), seconds, self.setup_seconds, info)
+        return RenderResult(rgb, alpha, foreground_mask(alpha), seconds, self.setup_seconds, info,
+                            cpu)
 
 
 def render_ex(brdf, scene: str = "sphere-env", envmap=None, spp: int = 256,

@@ -9,9 +9,16 @@ Resolution order of :func:`to_evaluator` (``mode="auto"``):
    :func:`register_translator`; built in: ``MicrofacetBRDF`` (closed-form GGX/Beckmann,
    tabulated radial table for any other isotropic distribution; Schlick in closed form, any
    other Fresnel tabulated over cos θd);
-3. the generic table: isotropic → MERL grid + trilinear (:class:`.drjit_eval.MERLTableEval`),
-   (360 φd samples over [0, 2π) instead of MERL's 180 over [0, π) when the BRDF is not
-   reciprocal, see :func:`is_reciprocal`), anisotropic → 4D (θh, φh, θd, φd) table + quadrilinear (:class:`.drjit_eval.Table4DEval`).
+3. the generic table: isotropic → MERL grid + trilinear in log space
+   (:class:`.drjit_eval.MERLTableEval`; 360 φd samples over [0, 2π) instead of MERL's 180
+   over [0, π) when the BRDF is not reciprocal, see :func:`is_reciprocal`; isolated spikes
+   removed by :func:`.drjit_eval.despike`, count in ``evaluator.despiked``); anisotropic →
+   4D (θh, φh, θd, φd) table with quadrilinear interpolation
+   (:class:`.drjit_eval.Table4DEval`, :data:`TABLE4D_SHAPE` = 40 × 40 × 32 × 40 samples).
+
+Sampling of the table paths: mixture of cosine-weighted hemisphere and GGX visible normals
+of a proxy lobe whose α is fitted to the table's θd = 0 slice
+(:func:`.drjit_eval.fit_ggx_proxy`); mixture pdf exact.
 
 Every translated (non-table) evaluator is *verified* against ``brdf.eval`` at random
 directions (cosine-weighted relative error, :func:`resampling_error`); above
@@ -121,6 +128,17 @@ register_translator("MicrofacetBRDF", _microfacet_translator)
 register_translator("SumBRDF", _sum_translator)
 
 
+def _per_channel_translator(brdf):
+    """``PerChannelBRDF`` (three single-channel fits, ``brdffit.fit.tabulated``)."""
+    models = getattr(brdf, "models", None)
+    if not models or len(models) != 3:
+        return None
+    return _dj().PerChannelEval([to_evaluator(m, verify_tol=np.inf) for m in models])
+
+
+register_translator("PerChannelBRDF", _per_channel_translator)
+
+
 # -- generic tables -------------------------------------------------------------------------
 def tabulate_4d(brdf, shape=TABLE4D_SHAPE, chunk: int = 1 << 18) -> np.ndarray:
     """Evaluate any BRDF on the (θh, φh, θd, φd) grid of :class:`.drjit_eval.Table4DEval`."""
@@ -137,7 +155,7 @@ def tabulate_4d(brdf, shape=TABLE4D_SHAPE, chunk: int = 1 << 18) -> np.ndarray:
     return out.reshape(*shape, 3)
 
 
-def _table_evaluator(brdf, table4d_shape=TABLE4D_SHAPE, reciprocal=None):
+def _table_evaluator(brdf, table4d_shape=TABLE4D_SHAPE, reciprocal=None, despike=True):
     dj = _dj()
     if getattr(brdf, "isotropic", False) and hasattr(brdf, "eval_hd"):
         if reciprocal is None:
@@ -148,16 +166,21 @@ def _table_evaluator(brdf, table4d_shape=TABLE4D_SHAPE, reciprocal=None):
             values, valid = tabulate_merl_grid(brdf)   # MERL's own grid, φd ∈ [0, π)
         else:
             values, valid = dj.tabulate_full_phi(brdf), None
+        if valid is not None:   # invalid measurements → 0 before looking for spikes
+            values = np.where(np.asarray(valid, bool)[..., None] & np.isfinite(values),
+                              np.maximum(values, 0.0), 0.0)
+            valid = None
+        n_spikes = 0
+        if despike:
+            values, n_spikes = dj.despike(values)
         ev = dj.MERLTableEval(values, valid)
+        ev.despiked = n_spikes
     else:
-        from ...grid import merl_theta_h
-
         values = tabulate_4d(brdf, table4d_shape)
         # proxy lobe from the θd = 0 slice (averaged over φh, any φd)
         th = (np.arange(table4d_shape[0]) / table4d_shape[0]) ** 2 * (np.pi / 2)
         lum = values[:, :, 0, 0, :].mean(axis=1) @ np.array([0.2126, 0.7152, 0.0722])
         alpha, w = dj.fit_ggx_proxy(th, lum)
-        del merl_theta_h
         ev = dj.Table4DEval(values, alpha, w)
     ev.source_kind = "table"
     return ev
@@ -260,4 +283,5 @@ def resampling_error(brdf, evaluator=None, n: int = 65536, seed: int = 0) -> dic
         "n": int(n),
         "path": getattr(evaluator, "path", None),
         "kind": getattr(evaluator, "kind", type(evaluator).__name__),
+        "despiked": int(getattr(evaluator, "despiked", 0)),
     }
