@@ -195,6 +195,8 @@ def test_log_interpolation_reduces_peak_bias():
     spiky[40, 88, 10] = 1e9
     spiky[12, 60, 100] = 5e4
     cleaned, n = dj.despike(spiky)
-    assert n == 2 and cleaned.max() < 1e4
-    np.testing.assert_array_equal(np.delete(cleaned.ravel(), []), np.where(
-        spiky > 1e4, cleaned, spiky).ravel())
+    assert n == 2
+    assert cleaned[40, 88, 10].max() < 10 * values[40, 88, 10].max() + 1.0
+    assert cleaned[12, 60, 100].max() < 10 * values[12, 60, 100].max() + 1.0
+    changed = np.any(cleaned != spiky, axis=-1)
+    assert changed.sum() == 2
