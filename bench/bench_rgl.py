@@ -4,6 +4,7 @@ Prints and writes ``bench/results/rgl.json``:
 
 * read time of each RGL file in ``../shared/data/rgl`` (parse + warp set-up),
 * 10⁶ random (wi, wo) evaluations of ``eval`` (f_r, RGB) per material (target < 3 s),
+  and 10⁶ importance samples (``sample``),
 * when Mitsuba 3 (``llvm_ad_rgb``) is usable: the maximum / median relative difference
   between ``RGLBRDF.eval_mitsuba`` and Mitsuba's own ``measured`` plugin on ``--n-check``
   random direction pairs (float32-representable inputs), and Mitsuba's time for 10⁶ evals.
@@ -93,7 +94,10 @@ def main() -> dict:
         read_s = _best(lambda: read_rgl(path), args.repeat)
         b = read_rgl(path)
         eval_s = _best(lambda: b.eval(wi, wo), args.repeat)
+        u = np.random.default_rng(2).random((args.n, 2))
+        sample_s = _best(lambda: b.sample(wi, u), args.repeat)
         row = {"read_s": read_s, "eval_1e6_s": eval_s * 1e6 / args.n,
+               "sample_1e6_s": sample_s * 1e6 / args.n,
                "albedo_0_30_60_75deg": b.albedo(np.radians([0, 30, 60, 75]), 16384).round(4).tolist()}
         if mi is not None:
             bsdf = mi.load_dict({"type": "measured", "filename": str(path)})
@@ -113,6 +117,7 @@ def main() -> dict:
             row["mitsuba_eval_1e6_s"] = _best(run_mi, args.repeat) * 1e6 / args.n
         result["materials"][path.stem] = row
         print(f"{path.stem:28s} read {read_s * 1e3:6.1f} ms   eval 1e6 {row['eval_1e6_s']:.3f} s"
+              f"   sample 1e6 {row['sample_1e6_s']:.3f} s"
               + (f"   vs Mitsuba: max rel {row['mitsuba_max_rel']:.2e}, median "
                  f"{row['mitsuba_median_rel']:.1e}, Mitsuba eval 1e6 {row['mitsuba_eval_1e6_s']:.3f} s"
                  if "mitsuba_max_rel" in row else ""))
