@@ -97,6 +97,7 @@ def bench_single(args) -> dict:
     out = Path(args.out or "/tmp/brdffit-bench-report")
     t0 = time.perf_counter()
     res = compare(args.material, models, out, scene=args.scene, spp=args.spp,
+                  fit_options=json.loads(args.fit_options) if args.fit_options else None,
                   resolution=args.resolution, seed=0,
                   render_options={"envmap": args.envmap} if args.envmap else None,
                   progress=lambda m: print(f"  [{time.perf_counter() - t0:6.1f} s] {m}", flush=True))
@@ -107,6 +108,7 @@ def bench_single(args) -> dict:
                                             "psnr", "mean_de2000")}
                     | {"cos_rel_error": (m.get("brdf") or {}).get("cos_rel_error")})
     fig = {"benchmark": "one-material report (reference + fits)", "material": args.material,
+           "fit_options": args.fit_options, "command": " ".join(sys.argv),
            "models": models, "scene": res["scene"], "total_seconds": total,
            "target_seconds": 120.0, "meets_target": total <= 120.0,
            "reference_render_seconds": res["reference"]["render_time"],
@@ -149,6 +151,7 @@ def bench_database(args) -> dict:
                   flush=True)
             try:
                 compare(ref, models, sdir, scene=scene, spp=args.spp, resolution=args.resolution,
+                        fit_options=json.loads(args.fit_options) if args.fit_options else None,
                         seed=0, noise_floor=args.noise_floor, update_index=False,
                         render_options={"envmap": args.envmap} if args.envmap else None)
             except Exception as exc:  # noqa: BLE001
@@ -166,6 +169,7 @@ def bench_database(args) -> dict:
     ranking = sorted(((n, s["mean_psnr"]) for n, s in summ["per_model"].items()
                       if s["mean_psnr"] is not None), key=lambda x: -x[1])
     fig = {"benchmark": "database comparison", "collections": args.collections,
+           "fit_options": args.fit_options, "command": " ".join(sys.argv),
            "limit": args.limit, "n_specs": len(specs), "scenes": scenes, "spp": args.spp,
            "resolution": args.resolution, "models": models, "n_renderings": len(all_results),
            "summary": summ, "ranking_by_mean_psnr": ranking, "failures": failures,
@@ -195,6 +199,8 @@ def main(argv=None) -> int:
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--resolution", type=int, default=128)
     ap.add_argument("--out", default=None)
+    ap.add_argument("--fit-options", default=None,
+                    help='JSON {model: {option: value}}, e.g. \'{"npf": {"max_iter": 200}}\'')
     ap.add_argument("--database", action="store_true")
     ap.add_argument("--collections", default="merl_nbrdf.zip,rgl/*_rgb.bsdf")
     ap.add_argument("--scenes", default="sphere-env")
