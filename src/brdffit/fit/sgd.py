@@ -371,8 +371,12 @@ class PerChannelMicrofacetBRDF(IsotropicBRDF, SerializableModel):
         out = []
         for c, ch in enumerate(self.channels):
             d = ch["distribution"]
+            dp = {k: float(v) for k, v in d.params().items() if np.isscalar(v)}
+            if "alpha" not in dp and "alpha_x" in dp and dp.get("alpha_y") == dp["alpha_x"] \
+                    and not dp.get("rho"):
+                dp = {"alpha": dp["alpha_x"]}             # isotropic Beckmann / GGX
             row = {"channel": _CHANNELS[c], "distribution": getattr(d, "kind", type(d).__name__),
-                   **{k: float(v) for k, v in d.params().items() if np.isscalar(v)},
+                   **dp,
                    "rho_d": ch["rho_d"], "rho_s": ch["rho_s"], "F0": ch["F0"], "F1": ch["F1"]}
             if self.g1_approx and self.g1_approx[c]:
                 row["g1_approx"] = dict(self.g1_approx[c])
@@ -444,6 +448,24 @@ def _basis_h(kind, theta, alpha, p):
     return np.where(np.isfinite(b), b, 0.0)
 
 
+def _grid_starts(cost: np.ndarray) -> np.ndarray:
+    """Flat indices of the grid's local minima (8-neighbourhood), best first, then the rest."""
+    c = np.where(np.isfinite(cost), cost, np.inf)
+    pad = np.pad(c, 1, constant_values=np.inf)
+    n0, n1 = c.shape
+    is_min = np.ones_like(c, dtype=bool)
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            if di or dj:
+                is_min &= c <= pad[1 + di:1 + di + n0, 1 + dj:1 + dj + n1]
+    flat = c.ravel()
+    mins = np.nonzero(is_min.ravel() & np.isfinite(flat))[0]
+    mins = mins[np.argsort(flat[mins])]
+    rest = np.setdiff1d(np.argsort(flat), mins, assume_unique=True)
+    rest = rest[np.argsort(flat[rest])]
+    return np.concatenate([mins, rest])
+
+
 def _step1(kind: str, theta, m, w, n_grid: tuple[int, int], starts: int):
     """Fit (ρd, Fr, α[, p]) per channel to the θd = 0 slice (Eq. 7, 12)."""
     a_lo, a_hi = ALPHA_BOUNDS[kind]
@@ -469,7 +491,7 @@ def _step1(kind: str, theta, m, w, n_grid: tuple[int, int], starts: int):
             r = (mc[:, 0] - coef[0, 0] / np.pi - coef[0, 1] * b) * wc[:, 0]
             return np.where(np.isfinite(r), r, 1e6)
 
-        order = np.argsort(costs[:, c])
+        order = _grid_starts(costs[:, c].reshape(len(la), len(ps)))
         best = None
         tried = 0
         for gi in order:
@@ -521,7 +543,7 @@ def _step2(kind: str, theta_d, m_d, valid_d, s1: dict) -> tuple[float, float, fl
 
 
 def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
-                  starts: int = 2, grid: tuple[int, int] = (24, 9), g1_approximation: bool = True,
+                  starts: int = 3, grid: tuple[int, int] = (24, 9), g1_approximation: bool = True,
                   name: str | None = None) -> PerChannelMicrofacetBRDF:
     """Two-slice fit of Bagher 2012 §5 with an SGD, Beckmann or GGX distribution, per channel.
 
@@ -585,7 +607,7 @@ def _check_finite(model: PerChannelMicrofacetBRDF, label: str) -> None:
             raise FitError(f"{label}: fit produced non-finite parameters {row}")
 
 
-def fit_sgd(brdf, *, weighting: str = "cosine", starts: int = 2,
+def fit_sgd(brdf, *, weighting: str = "cosine", starts: int = 3,
             g1_approximation: bool = True, **kwargs) -> PerChannelMicrofacetBRDF:
     """Fit the SGD Cook-Torrance model of Bagher, Soler, Holzschuch 2012 (§5) per channel.
 
@@ -596,13 +618,13 @@ def fit_sgd(brdf, *, weighting: str = "cosine", starts: int = 2,
                          g1_approximation=g1_approximation, **kwargs)
 
 
-def fit_beckmann_two_slice(brdf, *, weighting: str = "cosine", starts: int = 2,
+def fit_beckmann_two_slice(brdf, *, weighting: str = "cosine", starts: int = 3,
                            **kwargs) -> PerChannelMicrofacetBRDF:
     """The two-slice procedure of Bagher 2012 §5 with a Beckmann distribution (§6.3)."""
     return fit_two_slice(brdf, "beckmann", weighting=weighting, starts=starts, **kwargs)
 
 
-def fit_ggx_two_slice(brdf, *, weighting: str = "cosine", starts: int = 2,
+def fit_ggx_two_slice(brdf, *, weighting: str = "cosine", starts: int = 3,
                       **kwargs) -> PerChannelMicrofacetBRDF:
     """The two-slice procedure of Bagher 2012 §5 with a GGX (Trowbridge-Reitz) distribution."""
     return fit_two_slice(brdf, "ggx", weighting=weighting, starts=starts, **kwargs)
