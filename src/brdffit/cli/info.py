@@ -80,10 +80,14 @@ def summarize(brdf, spec=None, *, albedo_samples: int = 65536) -> dict:
         shapes = {k: list(np.shape(v)) for k, v in brdf.fields.items()
                   if isinstance(v, np.ndarray) and k != "description"}
         n = int(np.prod(shapes["rgb"])) // 3 if "rgb" in shapes else None
+        counts = {"field_shapes": shapes, "n_samples": n, "n_invalid": None}
         valid = getattr(brdf, "valid", None)
-        n_invalid = (int(np.size(valid) - np.count_nonzero(valid))
-                     if isinstance(valid, np.ndarray) else None)
-        counts = {"field_shapes": shapes, "n_samples": n, "n_invalid": n_invalid}
+        if isinstance(valid, np.ndarray):  # the file's own 'valid' field, reported as is
+            if valid.dtype == np.uint8 and n is not None and valid.size * 8 == n:
+                bits = int(np.unpackbits(valid).sum())
+                counts["valid_field"] = f"bit mask, {bits} of {n} bits set"
+            else:
+                counts["valid_field"] = f"{int(np.count_nonzero(valid))} of {valid.size} set"
     else:
         counts = {"n_samples": None, "n_invalid": None}
     out["samples"] = counts
@@ -120,9 +124,12 @@ def _print_summary(s: dict) -> None:
     if "grid" in c:
         echo(f"  grid        {c['grid']}")
     if c.get("n_samples") is not None:
-        echo(f"  samples     {c['n_samples']}  (invalid: {c['n_invalid']})")
+        inv = "" if c.get("n_invalid") is None else f"  (invalid: {c['n_invalid']})"
+        echo(f"  samples     {c['n_samples']}{inv}")
     if "n_parameters" in c:
         echo(f"  parameters  {c['n_parameters']}  (network; no stored samples)")
+    if "valid_field" in c:
+        echo(f"  valid field {c['valid_field']}")
     if "field_shapes" in c:
         echo("  fields      " + ", ".join(f"{k}{tuple(v)}" for k, v in c["field_shapes"].items()))
     for key in ("interpolation", "precision"):
