@@ -99,3 +99,17 @@ def test_subprocess_entry_point(tmp_path):
     assert res.returncode == 1 and "Traceback" not in res.stderr
     assert res.stderr.startswith("brdffit: error:") and res.stderr.strip().count("\n") == 0
     assert "no.bin" in res.stderr and res.stdout == ""
+
+
+def test_info_rgl_and_nbrdf(capsys):
+    rgl = shared_data_path("rgl", "paper_white_rgb.bsdf")
+    assert main(["info", str(rgl), "--json", "--albedo-samples", "1024"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["isotropic"] is True and "rgb" in out["samples"]["field_shapes"]
+    alb = np.array(list(out["albedo"].values()))
+    assert np.all((alb > 0.3) & (alb < 1.05))  # white paper
+    z = shared_data_path("nbrdf", "merl_nbrdf.zip")
+    assert main(["info", f"{z}:gold-metallic-paint", "--json", "--albedo-samples", "1024"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["format"] == "nbrdf" and out["samples"]["n_parameters"] == 675
+    assert out["value_range"]["min"][0] >= 0 and out["value_range"]["max"][0] > 1.0
