@@ -89,3 +89,59 @@ def g_normal_equations(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
             Ao_o[c, b] += wy2 * s * (1.0 - s)
             bo[c, b] += wyr * (1.0 - s)
             bo[c, b + 1] += wyr * s
+
+
+@njit(cache=True, nogil=True)
+def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_s,
+                      GG, DG, FG, Grd, Grs, gG):  # pragma: no cover
+    """Blocks of JᵀWJ and JᵀWr involving G for the Gauss–Newton polish of Eq. 3 (per
+    channel): ``GG`` (3, 90, 90), ``DG`` (3, 90 θh, 90 G), ``FG`` (3, 90 θd, 90 G), ``Grd``,
+    ``Grs``, ``gG`` (3, 90). The blocks not involving G follow from the bin statistics."""
+    n = hd.shape[0]
+    nd = F.shape[1]
+    GG[:] = 0.0
+    DG[:] = 0.0
+    FG[:] = 0.0
+    Grd[:] = 0.0
+    Grs[:] = 0.0
+    gG[:] = 0.0
+    idx = np.empty(4, dtype=np.int64)
+    gv = np.empty(4)
+    for j in range(n):
+        k = hd[j]
+        h = k // nd
+        d = k - h * nd
+        a = gi0[j]
+        t = gti[j]
+        b = go0[j]
+        s = gto[j]
+        ic = inv_cc[j]
+        idx[0] = a
+        idx[1] = a + 1
+        idx[2] = b
+        idx[3] = b + 1
+        for c in range(3):
+            g_i = G[c, a] + t * (G[c, a + 1] - G[c, a])
+            g_o = G[c, b] + s * (G[c, b + 1] - G[c, b])
+            P = g_i * g_o * ic
+            df = D[c, h] * F[c, d]
+            q = rho_s[c] * df * ic
+            gv[0] = q * g_o * (1.0 - t)
+            gv[1] = q * g_o * t
+            gv[2] = q * g_i * (1.0 - s)
+            gv[3] = q * g_i * s
+            wj = w[c, j]
+            r = rho_d[c] + rho_s[c] * df * P - z[c, j]
+            jd = rho_s[c] * F[c, d] * P
+            jf = rho_s[c] * D[c, h] * P
+            js = df * P
+            for u in range(4):
+                e = wj * gv[u]
+                iu = idx[u]
+                DG[c, h, iu] += e * jd
+                FG[c, d, iu] += e * jf
+                Grs[c, iu] += e * js
+                Grd[c, iu] += e
+                gG[c, iu] += e * r
+                for v in range(4):
+                    GG[c, iu, idx[v]] += e * gv[v]

@@ -283,12 +283,46 @@ class RunResult:
     seconds: float
 
 
+def _extrapolate(st: MFState, prev: MFState, beta, smp: Samples, eps, E):
+    """Over-relaxation of a whole AWLS sweep (an extension, not in the paper): try
+    ``θ + β (θ − θ_prev)`` for the factors, re-normalise, solve ρd/ρs (Cramer) and accept per
+    channel when the objective decreases (one pass over the samples). Returns
+    ``(accepted (3,), S or None, E)``; ``st`` is updated in place where accepted."""
+    b = beta[:, None]
+    cand = MFState(*(np.array(x) for x in _state_arrays(st)))
+    for nm in ("D", "F", "G"):
+        x = getattr(st, nm) + b * (getattr(st, nm) - getattr(prev, nm))
+        setattr(cand, nm, np.maximum(x, eps))
+    cand.rho_s = np.maximum(st.rho_s + beta * (st.rho_s - prev.rho_s), 1e-300)
+    for nm, pw in (("D", 1), ("F", 1), ("G", 2)):
+        f, cand.rho_s = normalise(getattr(cand, nm), cand.rho_s, eps, pw)
+        setattr(cand, nm, f)
+    X = cand.rho_s[:, None] * outer_df(cand.D, cand.F)
+    _, S = smp.stats(cand.G, X, cand.rho_d)
+    _rho_update(cand, smp, S)
+    Ec = expanded_objective(cand, smp, S)
+    acc = Ec < E
+    if np.any(acc):
+        for nm in ("D", "F", "G"):
+            setattr(st, nm, np.where(acc[:, None], getattr(cand, nm), getattr(st, nm)))
+        for nm in ("rho_d", "rho_s"):
+            setattr(st, nm, np.where(acc, getattr(cand, nm), getattr(st, nm)))
+    return acc, S, np.where(acc, Ec, E)
+
+
+def _state_arrays(st: MFState):
+    return [st.D, st.F, st.G, st.rho_d, st.rho_s]
+
+
 def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol=1e-6,
-                      max_iter=1000, gss_max_eval=12, callback=None) -> RunResult:
+                      max_iter=1000, gss_max_eval=12, extrapolate=True,
+                      callback=None) -> RunResult:
     """Independent-G AWLS (§4.2-4.3): D, F (Eq. 14), G(θi) and G(θo) updates averaged and
     Gaussian-smoothed (σ = ``smoothing`` samples; golden-section search along the step when
     the objective increases), ρd/ρs by Cramer's rule, max-normalisation and DR clamping at
-    ``eps``."""
+    ``eps``. With ``extrapolate`` each sweep is followed by an accepted-if-better
+    over-relaxation step (:func:`_extrapolate`), which shortens the long AWLS "swamps"
+    caused by the near-ambiguity between F(θd) and G(θi)G(θo)."""
     t0 = time.perf_counter()
     for name in ("D", "F", "G"):
         f, st.rho_s = normalise(getattr(st, name), st.rho_s, eps, 2 if name == "G" else 1)
@@ -300,7 +334,10 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
     gss_calls = gss_evals = 0
     E = expanded_objective(st, smp, S)
     mon.history.append(float(E.sum()))
+    beta = np.ones(3)
+    n_extra = 0
     while True:
+        prev = MFState(*(np.array(x) for x in _state_arrays(st)))
         st.D, st.rho_s = normalise(_d_update(st, S), st.rho_s, eps)
         st.F, st.rho_s = normalise(_f_update(st, S), st.rho_s, eps)
         _rho_update(st, smp, S)
@@ -312,7 +349,7 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
             g_new = gaussian_filter1d(g_new, smoothing, axis=1, mode="nearest")
         g_new = np.maximum(g_new, eps)
         e_new, S_new = smp.stats(g_new, X, st.rho_d)
-        need = e_new > e_before
+        need = e_new > e_before + 1e-12 * smp.sum_wzz
         if np.any(need):
             gss_calls += 1
             g_old = st.G
@@ -343,6 +380,12 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
         S = (S[0] / m[:, None] ** 2, S[1] / m[:, None] ** 4, S[2] / m[:, None] ** 2)
         _rho_update(st, smp, S)
         E = expanded_objective(st, smp, S)
+        if extrapolate and len(mon.history) > 1:
+            acc, S_e, E = _extrapolate(st, prev, beta, smp, eps, E)
+            if np.any(acc):
+                n_extra += 1
+                S = tuple(np.where(acc[:, None], a, b) for a, b in zip(S_e, S))
+            beta = np.where(acc, np.minimum(beta * 1.5, 50.0), np.maximum(beta * 0.5, 0.5))
         if callback is not None:
             callback(len(mon.history), float(E.sum()))
         if mon.push(E):
@@ -354,7 +397,7 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
 
 
 def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
-                 gss_max_eval=12, callback=None) -> RunResult:
+                 gss_max_eval=8, callback=None) -> RunResult:
     """G-from-D AWLS (§4.3): D by Eq. 14, G from D (Eq. 19 + Smith Λ), objective check and
     golden-section search along D's step when it increases; F by Eq. 14; ρd/ρs by Cramer;
     negative components clamped to 0 (``eps``)."""
@@ -384,7 +427,8 @@ def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
             return e, (D, G, m) + s
 
         e_new, aux = make(A_new)
-        need = e_new > e_before
+        # e_before comes from the expanded form: allow for its rounding (≈1e-15 Σwz²)
+        need = e_new > e_before + 1e-12 * smp.sum_wzz
         if np.any(need):
             gss_calls += 1
 
@@ -523,3 +567,134 @@ def fit_bivariate_table(data: ObjectiveData) -> tuple[np.ndarray, np.ndarray]:
     r = model - data.z
     E = np.einsum("cn,cn->c", data.w, r * r)
     return np.maximum(B.reshape(3, NH, ND), 0.0), E
+
+
+# -- Gauss–Newton / Levenberg–Marquardt polish (extension) ------------------------------------
+def _normal_matrix(st: MFState, smp: Samples, S):
+    """Full JᵀWJ (3, 272, 272) and JᵀWr (3, 272) of Eq. 7 for Eq. 3 in the parameters
+    (D, F, G, ρd, ρs)."""
+    S1, S2, Spz = (s.reshape(3, NH, ND) for s in S)
+    D, F, G, a, b = st.D, st.F, st.G, st.rho_d, st.rho_s
+    blocks = [np.empty((3, NG, NG)), np.empty((3, NH, NG)), np.empty((3, ND, NG)),
+              np.empty((3, NG)), np.empty((3, NG)), np.empty((3, NG))]
+    _kernels.g_jacobian_blocks(smp.hd, smp.gi0, smp.gti, smp.go0, smp.gto, smp.inv_cc,
+                               smp.w, smp.z, np.ascontiguousarray(G), np.ascontiguousarray(D),
+                               np.ascontiguousarray(F), np.ascontiguousarray(a),
+                               np.ascontiguousarray(b), *blocks)
+    GG, DG, FG, Grd, Grs, gG = blocks
+    X = b[:, None, None] * D[:, :, None] * F[:, None, :]
+    R = a[:, None, None] * S1 + X * S2 - Spz                       # Σ w r P per bin
+    b2 = (b * b)[:, None, None]
+    n = NH + ND + NG + 2
+    A = np.zeros((3, n, n))
+    g = np.zeros((3, n))
+    iD, iF, iG, ia, ib = slice(0, NH), slice(NH, NH + ND), slice(NH + ND, NH + ND + NG), n - 2, n - 1
+    ci = np.arange(3)[:, None]
+    A[ci, np.arange(NH)[None], np.arange(NH)[None]] = b2[:, :, 0] * np.einsum("chd,cd->ch", S2, F * F)
+    A[ci, NH + np.arange(ND)[None], NH + np.arange(ND)[None]] = \
+        b2[:, :, 0] * np.einsum("chd,ch->cd", S2, D * D)
+    # D–F: Σ w (b F_d P)(b D_h P) plus the second-order term of the residual (exact Hessian
+    # of the bilinear part is not used: Gauss–Newton)
+    A[:, iD, iF] = b2 * D[:, :, None] * F[:, None, :] * S2
+    A[:, iF, iD] = np.swapaxes(A[:, iD, iF], 1, 2)
+    A[:, iG, iG] = GG
+    A[:, iD, iG] = DG
+    A[:, iG, iD] = np.swapaxes(DG, 1, 2)
+    A[:, iF, iG] = FG
+    A[:, iG, iF] = np.swapaxes(FG, 1, 2)
+    # ρd, ρs
+    A[:, ia, ia] = smp.sum_w
+    A[:, ia, iD] = b[:, None] * np.einsum("chd,cd->ch", S1, F)
+    A[:, ia, iF] = b[:, None] * np.einsum("chd,ch->cd", S1, D)
+    A[:, ia, iG] = Grd
+    DF = D[:, :, None] * F[:, None, :]
+    A[:, ib, ib] = (DF * DF * S2).sum((1, 2))
+    A[:, ib, ia] = (DF * S1).sum((1, 2))
+    A[:, ib, iD] = b[:, None] * D * np.einsum("chd,cd->ch", S2, F * F)
+    A[:, ib, iF] = b[:, None] * F * np.einsum("chd,ch->cd", S2, D * D)
+    A[:, ib, iG] = Grs
+    A[:, ia, ib] = A[:, ib, ia]
+    for i in (ia, ib):
+        A[:, :n - 2, i] = A[:, i, :n - 2]
+    g[:, iD] = b[:, None] * np.einsum("chd,cd->ch", R, F)
+    g[:, iF] = b[:, None] * np.einsum("chd,ch->cd", R, D)
+    g[:, iG] = gG
+    g[:, ia] = a * smp.sum_w + (X * S1).sum((1, 2)) - smp.sum_wz
+    g[:, ib] = (DF * R).sum((1, 2))
+    return A, g
+
+
+def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
+              callback=None) -> RunResult:
+    """Levenberg–Marquardt refinement of an AWLS independent-G solution (an extension, not in
+    the paper): Gauss–Newton steps on all 272 parameters per channel at once, which crosses
+    the long, nearly flat valleys of Eq. 7 (the near-ambiguity between F(θd), G(θi)G(θo) and
+    D(θh) away from the specular peak) where alternating updates crawl. Steps are accepted
+    per channel only if the exact objective decreases; factors stay clamped at ``eps`` and
+    max-normalised. No smoothing is applied to G."""
+    t0 = time.perf_counter()
+    X = st.rho_s[:, None] * outer_df(st.D, st.F)
+    E, S = smp.stats(st.G, X, st.rho_d)
+    mon = Monitor(smp.sum_wzz, tol, max_iter, patience=2)
+    mon.history.append(float(E.sum()))
+    lam = np.full(3, 1e-12)
+    n = NH + ND + NG + 2
+    n_eval = 0
+    while True:
+        A, g = _normal_matrix(st, smp, S)
+        # multiplicative (log) parameters for D, F, G and ρs: the near-ambiguity
+        # F(θd)·G(θi)G(θo) ≈ F(θd)e^{-2kθd}·G(θi)e^{kθi}·G(θo)e^{kθo} is a straight line in
+        # log space, so Gauss–Newton crosses it in few steps
+        sc = np.concatenate([st.D, st.F, st.G, np.ones((3, 1)), st.rho_s[:, None]], axis=1)
+        sc = np.maximum(sc, 1e-300)
+        A = A * sc[:, :, None] * sc[:, None, :]
+        g = g * sc
+        free = np.ones((3, n), bool)
+        for c in range(3):
+            # gauge: the max components of D, F and G stay fixed, removing the three scale
+            # ambiguities (ρs absorbs the scale) from the system
+            free[c, [int(np.argmax(st.D[c])), NH + int(np.argmax(st.F[c])),
+                     NH + ND + int(np.argmax(st.G[c]))]] = False
+        todo = np.ones(3, bool)
+        for _attempt in range(8):                 # raise the damping until the step helps
+            step = np.zeros((3, n))
+            for c in np.flatnonzero(todo):
+                fr = free[c]
+                Af = A[c][np.ix_(fr, fr)]
+                M = Af + np.diag(lam[c] * np.maximum(np.diag(Af), 1e-300) + 1e-300)
+                try:
+                    step[c, fr] = -np.linalg.solve(M, g[c, fr])
+                except np.linalg.LinAlgError:
+                    step[c] = 0.0
+            mult = np.exp(np.clip(step, -5.0, 5.0))
+            cand = MFState(np.maximum(st.D * mult[:, :NH], eps),
+                           np.maximum(st.F * mult[:, NH:NH + ND], eps),
+                           np.maximum(st.G * mult[:, NH + ND:NH + ND + NG], eps),
+                           np.maximum(st.rho_d + step[:, -2], 0.0),
+                           np.maximum(st.rho_s * mult[:, -1], 1e-300))
+            for nm, pw in (("D", 1), ("F", 1), ("G", 2)):
+                f, cand.rho_s = normalise(getattr(cand, nm), cand.rho_s, eps, pw)
+                setattr(cand, nm, f)
+            Xc = cand.rho_s[:, None] * outer_df(cand.D, cand.F)
+            Ec, Sc = smp.stats(cand.G, Xc, cand.rho_d)
+            n_eval += 1
+            acc = todo & np.isfinite(Ec) & (Ec < E)
+            for nm in ("D", "F", "G"):
+                setattr(st, nm, np.where(acc[:, None], getattr(cand, nm), getattr(st, nm)))
+            for nm in ("rho_d", "rho_s"):
+                setattr(st, nm, np.where(acc, getattr(cand, nm), getattr(st, nm)))
+            S = tuple(np.where(acc[:, None], x, y) for x, y in zip(Sc, S))
+            E = np.where(acc, Ec, E)
+            lam = np.where(acc, np.maximum(lam / 10.0, 1e-12), np.where(todo, lam * 100.0, lam))
+            todo &= ~acc
+            if not np.any(todo):
+                break
+        if callback is not None:
+            callback(len(mon.history), float(E.sum()))
+        if mon.push(E):
+            break
+        if np.all(lam >= 1e3):
+            mon.reason = "damping limit (no further decrease)"
+            break
+    return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, 0, 0,
+                     time.perf_counter() - t0)
