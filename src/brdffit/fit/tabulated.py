@@ -235,7 +235,7 @@ def _merl_geometry():
 
 def extract_fresnel(brdf: BRDF, dist: TabulatedSlopeDistribution, *, merl=None,
                     p_floor: float = 1e-6, fresnel_max: float = 100.0,
-                    aniso_grid: tuple[int, int, int] = (24, 16, 24)) -> np.ndarray:
+                    aniso_grid: tuple[int, int, int] = (16, 12, 16)) -> np.ndarray:
     """Microfacet Fresnel ``F(θd)`` per channel at the 90 MERL ``θd`` (Eq. 19-20).
 
     Isotropic: the mean of ``f_r/f_r,id`` over every valid MERL sample ``(θh, θd, φd)`` with

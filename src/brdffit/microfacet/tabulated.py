@@ -51,6 +51,7 @@ __all__ = ["TabulatedSlopeDistribution", "AnisotropicTabulatedSlopeDistribution"
            "FittedFresnel", "radial_rule", "azimuthal_clamped_cosine_integral"]
 
 _LOG_FLOOR = 1e-30  # relative floor of P before taking logs
+_SIGMA_DENSE = 4096  # uniform-u resampling of the σ table used for lookups
 
 
 def radial_rule(n: int, rule: str = "merl"):
@@ -267,6 +268,15 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         self._su = us
         self._ssig = sig_ext
         self._sdsig = _pchip_slopes(us, sig_ext)
+        # dense uniform-u resampling of σ for fast lookups (index arithmetic, no search)
+        m = _SIGMA_DENSE if self.table_isotropic else _SIGMA_DENSE // 4
+        self._sig_m = m
+        ug = np.linspace(0.0, 1.0, m + 1)
+        if self.table_isotropic:
+            self._sig_dense = _hermite(us, sig_ext, self._sdsig, ug)
+        else:
+            cols = np.arange(self.n_phi)
+            self._sig_dense = _hermite(us, sig_ext, self._sdsig, ug[:, None], cols[None, :])
 
     def _sigma_nodes(self) -> np.ndarray:
         """``σ(θk[, φj])`` at the table nodes with the fit quadrature (Eq. 3, 22-23)."""
@@ -315,17 +325,22 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         rho = np.hypot(w[..., 0], w[..., 1])
         theta = np.arctan2(rho, w[..., 2])
         u = np.sqrt(np.clip(theta, 0.0, np.pi / 2) * (2.0 / np.pi))
-        norm = np.linalg.norm(w, axis=-1)
+        norm = np.sqrt(rho * rho + w[..., 2] ** 2)
+        m = self._sig_m
+        xu = u * m
+        i0 = np.minimum(xu.astype(np.int64), m - 1)
+        fu = xu - i0
+        tab = self._sig_dense
         if self.table_isotropic:
-            return norm * _hermite(self._su, self._ssig, self._sdsig, u)
+            return norm * (tab[i0] + fu * (tab[i0 + 1] - tab[i0]))
         phi = np.arctan2(w[..., 1], w[..., 0])
         n = self.n_phi
         x = np.mod(phi, 2.0 * np.pi) / (2.0 * np.pi) * n
-        j0 = np.floor(x).astype(np.int64) % n
+        j0 = np.minimum(x.astype(np.int64), n - 1)
         j1 = (j0 + 1) % n
-        f = x - np.floor(x)
-        v0 = _hermite(self._su, self._ssig, self._sdsig, u, j0)
-        v1 = _hermite(self._su, self._ssig, self._sdsig, u, j1)
+        f = x - j0
+        v0 = tab[i0, j0] + fu * (tab[i0 + 1, j0] - tab[i0, j0])
+        v1 = tab[i0, j1] + fu * (tab[i0 + 1, j1] - tab[i0, j1])
         return norm * ((1.0 - f) * v0 + f * v1)
 
     # -- SlopeDistribution API (roughness-scaled, Eq. 9) ------------------------------------
@@ -463,7 +478,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         """
         if self._visible is not None:
             return self._visible
-        m = 512
+        m = 320
         v = np.linspace(0.0, 1.0, m + 1)[:-1] + 0.5 / m  # avoid the pole at v = 1
         v = np.concatenate([[0.0], v])  # |slope| ≤ tan(89.8°): the mass beyond is negligible
         ygrid = np.tan(0.5 * np.pi * v**2)  # ≥ 0, dense near 0
