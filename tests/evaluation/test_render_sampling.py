@@ -27,6 +27,15 @@ def _models():
     }
 
 
+def _npf():
+    from brdffit.microfacet.npf_model import D_THETA_H, F_THETA_D, G_THETA, NPFMicrofacetBRDF
+
+    D = np.exp(-(np.tan(D_THETA_H) / 0.2) ** 2)[:, None] * np.array([1.0, 0.9, 0.8])
+    F = (0.5 + 0.5 * (1 - np.cos(F_THETA_D)) ** 5)[:, None] * np.ones(3)
+    G = np.cos(G_THETA)[:, None] ** 0.1 * np.ones(3)
+    return NPFMicrofacetBRDF(D, F, G, [0.05, 0.04, 0.03], [0.3, 0.3, 0.3])
+
+
 def _np(c):
     return np.stack([np.asarray(c[k], dtype=np.float64) for k in range(3)], -1)
 
@@ -63,12 +72,12 @@ def _check_sampling(ev, brdf, theta_deg, n=1 << 17, alpha_scale=1.0, ref_albedo=
     return est
 
 
-@pytest.mark.parametrize("name", ["ggx+diffuse", "beckmann-aniso", "ggx-rho", "beckmann-rho", "sum"])
+@pytest.mark.parametrize("name", ["ggx+diffuse", "beckmann-aniso", "ggx-rho", "beckmann-rho", "sum", "npf"])
 @pytest.mark.parametrize("theta", [25.0, 70.0])
 def test_closed_form_sampling_consistent(name, theta):
     from brdffit.evaluation.render.translate import to_evaluator
 
-    brdf = _models()[name]
+    brdf = _npf() if name == "npf" else _models()[name]
     ev = to_evaluator(brdf, mode="closed")
     assert ev.path == "closed-form"
     _check_sampling(ev, brdf, theta)

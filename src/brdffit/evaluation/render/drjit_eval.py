@@ -44,7 +44,7 @@ from ._mitsuba import load as _load
 mi, dr = _load()
 
 __all__ = ["MERLTableEval", "tabulate_full_phi", "despike", "Table4DEval", "MicrofacetEval", "GGXDist", "BeckmannDist",
-           "RadialTableDist", "SumEval", "PerChannelEval", "SchlickFresnelDJ", "TableFresnelDJ", "ConstantFresnelDJ",
+           "RadialTableDist", "SumEval", "PerChannelEval", "NPFEval", "SchlickFresnelDJ", "TableFresnelDJ", "ConstantFresnelDJ",
            "fit_ggx_proxy", "half_diff", "ggx_vndf_sample", "ggx_D", "ggx_lambda",
            "cosine_sample", "to_vec3", "to_numpy"]
 
@@ -731,3 +731,80 @@ class PerChannelEval(SumEval):
     def eval(self, wi, wo, alpha_scale=1.0, active=True):
         vals = [c.eval(wi, wo, alpha_scale, active) for c in self.components]
         return mi.Color3f(vals[0][0], vals[1][1], vals[2][2])
+
+
+# -- NPF (Bagher, Snyder, Nowrouzezahrai 2016) ----------------------------------------------
+def _lerp1(buf, u, n):
+    """Linear interpolation of an RGB table (n entries, flat) at continuous index ``u``
+    (clamped to [0, n−1]), like ``brdffit.microfacet.npf_model._lerp``."""
+    u = dr.clip(u, 0.0, n - 1.0)
+    i0 = mi.UInt32(dr.minimum(dr.floor(u), n - 2))
+    t = u - mi.Float(i0)
+    return dr.lerp(dr.gather(mi.Color3f, buf, i0), dr.gather(mi.Color3f, buf, i0 + 1), t)
+
+
+class NPFEval(_ProxySampling):
+    """The NPF models in Dr.Jit (Bagher 2016 Eq. 3-5), per RGB channel:
+
+    * ``"npf"``: ``ρd + ρs D(θh) F(θd) G(θi) G(θo) / (cos θi cos θo)`` (Eq. 3);
+    * ``"naive"``: ``ρd + ρs D(θh) F(θd) H(φd)`` (Eq. 4), H periodic over [0, π);
+    * ``"bivariate"``: ``B(θh, θd)`` bilinear on the 90 × 90 MERL (θ'h, θd) grid (Eq. 5).
+
+    D on the MERL θh grid (index ``sqrt(θh/(π/2))·90``), F on the θd grid, G at 1° steps
+    with a linear taper to 0 at 90° (as :mod:`brdffit.microfacet.npf_model`). Sampling: the
+    table paths' cosine + GGX-proxy mixture, proxy α fitted to the model's θd = 0 slice.
+    """
+
+    kind = "npf"
+
+    def __init__(self, variant, tables: dict, proxy_profile=None):
+        self.variant = variant
+        self.kind = {"npf": "npf", "naive": "npf-naive", "bivariate": "npf-bivariate"}[variant]
+        self.has_diffuse = True
+        f32 = lambda a: mi.Float(np.asarray(a, np.float32).ravel())  # noqa: E731
+        if variant == "bivariate":
+            self.B = f32(tables["B"])
+        else:
+            self.D, self.F = f32(tables["D"]), f32(tables["F"])
+            self.rho_d = mi.ScalarColor3f(*map(float, tables["rho_d"]))
+            self.rho_s = mi.ScalarColor3f(*map(float, tables["rho_s"]))
+            if variant == "npf":
+                G = np.concatenate([np.asarray(tables["G"], np.float64), np.zeros((1, 3))], 0)
+                self.G = f32(G)
+            else:
+                self.H = f32(tables["H"])
+        if proxy_profile is not None:
+            from ...grid import merl_theta_h
+
+            self.proxy_alpha, self.proxy_weight = fit_ggx_proxy(merl_theta_h(), proxy_profile)
+
+    def eval(self, wi, wo, alpha_scale=1.0, active=True):
+        ok = active & (wi.z > 0) & (wo.z > 0)
+        th, td, pd, _ = half_diff(wi, wo)
+        uh = dr.sqrt(th * (2.0 / dr.pi)) * 90.0
+        ud = td * (180.0 / dr.pi)
+        if self.variant == "bivariate":
+            uh = dr.clip(uh, 0.0, 89.0)
+            ud = dr.clip(ud, 0.0, 89.0)
+            i0 = mi.UInt32(dr.minimum(dr.floor(uh), 88))
+            j0 = mi.UInt32(dr.minimum(dr.floor(ud), 88))
+            s, t = uh - mi.Float(i0), ud - mi.Float(j0)
+            g = lambda i, j: dr.gather(mi.Color3f, self.B, i * 90 + j, ok)  # noqa: E731
+            v = ((1 - s) * (1 - t) * g(i0, j0) + s * (1 - t) * g(i0 + 1, j0)
+                 + (1 - s) * t * g(i0, j0 + 1) + s * t * g(i0 + 1, j0 + 1))
+            return dr.select(ok, v, 0.0)
+        spec = _lerp1(self.D, uh, 90) * _lerp1(self.F, ud, 90)
+        if self.variant == "npf":
+            ti = dr.safe_acos(wi.z) * (180.0 / dr.pi)
+            to = dr.safe_acos(wo.z) * (180.0 / dr.pi)
+            spec *= _lerp1(self.G, ti, 91) * _lerp1(self.G, to, 91) / (
+                dr.maximum(wi.z, 1e-7) * dr.maximum(wo.z, 1e-7))
+        else:
+            pdm = pd - dr.pi * dr.floor(pd / dr.pi)
+            up = dr.clip(pdm * (180.0 / dr.pi), 0.0, 179.9999)
+            i0 = mi.UInt32(dr.floor(up))
+            t = up - mi.Float(i0)
+            i1 = dr.select(i0 + 1 >= 180, 0, i0 + 1)
+            spec *= dr.lerp(dr.gather(mi.Color3f, self.H, i0), dr.gather(mi.Color3f, self.H, i1), t)
+        f = mi.Color3f(self.rho_d) + mi.Color3f(self.rho_s) * spec
+        return dr.select(ok, f, 0.0)

@@ -8,7 +8,8 @@ Resolution order of :func:`to_evaluator` (``mode="auto"``):
    MRO so that registering does not import the model's module) with
    :func:`register_translator`; built in: ``MicrofacetBRDF`` (closed-form GGX/Beckmann,
    tabulated radial table for any other isotropic distribution; Schlick in closed form, any
-   other Fresnel tabulated over cos θd);
+   other Fresnel tabulated over cos θd), ``SumBRDF``, ``PerChannelBRDF`` and the NPF models
+   (their D/F/G/H/B tables gathered in Dr.Jit);
 3. the generic table: isotropic → MERL grid + trilinear in log space
    (:class:`.drjit_eval.MERLTableEval`; 360 φd samples over [0, 2π) instead of MERL's 180
    over [0, π) when the BRDF is not reciprocal, see :func:`is_reciprocal`; isolated spikes
@@ -139,6 +140,28 @@ def _per_channel_translator(brdf):
 register_translator("PerChannelBRDF", _per_channel_translator)
 
 
+def _npf_translator(brdf):
+    """NPF models (``brdffit.microfacet.npf_model``): their own tables in Dr.Jit (no
+    resampling); the proxy lobe for sampling is fitted to the model's θd = 0 slice."""
+    from ...grid import merl_theta_h
+
+    name = type(brdf).__name__
+    th = merl_theta_h()
+    prof = brdf.eval_hd(th, np.zeros_like(th), np.zeros_like(th)) @ np.array([0.2126, 0.7152, 0.0722])
+    if name == "NPFBivariateBRDF":
+        return _dj().NPFEval("bivariate", {"B": brdf.B}, prof)
+    tables = {"D": brdf.D, "F": brdf.F, "rho_d": brdf.rho_d, "rho_s": brdf.rho_s}
+    if name == "NPFNaiveBRDF":
+        tables["H"] = brdf.H
+        return _dj().NPFEval("naive", tables, prof)
+    tables["G"] = brdf.G
+    return _dj().NPFEval("npf", tables, prof)
+
+
+for _n in ("NPFMicrofacetBRDF", "NPFNaiveBRDF", "NPFBivariateBRDF"):
+    register_translator(_n, _npf_translator)
+
+
 # -- generic tables -------------------------------------------------------------------------
 def tabulate_4d(brdf, shape=TABLE4D_SHAPE, chunk: int = 1 << 18) -> np.ndarray:
     """Evaluate any BRDF on the (θh, φh, θd, φd) grid of :class:`.drjit_eval.Table4DEval`."""
@@ -196,14 +219,60 @@ def is_reciprocal(brdf, n: int = 4096, tol: float = 1e-3, seed: int = 1) -> bool
     return bool(np.abs(a - b).sum() <= tol * max(np.abs(a).sum(), 1e-300))
 
 
-def to_evaluator(brdf, mode: str = "auto", verify_tol: float = 0.02, seed: int = 0):
+_CACHE: "collections.OrderedDict[tuple, tuple]" = None  # (id, mode, tol) -> (weakref, evaluator)
+_CACHE_SIZE = 4
+
+
+def _cache_get(brdf, key):
+    import weakref  # noqa: F401
+
+    global _CACHE
+    if _CACHE is None:
+        import collections
+
+        _CACHE = collections.OrderedDict()
+    hit = _CACHE.get(key)
+    if hit is not None and hit[0]() is brdf:
+        _CACHE.move_to_end(key)
+        return hit[1]
+    return None
+
+
+def _cache_put(brdf, key, ev):
+    import weakref
+
+    try:
+        ref = weakref.ref(brdf)
+    except TypeError:
+        return
+    _CACHE[key] = (ref, ev)
+    while len(_CACHE) > _CACHE_SIZE:
+        _CACHE.popitem(last=False)
+
+
+def to_evaluator(brdf, mode: str = "auto", verify_tol: float = 0.02, seed: int = 0,
+                 cache: bool = True):
     """Dr.Jit evaluator of ``brdf`` (see module docstring for the resolution order).
 
     The chosen path is recorded as ``evaluator.path`` (``"own"``, ``"closed-form"`` or
     ``"table"``); the verification error as ``evaluator.verify_error`` when verified.
+    With ``cache`` the last few evaluators are kept (keyed on the BRDF object, held weakly),
+    so rendering the same reference twice (noise floor, several scenes) tabulates it once.
     """
     if mode not in ("auto", "table", "closed"):
         raise ValueError(f"mode must be 'auto', 'table' or 'closed', got {mode!r}")
+    key = (id(brdf), mode, float(verify_tol))
+    if cache:
+        ev = _cache_get(brdf, key)
+        if ev is not None:
+            return ev
+    ev = _to_evaluator(brdf, mode, verify_tol, seed)
+    if cache:
+        _cache_put(brdf, key, ev)
+    return ev
+
+
+def _to_evaluator(brdf, mode, verify_tol, seed):
     if mode != "table":
         ev, path = None, None
         own = getattr(brdf, "to_drjit", None)
