@@ -1,0 +1,242 @@
+"""Benchmark of the SGD fit (Bagher, Soler, Holzschuch 2012) → bench/results/sgd.json.
+
+Usage::
+
+    .venv/bin/python bench/bench_sgd.py                 # synthetic recovery + speed
+    .venv/bin/python bench/bench_sgd.py --real          # + all 100 Neural-BRDF MERL materials
+    .venv/bin/python bench/bench_sgd.py --real --limit 10 --phi-stride 4
+
+Synthetic part: SGD materials with known per-channel (α, p, ρd, ρs, F0, F1) are fitted with
+``fit_sgd``; relative errors on α and p, absolute on F0/F1, time per material (full fit,
+including the Eq. 6 G1 tables and the Eq. 9 approximation).
+
+Real part (``--real``): every material of ``../shared/data/nbrdf/merl_nbrdf.zip`` is fitted
+with the SGD and the two-slice Beckmann (and GGX) procedures, and the normalised L2 error of
+§6.3 (brdffit.evaluation.l2, MERL-grid quadrature) is computed over the full domain and over
+θi, θo ≤ 80°. Counts: materials where SGD beats two-slice Beckmann, NaN, failures. The
+materials the seed papers single out (two-layer-gold, color-changing-paint1, white-paint)
+are reported in detail, with the full-data Cook-Torrance fits for reference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from brdffit._atomic import atomic_write  # noqa: E402
+from brdffit.fit.sgd import (PerChannelMicrofacetBRDF, fit_beckmann_two_slice,  # noqa: E402
+                             fit_cook_torrance, fit_ggx_two_slice, fit_sgd)
+from brdffit.microfacet.sgd import SGD  # noqa: E402
+
+NBRDF = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
+SHOWCASE = ("two-layer-gold", "color-changing-paint1", "white-paint")
+OUT = ROOT / "bench" / "results" / "sgd.json"
+
+
+def synthetic_materials(seed: int = 2012) -> dict[str, list[dict]]:
+    """Hand-picked plus random SGD materials (per channel α, p, ρd, ρs, F0, F1)."""
+    mats = {
+        "sharp-metal": [dict(alpha=0.004, p=2.3, rho_d=0.01, rho_s=0.05, F0=0.9, F1=0.2),
+                        dict(alpha=0.005, p=2.1, rho_d=0.02, rho_s=0.06, F0=0.7, F1=0.1),
+                        dict(alpha=0.004, p=2.4, rho_d=0.015, rho_s=0.04, F0=0.5, F1=0.0)],
+        "glossy-paint": [dict(alpha=0.06, p=1.3, rho_d=0.25, rho_s=0.4, F0=0.08, F1=0.03),
+                         dict(alpha=0.07, p=1.1, rho_d=0.12, rho_s=0.5, F0=0.05, F1=0.0),
+                         dict(alpha=0.05, p=1.5, rho_d=0.05, rho_s=0.3, F0=0.12, F1=0.06)],
+        "rough": [dict(alpha=0.4, p=0.3, rho_d=0.3, rho_s=0.8, F0=0.3, F1=0.1),
+                  dict(alpha=0.35, p=0.6, rho_d=0.2, rho_s=0.9, F0=0.2, F1=0.0),
+                  dict(alpha=0.45, p=-0.5, rho_d=0.1, rho_s=0.7, F0=0.4, F1=0.2)],
+    }
+    rng = np.random.default_rng(seed)
+    for k in range(5):
+        rows = []
+        la = rng.uniform(np.log(0.002), np.log(0.3))
+        p = rng.uniform(0.2, 2.6)
+        for _ in range(3):
+            f0 = rng.uniform(0.02, 0.95)
+            rows.append(dict(alpha=float(np.exp(la + rng.normal(0, 0.1))),
+                             p=float(p + rng.normal(0, 0.1)),
+                             rho_d=float(rng.uniform(0.0, 0.4)),
+                             rho_s=float(rng.uniform(0.05, 1.0)),
+                             F0=float(f0), F1=float(rng.uniform(0.0, 0.5 * f0))))
+        mats[f"random-{k}"] = rows
+    return mats
+
+
+def truth_model(rows) -> PerChannelMicrofacetBRDF:
+    return PerChannelMicrofacetBRDF(
+        [{"distribution": SGD(r["alpha"], r["p"]),
+          **{k: r[k] for k in ("rho_d", "rho_s", "F0", "F1")}} for r in rows], name="truth")
+
+
+def run_synthetic() -> dict:
+    fit_sgd(truth_model(synthetic_materials()["glossy-paint"]))      # warm-up (imports)
+    out, worst = {}, {"alpha_rel": 0.0, "p_rel": 0.0, "F0_abs": 0.0, "F1_abs": 0.0}
+    times = []
+    for name, rows in synthetic_materials().items():
+        t0 = time.perf_counter()
+        model = fit_sgd(truth_model(rows))
+        dt = time.perf_counter() - t0
+        times.append(dt)
+        chans = []
+        for got, want in zip(model.channel_params(), rows):
+            e = {"alpha_rel": abs(got["alpha"] / want["alpha"] - 1),
+                 "p_rel": abs(got["p"] - want["p"]) / max(abs(want["p"]), 1e-12),
+                 "F0_abs": abs(got["F0"] - want["F0"]), "F1_abs": abs(got["F1"] - want["F1"])}
+            for k in worst:
+                worst[k] = max(worst[k], e[k])
+            chans.append({"truth": want, "fit": {k: got[k] for k in want}, "errors": e,
+                          "g1_approx": got.get("g1_approx")})
+        out[name] = {"time_s": dt, "fit_info": {k: v for k, v in model.fit_info.items()
+                                                if k.startswith("time")}, "channels": chans}
+        print(f"  {name:14s} {dt:6.2f} s  max α rel {max(c['errors']['alpha_rel'] for c in chans):.2e}"
+              f"  p rel {max(c['errors']['p_rel'] for c in chans):.2e}"
+              f"  F0 abs {max(c['errors']['F0_abs'] for c in chans):.2e}", flush=True)
+    return {"materials": out, "worst": worst, "time_median_s": float(np.median(times)),
+            "time_max_s": float(np.max(times)),
+            "targets_met": bool(worst["alpha_rel"] <= 0.01 and worst["p_rel"] <= 0.01
+                                and worst["F0_abs"] <= 0.01)}
+
+
+def _params(model):
+    return [{k: v for k, v in r.items() if k != "g1_approx"} for r in model.channel_params()]
+
+
+def run_real(limit: int | None, phi_stride: int, prev: dict | None) -> dict:
+    import brdffit
+    from brdffit.evaluation.l2 import L2Reference
+    from brdffit.io.nbrdf import list_materials
+
+    names = list_materials(NBRDF)
+    if limit:
+        names = [n for n in SHOWCASE if n in names] + [n for n in names if n not in SHOWCASE]
+        names = names[:limit]
+    results = dict((prev or {}).get("materials", {}))
+    for i, name in enumerate(names):
+        if name in results and "error" not in results[name]:
+            continue
+        rec: dict = {}
+        try:
+            brdf = brdffit.load(f"{NBRDF}:{name}")
+            ref = L2Reference(brdf, phi_stride=phi_stride, albedo_samples=4096)
+            ref80 = L2Reference(brdf, phi_stride=phi_stride, albedo_samples=4096,
+                                theta_max=np.radians(80.0))
+            fits = {"sgd": fit_sgd, "beckmann-2s": fit_beckmann_two_slice,
+                    "ggx-2s": fit_ggx_two_slice}
+            if name in SHOWCASE:
+                fits["beckmann-ct"] = lambda b: fit_cook_torrance(b, "beckmann")
+                fits["ggx-ct"] = lambda b: fit_cook_torrance(b, "ggx")
+            for key, fn in fits.items():
+                t0 = time.perf_counter()
+                try:
+                    model = fn(brdf)
+                except Exception as exc:            # a failed fit is a result, not a crash
+                    rec[key] = {"error": f"{type(exc).__name__}: {exc}"}
+                    continue
+                dt = time.perf_counter() - t0
+                e, e80 = ref.error(model), ref80.error(model)
+                rec[key] = {"time_s": dt, "l2": e.value, "l2_80": e80.value,
+                            "l2_per_channel": e.per_channel.tolist(),
+                            "nan": bool(not np.isfinite(e.value)), "params": _params(model)}
+        except Exception as exc:
+            rec["error"] = f"{type(exc).__name__}: {exc}"
+            traceback.print_exc()
+        results[name] = rec
+        s, b = rec.get("sgd", {}), rec.get("beckmann-2s", {})
+        print(f"  [{i + 1:3d}/{len(names)}] {name:28s} SGD {s.get('l2', np.nan):9.4g} "
+              f"({s.get('l2_80', np.nan):8.4g})  Beckmann-2s {b.get('l2', np.nan):9.4g} "
+              f"({b.get('l2_80', np.nan):8.4g})  t_sgd {s.get('time_s', np.nan):5.2f} s", flush=True)
+        yield results
+
+
+def summarize_real(results: dict) -> dict:
+    def get(rec, key, field):
+        v = rec.get(key, {}).get(field)
+        return np.nan if v is None else v
+
+    names = sorted(results)
+    sgd = np.array([get(results[n], "sgd", "l2") for n in names])
+    bec = np.array([get(results[n], "beckmann-2s", "l2") for n in names])
+    ggx = np.array([get(results[n], "ggx-2s", "l2") for n in names])
+    sgd80 = np.array([get(results[n], "sgd", "l2_80") for n in names])
+    bec80 = np.array([get(results[n], "beckmann-2s", "l2_80") for n in names])
+    t = np.array([get(results[n], "sgd", "time_s") for n in names])
+    failures = {n: {k: v["error"] for k, v in results[n].items()
+                    if isinstance(v, dict) and "error" in v} for n in names}
+    failures = {n: v for n, v in failures.items() if v}
+    return {
+        "n_materials": len(names),
+        "sgd_better_than_beckmann_2s": int(np.sum(sgd < bec)),
+        "sgd_better_than_beckmann_2s_theta80": int(np.sum(sgd80 < bec80)),
+        "sgd_better_than_ggx_2s": int(np.sum(sgd < ggx)),
+        "materials_where_beckmann_2s_wins": [n for n, a, b in zip(names, sgd, bec) if not a < b],
+        "sgd_nan": int(np.sum(~np.isfinite(sgd))), "failures": failures,
+        "median_l2": {"sgd": float(np.nanmedian(sgd)), "beckmann-2s": float(np.nanmedian(bec)),
+                      "ggx-2s": float(np.nanmedian(ggx))},
+        "median_l2_theta80": {"sgd": float(np.nanmedian(sgd80)),
+                              "beckmann-2s": float(np.nanmedian(bec80))},
+        "sgd_time_s": {"median": float(np.nanmedian(t)), "max": float(np.nanmax(t)),
+                       "under_1s": int(np.sum(t < 1.0))},
+        "showcase": {n: results[n] for n in SHOWCASE if n in results},
+    }
+
+
+def write(doc: dict) -> None:
+    OUT.parent.mkdir(parents=True, exist_ok=True)
+    with atomic_write(OUT, "w") as fh:
+        json.dump(doc, fh, indent=1, default=float)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--real", action="store_true", help="also run all Neural-BRDF MERL materials")
+    ap.add_argument("--limit", type=int, default=None, help="only the first N materials")
+    ap.add_argument("--phi-stride", type=int, default=4, help="φd subsampling of the L2 grid")
+    ap.add_argument("--skip-synthetic", action="store_true")
+    ap.add_argument("--resume", action="store_true", help="reuse materials already in the JSON")
+    args = ap.parse_args(argv)
+
+    doc: dict = {}
+    if OUT.exists():
+        try:
+            doc = json.loads(OUT.read_text())
+        except json.JSONDecodeError:
+            doc = {}
+    doc["command"] = " ".join(["bench/bench_sgd.py"] + (argv if argv is not None else sys.argv[1:]))
+    doc["date"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    if not args.skip_synthetic:
+        print("synthetic SGD materials:")
+        doc["synthetic"] = run_synthetic()
+        w = doc["synthetic"]["worst"]
+        print(f"worst: α rel {w['alpha_rel']:.2e}, p rel {w['p_rel']:.2e}, F0 abs "
+              f"{w['F0_abs']:.2e}, F1 abs {w['F1_abs']:.2e}; time median "
+              f"{doc['synthetic']['time_median_s']:.2f} s, max {doc['synthetic']['time_max_s']:.2f} s")
+        write(doc)
+    if args.real:
+        if not NBRDF.exists():
+            print(f"skipping --real: {NBRDF} not found")
+        else:
+            print(f"Neural-BRDF MERL materials ({NBRDF}):")
+            prev = doc.get("real") if args.resume else None
+            for results in run_real(args.limit, args.phi_stride, prev):
+                doc["real"] = {"materials": results, "phi_stride": args.phi_stride,
+                               "summary": summarize_real(results)}
+                write(doc)
+            s = doc["real"]["summary"]
+            print(json.dumps({k: v for k, v in s.items() if k != "showcase"}, indent=1,
+                             default=float))
+    write(doc)
+    print(f"wrote {OUT}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
