@@ -39,7 +39,7 @@ def _beckmann_visible_x(t: np.ndarray, u: np.ndarray, iterations: int = 80) -> n
     t, u = np.broadcast_arrays(t, u)
     shape = t.shape
     t, u = t.ravel(), u.ravel()
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", over="ignore"):
         mu = np.where(t > 0, 1.0 / np.where(t > 0, t, 1.0), np.inf)
     hi = np.minimum(mu, 8.0)
     lo = np.full_like(hi, -8.0)
