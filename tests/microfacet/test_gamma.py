@@ -54,3 +54,11 @@ def test_broadcast_and_ratio():
     assert upper_gamma(s, x).shape == (3, 3)
     r = upper_gamma_ratio(-1.2, np.array([0.05, 1.0, 10.0]), 0.05)
     assert r[0] == pytest.approx(1.0) and np.all(np.diff(r) < 0) and r[-1] > 0
+
+
+def test_scalar_path_matches_array_path():
+    S = np.array([-3.7, -2.0, -1.0000001, -0.3, 0.0, 1e-9, 0.3, 1.7])
+    X = np.array([1e-4, 0.05, 1.0, 2.0, 2.5, 40.0])
+    arr = upper_gamma(S[:, None], X[None, :])
+    sca = np.array([[float(upper_gamma(float(a), float(b))) for b in X] for a in S])
+    np.testing.assert_allclose(sca, arr, rtol=1e-12)

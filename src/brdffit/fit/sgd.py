@@ -507,7 +507,7 @@ def _step1(kind: str, theta, m, w, n_grid: tuple[int, int], starts: int):
             try:
                 res = optimize.least_squares(resid, q0, bounds=(lo, hi), method="trf",
                                              x_scale=1.0, diff_step=1e-4, xtol=1e-10,
-                                             ftol=1e-12, max_nfev=200)
+                                             ftol=1e-12, max_nfev=80)
                 x, cost = res.x, res.cost
             except (ValueError, FloatingPointError, np.linalg.LinAlgError):
                 x, cost = q0, 0.5 * costs[gi, c]
@@ -543,7 +543,7 @@ def _step2(kind: str, theta_d, m_d, valid_d, s1: dict) -> tuple[float, float, fl
 
 
 def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
-                  starts: int = 3, grid: tuple[int, int] = (24, 9), g1_approximation: bool = True,
+                  starts: int = 3, grid: tuple[int, int] = (18, 8), g1_approximation: bool = True,
                   name: str | None = None) -> PerChannelMicrofacetBRDF:
     """Two-slice fit of Bagher 2012 §5 with an SGD, Beckmann or GGX distribution, per channel.
 

@@ -29,6 +29,8 @@ x ∈ [1e-6, 300] (tests use the grid s ∈ [−4, 2], x ∈ [1e-4, 50] at 1e-10
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import special
 
@@ -120,6 +122,68 @@ def _continued_fraction(s: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.exp(s * np.log(x) - x) * h
 
 
+def _upper_gamma_scalar(s: float, x: float) -> float:
+    """Scalar version of :func:`upper_gamma` (same branches, Python floats: ~100× faster
+    than the array code for one value; used for normalisation constants inside fits)."""
+    if not (x > 0) or not math.isfinite(s) or math.isinf(x):
+        return float(upper_gamma(np.array([s]), np.array([x]))[0])
+    if s >= 0.5:
+        return float(special.gammaincc(s, x) * special.gamma(s))
+    if s == round(s):
+        n = int(-s)
+        return float(special.exp1(x)) if n == 0 else float(special.expn(n + 1, x) * x ** (-n))
+    if x > _SERIES_X_MAX:
+        b = x + 1.0 - s
+        c = 1.0 / _TINY
+        d = 1.0 / b
+        h = d
+        for i in range(1, _CF_MAX_ITER + 1):
+            an = -i * (i - s)
+            b += 2.0
+            d = an * d + b
+            d = _TINY if abs(d) < _TINY else d
+            c = b + an / c
+            c = _TINY if abs(c) < _TINY else c
+            d = 1.0 / d
+            delta = d * c
+            h *= delta
+            if abs(delta - 1.0) < 1e-16:
+                break
+        return math.exp(s * math.log(x) - x) * h
+    m = max(int(round(-s)), 0)
+    eps = s + m
+    lx = math.log(x)
+    q, q0, dd = 1.0, 1.0, 0.0
+    for j in range(1, m + 1):
+        dd = q - j * dd
+        q *= eps - j
+        q0 *= -j
+    if eps == 0.0:
+        g1 = -_EULER
+    elif abs(eps) <= 0.1:
+        lg = 0.0
+        for c in _LG_COEF[20:0:-1]:
+            lg = (lg + c) * eps
+        g1 = math.expm1(lg) / eps
+    else:
+        g1 = (math.gamma(1.0 + eps) - 1.0) / eps
+    r_m = (g1 * q0 - dd) / (q * q0)
+    em = lx if eps == 0.0 else math.expm1(eps * lx) / eps
+    total = r_m - (1.0 if m % 2 == 0 else -1.0) / math.factorial(m) * em
+    term = math.exp(s * lx)
+    acc = 0.0
+    for n in range(_N_SERIES):
+        if n > 0:
+            term *= -x / n
+        if n == m:
+            continue
+        contrib = term / (s + n)
+        acc += contrib
+        if n > m and abs(contrib) <= 1e-17 * abs(acc):
+            break
+    return total - acc
+
+
 def upper_gamma(s, x) -> np.ndarray:
     """Non-regularised upper incomplete gamma ``Γ(s, x) = ∫_x^∞ t^{s−1} e^{−t} dt``.
 
@@ -127,6 +191,8 @@ def upper_gamma(s, x) -> np.ndarray:
     ``p > 1``). At ``x = 0`` returns ``Γ(s)`` for ``s > 0`` and ``inf`` for ``s ≤ 0``; NaN for
     ``x < 0`` or NaN input. Inputs broadcast; returns float64 of the broadcast shape.
     """
+    if np.ndim(s) == 0 and np.ndim(x) == 0:
+        return np.float64(_upper_gamma_scalar(float(s), float(x)))
     s, x = np.broadcast_arrays(np.asarray(s, dtype=np.float64), np.asarray(x, dtype=np.float64))
     shape = s.shape
     s = s.ravel()

@@ -345,6 +345,8 @@ class SGD(SlopeDistribution):
                 continue
             if best is None or res.cost < best.cost:
                 best = res
+            if 2.0 * best.cost / len(theta) < 1e-7:     # mse already at the paper's level
+                break
         lam, w, k = np.exp(best.x)
         c = np.log1p(1.0 / lam) / w**k
         err = model(best.x) - g
