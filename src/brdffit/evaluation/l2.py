@@ -144,18 +144,30 @@ class L2Reference:
 
     def error(self, fit) -> L2Result:
         """Normalised L2 error of ``fit`` against the reference."""
+        return self.errors(fit)[0]
+
+    def errors(self, fit, theta_max=()) -> list[L2Result]:
+        """``[error over the reference's domain] + [error over θi, θo ≤ t for t in theta_max]``
+        with one evaluation of ``fit`` (grid method only for ``theta_max``)."""
         if self.method == "grid":
             fv, fvalid = _grid_values(fit, self.phi_stride)
             ok = self.valid & np.all(np.isfinite(fv), axis=-1)
             diff2 = np.where(ok[..., None], (np.where(ok[..., None], self.values, 0.0)
                                               - np.where(ok[..., None], fv, 0.0)) ** 2, 0.0)
-            e2 = np.einsum("ijk,ijkc->c", self.weights, diff2)
-        else:
-            fv = np.asarray(fit.eval(self.wi, self.wo), dtype=np.float64)
-            ok = self.valid & np.all(np.isfinite(fv), axis=-1)
-            diff2 = np.where(ok[..., None], (np.where(ok[..., None], self.values, 0.0)
-                                              - np.where(ok[..., None], fv, 0.0)) ** 2, 0.0)
-            e2 = np.pi**2 * diff2.sum(axis=0) / len(ok)
+            out = []
+            for w in [self.weights] + [merl_grid_weights(self.phi_stride, t)[0]
+                                       for t in theta_max]:
+                out.append(self._result(np.einsum("ijk,ijkc->c", w, diff2)))
+            return out
+        if theta_max:
+            raise ValueError("errors(theta_max=...) needs the 'grid' method")
+        fv = np.asarray(fit.eval(self.wi, self.wo), dtype=np.float64)
+        ok = self.valid & np.all(np.isfinite(fv), axis=-1)
+        diff2 = np.where(ok[..., None], (np.where(ok[..., None], self.values, 0.0)
+                                          - np.where(ok[..., None], fv, 0.0)) ** 2, 0.0)
+        return [self._result(np.pi**2 * diff2.sum(axis=0) / len(ok))]
+
+    def _result(self, e2) -> L2Result:
         e = np.sqrt(e2)
         a = np.where(self.max_albedo > 0, self.max_albedo, np.nan)
         per = e / a
