@@ -262,7 +262,9 @@ def test_per_texel_roughness_arrays_broadcast():
     wo = wi * np.array([-1, -1, 1])
     ax = np.linspace(0.2, 2.0, 7)
     ay = ax[::-1].copy()
-    model = MicrofacetBRDF(d.with_roughness(ax, ay), None)
+    from brdffit.fit.tabulated import with_roughness
+
+    model = with_roughness(MicrofacetBRDF(d, None), ax, ay)
     f = model.eval(wi, wo)
     for k in range(7):
         single = MicrofacetBRDF(d.with_roughness(ax[k], ay[k]), None).eval(wi[k], wo[k])
