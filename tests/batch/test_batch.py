@@ -16,8 +16,8 @@ import pytest
 from brdffit.batch import TIMING_FIELDS, enumerate_materials, make_tasks, read_records
 from brdffit.errors import BRDFError
 
-MATERIALS = "synthetic:ggx-gold,beckmann-plastic,anisotropic-ggx,two-lobe"
-MODELS = "tabulated,ggx"
+MATERIALS = "synthetic:gold-ggx,plastic-beckmann,sgd-paint,two-lobe-ggx"
+MODELS = "ggx"
 
 
 def test_enumerate_list_file_and_folder(tmp_path):
@@ -26,8 +26,8 @@ def test_enumerate_list_file_and_folder(tmp_path):
     (tmp_path / "notes.txt").write_text("x")
     assert [n for n, _ in enumerate_materials(tmp_path)] == ["a", "b"]
     lst = tmp_path / "list.txt"
-    lst.write_text("# two specs\nsynthetic:ggx-gold\nsome.zip:red-paint  # comment\n")
-    assert enumerate_materials(lst) == [("ggx-gold", "synthetic:ggx-gold"),
+    lst.write_text("# two specs\nsynthetic:gold-ggx\nsome.zip:red-paint  # comment\n")
+    assert enumerate_materials(lst) == [("gold-ggx", "synthetic:gold-ggx"),
                                         ("red-paint", "some.zip:red-paint")]
     assert len(enumerate_materials(lst, limit=1)) == 1
     with pytest.raises(BRDFError, match="unknown material"):
@@ -44,9 +44,9 @@ def test_enumerate_nbrdf_collection(shared_data):
 
 
 def test_task_key_changes_with_options():
-    a, = make_tasks([("m", "synthetic:ggx-gold")], ["tabulated"])
-    b, = make_tasks([("m", "synthetic:ggx-gold")], ["tabulated"], {"tabulated": {"n": 64}})
-    assert a.key() != b.key() and a.key() == make_tasks([("m", "synthetic:ggx-gold")],
+    a, = make_tasks([("m", "synthetic:gold-ggx")], ["tabulated"])
+    b, = make_tasks([("m", "synthetic:gold-ggx")], ["tabulated"], {"tabulated": {"n": 64}})
+    assert a.key() != b.key() and a.key() == make_tasks([("m", "synthetic:gold-ggx")],
                                                         ["tabulated"])[0].key()
 
 
