@@ -161,13 +161,13 @@ class NBRDF(IsotropicBRDF):
     def _forward_t(self, xt: np.ndarray) -> np.ndarray:
         """MLP output ``(3, m)`` for inputs ``(6, m)`` (before ``exp(y) − 1``).
 
-        Samples sit on the contiguous axis. float32 runs a compiled kernel (BLAS is slow for
-        6- and 21-wide products and oversubscribes a busy machine with threads); float64
-        uses NumPy matrix products, the reference.
+        Samples sit on the contiguous axis. A compiled kernel runs the products when numba
+        is available (BLAS is slow for 6- and 21-wide products and oversubscribes a busy
+        machine with threads); NumPy matrix products otherwise.
         """
         dtype, layers = self._weights()
         h = np.ascontiguousarray(xt, dtype=dtype)
-        if dtype == np.float32 and _numba is not None:
+        if _numba is not None:
             for wt, bias, relu in layers:
                 h = _dense_t(wt, bias, h, relu)
             return h
