@@ -11,11 +11,16 @@ The public API is deliberately small; everything else lives in the subpackages:
 
 from .brdf import BRDF, IsotropicBRDF
 from .errors import BRDFError, BRDFFormatError, ExportError, FitError
+from .synthetic import list_synthetic, synthetic  # eager: the function shadows the module name
 
 __version__ = "0.1.0"
 
 __all__ = ["BRDF", "IsotropicBRDF", "BRDFError", "BRDFFormatError", "FitError", "ExportError",
-           "__version__"]
+           "synthetic", "list_synthetic", "load", "resample_to_merl", "write_merl",
+           "MicrofacetBRDF", "Beckmann", "GGX", "SGD", "SchlickFresnel",
+           "GeneralizedSchlickFresnel", "DielectricFresnel", "ConductorFresnel",
+           "TabulatedFresnel", "fit_tabulated", "fit_ggx", "fit_beckmann", "fit_sgd", "fit_npf",
+           "save_fit", "load_fit", "__version__"]
 
 
 def __getattr__(name):  # lazy public API: keeps `import brdffit` fast and cycle-free
@@ -27,7 +32,6 @@ def __getattr__(name):  # lazy public API: keeps `import brdffit` fast and cycle
         "SGD": ".microfacet", "SchlickFresnel": ".microfacet",
         "GeneralizedSchlickFresnel": ".microfacet", "DielectricFresnel": ".microfacet",
         "ConductorFresnel": ".microfacet", "TabulatedFresnel": ".microfacet",
-        "synthetic": ".synthetic",
         "fit_tabulated": ".fit", "fit_ggx": ".fit", "fit_beckmann": ".fit", "fit_sgd": ".fit",
         "fit_npf": ".fit", "save_fit": ".io.fitfile", "load_fit": ".io.fitfile",
     }

@@ -119,14 +119,3 @@ register_synthetic("sgd-paint", _sgd_paint,
                    "SGD α=0.15 p=1.2, generalised Schlick (0.06, 0.02), blue diffuse base")
 register_synthetic("two-lobe-ggx", _two_lobe,
                    "sharp white GGX α=0.04 + broad copper GGX α=0.35 (not fit by one lobe)")
-
-
-# ``brdffit.synthetic`` is both this module and (lazily) the function ``synthetic``; once the
-# module is imported, ``from brdffit import synthetic`` may return the module itself. Making
-# the module callable keeps ``brdffit.synthetic("gold-ggx")`` working either way.
-class _CallableModule(__import__("types").ModuleType):
-    def __call__(self, name: str):
-        return synthetic(name)
-
-
-__import__("sys").modules[__name__].__class__ = _CallableModule
