@@ -4,7 +4,7 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
-DEBIAN_PACKAGES := libllvm19 chromium
+DEBIAN_PACKAGES := libllvm19 chromium glslang-tools
 
 .PHONY: demo test bench sysdeps install clean
 
@@ -28,6 +28,7 @@ $(STAMP): pyproject.toml
 
 # libllvm19: Mitsuba 3's LLVM back-end (the machine's default LLVM crashes it).
 # chromium: the report test renders the HTML report headless.
+# glslang-tools: the export test compiles the generated GLSL (glslangValidator).
 sysdeps:
 	@missing=""; for p in $(DEBIAN_PACKAGES); do dpkg -s $$p >/dev/null 2>&1 || missing="$$missing $$p"; done; \
 	if [ -z "$$missing" ]; then echo "Debian packages present: $(DEBIAN_PACKAGES)"; \
