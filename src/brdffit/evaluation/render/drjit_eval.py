@@ -59,9 +59,10 @@ def to_vec3(a) -> "mi.Vector3f":
 
 
 def to_numpy(v) -> np.ndarray:
-    """Dr.Jit array (Float, Vector3f, Color3f) → NumPy ``(N,)`` or ``(N, 3)``."""
-    a = np.asarray(v)
-    return a if a.ndim == 1 else (a.T if a.shape[0] in (2, 3) and a.ndim == 2 else a)
+    """Dr.Jit array → NumPy: ``mi.Float`` → ``(N,)``; 3-vectors/colours → ``(N, 3)``."""
+    if isinstance(v, (mi.Vector3f, mi.Color3f, mi.Point3f)):
+        return np.stack([np.asarray(v[k], dtype=np.float64) for k in range(3)], axis=-1)
+    return np.asarray(v, dtype=np.float64)
 
 
 def half_diff(wi, wo):
@@ -477,8 +478,9 @@ class RadialTableDist:
     ``D_s(θ) = D(θ′) cos⁴θ′ / (s² cos⁴θ)`` with ``tan θ′ = tan θ / s``, and
     ``Λ_s(θ) = Λ(θ″)`` with ``tan θ″ = s · tan θ`` (stretch invariance of Smith Λ).
 
-    Sampling: ``D cos θ`` (not visible normals) with a piecewise-linear density in θ built on
-    the same nodes (``mi.ContinuousDistribution``); the reported pdf is the exact density of
+    Sampling: ``D cos θ`` (not visible normals; Dupuy 2015 App. A samples the tabulated P the
+    same way) with a piecewise-linear density in θ on 1024 uniform nodes
+    (``mi.ContinuousDistribution``, from the interpolated log-D table); the reported pdf is the exact density of
     that sampler (so sample/pdf are consistent even though it only approximates ``D cos θ``),
     mapped through the slope scaling by its Jacobian
     ``p_s(m) = p(m′) cos³θ′ / (s² cos³θ)`` (slope area element ``dω/cos³θ``).
@@ -486,7 +488,7 @@ class RadialTableDist:
 
     kind = "radial-table"
 
-    def __init__(self, D_values, Lambda_values, n=None):
+    def __init__(self, D_values, Lambda_values):
         D_values = np.asarray(D_values, dtype=np.float64)
         Lambda_values = np.asarray(Lambda_values, dtype=np.float64)
         self.n = D_values.size
