@@ -203,7 +203,7 @@ def speed(repeats=7):
     out["anisotropic_90x90_analytic_input"] = {
         "median_s": statistics.median(ts), "all_s": ts, "breakdown_last": parts[-1],
         "target_s": 1.0,
-        "note": "time_fresnel includes evaluating the input BRDF at 24x16x24x90 configurations"}
+        "note": "time_fresnel includes evaluating the input BRDF at 16x12x16x90 configurations"}
     return out
 
 

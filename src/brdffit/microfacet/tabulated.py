@@ -217,6 +217,8 @@ class TabulatedSlopeDistribution(SlopeDistribution):
     def _interpolant_integral(self, m: int = 4096) -> float:
         """``∫ P dh̃`` of the interpolated table: trapezoid on a fine ``u`` grid up to the
         last node, plus the ``r⁻⁴`` tail in closed form (``π P_last r_last²``)."""
+        if not self.table_isotropic:
+            m = m // 4  # 2D: Nφ lookups per u sample
         uu = np.linspace(0.0, self._u_last, m + 1)
         theta = 0.5 * np.pi * uu**2
         r = np.tan(theta)
