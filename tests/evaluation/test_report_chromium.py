@@ -73,3 +73,32 @@ def test_chromium_detects_a_broken_image(report, tmp_path):
     total, broken, lst = image_status(dump_dom(copy / res["slug"] / "index.html",
                                                tmp_path / "profile"))
     assert broken == 1 and "lambert.png" in lst
+
+
+def test_index_table_sorts_on_click(tmp_path):
+    """Click the PSNR header of the per-model table twice (descending) in Chromium."""
+    from brdffit.evaluation import report as R
+
+    out = tmp_path / "rep"
+    for k, (name, alb) in enumerate((("bright", 0.8), ("mid", 0.5), ("dark", 0.2))):
+        ref = Lambert([alb] * 3)
+        ref.name = name
+        C.compare(ref, {"a": Lambert([alb * 0.9] * 3), "b": Lambert([alb * (0.5 + 0.2 * k)] * 3)},
+                  out, renderer=standin_render, spp=4, resolution=16, noise_floor=False,
+                  brdf_metric_samples=1 << 8, brdf_metrics=("cos_rel_error",))
+    text = (out / "index.html").read_text()
+    # a copy of the index in the same folder with one extra script clicking the header
+    click = ("<script>window.addEventListener('load',function(){var th=document.querySelectorAll("
+             "'#materials thead th')[5];th.click();th.click();document.documentElement"
+             ".setAttribute('data-order',Array.prototype.map.call(document.querySelectorAll("
+             "'#materials tbody tr'),function(r){return r.cells[1].textContent.trim();}).join(','))"
+             "});</script></body>")
+    (out / "_click.html").write_text(text.replace("</body>", click))
+    dom = dump_dom(out / "_click.html", tmp_path / "profile")
+    m = re.search(r'data-order="([^"]*)"', dom)
+    assert m, "click script did not run"
+    order = m.group(1).split(",")
+    summ = R.read_results(out)
+    psnr_b = {r["material"]: [x for x in r["models"] if x["name"] == "b"][0]["psnr"] for r in summ}
+    assert order == sorted(psnr_b, key=lambda n: -float(psnr_b[n]))
+    assert order != sorted(psnr_b)  # the sort changed the (alphabetical) initial order
