@@ -1,0 +1,60 @@
+"""Exports of fitted models to renderers, engines and shaders, and imports back (issue 8).
+
+One module per target (conventions of every target in ``docs/conventions.md``):
+
+* :mod:`.json_params` – JSON of the analytic parameters with units/conventions, and
+  :func:`load_json` (exact round trip of any serialisable model);
+* :mod:`.mitsuba` – Mitsuba 3 scene snippets (XML and Python dict) with built-in plugins
+  (``roughconductor`` + ``diffuse`` in a ``blendbsdf``) where the fit maps to one, and the
+  project's Python BSDF plugin (``brdffit``) for tabulated, SGD and NPF fits, plus a
+  ready-to-render example scene;
+* :mod:`.gltf` – glTF 2.0 metallic-roughness material of GGX fits, and :class:`GLTFBRDF`,
+  the glTF BRDF of the specification's Appendix B as a BRDF of the library (to measure
+  the loss of fidelity);
+* :mod:`.glsl` – GLSL functions (GGX/Beckmann/SGD with the Eq. 9 G1, tabulated and NPF
+  models from textures), the NPF "uber-texture" (Bagher 2016 Fig. 16), and the NumPy
+  translation of the same code (:mod:`.glsl_cpu`);
+* :mod:`.merl` / :mod:`.rgl` – resampling to MERL ``.binary`` and RGL-style tensor files;
+* :mod:`.tables` – import of published SGD (CSV) and NPF (uber-texture) parameter tables.
+
+:func:`export` dispatches on ``to`` (one of :data:`TARGETS`).
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from pathlib import Path
+
+from ..errors import ExportError
+
+__all__ = ["export", "TARGETS", "load_json", "ExportError"]
+
+#: target name -> (module, function); every function is ``fn(model, path, **options) -> dict``
+TARGETS = {
+    "json": (".json_params", "write_json"),
+    "mitsuba": (".mitsuba", "write_mitsuba_python"),
+    "mitsuba-xml": (".mitsuba", "write_mitsuba_xml"),
+    "gltf": (".gltf", "write_gltf"),
+    "glsl": (".glsl", "write_glsl"),
+    "merl": (".merl", "export_merl"),
+    "rgl": (".rgl", "export_rgl"),
+}
+
+
+def export(model, to: str, path, **options) -> dict:
+    """Write ``model`` in the target format ``to`` at ``path``; returns a summary dict
+    (files written, approximations made and their measured error where applicable).
+
+    Raises :class:`~brdffit.errors.ExportError` when the model cannot go to the target.
+    """
+    if to not in TARGETS:
+        raise ExportError(f"unknown export target {to!r}; expected one of {', '.join(TARGETS)}")
+    mod, fn = TARGETS[to]
+    return getattr(import_module(mod, __name__), fn)(model, Path(path), **options)
+
+
+def load_json(path):
+    """Rebuild a model from a JSON written by :func:`brdffit.export.json_params.write_json`."""
+    from .json_params import load_json as _load
+
+    return _load(path)
