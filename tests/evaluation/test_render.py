@@ -141,3 +141,10 @@ def test_tabulated_distribution_with_roughness_texture():
     p_other = psnr(g0.image, Renderer(MicrofacetBRDF(GGX(0.35), fres), **opts).render(0).image, g0.mask)
     assert p_tab > floor - 3.0, (p_tab, floor)
     assert p_other < p_tab - 3.0, (p_other, p_tab)
+
+
+def test_roughness_texture_on_table_path_warns():
+    from brdffit.evaluation.render import Renderer
+
+    with pytest.warns(RuntimeWarning, match="roughness texture is ignored"):
+        Renderer(_ggx(), scene="sphere-svrough", spp=4, resolution=16, mode="table")

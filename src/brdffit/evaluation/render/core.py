@@ -89,6 +89,13 @@ class Renderer:
         self.evaluator = evaluator
         if scene == "sphere-svrough" and alpha_texture is None:
             alpha_texture = roughness_texture()
+        if alpha_texture is not None and not getattr(evaluator, "supports_roughness", False):
+            import warnings
+
+            warnings.warn(f"the {getattr(evaluator, 'kind', 'table')} evaluator has no "
+                          "microfacet roughness: the roughness texture is ignored (only "
+                          "microfacet models, closed-form or tabulated, support Eq. 9 scaling)",
+                          RuntimeWarning, stacklevel=2)
         self.bsdf = make_bsdf(evaluator, alpha_texture=alpha_texture)
         self.scene_name, self.spp, self.resolution = scene, int(spp), int(resolution)
         self.envmap = envmap

@@ -628,6 +628,7 @@ class MicrofacetEval:
     """
 
     kind = "microfacet"
+    supports_roughness = True
 
     def __init__(self, dist, fresnel, ks=1.0, kd=0.0, g_mode: str = "correlated"):
         self.dist, self.fresnel = dist, fresnel
@@ -695,6 +696,8 @@ class SumEval:
         if not self.components:
             raise ValueError("SumEval needs at least one component")
         self.has_diffuse = any(getattr(c, "has_diffuse", True) for c in self.components)
+        self.supports_roughness = all(getattr(c, "supports_roughness", False)
+                                      for c in self.components)
 
     def eval(self, wi, wo, alpha_scale=1.0, active=True):
         out = mi.Color3f(0.0)
