@@ -22,7 +22,8 @@ density proportional to an upper bound of the specular factor in θh times cos �
 uniform, followed by reflection of ``wi`` about the half vector (the CDF-based approach of the
 paper's rendering appendix reduced to the factor that carries the peak). ``pdf`` is the exact
 density of ``sample`` (the half vector ±h ambiguity is resolved by using the upper-hemisphere
-representative, for which both give the same ``wo``).
+representative, for which both give the same ``wo``); reflections below the horizon are
+returned with pdf 0 (invalid samples), so ``pdf`` integrates to the valid fraction.
 
 :func:`smith_g_from_d` implements G-from-D (§4.3, Eq. 19 and the Λ formulas after it) with
 15-point Gauss–Legendre quadrature.
@@ -232,7 +233,8 @@ class _HalfVectorSampling:
         wih = np.abs(np.sum(wi * h, axis=-1))
         p_spec = np.where(wih > 1e-12, self._h_pdf(h) / (4.0 * np.maximum(wih, 1e-12)), 0.0)
         p = self._mix * cosine_hemisphere_pdf(wo) + (1.0 - self._mix) * p_spec
-        return np.where(wi[..., 2] > 0, p, 0.0)
+        # reflections below the horizon are invalid samples (pdf 0), as everywhere in brdffit
+        return np.where((wi[..., 2] > 0) & (wo[..., 2] > 0), p, 0.0)
 
 
 def _estimate_diffuse_fraction(brdf, diffuse_albedo: float) -> float:
