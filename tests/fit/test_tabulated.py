@@ -12,7 +12,7 @@ from scipy.special import erf
 
 from brdffit.brdf import BRDF
 from brdffit.errors import FitError
-from brdffit.fit.tabulated import (beckmann_parameters, extract_fresnel, fit_tabulated,
+from brdffit.fit.tabulated import (beckmann_parameters, fit_tabulated,
                                    ggx_parameters, solve_slope_pdf, to_beckmann, to_ggx)
 from brdffit.microfacet import GGX, Beckmann, MicrofacetBRDF, SchlickFresnel
 from brdffit.microfacet.tabulated import TabulatedSlopeDistribution, radial_rule

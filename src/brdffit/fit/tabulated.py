@@ -14,8 +14,10 @@ Pipeline of :func:`fit_tabulated`:
    Algorithm 3) with the azimuthal integral in closed form. Anisotropic: the 2D form on a
    ``(θ, φ)`` grid; the kernel is circulant in ``φ`` so ``K·p`` is an FFT convolution and the
    ``N² = 8100²`` matrix is never formed.
-3. **Normalisation** (Eq. 8) with the same quadrature, continuous lookup, ``σ``/``G1``
-   tables (Eq. 3): see :class:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution`.
+3. **Normalisation** (Eq. 8) of the *interpolated* P, continuous lookup, ``σ``/``G1``
+   tables (Eq. 3) and sampling tables (Appendix A; visible normals for isotropic P):
+   see :class:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution`. Roughness editing
+   (Eq. 9, scalar or per-texel arrays): :func:`with_roughness`.
 4. **Fresnel** per channel: ``F(θd) = E[f_r / f_r,id | θd]`` (Eq. 19-20) with
    ``f_r,id = D G2 / (4 cos θi cos θo)`` (Eq. 1 with F = 1 and the height-correlated Eq. 2),
    averaged over every valid MERL sample (supplemental Eq. 33-39) for isotropic input. For
@@ -41,8 +43,8 @@ import numpy as np
 
 from ..brdf import BRDF
 from ..errors import FitError
-from ..grid import N_THETA_D, N_THETA_H, merl_theta_d, tabulate_merl_grid
-from ..microfacet.tabulated import (TabulatedSlopeDistribution, _circular_kernel_apply,
+from ..grid import N_THETA_H, merl_theta_d, tabulate_merl_grid
+from ..microfacet.tabulated import (TabulatedSlopeDistribution,
                                     azimuthal_clamped_cosine_integral, radial_rule)
 
 __all__ = ["fit_tabulated", "fit_ggx", "fit_beckmann", "to_ggx", "to_beckmann", "with_roughness",

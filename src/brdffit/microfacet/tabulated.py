@@ -43,7 +43,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import CubicSpline, PchipInterpolator
 
-from ..geometry import normal_to_slope, slope_to_normal
+from ..geometry import slope_to_normal
 from .base import SlopeDistribution
 from .fresnel import TabulatedFresnel
 
