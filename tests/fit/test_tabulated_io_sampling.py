@@ -179,3 +179,17 @@ def test_real_neural_brdf_material(shared_data):
     assert np.all(d.table >= 0) and np.all(np.isfinite(model.fresnel.values))
     assert d._interpolant_integral() == pytest.approx(1.0, abs=1e-6)
     assert 0 < model.fit_info["eigenvalue"] < 10
+
+
+def test_per_channel_fit_round_trip_and_sampling(tmp_path):
+    from brdffit.fit.tabulated import PerChannelBRDF
+
+    brdf = MicrofacetBRDF(GGX(0.2), SchlickFresnel([0.9, 0.5, 0.2]))
+    model = fit_tabulated(brdf, per_channel=True, n=32, hotspot="G2", tol=1e-8)
+    assert isinstance(model, PerChannelBRDF)
+    back = load_fit(save_fit(model, tmp_path / "pc.npz"))
+    wi, wo = _random_pairs(seed=4)
+    np.testing.assert_array_equal(back.eval(wi, wo), model.eval(wi, wo))
+    ok, res = check_sampling(model, [[0.3, 0.2, np.sqrt(0.87)]], sample_count=40000,
+                             res_theta=16, res_phi=32, ires=3)
+    assert ok, "\n".join(map(str, res))

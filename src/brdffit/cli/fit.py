@@ -54,8 +54,12 @@ def run_fit(spec: str, model: str = "tabulated", out: Path | None = None,
     if summary.get("time_s") is None:
         summary["time_s"] = elapsed
     if out is not None:
-        from ..io.fitfile import save_fit
+        from ..errors import ExportError
+        from ..io.fitfile import SerializableModel, save_fit
 
+        if not isinstance(fitted, SerializableModel) or not fitted.fit_kind:
+            raise ExportError(f"{out}: expected a model that can be saved as a fit file, found "
+                              f"{type(fitted).__name__} (e.g. per-channel fits are not saved)")
         save_fit(fitted, out, source=spec,
                  options=dict(getattr(fitted, "fit_options", None) or options or {}, model=model))
         summary["output"] = str(out)
