@@ -195,3 +195,19 @@ def test_registered_cli_fitters():
 
     for name in ("sgd", "beckmann-2s", "ggx-2s", "beckmann-ct", "ggx-ct"):
         assert get(name).summary is summary
+
+
+@pytest.mark.shared_data
+def test_real_material_sgd_beats_two_slice_beckmann():
+    # Bagher 2012 §6.3 / Fig. 11 on Neural-BRDF stand-ins of MERL materials
+    import brdffit
+    from brdffit.evaluation.l2 import L2Reference
+    from tests.conftest import shared_data_path
+
+    z = shared_data_path("nbrdf", "merl_nbrdf.zip")
+    for name in ("hematite", "blue-acrylic"):
+        b = brdffit.load(f"{z}:{name}")
+        ref = L2Reference(b, phi_stride=12, albedo_samples=2048)
+        sgd, beck = fit_sgd(b), fit_beckmann_two_slice(b)
+        e_sgd, e_beck = ref.error(sgd).value, ref.error(beck).value
+        assert np.isfinite(e_sgd) and e_sgd < e_beck, (name, e_sgd, e_beck)
