@@ -94,3 +94,18 @@ def test_npf_default_sample_angles():
     assert d[0] == 0 and d[1] == pytest.approx((1 / 90) ** 2 * np.pi / 2)  # sqrt(θh) uniform
     assert np.degrees(plots.npf_sample_angles("G", 90))[-1] == pytest.approx(89.0)
     assert np.degrees(plots.npf_sample_angles("H", 180))[-1] == pytest.approx(179.0)
+
+
+class PerChannel(Lambert):
+    """A per-channel model (like the SGD fit): three lobes, each with its own factors."""
+
+    def __init__(self):
+        super().__init__([0.2] * 3)
+        self.lobes = [FakeMicrofacet() for _ in range(3)]
+        for a, lb in zip((0.1, 0.2, 0.3), self.lobes):
+            lb.distribution = FakeDist(a)
+
+
+def test_per_channel_models_have_factors(tmp_path):
+    assert plots.has_factors(PerChannel())
+    assert _is_png(plots.plot_factors({"sgd-like": PerChannel()}, tmp_path / "pc.png"))

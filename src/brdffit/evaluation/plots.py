@@ -8,7 +8,8 @@
   documented choice since the papers do not state it).
 * :func:`plot_factors` – fitted microfacet factors of every fit that has them: Fresnel (R, G,
   B) over θd, NDF ``D`` over θh (log scale), Smith ``G1`` over θ (Dupuy 2015 supplemental,
-  "Fitted Microfacet Functions"); and NPF tables ``D``, ``F``, ``G`` per colour channel
+  "Fitted Microfacet Functions"; per-channel models such as the SGD fit of Bagher et al. 2012
+  draw each channel's own D and G1 in that channel's colour); and NPF tables ``D``, ``F``, ``G`` per colour channel
   (Bagher, Snyder, Nowrouzezahrai 2016 Fig. 6).
 * :func:`plot_slices` – the backscattering slice (θd = 0, over θh) and the θh = 0 slice
   (over θd), data against fits, log scale.
@@ -92,11 +93,14 @@ def plot_lobes(reference, fits: Mapping[str, object], path, incidences=LOBE_INCI
     (coloured by incidence angle) in the incidence plane. See the module docstring."""
     plt = _plt()
     names = list(fits)
-    ncol = max(1, len(names))
-    fig, axes = plt.subplots(1, ncol, figsize=(3.2 * ncol, 2.2), squeeze=False)
+    ncol = max(1, min(3, len(names)))
+    nrow = max(1, -(-len(names) // ncol))
+    fig, axes = plt.subplots(nrow, ncol, figsize=(3.6 * ncol, 2.3 * nrow), squeeze=False)
+    for ax in axes.ravel()[len(names):]:
+        ax.set_axis_off()
     ref_curves = [lobe_curve(reference, t) for t in incidences]
     rmax = max(float(np.max(np.hypot(x, z))) for x, z in ref_curves) or 1.0
-    for ax, name in zip(axes[0], names):
+    for ax, name in zip(axes.ravel(), names):
         for t, col, (xr, zr) in zip(incidences, _ANGLE_COLOURS, ref_curves):
             ax.plot(xr, zr, "--", color="k", lw=0.9)
             xf, zf = lobe_curve(fits[name], t)
@@ -160,10 +164,44 @@ def npf_sample_angles(key: str, n: int) -> np.ndarray:
     return i * (np.pi / 2 / n)
 
 
+def _channel_lobes(model):
+    """Per-colour-channel microfacet lobes (e.g. the SGD fit of Bagher et al. 2012 §5.1,
+    one distribution and Fresnel per channel): a ``lobes`` list of 3 objects with
+    ``distribution``/``fresnel``, else ``None``."""
+    lobes = getattr(model, "lobes", None)
+    if isinstance(lobes, (list, tuple)) and len(lobes) == 3 and all(
+            getattr(lb, "distribution", None) is not None for lb in lobes):
+        return list(lobes)
+    return None
+
+
+def _plot_channel_lobes(axF, axD, axG, name, lobes, th, m, ls):
+    """Factors of a per-channel model: channel c's own Fresnel, D and G1 in colour c."""
+    for c, lobe in enumerate(lobes):
+        lab = f"{name} (per channel)" if c == 0 else None
+        try:
+            F = np.asarray(lobe.fresnel.eval(np.cos(th)), float).reshape(th.size, -1)
+            axF.plot(np.degrees(th), F[:, c if F.shape[1] == 3 else 0], ls, color=_RGB[c], lw=1,
+                     label=lab)
+        except Exception:  # noqa: BLE001
+            pass
+        try:
+            D = np.asarray(lobe.distribution.D(m), float)
+            axD.semilogy(np.degrees(th), np.maximum(D, 1e-8), ls, color=_RGB[c], lw=1, label=lab)
+        except Exception:  # noqa: BLE001
+            pass
+        try:
+            G = np.asarray(lobe.distribution.G1(m), float)
+            axG.plot(np.degrees(th), G, ls, color=_RGB[c], lw=1, label=lab)
+        except Exception:  # noqa: BLE001
+            pass
+
+
 def has_factors(model) -> bool:
     """True when a model exposes anything :func:`plot_factors` can draw."""
     return (getattr(model, "distribution", None) is not None
-            or getattr(model, "fresnel", None) is not None or npf_tables(model) is not None)
+            or getattr(model, "fresnel", None) is not None or npf_tables(model) is not None
+            or _channel_lobes(model) is not None)
 
 
 def _angles(n):
@@ -176,7 +214,7 @@ def plot_factors(fits: Mapping[str, object], path, n: int = 200, title: str | No
     ``None`` when no fit exposes any factor (no file is written then)."""
     plt = _plt()
     micro = {k: m for k, m in fits.items() if getattr(m, "distribution", None) is not None
-             or getattr(m, "fresnel", None) is not None}
+             or getattr(m, "fresnel", None) is not None or _channel_lobes(m)}
     npf = {k: t for k, t in ((k, npf_tables(m)) for k, m in fits.items()) if t is not None}
     nrows = (1 if micro else 0) + len(npf)
     if nrows == 0:
@@ -191,6 +229,10 @@ def plot_factors(fits: Mapping[str, object], path, n: int = 200, title: str | No
         for k, (name, model) in enumerate(micro.items()):
             col = _MODEL_COLOURS[k % len(_MODEL_COLOURS)]
             ls = styles[k % len(styles)]
+            lobes = _channel_lobes(model)
+            if lobes:
+                _plot_channel_lobes(axF, axD, axG, name, lobes, th, m, ls)
+                continue
             fr = getattr(model, "fresnel", None)
             if fr is not None:
                 try:
