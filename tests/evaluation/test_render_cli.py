@@ -33,6 +33,24 @@ def test_cli_render_png_and_exr(tmp_path, capsys):
     assert "merl-table" in capsys.readouterr().out
 
 
+@pytest.mark.render
+@pytest.mark.skipif(not available(), reason="Mitsuba 3 LLVM back-end unavailable")
+def test_cli_render_fit_file(tmp_path, capsys):
+    from brdffit.evaluation.imageio import read_exr
+    from brdffit.io.fitfile import save_fit
+    from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel
+
+    fit = save_fit(MicrofacetBRDF(GGX(0.3), SchlickFresnel([0.1, 0.5, 0.9]), diffuse=0.05),
+                   tmp_path / "fit.npz")
+    out = tmp_path / "fit.exr"
+    assert main(["render", str(fit), "--spp", "4", "--resolution", "24", "--scene",
+                 "sphere-distant", "-o", str(out)]) == 0
+    img = read_exr(out)
+    fg = img[..., 3] > 0.999
+    assert fg.any() and img[fg][:, 2].mean() > img[fg][:, 0].mean()  # blue Fresnel
+    assert "closed-form" in capsys.readouterr().out
+
+
 def test_cli_render_errors(tmp_path, capsys):
     assert main(["render", "synthetic:gold-ggx", "-o", str(tmp_path / "x.jpg")]) != 0
     assert main(["render", str(tmp_path / "missing.binary"), "-o", str(tmp_path / "x.png")]) == 1
