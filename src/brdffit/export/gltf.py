@@ -1,0 +1,200 @@
+"""glTF 2.0 metallic-roughness materials of GGX fits, and the glTF BRDF as a library BRDF.
+
+:class:`GLTFBRDF` is the BRDF of the glTF 2.0 specification, **Appendix B** ("BRDF
+Implementation"), with the default ``ior`` 1.5:
+
+* ``α = roughness²`` — glTF's ``roughnessFactor`` is the *perceptual* roughness ``r``; our
+  (and Mitsuba's) α is the GGX slope scale, so **glTF roughness = √α**;
+* ``D = α² χ⁺(N·H) / (π ((N·H)² (α² − 1) + 1)²)`` (isotropic GGX / Trowbridge-Reitz);
+* ``V = χ⁺(H·L) χ⁺(H·V) / ((|N·L| + √(α² + (1 − α²)(N·L)²)) (|N·V| + √(α² + (1 − α²)(N·V)²)))``
+  (separable Smith, ``V = G / (4 |N·L| |N·V|)``);
+* ``F = f0 + (1 − f0)(1 − |V·H|)⁵`` (Schlick) with ``f0 = mix(0.04, baseColor, metallic)``;
+* ``f = (1 − F) c_diff / π + F D V`` with ``c_diff = mix(baseColor, 0, metallic)``.
+
+Mapping of a fit (:func:`gltf_material`) — a single GGX lobe
+(``MicrofacetBRDF(GGX, ...)``; tabulated fits are first converted with
+:func:`brdffit.fit.tabulated.to_ggx`, Dupuy 2015 App. C):
+
+* roughness: ``α = √(αx αy)`` (geometric mean; glTF core is isotropic, the anisotropy and ρ
+  are dropped and reported), ``roughnessFactor = √α``;
+* **metallic rule**: with ``F0 = ks · F(θd = 0)`` clipped to [0, 1], the material is a metal
+  (``metallic = 1``, ``baseColorFactor = F0``, the fit's diffuse term dropped) when the
+  luminance of F0 is ≥ 0.2 — dielectrics have F0 ≈ 0.02-0.08, so a fitted F0 ≥ 0.2 means a
+  conductor — and the fit's ρd is below a tenth of that luminance; otherwise a dielectric
+  (``metallic = 0``, ``baseColorFactor = ρd`` clipped to [0, 1], glTF's fixed F0 = 0.04).
+  ``MATERIAL_METAL_F0`` is the threshold.
+* the loss of fidelity is measured by :func:`gltf_fidelity` (BRDF-space metrics of
+  :class:`GLTFBRDF` vs the fit; rendered PSNR in ``bench/bench_export.py``).
+
+Colours are the fit's linear RGB, written unchanged (glTF factors are linear).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from .._atomic import atomic_write
+from ..brdf import IsotropicBRDF, _as_dirs
+from ._common import LUMA, fail, is_elliptical
+
+__all__ = ["GLTFBRDF", "gltf_parameters", "gltf_material", "gltf_equivalent", "gltf_fidelity",
+           "write_gltf", "MATERIAL_METAL_F0"]
+
+MATERIAL_METAL_F0 = 0.2
+
+
+class GLTFBRDF(IsotropicBRDF):
+    """The glTF 2.0 metallic-roughness BRDF (specification Appendix B, see module doc).
+
+    Parameters: ``base_color`` (linear RGB), ``metallic`` and ``roughness`` (perceptual,
+    α = roughness²) in [0, 1].
+    """
+
+    def __init__(self, base_color, metallic: float, roughness: float, name: str = "gltf"):
+        self.base_color = np.broadcast_to(np.asarray(base_color, float), (3,)).copy()
+        self.metallic = float(metallic)
+        self.roughness = float(roughness)
+        for nm, v in (("metallic", self.metallic), ("roughness", self.roughness)):
+            if not 0.0 <= v <= 1.0:
+                raise ValueError(f"GLTFBRDF: {nm} must be in [0, 1], got {v}")
+        self.name = name
+        self.source = None
+
+    def eval(self, wi, wo) -> np.ndarray:
+        """``f_r`` of Appendix B: ``(1 − F) c_diff/π + F D V`` (L = wi, V = wo)."""
+        wi, wo = _as_dirs(wi, wo)
+        nl, nv = wi[..., 2], wo[..., 2]
+        ok = (nl > 0) & (nv > 0)
+        h = wi + wo
+        h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+        nh = h[..., 2]
+        vh = np.abs(np.sum(wo * h, -1))
+        lh = np.sum(wi * h, -1)
+        a = self.roughness**2
+        a2 = a * a
+        with np.errstate(divide="ignore", invalid="ignore"):
+            D = a2 * (nh > 0) / (np.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
+            V = ((lh > 0) * (np.sum(wo * h, -1) > 0)
+                 / ((np.abs(nl) + np.sqrt(a2 + (1.0 - a2) * nl * nl))
+                    * (np.abs(nv) + np.sqrt(a2 + (1.0 - a2) * nv * nv))))
+        f0 = 0.04 * (1.0 - self.metallic) + self.base_color * self.metallic
+        c_diff = self.base_color * (1.0 - self.metallic)
+        F = f0 + (1.0 - f0) * ((1.0 - vh) ** 5)[..., None]
+        f = (1.0 - F) * c_diff / np.pi + F * np.nan_to_num(D * V)[..., None]
+        return np.where(ok[..., None], f, 0.0)
+
+    def as_microfacet(self):
+        """For a pure metal (metallic = 1): the identical ``MicrofacetBRDF`` (GGX α = r²,
+        Schlick F0 = baseColor, uncorrelated Smith G), usable by the closed-form renderers."""
+        from ..microfacet import GGX, MicrofacetBRDF, SchlickFresnel
+
+        if self.metallic != 1.0:
+            return None
+        return MicrofacetBRDF(GGX(max(self.roughness**2, 1e-6)),
+                              SchlickFresnel(np.clip(self.base_color, 0, 1)), correlated=False,
+                              name=self.name)
+
+    def describe(self) -> dict:
+        d = super().describe()
+        d.update(base_color=self.base_color.tolist(), metallic=self.metallic,
+                 roughness=self.roughness)
+        return d
+
+
+def _ggx_model(model):
+    """``(model as single GGX lobe, notes)`` or ExportError."""
+    from ..microfacet.model import MicrofacetBRDF
+    from ..microfacet.tabulated import TabulatedSlopeDistribution
+
+    notes = []
+    if isinstance(model, MicrofacetBRDF) and isinstance(model.distribution,
+                                                       TabulatedSlopeDistribution):
+        from ..fit.tabulated import to_ggx
+
+        model = to_ggx(model)
+        notes.append("tabulated NDF converted to GGX by Dupuy 2015 App. C (first moments)")
+    if not (isinstance(model, MicrofacetBRDF) and is_elliptical(model.distribution, ("ggx",))):
+        fail(model, "glTF 2.0", "glTF's metallic-roughness model is a single isotropic GGX lobe; "
+             "expected a MicrofacetBRDF with a GGX (or tabulated) distribution, e.g. from "
+             "fit_ggx")
+    return model, notes
+
+
+def gltf_parameters(model) -> dict:
+    """``{"baseColorFactor", "metallicFactor", "roughnessFactor", "alpha", "notes", ...}`` of
+    a GGX fit by the rules of the module docstring."""
+    m, notes = _ggx_model(model)
+    d = m.distribution
+    alpha = float(np.sqrt(d.alpha_x * d.alpha_y))
+    if d.alpha_x != d.alpha_y or d.rho != 0:
+        notes.append(f"anisotropy dropped: alpha_x={d.alpha_x:.4g}, alpha_y={d.alpha_y:.4g}, "
+                     f"rho={d.rho:.4g} -> isotropic alpha={alpha:.4g} (geometric mean)")
+    ks = np.ones(3) if m.specular is None else np.asarray(m.specular, float)
+    F0 = ks * (np.ones(3) if m.fresnel is None else np.asarray(m.fresnel.eval(1.0), float))
+    F0c = np.clip(F0, 0.0, 1.0)
+    rd = np.zeros(3) if m.diffuse is None else np.asarray(m.diffuse, float)
+    lum = float(LUMA @ F0c)
+    metal = lum >= MATERIAL_METAL_F0 and float(LUMA @ rd) < 0.1 * lum
+    if metal:
+        base = F0c
+        if m.diffuse is not None:
+            notes.append("metal: the fit's diffuse term is dropped")
+    else:
+        base = np.clip(rd, 0.0, 1.0)
+        notes.append(f"dielectric: specular F0 fixed by glTF to 0.04 (fit: "
+                     f"{np.round(F0, 4).tolist()}), diffuse weighted by (1 - F)")
+    if m.correlated:
+        notes.append("height-correlated Smith G of the fit replaced by glTF's separable Smith")
+    notes.append("Fresnel curve replaced by Schlick with F0 = baseColor (metal) / 0.04")
+    return {"baseColorFactor": [float(x) for x in base] + [1.0],
+            "metallicFactor": 1.0 if metal else 0.0,
+            "roughnessFactor": float(np.sqrt(min(alpha, 1.0))), "alpha": alpha,
+            "F0": F0.tolist(), "rho_d": rd.tolist(), "notes": notes}
+
+
+def gltf_equivalent(model) -> GLTFBRDF:
+    """The :class:`GLTFBRDF` a glTF viewer renders for the exported material."""
+    p = gltf_parameters(model)
+    return GLTFBRDF(p["baseColorFactor"][:3], p["metallicFactor"], p["roughnessFactor"],
+                    name=f"{getattr(model, 'name', 'model')}-gltf")
+
+
+def gltf_fidelity(model, n_samples: int = 1 << 15,
+                  metrics=("cos_rel_error", "normalized_l2")) -> dict:
+    """BRDF-space loss of fidelity of the glTF material vs the fit
+    (:func:`brdffit.evaluation.metrics.brdf_metrics`, the fit as reference)."""
+    from ..evaluation.metrics import brdf_metrics
+
+    r = brdf_metrics(model, gltf_equivalent(model), n_samples, metrics=metrics)
+    return {k: r.get(k) for k in metrics}
+
+
+def gltf_material(model, name: str | None = None, fidelity: bool = True) -> dict:
+    """The glTF 2.0 ``material`` object (``pbrMetallicRoughness`` + ``extras.brdffit`` with
+    α, conventions, approximations and the measured BRDF-space fidelity)."""
+    p = gltf_parameters(model)
+    extras = {"alpha": p["alpha"], "F0_fit": p["F0"], "rho_d_fit": p["rho_d"],
+              "notes": p["notes"],
+              "conventions": "roughnessFactor = sqrt(alpha), alpha = GGX slope scale; "
+                             "linear RGB of the source data; glTF Appendix B BRDF"}
+    if fidelity:
+        extras["fidelity"] = gltf_fidelity(model)
+    return {"name": name or getattr(model, "name", "material"),
+            "pbrMetallicRoughness": {"baseColorFactor": p["baseColorFactor"],
+                                     "metallicFactor": p["metallicFactor"],
+                                     "roughnessFactor": p["roughnessFactor"]},
+            "extras": {"brdffit": extras}}
+
+
+def write_gltf(model, path, fidelity: bool = True, **_ignored) -> dict:
+    """Write a minimal valid glTF 2.0 JSON (``asset`` + one ``material``), atomically."""
+    mat = gltf_material(model, fidelity=fidelity)
+    doc = {"asset": {"version": "2.0", "generator": "brdffit export"}, "materials": [mat]}
+    with atomic_write(Path(path), "w") as fh:
+        json.dump(doc, fh, indent=1, allow_nan=False)
+    return {"files": [str(path)], "target": "gltf", "material": mat["pbrMetallicRoughness"],
+            "notes": mat["extras"]["brdffit"]["notes"],
+            "fidelity": mat["extras"]["brdffit"].get("fidelity")}
