@@ -211,3 +211,28 @@ def test_real_material_sgd_beats_two_slice_beckmann():
         sgd, beck = fit_sgd(b), fit_beckmann_two_slice(b)
         e_sgd, e_beck = ref.error(sgd).value, ref.error(beck).value
         assert np.isfinite(e_sgd) and e_sgd < e_beck, (name, e_sgd, e_beck)
+
+
+def test_fit_from_a_merl_table():
+    # the MERL reader's table path (merl_table + validity mask), not eval_hd
+    import brdffit
+    from brdffit.io.merl import resample_to_merl
+
+    merl = resample_to_merl(brdffit.synthetic("sgd-paint"))
+    assert hasattr(merl, "merl_table")
+    for row in fit_sgd(merl).channel_params():
+        assert row["alpha"] == pytest.approx(0.15, rel=0.01)
+        assert row["p"] == pytest.approx(1.2, rel=0.01)
+        assert row["F0"] == pytest.approx(0.06, abs=0.01)
+
+
+def test_sampling_chi_square_beckmann_ggx_lobes():
+    from brdffit.testing.chi2 import check_sampling
+
+    rows = [dict(rho_d=0.2, rho_s=0.5, F0=0.05, F1=0.0), dict(rho_d=0.1, rho_s=0.3, F0=0.5, F1=0.1),
+            dict(rho_d=0.0, rho_s=0.8, F0=0.9, F1=0.0)]
+    dists = [Beckmann(0.1), GGX(0.3), Beckmann(0.05)]
+    model = PerChannelMicrofacetBRDF([{"distribution": d, **r} for d, r in zip(dists, rows)])
+    ok, results = check_sampling(model, [[0, 0, 1], [0.8, 0.0, 0.6]], sample_count=50000,
+                                 res_theta=24, res_phi=48)
+    assert ok, [str(r) for r in results]
