@@ -18,9 +18,10 @@ Two-slice fit (§5.2), per channel
    minimising Eq. 12 ``Σ w_i (m_h − ρh)²`` over (ρd, Fr, α, p). **Deviation**: instead of
    Levenberg-Marquardt on all four parameters, ρd and Fr (which enter linearly) are
    eliminated by a non-negative linear least-squares solve inside the residual ("variable
-   projection"), and the remaining (ln α, p) are found by a grid search shared by the three
-   channels followed by bounded trust-region least squares (``scipy.optimize.least_squares``,
-   TRF) from the two best grid points. Same minimiser, far more robust and faster. The paper
+   projection"), and the remaining (ln α, p) are found by a grid search (18 × 8, shared by
+   the three channels) followed by bounded trust-region least squares
+   (``scipy.optimize.least_squares``, TRF) from the three best local minima of the grid.
+   Same minimiser, far more robust and faster. The paper
    does not give its weights ``w_i``; by default (``weighting="cosine"``) they are the
    §6.3 measure restricted to the slice, ``cos²θh · sin θh dθh`` (cell of the MERL θh node),
    so that step 1 approximates the error the paper reports; ``weighting="relative"`` uses
