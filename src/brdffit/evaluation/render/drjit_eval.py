@@ -310,18 +310,32 @@ class Table4DEval(_ProxySampling):
 
     Generic anisotropic path. θh uses the MERL sqrt mapping ``θh = (i/Nth)² π/2``; θd is
     uniform on [0, π/2); φh and φd are uniform on [0, 2π) and periodic (no reciprocity folding,
-    so non-reciprocal tables also work).
+    so non-reciprocal tables also work). Linear interpolation by default: on the synthetic
+    aniso-GGX (αx, αy, ρ) = (0.06, 0.3, 0.45) with the default 40 × 40 × 32 × 40 table,
+    linear gives a cosine-weighted L1 error of 6.2 % and an albedo error of 0.35 %, while
+    ``interp="log"`` gives 4.4 % but a 3.7 % albedo bias (56 × 48 × 32 × 48: 4.0 % / 0.3 %
+    linear). Anisotropic BRDFs with a known model should use their closed form instead.
     """
 
     kind = "table4d"
 
-    def __init__(self, values, proxy_alpha=0.3, proxy_weight=0.5):
+    def __init__(self, values, proxy_alpha=0.3, proxy_weight=0.5, interp: str = "linear"):
         v = np.asarray(values, dtype=np.float64)
         if v.ndim != 5 or v.shape[-1] != 3:
             raise ValueError(f"expected a table (Nθh, Nφh, Nθd, Nφd, 3), found {v.shape}")
+        if interp not in ("log", "linear"):
+            raise ValueError(f"interp must be 'log' or 'linear', got {interp!r}")
         self.shape = v.shape[:4]
-        self.values = np.where(np.isfinite(v), np.maximum(v, 0.0), 0.0).astype(np.float32)
-        self.buffer = mi.Float(self.values.ravel())
+        v = np.where(np.isfinite(v), np.maximum(v, 0.0), 0.0)
+        self.values = v.astype(np.float32)
+        self.interp = interp
+        if interp == "log":   # as MERLTableEval: log(f + ε), ε = 5 % of the median
+            pos = v[v > 0]
+            self.eps = float(max(0.05 * np.median(pos), 1e-6)) if pos.size else 1e-6
+            self.buffer = mi.Float(np.log(v + self.eps).astype(np.float32).ravel())
+        else:
+            self.eps = 0.0
+            self.buffer = mi.Float(self.values.ravel())
         self.proxy_alpha, self.proxy_weight = float(proxy_alpha), float(proxy_weight)
 
     @staticmethod
@@ -354,6 +368,8 @@ class Table4DEval(_ProxySampling):
                     base = ((a * nph + b) * ntd + c) * npd
                     for d, wd in axis(xpd, npd, True):
                         out += (wa * wb * wc * wd) * dr.gather(mi.Color3f, self.buffer, base + d, ok)
+        if self.interp == "log":
+            out = dr.maximum(dr.exp(out) - self.eps, 0.0)
         return dr.select(ok, out, 0.0)
 
 
