@@ -14,7 +14,8 @@ from importlib import import_module
 _MODULES = ("tabulated", "sgd", "npf")
 _EXPORTS = {
     "fit_tabulated": "tabulated", "fit_ggx": "tabulated", "fit_beckmann": "tabulated",
-    "fit_sgd": "sgd", "fit_npf": "npf",
+    "fit_sgd": "sgd", "fit_beckmann_two_slice": "sgd", "fit_ggx_two_slice": "sgd",
+    "fit_cook_torrance": "sgd", "fit_npf": "npf",
 }
 
 
