@@ -274,8 +274,13 @@ def extract_fresnel(brdf: BRDF, dist: TabulatedSlopeDistribution, *, merl=None,
         vals = values
         if not np.all(np.isfinite(vals)):
             vals = np.where(np.isfinite(vals), vals, 0.0)
-        # Σ_{θh, φd} f · weight for each θd: one batched (1 × Nφ) @ (Nφ × 3) product per (θh, θd)
-        sums = np.matmul(weight[:, :, None, :].astype(vals.dtype), vals)[:, :, 0, :].sum(axis=0)
+        # Σ_{θh, φd} f · weight for each θd, in the cheapest way for the table's memory layout
+        if all(vals[..., c].flags["C_CONTIGUOUS"] for c in range(3)):  # channel-planar storage
+            sums = np.stack([np.einsum("hdp,hdp->d", vals[..., c], weight, dtype=np.float64)
+                             for c in range(3)], -1)
+        else:  # channel-last: one batched (1 × Nφ) @ (Nφ × 3) product per (θh, θd)
+            vals = np.ascontiguousarray(vals)
+            sums = np.matmul(weight[:, :, None, :].astype(vals.dtype), vals)[:, :, 0, :].sum(0)
         counts = ok.sum(axis=(0, 2))
     else:
         n_h, n_ph, n_pd = aniso_grid

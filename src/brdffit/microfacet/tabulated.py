@@ -186,6 +186,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         self._build_lookup()
         self._sampling = None
         self._visible = None
+        self._pdense = None
 
     # -- construction helpers ----------------------------------------------------------------
     def _integral(self, p) -> float:
@@ -320,6 +321,22 @@ class TabulatedSlopeDistribution(SlopeDistribution):
             tail = (((1.0 - f) * self._p_last[j0] + f * self._p_last[j1])
                     * (self._r_last / np.maximum(r, self._r_last)) ** 4)
         return np.where(u > self._u_last, tail, val)
+
+    def _p_radial_dense(self, r) -> np.ndarray:
+        """Fast approximate ``P(r)`` of an isotropic table (sampling tables only): linear
+        interpolation of ``log P`` on a dense uniform ``u`` grid (8192 cells)."""
+        m = 8192
+        if getattr(self, "_pdense", None) is None:
+            ug = np.linspace(0.0, 1.0, m + 1)
+            ug[-1] = 1.0 - 1e-12
+            pg = self._p_unit_polar(np.tan(0.5 * np.pi * ug**2))
+            self._pdense = np.log(np.maximum(pg, 1e-300))
+        u = np.sqrt(np.arctan(r) * (2.0 / np.pi))
+        x = u * m
+        i0 = np.minimum(x.astype(np.int64), m - 1)
+        f = x - i0
+        t = self._pdense
+        return np.exp(t[i0] + f * (t[i0 + 1] - t[i0]))
 
     def _sigma_unit(self, w) -> np.ndarray:
         """σ of the unit-roughness table for directions ``w`` (any length, z ≥ 0)."""
@@ -486,7 +503,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         ygrid = np.tan(0.5 * np.pi * v**2)  # ≥ 0, dense near 0
         xpos = ygrid
         rr = np.hypot(xpos[:, None], ygrid[None, :])
-        pv = self._p_unit_polar(rr)  # (Mx, My)
+        pv = self._p_radial_dense(rr)  # (Mx, My)
         # conditional CDF of |ỹ| given |x̃| (trapezoid in y)
         dy = np.diff(ygrid)
         seg = 0.5 * (pv[:, 1:] + pv[:, :-1]) * dy[None, :]
