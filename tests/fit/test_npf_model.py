@@ -190,13 +190,16 @@ def test_sizes_and_save_load_identity(tmp_path):
         np.testing.assert_allclose(back.eval(wi, wo), m.eval(wi, wo), rtol=2e-6, atol=1e-7)
 
 
-@pytest.mark.parametrize("which", [0, 1, 2])
-def test_sampling_chi2(which):
+CHI2 = dict(sample_count=40_000, res_theta=12, res_phi=24, ires=3)
+
+
+@pytest.mark.parametrize("which,wi", [(0, [0.6, 0.0, 0.8]), (1, [0.0, 0.95, 0.3122499]),
+                                      (2, [0.0, 0.0, 1.0])])
+def test_sampling_chi2(which, wi):
     from brdffit.testing.chi2 import check_sampling
 
     m = make_models()[which]
-    ok, res = check_sampling(m, [[0, 0, 1], [0.6, 0.0, 0.8], [0.0, 0.95, 0.3122499]],
-                             sample_count=60_000, res_theta=16, res_phi=32)
+    ok, res = check_sampling(m, [wi], **CHI2)
     assert ok, "\n".join(str(r) for r in res)
     for r in res:
         assert r.sample_pdf_mismatch < 1e-6
@@ -213,5 +216,5 @@ def test_sampling_chi2_detects_wrong_pdf():
             return 1.3 * super().pdf(wi, wo) * (1 + 0.5 * np.asarray(wo)[..., 0])
 
     w = Wrong(m.D, m.F, m.G, m.rho_d, m.rho_s)
-    ok, _ = check_sampling(w, [[0.6, 0.0, 0.8]], sample_count=60_000, res_theta=16, res_phi=32)
+    ok, _ = check_sampling(w, [[0.6, 0.0, 0.8]], **CHI2)
     assert not ok
