@@ -270,10 +270,11 @@ def extract_fresnel(brdf: BRDF, dist: TabulatedSlopeDistribution, *, merl=None,
         ok = geo["up"] & usable_h[:, None, None]
         if valid is not None and not np.all(valid):
             ok = ok & np.asarray(valid, dtype=bool)
-        weight = np.where(ok, weight, np.float32(0.0))
         vals = values
-        if not np.all(np.isfinite(vals)):
+        if not np.all(np.isfinite(vals)):  # non-finite samples are invalid, not zeros
+            ok = ok & np.all(np.isfinite(vals), axis=-1)
             vals = np.where(np.isfinite(vals), vals, 0.0)
+        weight = np.where(ok, weight, np.float32(0.0))
         # Σ_{θh, φd} f · weight for each θd, in the cheapest way for the table's memory layout
         if all(vals[..., c].flags["C_CONTIGUOUS"] for c in range(3)):  # channel-planar storage
             sums = np.stack([np.einsum("hdp,hdp->d", vals[..., c], weight, dtype=np.float64)
