@@ -101,8 +101,15 @@ def test_write_glsl_and_uber_texture(tmp_path):
         np.testing.assert_allclose(C.eval_spec(spec, wi, wo), mm.eval(wi, wo), rtol=2e-6, atol=1e-9)
 
 
-def test_unsupported_raises():
+def test_unsupported_raises_and_per_channel_works():
+    from brdffit.export.gltf import GLTFBRDF
     from brdffit.fit.tabulated import PerChannelBRDF
 
     with pytest.raises(ExportError, match="GLSL"):
-        GL.model_spec(PerChannelBRDF([brdffit.synthetic("gold-ggx")] * 3))
+        GL.model_spec(GLTFBRDF([0.5, 0.5, 0.5], 0.0, 0.5))
+    pc = PerChannelBRDF([brdffit.synthetic(n) for n in ("gold-ggx", "aniso-ggx", "plastic-beckmann")])
+    wi, wo = _pairs(1000, 7)
+    ref = pc.eval(wi, wo)
+    got = C.eval_spec(GL.model_spec(pc), wi, wo)
+    ok = ref > 1e-6 * ref.max()
+    assert (np.abs(got - ref)[ok] / ref[ok]).max() < 1e-4

@@ -23,7 +23,8 @@ Supported models
   Fresnel terms: none, Schlick / generalised Schlick (Bagher 2012 Eq. 11), conductor (η, k),
   dielectric (η), tabulated (on a uniform θd grid, e.g. the fitted 90-sample tables);
   optional ρd and ks; correlated (Dupuy Eq. 2) or uncorrelated Smith G.
-* ``SumBRDF`` of those, ``PerChannelMicrofacetBRDF`` (one lobe per channel).
+* ``SumBRDF`` of those, ``PerChannelMicrofacetBRDF`` and per-channel tabulated fits
+  (``PerChannelBRDF``; one lobe per channel).
 * NPF models (Bagher 2016 Eq. 3, ``NPFMicrofacetBRDF``) from a row of the uber-texture.
 
 Textures are RGB float32 arrays ``(rows, width, 3)`` read with ``texelFetch`` (no hardware
@@ -323,6 +324,12 @@ def model_spec(model) -> dict:
         m = model if model.g1 == "approx" or not model.g1_approx else model.with_g1("approx")
         lobes = [_lobe_spec(lobe, textures, notes, f"l{c}_", channel=c)
                  for c, lobe in enumerate(m.lobes)]
+    elif type(model).__name__ == "PerChannelBRDF" and len(getattr(model, "models", ())) == 3:
+        lobes = []
+        for c, mc in enumerate(model.models):
+            if not isinstance(mc, MicrofacetBRDF):
+                fail(model, "GLSL", f"channel model {label(mc)} is not a MicrofacetBRDF")
+            lobes.append(_lobe_spec(mc, textures, notes, f"l{c}_", channel=c))
     elif isinstance(model, NPFMicrofacetBRDF):
         textures["uber"] = npf_row(model)[None]
         lobes = [{"type": "npf", "tex": "uber", "row": 0}]

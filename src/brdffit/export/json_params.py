@@ -123,6 +123,10 @@ def describe_parameters(model) -> dict:
         return {"channels": model.channel_params(), "g1": model.g1,
                 "formula": "Bagher 2012 Eq. 1 per channel: rho_d/pi + rho_s F D G1 G1 / "
                            "(pi cos_i cos_o) with F = F0 + (1 - F0)(1 - cos_d)^5 - F1 cos_d"}
+    if type(model).__name__ == "PerChannelBRDF":
+        return {"channels": [{"channel": "RGB"[c], **describe_parameters(m)}
+                             for c, m in enumerate(model.models)],
+                "formula": "channel c of the BRDF = channel c of models[c]"}
     if isinstance(model, (NPFMicrofacetBRDF, NPFNaiveBRDF)):
         f = model.factors()
         return {"rho_d": _rgb(f["rho_d"]), "rho_s": _rgb(f["rho_s"]),
@@ -155,9 +159,9 @@ def to_json_dict(model) -> dict[str, Any]:
     from ..io.fitfile import SerializableModel
 
     if not isinstance(model, SerializableModel) or not model.fit_kind:
-        fail(model, "json", "only serialisable models (MicrofacetBRDF, SumBRDF, "
-                            "PerChannelMicrofacetBRDF, NPF models) can be written; a "
-                            "per-channel tabulated fit (PerChannelBRDF) has no serialisation")
+        fail(model, "json", "only serialisable models (SerializableModel with a fit_kind: "
+                            "MicrofacetBRDF, SumBRDF, PerChannelMicrofacetBRDF, PerChannelBRDF, "
+                            "NPF models) can be written")
     params, arrays = model.to_state()
     return {"format": FORMAT, "version": VERSION, "conventions": CONVENTIONS,
             "model": model.fit_kind, "class": type(model).__name__,
