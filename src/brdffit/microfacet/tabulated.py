@@ -33,8 +33,9 @@ Derived quantities:
   stretch invariance of ``Λ`` (Heitz 2014); ``alpha_x``/``alpha_y`` may be arrays that
   broadcast with the directions (per-texel roughness), without refitting;
 * sampling: slopes from ``P`` by quantile tables (Appendix A; in polar form: a marginal in
-  ``u`` and conditional in ``φ``), and for isotropic tables visible normals (Heitz & d'Eon
-  2014) with a marginal table of ``P1(x̃)`` and a conditional quantile table of ``ỹ | x̃``;
+  ``u`` and conditional in ``φ``), and visible normals (Heitz & d'Eon 2014): for isotropic
+  tables by inversion, with a marginal table of ``P1(x̃)`` and a conditional quantile table
+  of ``ỹ | x̃``; for anisotropic tables by rejection from the quantile tables (extension);
 * slope moments for Appendix C (Beckmann / GGX conversion).
 """
 
@@ -430,7 +431,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
             dens = self._p_unit_polar(r) * jac * 2.0 * np.pi
             cdf = np.concatenate([[0.0], np.cumsum(0.5 * (dens[1:] + dens[:-1]) * np.diff(uu))])
             cdf /= cdf[-1]
-            self._sampling = (uu, cdf, None, None)
+            self._sampling = (uu, cdf, None, None, None, None)
         else:
             n = self.n_phi
             phis = self.phi
@@ -446,14 +447,27 @@ class TabulatedSlopeDistribution(SlopeDistribution):
             tot = ccdf[:, -1:]
             ccdf = np.where(tot > 0, ccdf / np.where(tot > 0, tot, 1.0),
                             np.linspace(0, 1, n + 1)[None, :])
-            self._sampling = (uu, cdf, ccdf, pp)
+            # the r-weighted law r·P (proposal of anisotropic visible-normal sampling): same
+            # conditional in φ, marginal in u weighted by r
+            dens_r = dens * r
+            cdf_r = np.concatenate([[0.0], np.cumsum(0.5 * (dens_r[1:] + dens_r[:-1]) * np.diff(uu))])
+            e_r = cdf_r[-1] / np.sum(0.5 * (dens[1:] + dens[:-1]) * np.diff(uu))
+            cdf_r /= cdf_r[-1]
+            self._sampling = (uu, cdf, ccdf, pp, cdf_r, float(e_r))
         return self._sampling
 
     def sample(self, u) -> np.ndarray:
         """Slopes distributed with :meth:`pdf` (Appendix A quantile transform, polar form)."""
         u = np.asarray(u, dtype=np.float64)
-        uu, cdf, ccdf, pnode = self._sampling_tables()
-        uv = np.interp(u[..., 0], cdf, uu)
+        r, phi = self._sample_polar(u, r_weighted=False)
+        ax, ay = self._alphas()
+        # normal azimuth φ -> slope -r (cos φ, sin φ); scale by α (Eq. 9)
+        return np.stack([-r * np.cos(phi) * ax, -r * np.sin(phi) * ay], axis=-1)
+
+    def _sample_polar(self, u, r_weighted=False):
+        """``(r, φ)`` of the unit table from ``P`` (or from ``r·P`` if ``r_weighted``)."""
+        uu, cdf, ccdf, pnode, cdf_r, _ = self._sampling_tables()
+        uv = np.interp(u[..., 0], cdf_r if r_weighted else cdf, uu)
         r = np.tan(0.5 * np.pi * uv**2)
         if self.table_isotropic:
             phi = 2.0 * np.pi * u[..., 1]
@@ -479,9 +493,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
             tl = np.where(p0 > 0, c / np.where(p0 > 0, p0, 1.0), 0.5)
             frac = np.where(np.abs(dp) > 1e-12 * np.maximum(p0 + p1, 1e-300), tq, tl)
             phi = (k + np.clip(frac, 0, 1)) * (2.0 * np.pi / n)
-        ax, ay = self._alphas()
-        # normal azimuth φ -> slope -r (cos φ, sin φ); scale by α (Eq. 9)
-        return np.stack([-r * np.cos(phi) * ax, -r * np.sin(phi) * ay], axis=-1)
+        return r, phi
 
     def sample_normal(self, u) -> np.ndarray:
         """Normals distributed with ``D(m) cos θm`` (slopes from :meth:`sample`, Eq. 6)."""
@@ -579,8 +591,8 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         """Visible normals for direction ``w`` (Heitz & d'Eon 2014), isotropic tables.
 
         Uses the stretch invariance for roughness (αx, αy): sample the unit table for the
-        stretched direction, then scale the slopes. Anisotropic tables raise
-        ``NotImplementedError`` (sample ``D cos θm`` with :meth:`sample_normal` instead).
+        stretched direction, then scale the slopes. (Anisotropic tables override this with
+        a rejection sampler.)
         """
         if not self.table_isotropic:
             raise NotImplementedError("visible-normal sampling is only tabulated for isotropic P")
@@ -697,11 +709,64 @@ def _circular_kernel_apply(t, r, w_r, p) -> np.ndarray:
 class AnisotropicTabulatedSlopeDistribution(TabulatedSlopeDistribution):
     """A 2D ``(θ, φ)`` table (created by ``TabulatedSlopeDistribution(p2d)``).
 
-    Visible-normal sampling is not tabulated for anisotropic P: samplers use the slope
-    quantile tables (Appendix A) and the density ``D(m) cos θm`` instead.
+    Visible normals are sampled by rejection (an extension; the paper samples ``D cos θm``
+    with the quantile tables of Appendix A): the visible slope density is
+    ``∝ (1 + w̃·h̃)₊ P(h̃)`` (``w̃`` the slope of ``w``), bounded by
+    ``(1 + |w̃| |h̃|) P(h̃)``, a mixture of ``P`` and ``|h̃| P`` that the polar quantile
+    tables sample exactly. Acceptance is 1 at normal incidence and about 1/π at grazing.
+    The first proposal uses ``u``; further uniforms come from a generator seeded by a hash
+    of ``u`` (deterministic for given inputs).
     """
 
-    sample_visible = SlopeDistribution.sample_visible
+    _MAX_ROUNDS = 64
+
+    def sample_visible(self, w, u) -> np.ndarray:
+        """Visible normals for direction ``w`` (density :meth:`pdf_visible`), by rejection."""
+        import hashlib
+
+        w = np.asarray(w, dtype=np.float64)
+        u = np.asarray(u, dtype=np.float64)
+        ax, ay = self._alphas()
+        shape = np.broadcast_shapes(w.shape[:-1], u.shape[:-1], ax.shape, ay.shape)
+        w = np.broadcast_to(w, shape + (3,))
+        u = np.broadcast_to(u, shape + (2,)).reshape(-1, 2)
+        axb = np.broadcast_to(ax, shape).reshape(-1)
+        ayb = np.broadcast_to(ay, shape).reshape(-1)
+        # stretched direction (roughness invariance) and its slope w̃* = −(x, y)/z
+        wz = np.maximum(w[..., 2].reshape(-1), 1e-12)
+        tx = -w[..., 0].reshape(-1) * axb / wz
+        ty = -w[..., 1].reshape(-1) * ayb / wz
+        amp = np.hypot(tx, ty)
+        e_r = self._sampling_tables()[5]
+        p_r = amp * e_r / (1.0 + amp * e_r)  # probability of the r·P component
+        seed = int.from_bytes(hashlib.blake2b(np.ascontiguousarray(u).tobytes() +
+                                              np.ascontiguousarray(w).tobytes(),
+                                              digest_size=8).digest(), "little")
+        rng = np.random.default_rng(seed)
+        n = u.shape[0]
+        out = np.zeros((n, 2))
+        todo = np.arange(n)
+        uu = u
+        for _ in range(self._MAX_ROUNDS):
+            comp = rng.random(todo.size) < p_r[todo]
+            r0, phi0 = self._sample_polar(uu, r_weighted=False)
+            r1, phi1 = self._sample_polar(uu, r_weighted=True)
+            r = np.where(comp, r1, r0)
+            phi = np.where(comp, phi1, phi0)
+            hx, hy = -r * np.cos(phi), -r * np.sin(phi)
+            ratio = np.maximum(1.0 + tx[todo] * hx + ty[todo] * hy, 0.0) / (1.0 + amp[todo] * r)
+            acc = rng.random(todo.size) < ratio
+            last = _ == self._MAX_ROUNDS - 1
+            take = acc | last
+            out[todo[take], 0] = hx[take]
+            out[todo[take], 1] = hy[take]
+            todo = todo[~take]
+            if todo.size == 0:
+                break
+            uu = rng.random((todo.size, 2))
+        slopes = out.reshape(shape + (2,)) * np.stack([np.broadcast_to(ax, shape),
+                                                       np.broadcast_to(ay, shape)], -1)
+        return slope_to_normal(slopes)
 
 
 class FittedFresnel(TabulatedFresnel):
