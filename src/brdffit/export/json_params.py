@@ -218,8 +218,10 @@ def from_json_dict(doc: dict, path=None):
     """Rebuild the model described by a document of :func:`to_json_dict`."""
     from ..io.fitfile import model_registry
 
-    import brdffit.fit  # noqa: F401  (registers the fitted model kinds)
-    import brdffit.microfacet.npf_model  # noqa: F401
+    from .. import microfacet as _mf  # noqa: F401  (registers the analytic model kinds)
+    from ..fit import import_all
+
+    import_all()                            # registers the fitted model kinds
 
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise BRDFFormatError(path, f"expected a JSON object with format {FORMAT!r}, found "
