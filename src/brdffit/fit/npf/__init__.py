@@ -408,6 +408,10 @@ def _register_cli() -> None:
     for cli_name, var in (("npf", "independent-g"), ("npf-g-from-d", "g-from-d"),
                           ("npf-naive", "naive"), ("npf-bivariate", "bivariate")):
         def fn(brdf, _v=var, **kw):
+            if "iterations" in kw:                        # the CLI's --iterations
+                kw["max_iter"] = int(kw.pop("iterations"))
+            if isinstance(kw.get("starts"), str):         # -O starts=slices,ones
+                kw["starts"] = tuple(x for x in kw["starts"].split(",") if x)
             return fit_npf(brdf, variant=_v, **kw)
         fn.__name__ = f"fit_{cli_name.replace('-', '_')}"
         fn.__doc__ = f"fit_npf(variant={var!r}) (Bagher, Snyder & Nowrouzezahrai 2016)"

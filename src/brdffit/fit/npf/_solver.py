@@ -160,7 +160,7 @@ class Monitor:
             if self.small >= self.patience:
                 self.reason = f"relative decrease < {self.tol:g} for {self.patience} iterations"
                 return True
-        if len(self.history) >= self.max_iter:
+        if len(self.history) > self.max_iter:         # history[0] is the start
             self.reason = "max_iter"
             return True
         return False
