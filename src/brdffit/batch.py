@@ -86,9 +86,9 @@ def enumerate_materials(source, only: Sequence[str] | None = None,
         names = [n for n in src.split(":", 1)[1].split(",") if n] or list(list_synthetic())
         pairs = [(n, f"synthetic:{n}") for n in names]
     else:
-        from .io import _find  # the same data search path as load()
+        from .io import find_data_file  # the same data search path as load()
 
-        path = _find(Path(src))
+        path = find_data_file(Path(src))
         if path is None:
             raise BRDFError(f"{src}: no such file or folder")
         if path.is_dir():
