@@ -65,3 +65,24 @@ def test_gold_is_metal_and_non_ggx_raises():
     for name in ("plastic-beckmann", "two-lobe-ggx"):
         with pytest.raises(ExportError, match="glTF"):
             gltf_parameters(brdffit.synthetic(name))
+
+
+def test_anisotropy_extension_is_exact_for_correlated_ggx(tmp_path):
+    base = np.array([0.9, 0.8, 0.7])
+    model = MicrofacetBRDF(GGX(0.06, 0.3, 0.45), SchlickFresnel(base), correlated=True)
+    p = gltf_parameters(model)
+    assert 0 < p["anisotropy"]["anisotropyStrength"] < 1
+    wi, wo = _pairs(3000, 5)
+    ref = model.eval(wi, wo)
+    got = GLTFBRDF(base, 1.0, p["roughnessFactor"],
+                   anisotropy_strength=p["anisotropy"]["anisotropyStrength"],
+                   anisotropy_rotation=p["anisotropy"]["anisotropyRotation"]).eval(wi, wo)
+    ok = ref > 1e-6 * ref.max()
+    assert (np.abs(got - ref)[ok] / ref[ok]).max() < 1e-9
+    # without the extension the anisotropy is lost (and the loss is measured)
+    lossy = gltf_fidelity(model, 4096, ("cos_rel_error",), anisotropy=False)["cos_rel_error"]
+    assert lossy > 0.1
+    export(model, "gltf", tmp_path / "a.gltf")
+    doc = json.loads((tmp_path / "a.gltf").read_text())
+    assert doc["extensionsUsed"] == ["KHR_materials_anisotropy"]
+    assert "KHR_materials_anisotropy" in doc["materials"][0]["extensions"]

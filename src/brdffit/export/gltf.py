@@ -15,8 +15,11 @@ Mapping of a fit (:func:`gltf_material`) — a single GGX lobe
 (``MicrofacetBRDF(GGX, ...)``; tabulated fits are first converted with
 :func:`brdffit.fit.tabulated.to_ggx`, Dupuy 2015 App. C):
 
-* roughness: ``α = √(αx αy)`` (geometric mean; glTF core is isotropic, the anisotropy and ρ
-  are dropped and reported), ``roughnessFactor = √α``;
+* roughness: ``roughnessFactor = √α``. Anisotropic / correlated GGX: with the
+  ``KHR_materials_anisotropy`` extension (default) the slope matrix is diagonalised, the
+  smoother principal α is the material's, the rougher one ``αt = mix(α, 1, s²)`` gives the
+  strength s and its axis the rotation (exact D, correlation included; needs αt ≤ 1);
+  without it ``α = √(αx αy)`` (geometric mean, anisotropy dropped and reported);
 * **metallic rule**: with ``F0 = ks · F(θd = 0)`` clipped to [0, 1], the material is a metal
   (``metallic = 1``, ``baseColorFactor = F0``, the fit's diffuse term dropped) when the
   luminance of F0 is ≥ 0.2 — dielectrics have F0 ≈ 0.02-0.08, so a fitted F0 ≥ 0.2 means a
@@ -50,40 +53,73 @@ class GLTFBRDF(IsotropicBRDF):
     """The glTF 2.0 metallic-roughness BRDF (specification Appendix B, see module doc).
 
     Parameters: ``base_color`` (linear RGB), ``metallic`` and ``roughness`` (perceptual,
-    α = roughness²) in [0, 1].
+    α = roughness²) in [0, 1]; optional ``anisotropy_strength`` s and
+    ``anisotropy_rotation`` φ (radians, counter-clockwise from the tangent) of the
+    ``KHR_materials_anisotropy`` extension: ``αt = mix(α, 1, s²)`` along ``t = (cos φ,
+    sin φ, 0)``, ``αb = α`` along ``b = n × t``, the extension's anisotropic GGX D and its
+    (non-normative, height-correlated) ``V = 0.5 / (N·L |(αt T·V, αb B·V, N·V)| + N·V |(αt T·L,
+    αb B·L, N·L)|)`` (without the sample code's clamp of V to [0, 1], which cuts grazing
+    values). With s = 0 the core Appendix B (separable V) is used.
     """
 
-    def __init__(self, base_color, metallic: float, roughness: float, name: str = "gltf"):
+    def __init__(self, base_color, metallic: float, roughness: float, name: str = "gltf",
+                 anisotropy_strength: float = 0.0, anisotropy_rotation: float = 0.0):
         self.base_color = np.broadcast_to(np.asarray(base_color, float), (3,)).copy()
         self.metallic = float(metallic)
         self.roughness = float(roughness)
-        for nm, v in (("metallic", self.metallic), ("roughness", self.roughness)):
+        self.anisotropy_strength = float(anisotropy_strength)
+        self.anisotropy_rotation = float(anisotropy_rotation)
+        for nm, v in (("metallic", self.metallic), ("roughness", self.roughness),
+                      ("anisotropy_strength", self.anisotropy_strength)):
             if not 0.0 <= v <= 1.0:
                 raise ValueError(f"GLTFBRDF: {nm} must be in [0, 1], got {v}")
+        self.isotropic = self.anisotropy_strength == 0.0
         self.name = name
         self.source = None
+
+    def _specular_dv(self, wi, wo, h):
+        """``D · V`` of the core spec (isotropic) or of KHR_materials_anisotropy."""
+        nl, nv, nh = wi[..., 2], wo[..., 2], h[..., 2]
+        a = self.roughness**2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if self.anisotropy_strength == 0.0:
+                a2 = a * a
+                D = a2 * (nh > 0) / (np.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
+                V = ((np.sum(wi * h, -1) > 0) * (np.sum(wo * h, -1) > 0)
+                     / ((np.abs(nl) + np.sqrt(a2 + (1.0 - a2) * nl * nl))
+                        * (np.abs(nv) + np.sqrt(a2 + (1.0 - a2) * nv * nv))))
+                return np.nan_to_num(D * V)
+            s2 = self.anisotropy_strength**2
+            at, ab = a * (1.0 - s2) + s2, a
+            c, s = np.cos(self.anisotropy_rotation), np.sin(self.anisotropy_rotation)
+
+            def tb(w):
+                return c * w[..., 0] + s * w[..., 1], -s * w[..., 0] + c * w[..., 1]
+
+            th, bh = tb(h)
+            tv, bv = tb(wo)
+            tl, bl = tb(wi)
+            a2 = at * ab
+            f2 = (ab * th) ** 2 + (at * bh) ** 2 + (a2 * nh) ** 2
+            w2 = a2 / f2
+            D = a2 * w2 * w2 / np.pi
+            ggxv = nl * np.sqrt((at * tv) ** 2 + (ab * bv) ** 2 + nv * nv)
+            ggxl = nv * np.sqrt((at * tl) ** 2 + (ab * bl) ** 2 + nl * nl)
+            V = 0.5 / (ggxv + ggxl)          # (the sample code's clamp to [0, 1] omitted)
+            return np.nan_to_num(D * V)
 
     def eval(self, wi, wo) -> np.ndarray:
         """``f_r`` of Appendix B: ``(1 − F) c_diff/π + F D V`` (L = wi, V = wo)."""
         wi, wo = _as_dirs(wi, wo)
-        nl, nv = wi[..., 2], wo[..., 2]
-        ok = (nl > 0) & (nv > 0)
+        ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
         h = wi + wo
         h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
-        nh = h[..., 2]
         vh = np.abs(np.sum(wo * h, -1))
-        lh = np.sum(wi * h, -1)
-        a = self.roughness**2
-        a2 = a * a
-        with np.errstate(divide="ignore", invalid="ignore"):
-            D = a2 * (nh > 0) / (np.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
-            V = ((lh > 0) * (np.sum(wo * h, -1) > 0)
-                 / ((np.abs(nl) + np.sqrt(a2 + (1.0 - a2) * nl * nl))
-                    * (np.abs(nv) + np.sqrt(a2 + (1.0 - a2) * nv * nv))))
+        dv = self._specular_dv(wi, wo, h)
         f0 = 0.04 * (1.0 - self.metallic) + self.base_color * self.metallic
         c_diff = self.base_color * (1.0 - self.metallic)
         F = f0 + (1.0 - f0) * ((1.0 - vh) ** 5)[..., None]
-        f = (1.0 - F) * c_diff / np.pi + F * np.nan_to_num(D * V)[..., None]
+        f = (1.0 - F) * c_diff / np.pi + F * dv[..., None]
         return np.where(ok[..., None], f, 0.0)
 
     def as_microfacet(self):
@@ -91,7 +127,7 @@ class GLTFBRDF(IsotropicBRDF):
         Schlick F0 = baseColor, uncorrelated Smith G), usable by the closed-form renderers."""
         from ..microfacet import GGX, MicrofacetBRDF, SchlickFresnel
 
-        if self.metallic != 1.0:
+        if self.metallic != 1.0 or self.anisotropy_strength != 0.0:
             return None
         return MicrofacetBRDF(GGX(max(self.roughness**2, 1e-6)),
                               SchlickFresnel(np.clip(self.base_color, 0, 1)), correlated=False,
@@ -100,7 +136,8 @@ class GLTFBRDF(IsotropicBRDF):
     def describe(self) -> dict:
         d = super().describe()
         d.update(base_color=self.base_color.tolist(), metallic=self.metallic,
-                 roughness=self.roughness)
+                 roughness=self.roughness, anisotropy_strength=self.anisotropy_strength,
+                 anisotropy_rotation=self.anisotropy_rotation)
         return d
 
 
@@ -123,15 +160,41 @@ def _ggx_model(model):
     return model, notes
 
 
-def gltf_parameters(model) -> dict:
+def _anisotropy(d):
+    """``(αb, strength, rotation)`` of KHR_materials_anisotropy for GGX(αx, αy, ρ): principal
+    axes (Dupuy 2015 App. C), the rougher one is the extension's direction t with
+    ``αt = mix(αb, 1, s²)``; ``None`` when αt > 1 (not representable)."""
+    from ._common import principal_axes
+
+    au, av, phi = principal_axes(d.alpha_x, d.alpha_y, d.rho)
+    if au >= av:
+        at, ab, rot = au, av, phi
+    else:
+        at, ab, rot = av, au, phi + 0.5 * np.pi
+    rot = float(np.angle(np.exp(1j * rot)))
+    if at > 1.0 or ab >= 1.0:
+        return None
+    return ab, float(np.sqrt((at - ab) / (1.0 - ab))), rot
+
+
+def gltf_parameters(model, anisotropy: bool = True) -> dict:
     """``{"baseColorFactor", "metallicFactor", "roughnessFactor", "alpha", "notes", ...}`` of
-    a GGX fit by the rules of the module docstring."""
+    a GGX fit by the rules of the module docstring; with ``anisotropy`` an anisotropic or
+    correlated GGX uses ``KHR_materials_anisotropy`` (``"anisotropy"`` entry: strength and
+    rotation; exact D, rotation included), else α = √(αx αy)."""
     m, notes = _ggx_model(model)
     d = m.distribution
     alpha = float(np.sqrt(d.alpha_x * d.alpha_y))
+    aniso = None
     if d.alpha_x != d.alpha_y or d.rho != 0:
-        notes.append(f"anisotropy dropped: alpha_x={d.alpha_x:.4g}, alpha_y={d.alpha_y:.4g}, "
-                     f"rho={d.rho:.4g} -> isotropic alpha={alpha:.4g} (geometric mean)")
+        aniso = _anisotropy(d) if anisotropy else None
+        if aniso is None:
+            notes.append(f"anisotropy dropped: alpha_x={d.alpha_x:.4g}, alpha_y={d.alpha_y:.4g}, "
+                         f"rho={d.rho:.4g} -> isotropic alpha={alpha:.4g} (geometric mean)")
+        else:
+            alpha = aniso[0]
+            notes.append(f"anisotropy via KHR_materials_anisotropy: strength={aniso[1]:.4g}, "
+                         f"rotation={aniso[2]:.4g} rad (principal axes of the slope matrix)")
     ks = np.ones(3) if m.specular is None else np.asarray(m.specular, float)
     F0 = ks * (np.ones(3) if m.fresnel is None else np.asarray(m.fresnel.eval(1.0), float))
     F0c = np.clip(F0, 0.0, 1.0)
@@ -146,53 +209,68 @@ def gltf_parameters(model) -> dict:
         base = np.clip(rd, 0.0, 1.0)
         notes.append(f"dielectric: specular F0 fixed by glTF to 0.04 (fit: "
                      f"{np.round(F0, 4).tolist()}), diffuse weighted by (1 - F)")
-    if m.correlated:
+    if m.correlated and aniso is None:
         notes.append("height-correlated Smith G of the fit replaced by glTF's separable Smith")
+    if not m.correlated and aniso is not None:
+        notes.append("uncorrelated Smith G of the fit replaced by the extension's "
+                     "height-correlated V")
     notes.append("Fresnel curve replaced by Schlick with F0 = baseColor (metal) / 0.04")
     return {"baseColorFactor": [float(x) for x in base] + [1.0],
             "metallicFactor": 1.0 if metal else 0.0,
             "roughnessFactor": float(np.sqrt(min(alpha, 1.0))), "alpha": alpha,
+            "anisotropy": None if aniso is None else {"anisotropyStrength": aniso[1],
+                                                      "anisotropyRotation": aniso[2]},
             "F0": F0.tolist(), "rho_d": rd.tolist(), "notes": notes}
 
 
-def gltf_equivalent(model) -> GLTFBRDF:
+def gltf_equivalent(model, anisotropy: bool = True) -> GLTFBRDF:
     """The :class:`GLTFBRDF` a glTF viewer renders for the exported material."""
-    p = gltf_parameters(model)
+    p = gltf_parameters(model, anisotropy)
+    a = p["anisotropy"] or {"anisotropyStrength": 0.0, "anisotropyRotation": 0.0}
     return GLTFBRDF(p["baseColorFactor"][:3], p["metallicFactor"], p["roughnessFactor"],
-                    name=f"{getattr(model, 'name', 'model')}-gltf")
+                    name=f"{getattr(model, 'name', 'model')}-gltf",
+                    anisotropy_strength=a["anisotropyStrength"],
+                    anisotropy_rotation=a["anisotropyRotation"])
 
 
 def gltf_fidelity(model, n_samples: int = 1 << 15,
-                  metrics=("cos_rel_error", "normalized_l2")) -> dict:
+                  metrics=("cos_rel_error", "normalized_l2"), anisotropy: bool = True) -> dict:
     """BRDF-space loss of fidelity of the glTF material vs the fit
     (:func:`brdffit.evaluation.metrics.brdf_metrics`, the fit as reference)."""
     from ..evaluation.metrics import brdf_metrics
 
-    r = brdf_metrics(model, gltf_equivalent(model), n_samples, metrics=metrics)
+    r = brdf_metrics(model, gltf_equivalent(model, anisotropy), n_samples, metrics=metrics)
     return {k: r.get(k) for k in metrics}
 
 
-def gltf_material(model, name: str | None = None, fidelity: bool = True) -> dict:
+def gltf_material(model, name: str | None = None, fidelity: bool = True,
+                  anisotropy: bool = True) -> dict:
     """The glTF 2.0 ``material`` object (``pbrMetallicRoughness`` + ``extras.brdffit`` with
-    α, conventions, approximations and the measured BRDF-space fidelity)."""
-    p = gltf_parameters(model)
+    α, conventions, approximations and the measured BRDF-space fidelity; the
+    ``KHR_materials_anisotropy`` extension for anisotropic fits when ``anisotropy``)."""
+    p = gltf_parameters(model, anisotropy)
     extras = {"alpha": p["alpha"], "F0_fit": p["F0"], "rho_d_fit": p["rho_d"],
               "notes": p["notes"],
               "conventions": "roughnessFactor = sqrt(alpha), alpha = GGX slope scale; "
                              "linear RGB of the source data; glTF Appendix B BRDF"}
     if fidelity:
-        extras["fidelity"] = gltf_fidelity(model)
-    return {"name": name or getattr(model, "name", "material"),
-            "pbrMetallicRoughness": {"baseColorFactor": p["baseColorFactor"],
-                                     "metallicFactor": p["metallicFactor"],
-                                     "roughnessFactor": p["roughnessFactor"]},
-            "extras": {"brdffit": extras}}
+        extras["fidelity"] = gltf_fidelity(model, anisotropy=anisotropy)
+    mat = {"name": name or getattr(model, "name", "material"),
+           "pbrMetallicRoughness": {"baseColorFactor": p["baseColorFactor"],
+                                    "metallicFactor": p["metallicFactor"],
+                                    "roughnessFactor": p["roughnessFactor"]},
+           "extras": {"brdffit": extras}}
+    if p["anisotropy"]:
+        mat["extensions"] = {"KHR_materials_anisotropy": p["anisotropy"]}
+    return mat
 
 
-def write_gltf(model, path, fidelity: bool = True, **_ignored) -> dict:
+def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True, **_ignored) -> dict:
     """Write a minimal valid glTF 2.0 JSON (``asset`` + one ``material``), atomically."""
-    mat = gltf_material(model, fidelity=fidelity)
+    mat = gltf_material(model, fidelity=fidelity, anisotropy=anisotropy)
     doc = {"asset": {"version": "2.0", "generator": "brdffit export"}, "materials": [mat]}
+    if "extensions" in mat:
+        doc["extensionsUsed"] = list(mat["extensions"])
     with atomic_write(Path(path), "w") as fh:
         json.dump(doc, fh, indent=1, allow_nan=False)
     return {"files": [str(path)], "target": "gltf", "material": mat["pbrMetallicRoughness"],
