@@ -14,7 +14,11 @@ Deviations from the paper (deliberate, documented):
 
 * G is linearly interpolated in θ, so a sample touches two G components; the G(θi) and G(θo)
   updates solve the corresponding (tridiagonal) weighted least-squares normal equations
-  exactly instead of Eq. 14's one-component-per-sample form.
+  exactly instead of Eq. 14's one-component-per-sample form, and the two systems are summed
+  rather than their solutions averaged (identical for reciprocal data; see ``_solver``).
+* Samples at φd and π − φd are folded into one (same θh, θd, swapped θi/θo, so the same
+  model value): every least-squares update is unchanged, Eq. 7 changes by a constant that
+  is added back, and each pass costs half.
 * Independent-G does one G step per outer iteration (D, F, G, ρ), with the golden-section
   search whenever that step increases the objective (the paper iterates G "until it converges
   or increases the objective").
@@ -167,7 +171,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
             max_iter: int | None = None, tol: float = 1e-6,
             starts: Iterable[str] | None = None, n_random: int = 4, seed: int = 0,
             g_smoothing: float = 1.0, dr_epsilon: float | None = None,
-            start_max_iter: int | None = 100, polish: int = 0, extrapolate: bool = True,
+            start_max_iter: int | None = 100, polish: int = 0, extrapolate: bool = False,
             init: str = "slices",
             name: str | None = None, callback=None, verbose: bool = False):
     """Fit a non-parametric factor model (Bagher, Snyder & Nowrouzezahrai 2016).
@@ -201,7 +205,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         that crosses the flat valleys where AWLS crawls (see ``_solver.polish_lm``).
     extrapolate:
         Independent-G: over-relaxation after each AWLS sweep, accepted only if it lowers the
-        objective (extension; ``False`` = plain AWLS).
+        objective (extension, default off = plain AWLS).
     g_smoothing:
         σ (in G samples) of the Gaussian smoothing of G in independent-G (0 disables).
     dr_epsilon:

@@ -51,25 +51,52 @@ class Samples:
     sum_wz: np.ndarray = field(default=None)
     sum_wzz: np.ndarray = field(default=None)
 
+    e_offset: np.ndarray = field(default=None)
+
     @classmethod
-    def from_objective(cls, data: ObjectiveData) -> "Samples":
-        ih, idd, ip = np.unravel_index(data.index, (NH, ND, NP))
+    def from_objective(cls, data: ObjectiveData, fold: bool = True) -> "Samples":
+        """Per-sample arrays; with ``fold`` the samples at φd and π − φd (which have the same
+        θh, θd and swapped θi, θo, hence the same value of the reciprocal model Eq. 3) are
+        merged into one with weight ``w1 + w2`` and measurement ``(w1 z1 + w2 z2)/(w1 + w2)``.
+        Eq. 7 then changes only by a constant (kept in ``e_offset``), and every weighted
+        least-squares update is unchanged, for half the work."""
+        w = np.ascontiguousarray(data.w, dtype=np.float64)
+        z = np.ascontiguousarray(data.z, dtype=np.float64)
+        index, cos_i, cos_o = data.index, data.cos_i, data.cos_o
+        sum_wzz = (w * z * z).sum(axis=1)
+        if fold:
+            ih, idd, ip = np.unravel_index(index, (NH, ND, NP))
+            ipc = np.where(ip > NP // 2, NP - ip, ip)            # φd → min(φd, π − φd)
+            key = (ih * ND + idd) * NP + ipc
+            uniq, inv = np.unique(key, return_inverse=True)
+            W = np.stack([np.bincount(inv, weights=w[c], minlength=uniq.size) for c in range(3)])
+            WZ = np.stack([np.bincount(inv, weights=w[c] * z[c], minlength=uniq.size)
+                           for c in range(3)])
+            z = np.where(W > 0, WZ / np.where(W > 0, W, 1.0), 0.0)
+            w = W
+            # geometry of the representative: cos θi/θo are swapped within a pair, so take
+            # each unique key's first member and keep its own cosines
+            first = np.full(uniq.size, -1, dtype=np.int64)
+            first[inv[::-1]] = np.arange(inv.size)[::-1]
+            index, cos_i, cos_o = index[first], cos_i[first], cos_o[first]
+        ih, idd, ip = np.unravel_index(index, (NH, ND, NP))
         hd = (ih * ND + idd).astype(np.int64)
 
-        def cell(cos):
+        def cell(cos):  # noqa: E306
             deg = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
             i0 = np.minimum(np.floor(deg), NG - 2).astype(np.int64)
             return i0, np.clip(deg - i0, 0.0, 1.0)
 
-        gi0, gti = cell(data.cos_i)
-        go0, gto = cell(data.cos_o)
-        w = np.ascontiguousarray(data.w, dtype=np.float64)
-        z = np.ascontiguousarray(data.z, dtype=np.float64)
+        gi0, gti = cell(cos_i)
+        go0, gto = cell(cos_o)
+        w = np.ascontiguousarray(w, dtype=np.float64)
+        z = np.ascontiguousarray(z, dtype=np.float64)
         s = cls(hd=hd, ip=ip.astype(np.int64), gi0=gi0, gti=gti, go0=go0, gto=gto,
-                inv_cc=1.0 / (data.cos_i * data.cos_o), w=w, z=z)
+                inv_cc=1.0 / (cos_i * cos_o), w=w, z=z)
         s.sum_w = w.sum(axis=1)
         s.sum_wz = (w * z).sum(axis=1)
-        s.sum_wzz = (w * z * z).sum(axis=1)
+        s.sum_wzz = sum_wzz
+        s.e_offset = np.maximum(sum_wzz - (w * z * z).sum(axis=1), 0.0)
         return s
 
     def stats(self, G, X, rho_d):
@@ -81,7 +108,7 @@ class Samples:
                              self.w, self.z, np.ascontiguousarray(G, dtype=np.float64),
                              np.ascontiguousarray(X, dtype=np.float64),
                              np.ascontiguousarray(rho_d, dtype=np.float64), S1, S2, Spz)
-        return E, (S1, S2, Spz)
+        return E + self.e_offset, (S1, S2, Spz)
 
     def g_system(self, G, X, rho_d):
         arrs = [np.empty((3, NG)), np.empty((3, NG)), np.empty((3, NG)),
@@ -315,7 +342,7 @@ def _state_arrays(st: MFState):
 
 
 def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol=1e-6,
-                      max_iter=1000, gss_max_eval=12, extrapolate=True,
+                      max_iter=1000, gss_max_eval=6, extrapolate=False,
                       callback=None) -> RunResult:
     """Independent-G AWLS (§4.2-4.3): D, F (Eq. 14), G(θi) and G(θo) updates averaged and
     Gaussian-smoothed (σ = ``smoothing`` samples; golden-section search along the step when
@@ -344,7 +371,11 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
         e_before = expanded_objective(st, smp, S)
         X = st.rho_s[:, None] * outer_df(st.D, st.F)
         Ai_d, Ai_o, bi, Ao_d, Ao_o, bo = smp.g_system(st.G, X, st.rho_d)
-        g_new = 0.5 * (_solve_tridiag(Ai_d, Ai_o, bi, st.G) + _solve_tridiag(Ao_d, Ao_o, bo, st.G))
+        # G(θi) (G(θo) fixed) and G(θo) (G(θi) fixed) updates: the paper averages the two
+        # solutions; we solve their summed normal equations. With reciprocal data the two
+        # systems coincide (so both are the same update), and the sum is what stays exact
+        # after folding φd ↔ π − φd (which swaps θi and θo within a pair).
+        g_new = _solve_tridiag(Ai_d + Ao_d, Ai_o + Ao_o, bi + bo, st.G)
         if smoothing and smoothing > 0:
             g_new = gaussian_filter1d(g_new, smoothing, axis=1, mode="nearest")
         g_new = np.maximum(g_new, eps)
