@@ -86,3 +86,15 @@ def test_anisotropy_extension_is_exact_for_correlated_ggx(tmp_path):
     doc = json.loads((tmp_path / "a.gltf").read_text())
     assert doc["extensionsUsed"] == ["KHR_materials_anisotropy"]
     assert "KHR_materials_anisotropy" in doc["materials"][0]["extensions"]
+
+
+def test_optimize_does_not_increase_error():
+    from brdffit.export.gltf import optimize_parameters
+
+    model = MicrofacetBRDF(GGX(0.2), SchlickFresnel([0.3, 0.2, 0.1]), diffuse=[0.2, 0.1, 0.05])
+    p = gltf_parameters(model)
+    q = optimize_parameters(model, p, n=2048)
+    before = gltf_fidelity(model, 4096, ("cos_rel_error",))["cos_rel_error"]
+    after = gltf_fidelity(model, 4096, ("cos_rel_error",), optimize=True)["cos_rel_error"]
+    assert after <= before + 1e-12
+    assert "optimis" in q["notes"][-1]
