@@ -218,3 +218,18 @@ def test_sampling_chi2_detects_wrong_pdf():
     w = Wrong(m.D, m.F, m.G, m.rho_d, m.rho_s)
     ok, _ = check_sampling(w, [[0.6, 0.0, 0.8]], **CHI2)
     assert not ok
+
+
+def test_compressive_objective_of_two_brdfs():
+    from brdffit.evaluation.objective import compressive_objective, cosine_weighted_relative_error
+
+    mf, _, _ = make_models()
+    same = compressive_objective(mf, mf)
+    assert same["objective"] == 0.0
+    brighter = NPFMicrofacetBRDF(mf.D, mf.F, mf.G, mf.rho_d * 1.1, mf.rho_s * 1.1)
+    o = compressive_objective(brighter, mf)
+    o_nc = compressive_objective(brighter, mf, ObjectiveOptions(compressive=False))
+    assert o["objective"] > 0 and o["normalised"] == pytest.approx(0.01, rel=1e-9)
+    assert o_nc["normalised"] == pytest.approx(0.01, rel=1e-9)
+    rel = cosine_weighted_relative_error(brighter, mf)
+    assert rel["relative_error"] == pytest.approx(0.1, rel=0.02)
