@@ -157,12 +157,20 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=str(ROOT / "bench" / "results" / "npf.json"))
     ap.add_argument("--csv", default=str(ROOT / "bench" / "results" / "npf_materials.csv"))
     ap.add_argument("--fresh", action="store_true")
+    ap.add_argument("--rgl", action="store_true",
+                    help="fit the RGL materials (../shared/data/rgl/*_rgb.bsdf) instead")
     args = ap.parse_args(argv)
 
     from brdffit.io import load
     from brdffit.io.nbrdf import list_materials
 
-    names = (args.materials.split(",") if args.materials else list_materials(args.zip))
+    if args.rgl:
+        rgl = sorted((ROOT.parent / "shared" / "data" / "rgl").glob("*_rgb.bsdf"))
+        names = [p.stem for p in rgl]
+        spec_of = {p.stem: str(p) for p in rgl}
+    else:
+        names = (args.materials.split(",") if args.materials else list_materials(args.zip))
+        spec_of = {}
     if args.limit:
         names = names[:args.limit]
     variants = args.variants.split(",")
@@ -178,7 +186,7 @@ def main(argv=None) -> int:
         if not todo:
             continue
         t0 = time.perf_counter()
-        brdf = load(f"{args.zip}:{name}")
+        brdf = load(spec_of.get(name, f"{args.zip}:{name}"))
         values, valid = tabulate_merl_grid(brdf)
         t_tab = time.perf_counter() - t0
         for v in todo:
