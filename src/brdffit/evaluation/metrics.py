@@ -16,10 +16,14 @@ Image space
 BRDF space (functions of two BRDFs, independent of rendering)
 -------------------------------------------------------------
 * :func:`cosine_weighted_relative_error` – defined and implemented here.
-* ``normalized_l2`` (Bagher, Soler, Holzschuch 2012 §6.3) and the compressive-weighted
-  objective of Bagher et al. 2016 (Eq. 7-12) are re-exported from
-  :mod:`brdffit.evaluation.l2` and :mod:`brdffit.evaluation.objective` when those modules
-  exist (attribute access raises ``AttributeError`` naming the missing module otherwise).
+* ``normalized_l2(ref, fit)`` (Bagher, Soler, Holzschuch 2012 §6.3) and
+  ``compressive_objective(fit, reference) -> dict`` (Bagher et al. 2016 Eq. 7-12; note its
+  argument order and dict result) are re-exported as is from :mod:`brdffit.evaluation.l2`
+  and :mod:`brdffit.evaluation.objective` (attribute access raises ``AttributeError`` naming
+  the missing module otherwise). :class:`BRDFMetrics` wraps all three with the reference
+  prepared once and scalar results.
+* Not to be confused with ``objective.cosine_weighted_relative_error`` (a weighted *mean of
+  per-sample relative errors* on the MERL grid): the one here is a *ratio of integrals*.
 
 Database summaries
 ------------------
