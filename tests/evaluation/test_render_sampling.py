@@ -36,6 +36,15 @@ def _npf():
     return NPFMicrofacetBRDF(D, F, G, [0.05, 0.04, 0.03], [0.3, 0.3, 0.3])
 
 
+def _sgd_per_channel():
+    """Bagher 2012 per-channel SGD lobes (what fit_sgd returns)."""
+    from brdffit.fit.sgd import PerChannelMicrofacetBRDF
+    from brdffit.microfacet.sgd import SGD
+
+    return PerChannelMicrofacetBRDF([dict(distribution=SGD(0.15 * c, 1.2), rho_d=0.05 * c,
+                                          rho_s=0.3, F0=0.05, F1=0.02) for c in (1, 2, 3)])
+
+
 def _np(c):
     return np.stack([np.asarray(c[k], dtype=np.float64) for k in range(3)], -1)
 
@@ -72,12 +81,13 @@ def _check_sampling(ev, brdf, theta_deg, n=1 << 17, alpha_scale=1.0, ref_albedo=
     return est
 
 
-@pytest.mark.parametrize("name", ["ggx+diffuse", "beckmann-aniso", "ggx-rho", "beckmann-rho", "sum", "npf"])
+@pytest.mark.parametrize("name", ["ggx+diffuse", "beckmann-aniso", "ggx-rho", "beckmann-rho", "sum", "npf",
+                                  "sgd-per-channel"])
 @pytest.mark.parametrize("theta", [25.0, 70.0])
 def test_closed_form_sampling_consistent(name, theta):
     from brdffit.evaluation.render.translate import to_evaluator
 
-    brdf = _npf() if name == "npf" else _models()[name]
+    brdf = {"npf": _npf, "sgd-per-channel": _sgd_per_channel}.get(name, lambda: _models()[name])()
     ev = to_evaluator(brdf, mode="closed")
     assert ev.path == "closed-form"
     _check_sampling(ev, brdf, theta)

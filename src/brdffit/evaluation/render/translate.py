@@ -8,7 +8,8 @@ Resolution order of :func:`to_evaluator` (``mode="auto"``):
    MRO so that registering does not import the model's module) with
    :func:`register_translator`; built in: ``MicrofacetBRDF`` (closed-form GGX/Beckmann,
    tabulated radial table for any other isotropic distribution; Schlick in closed form, any
-   other Fresnel tabulated over cos θd), ``SumBRDF``, ``PerChannelBRDF`` and the NPF models
+   other Fresnel tabulated over cos θd), ``SumBRDF``, ``PerChannelBRDF``,
+   ``PerChannelMicrofacetBRDF`` (SGD/2-slice fits) and the NPF models
    (their D/F/G/H/B tables gathered in Dr.Jit);
 3. the generic table: isotropic → MERL grid + trilinear in log space
    (:class:`.drjit_eval.MERLTableEval`; 360 φd samples over [0, 2π) instead of MERL's 180
@@ -130,14 +131,17 @@ register_translator("SumBRDF", _sum_translator)
 
 
 def _per_channel_translator(brdf):
-    """``PerChannelBRDF`` (three single-channel fits, ``brdffit.fit.tabulated``)."""
-    models = getattr(brdf, "models", None)
+    """``PerChannelBRDF`` (three single-channel fits, ``brdffit.fit.tabulated``: ``models``)
+    and ``PerChannelMicrofacetBRDF`` (Bagher 2012 per-channel lobes, ``brdffit.fit.sgd``:
+    ``lobes``): channel c from the Dr.Jit evaluator of component c."""
+    models = getattr(brdf, "models", None) or getattr(brdf, "lobes", None)
     if not models or len(models) != 3:
         return None
     return _dj().PerChannelEval([to_evaluator(m, verify_tol=np.inf) for m in models])
 
 
 register_translator("PerChannelBRDF", _per_channel_translator)
+register_translator("PerChannelMicrofacetBRDF", _per_channel_translator)
 
 
 def _npf_translator(brdf):
