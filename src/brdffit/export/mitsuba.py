@@ -25,6 +25,10 @@ summary):
 * **Shadowing.** Mitsuba uses the uncorrelated Smith ``G1(i) G1(o)``; our fits default to
   the height-correlated G of Dupuy 2015 Eq. 2 (PerChannel SGD/CT fits are uncorrelated,
   exact).
+* ``roughdielectric`` is not used: fits are reflection-only BRDFs (no transmission).
+  ``roughplastic`` is offered as an alternative (``style="plastic"``, :func:`plastic_bsdf`)
+  for dielectric-looking fits; it is approximate (scalar η, energy-coupled diffuse) and its
+  error is measured inside Mitsuba (:func:`mitsuba_eval_error`).
 * **Correlation ρ ≠ 0.** Mitsuba has no correlated anisotropy. The slope scale matrix is
   diagonalised (:func:`~brdffit.export._common.principal_axes`): the distribution is exactly
   the axis-aligned one with the principal roughnesses in the tangent frame rotated by φ about
@@ -54,7 +58,7 @@ from ..errors import ExportError
 from ._common import fail, is_elliptical, label, principal_axes
 
 __all__ = ["fit_conductor_fresnel", "builtin_terms", "builtin_bsdf", "mitsuba_equivalent",
-           "mitsuba_error", "to_xml", "scene_xml", "plugin_bsdf", "mitsuba_bsdf",
+           "mitsuba_error", "mitsuba_eval", "mitsuba_eval_error", "plastic_bsdf", "to_xml", "scene_xml", "plugin_bsdf", "mitsuba_bsdf",
            "example_scene_dict", "write_mitsuba_xml", "write_mitsuba_python", "LLVM_PATH"]
 
 LLVM_PATH = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
@@ -275,6 +279,107 @@ def mitsuba_error(model, n_samples: int = 1 << 14) -> dict:
 
 
 # ------------------------------------------------------------------------------------------
+# evaluation inside Mitsuba (any plugin dict) and the roughplastic mapping
+# ------------------------------------------------------------------------------------------
+def _pairs(n: int, seed: int):
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(2 * n, 3))
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    v[:, 2] = np.abs(v[:, 2]) + 1e-3
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    return v[:n], v[n:]
+
+
+def mitsuba_eval(bsdf: dict, wi, wo) -> np.ndarray:
+    """``f_r(wi, wo)`` (library convention: ``wi`` light, ``wo`` viewer, no cosine) of a
+    Mitsuba plugin dict, evaluated by Mitsuba itself (``BSDF.eval / cos θ(wi)``)."""
+    from ..evaluation.render._mitsuba import load
+
+    mi, dr = load()
+    obj = mi.load_dict(bsdf)
+    wi = np.asarray(wi, float)
+    wo = np.asarray(wo, float)
+    n = wi.shape[0]
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+    si.wi = mi.Vector3f(wo[:, 0], wo[:, 1], wo[:, 2])
+    val = np.array(obj.eval(mi.BSDFContext(), si, mi.Vector3f(wi[:, 0], wi[:, 1], wi[:, 2])))
+    val = val.T if val.shape == (3, n) else val
+    return val / np.maximum(wi[:, 2:3], 1e-12)
+
+
+def mitsuba_eval_error(model, bsdf: dict, n: int = 1 << 13, seed: int = 0) -> dict:
+    """Cosine-weighted relative L1 error ``Σ|Δf| cos θo / Σ f cos θo`` of a Mitsuba plugin
+    dict (evaluated by Mitsuba) against ``model`` on ``n`` random direction pairs."""
+    wi, wo = _pairs(n, seed)
+    ref = np.asarray(model.eval(wi, wo), float) * wo[:, 2:3]
+    got = mitsuba_eval(bsdf, wi, wo) * wo[:, 2:3]
+    return {"cos_rel_error": float(np.abs(got - ref).sum() / max(np.abs(ref).sum(), 1e-300)),
+            "n": int(n)}
+
+
+def plastic_bsdf(model, n: int = 4096) -> tuple[dict, dict]:
+    """``(bsdf, info)``: Mitsuba's ``roughplastic`` for an isotropic GGX/Beckmann
+    ``MicrofacetBRDF`` (with or without ρd). **Approximate and needs Mitsuba:** roughplastic
+    has a scalar dielectric Fresnel (``int_ior``) and an energy-coupled diffuse term
+    (``(1 − T(θi))(1 − T(θo))`` with Mitsuba's rough-dielectric transmittance tables), so
+
+    * ``int_ior`` = η of a :class:`DielectricFresnel` (channel mean), else from the luminance
+      of F0, ``η = (1 + √F0)/(1 − √F0)``; ``specular_reflectance`` = per-channel least-squares
+      scale of the dielectric curve to the fit's Fresnel (cos⁴θd weights);
+    * ``diffuse_reflectance`` = per-channel least squares of Mitsuba's own diffuse response
+      (evaluated with Mitsuba at ``n`` direction pairs; it is linear in the reflectance) to
+      the fit's ρd/π, clipped to [0, 1].
+
+    The error (evaluated in Mitsuba) is in ``info["error"]``.
+    """
+    from ..microfacet.fresnel import DielectricFresnel
+
+    m = model
+    if not (microfacet_ok := (is_elliptical(getattr(m, "distribution", None))
+                              and m.distribution.isotropic)):
+        fail(model, "Mitsuba roughplastic", "an isotropic GGX/Beckmann MicrofacetBRDF "
+             "(roughplastic has a single alpha)")
+    del microfacet_ok
+    dist, fres = m.distribution, m.fresnel
+    ks = np.ones(3) if m.specular is None else np.asarray(m.specular, float)
+    theta = (np.arange(90) + 0.5) * (np.pi / 180)
+    c = np.cos(theta)
+    if isinstance(fres, DielectricFresnel):
+        eta = float(np.mean(fres.eta))
+    else:
+        F0 = float(np.clip(np.asarray(fres.eval(1.0) if fres is not None else np.ones(3)) @
+                           np.array([0.2126, 0.7152, 0.0722]), 1e-4, 0.95))
+        eta = float((1 + np.sqrt(F0)) / (1 - np.sqrt(F0)))
+    eta = max(eta, 1.0 + 1e-3)
+    fd = DielectricFresnel(eta).eval(c)[:, 0]
+    target = np.ones((90, 3)) if fres is None else np.asarray(fres.eval(c), float)
+    w = c**4
+    spec_scale = np.array([float((w * fd) @ target[:, k] / max(float((w * fd) @ fd), 1e-300))
+                           for k in range(3)]) * ks
+    base = {"type": "roughplastic", "distribution": dist.kind, "alpha": float(dist.alpha_x),
+            "int_ior": eta, "ext_ior": 1.0, "nonlinear": False,
+            "specular_reflectance": _rgb_tex(spec_scale)}
+    wi, wo = _pairs(n, 1)
+    zero = mitsuba_eval(dict(base, diffuse_reflectance=_rgb_tex([0.0] * 3)), wi, wo)
+    one = mitsuba_eval(dict(base, diffuse_reflectance=_rgb_tex([1.0] * 3)), wi, wo)
+    g = (one - zero) * wo[:, 2:3]                                    # diffuse response, ρ' = 1
+    rd = np.zeros(3) if m.diffuse is None else np.asarray(m.diffuse, float)
+    want = (np.asarray(m.eval(wi, wo), float) - zero) * wo[:, 2:3]
+    rho = np.clip([(g[:, k] @ want[:, k]) / max(g[:, k] @ g[:, k], 1e-300) for k in range(3)],
+                  0.0, 1.0) if np.any(rd > 0) else np.zeros(3)
+    bsdf = dict(base, diffuse_reflectance=_rgb_tex(rho))
+    notes = [f"roughplastic: scalar int_ior={eta:.4g}, Fresnel scale per channel "
+             f"{np.round(spec_scale, 4).tolist()}, diffuse_reflectance fitted to rho_d/pi "
+             "through Mitsuba's energy-coupled diffuse term"]
+    if m.correlated:
+        notes.append("height-correlated Smith G of the fit rendered with Mitsuba's uncorrelated "
+                     "G1(i) G1(o)")
+    return bsdf, {"notes": notes, "error": mitsuba_eval_error(model, bsdf),
+                  "frame_rotation_deg": [0.0]}
+
+
+# ------------------------------------------------------------------------------------------
 # XML
 # ------------------------------------------------------------------------------------------
 _BSDF_TYPES = {"diffuse", "roughconductor", "blendbsdf", "roughplastic", "roughdielectric",
@@ -401,11 +506,20 @@ def example_scene_dict(bsdf: dict, resolution: int = 64, spp: int = 16) -> dict:
 # ------------------------------------------------------------------------------------------
 # files
 # ------------------------------------------------------------------------------------------
-def write_mitsuba_xml(model, path, resolution: int = 256, spp: int = 64, **_ignored) -> dict:
-    """Write a ready-to-render XML scene with the built-in mapping of ``model``; raises
-    :class:`ExportError` for models without one (use :func:`write_mitsuba_python`)."""
-    bsdf, info = builtin_bsdf(model)
-    err = mitsuba_error(model)
+def write_mitsuba_xml(model, path, resolution: int = 256, spp: int = 64,
+                      style: str = "conductor", **_ignored) -> dict:
+    """Write a ready-to-render XML scene with the built-in mapping of ``model`` (``style``
+    ``"conductor"``: roughconductor/diffuse/blendbsdf, exact up to the documented
+    approximations; ``"plastic"``: :func:`plastic_bsdf`); raises :class:`ExportError` for
+    models without one (use :func:`write_mitsuba_python`)."""
+    if style == "plastic":
+        bsdf, info = plastic_bsdf(model)
+        err = info.pop("error")
+    elif style == "conductor":
+        bsdf, info = builtin_bsdf(model)
+        err = mitsuba_error(model)
+    else:
+        raise ExportError(f"unknown Mitsuba style {style!r}; expected 'conductor' or 'plastic'")
     comment = (f"brdffit export of {label(model)}; alpha = slope-scale roughness (Mitsuba's "
                f"alpha); notes: {'; '.join(info['notes']) or 'exact'}; "
                f"cosine-weighted relative error vs the fit: {err['cos_rel_error']:.4g}")
