@@ -136,3 +136,20 @@ def test_cli_compare(tmp_path, monkeypatch, capsys):
     res = json.loads((tmp_path / "glossy-test-material" / "result.json").read_text())
     assert res["scene"]["spp"] == 4 and res["scene"]["resolution"] == 16
     assert [m["fit_time"] is not None for m in res["models"]] == [True, True]
+
+
+def test_compare_loads_saved_fit_files(tmp_path):
+    """Models given as fit files are loaded (not refitted) and end up in the report."""
+    synth = pytest.importorskip("brdffit.synthetic")
+    from brdffit.io.fitfile import save_fit
+
+    ref = synth.synthetic("gold-ggx")
+    fp = save_fit(ref, tmp_path / "same.npz")
+    res = C.compare(ref, [f"copy={fp}", str(fp)], tmp_path / "rep", renderer=standin_render,
+                    spp=4, resolution=16, noise_floor=False, brdf_metric_samples=1 << 8,
+                    brdf_metrics=("cos_rel_error",))
+    names = [m["name"] for m in res["models"]]
+    assert names == ["copy", "same"]
+    for m in res["models"]:
+        assert m["status"] == "ok" and m["origin"].startswith("loaded")
+        assert m["psnr"] == np.inf and m["brdf"]["cos_rel_error"] == pytest.approx(0.0, abs=1e-6)
