@@ -54,6 +54,11 @@ def register(app: typer.Typer) -> None:
         exposure: str = typer.Option("auto", "--exposure",
                                      help="PNG tone-mapping exposure (number or 'auto')."),
         gamma: float = typer.Option(2.2, "--gamma", help="PNG tone-mapping gamma."),
+        roughness_texture: Path = typer.Option(
+            None, "--roughness-texture",
+            help="Roughness-scale texture for microfacet models (Dupuy 2015 Eq. 9): an EXR "
+                 "whose first channel is the α multiplier, or a PNG with multiplier "
+                 "2·value/255 (mid-grey = 1). Default for --scene sphere-svrough: built-in."),
         report_error: bool = typer.Option(False, "--resampling-error",
                                           help="Also measure the Dr.Jit evaluator's error vs brdf.eval."),
     ):
@@ -81,7 +86,16 @@ def register(app: typer.Typer) -> None:
                 raise _UsageError("--exposure", f"expected a number or 'auto', found {exposure!r}") from None
         brdf = load_brdf(spec)
         env = None if envmap in (None, "", "procedural", "default") else envmap
-        r = Renderer(brdf, scene=scene, envmap=env, spp=spp, resolution=resolution, mode=mode)
+        tex = None
+        if roughness_texture is not None:
+            from ..evaluation.imageio import read_image
+
+            t = read_image(roughness_texture)
+            tex = (t[..., 0].astype(np.float64) if t.dtype != np.uint8
+                   else t[..., 0].astype(np.float64) * (2.0 / 255.0))
+            tex = np.maximum(np.nan_to_num(tex, nan=1.0), 0.05)
+        r = Renderer(brdf, scene=scene, envmap=env, spp=spp, resolution=resolution, mode=mode,
+                     alpha_texture=tex)
         res = r.render(seed)
         if not np.all(np.isfinite(res.image)):
             raise BRDFError(f"{spec}: rendering produced non-finite pixels")

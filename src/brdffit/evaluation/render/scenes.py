@@ -179,6 +179,14 @@ def _env_emitter(envmap):
             "to_world": mi.ScalarTransform4f().rotate([0, 1, 0], 0.0)}
 
 
+def _sphere(bsdf):
+    """Unit sphere with its poles on ±y and the texture seam at the back: u runs around the
+    vertical axis with u = 0.5 facing the camera, v from the top (0) to the bottom (1)."""
+    mi, _ = _load()
+    tw = mi.ScalarTransform4f().rotate([0, 1, 0], 90.0) @ mi.ScalarTransform4f().rotate([1, 0, 0], -90.0)
+    return {"type": "sphere", "bsdf": bsdf, "to_world": tw}
+
+
 def _knot_mesh(bsdf):
     mi, _ = _load()
     v, f, n, uv = torus_knot()
@@ -205,16 +213,15 @@ def scene_dict(bsdf, scene: str = "sphere-env", envmap=None, spp: int = 256,
          "integrator": {"type": "direct", "hide_emitters": True}}
     if scene in ("sphere-env", "sphere-svrough"):
         d["emitter"] = _env_emitter(envmap)
-        d["object"] = {"type": "sphere", "bsdf": bsdf,
-                       "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], -90.0)}
+        d["object"] = _sphere(bsdf)
     elif scene == "sphere-point":
         d["emitter"] = {"type": "point", "position": [3.0, 3.5, 4.0],
                         "intensity": {"type": "rgb", "value": [40.0, 40.0, 40.0]}}
-        d["object"] = {"type": "sphere", "bsdf": bsdf}
+        d["object"] = _sphere(bsdf)
     elif scene == "sphere-distant":
         d["emitter"] = {"type": "directional", "direction": [-0.5, -0.6, -0.62],
                         "irradiance": {"type": "rgb", "value": [3.0, 3.0, 3.0]}}
-        d["object"] = {"type": "sphere", "bsdf": bsdf}
+        d["object"] = _sphere(bsdf)
     elif scene == "knot":
         d["emitter"] = _env_emitter(envmap)
         d["integrator"] = {"type": "path", "max_depth": 4, "rr_depth": 100,
