@@ -124,10 +124,13 @@ def test_cli_compare(tmp_path, monkeypatch, capsys):
 
     monkeypatch.setattr(C, "_default_renderer", lambda: standin_render)
     monkeypatch.setattr(C, "resolve_reference", lambda src, material=None: _ref())
-    fitters = {"lam": lambda brdf: Lambert([0.3, 0.3, 0.3]), "mf": lambda brdf: FakeMicrofacet()}
+    seen = []
+    fitters = {"lam": lambda brdf, albedo=0.3: seen.append(albedo) or Lambert([albedo] * 3),
+               "mf": lambda brdf: FakeMicrofacet()}
     monkeypatch.setattr(C, "resolve_fitter", lambda name: fitters[name])
     rc = main(["compare", "whatever.h5", "--models", "lam,mf", "--out", str(tmp_path),
-               "--spp", "4", "--resolution", "16", "--no-noise-floor", "-q"])
+               "--spp", "4", "--resolution", "16", "--no-noise-floor", "-q",
+               "--fit-options", '{"lam": {"albedo": 0.7}}'])
     assert rc == 0
     out = capsys.readouterr().out
     assert "lam" in out and "mf" in out and "index.html" in out
@@ -136,6 +139,10 @@ def test_cli_compare(tmp_path, monkeypatch, capsys):
     res = json.loads((tmp_path / "glossy-test-material" / "result.json").read_text())
     assert res["scene"]["spp"] == 4 and res["scene"]["resolution"] == 16
     assert [m["fit_time"] is not None for m in res["models"]] == [True, True]
+    assert seen == [0.7]  # --fit-options reached the fitter
+    assert main(["compare", "x.h5", "--models", "lam", "--out", str(tmp_path),
+                 "--fit-options", "[1]", "-q"]) == 1  # one-line error, not a traceback
+    assert "--fit-options" in capsys.readouterr().err
 
 
 def test_compare_loads_saved_fit_files(tmp_path):

@@ -10,6 +10,7 @@ without ``:MATERIAL`` compares all its materials (``--limit`` keeps the first N)
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import typer
@@ -58,6 +59,9 @@ def register(app: typer.Typer) -> None:
                                         "../shared/data/envmaps or an EXR (default procedural)."),
         limit: int = typer.Option(None, "--limit", min=1,
                                   help="With a collection: only its first N materials."),
+        fit_options: str = typer.Option(None, "--fit-options",
+                                        help='Fitter keyword arguments as JSON per model, e.g. '
+                                             '\'{"npf": {"max_iter": 100}}\'.'),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress messages."),
     ) -> None:
         """Fit, render and measure models against a reference; write an HTML report."""
@@ -66,12 +70,21 @@ def register(app: typer.Typer) -> None:
 
         model_list = [m.strip() for m in models.split(",") if m.strip()]
         if not model_list:
-            raise typer.BadParameter("expected at least one model", param_hint="--models")
+            raise ValueError(f"--models: expected at least one model name, found {models!r}")
         exp = exposure if exposure == "auto" else float(exposure)
+        try:
+            fopts = json.loads(fit_options) if fit_options else None
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"--fit-options: expected JSON, found {fit_options!r} ({exc})")
+        if fopts is not None and not (isinstance(fopts, dict)
+                                      and all(isinstance(v, dict) for v in fopts.values())):
+            raise ValueError(f"--fit-options: expected a JSON object {{model: {{option: value}}}}, "
+                             f"found {fit_options!r}")
         ropts = {"envmap": envmap} if envmap else {}
         say = (lambda msg: None) if quiet else (lambda msg: typer.echo(msg, err=True))
         kw = dict(scene=scene, spp=spp, resolution=resolution, seed=seed, exposure=exp,
-                  gamma=gamma, noise_floor=noise_floor, render_options=ropts, progress=say)
+                  gamma=gamma, noise_floor=noise_floor, render_options=ropts, progress=say,
+                  fit_options=fopts)
         specs = _materials(spec, limit)
         if len(specs) == 1:
             res = compare(specs[0], model_list, out, **kw)
