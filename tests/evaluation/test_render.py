@@ -150,3 +150,18 @@ def test_roughness_texture_on_table_path_warns():
 
     with pytest.warns(RuntimeWarning, match="roughness texture is ignored"):
         Renderer(_ggx(), scene="sphere-svrough", spp=4, resolution=16, mode="table")
+
+
+def test_plugin_by_name_in_scene_dict():
+    """The registered plugin name works in plain Mitsuba dicts (evaluator_id)."""
+    from brdffit.evaluation.render import drjit_eval as dj
+    from brdffit.evaluation.render import plugin
+
+    key = plugin.register_evaluator(dj.MicrofacetEval(dj.GGXDist(0.2), dj.ConstantFresnelDJ(1.0)))
+    try:
+        bsdf = dj.mi.load_dict({"type": plugin.PLUGIN_NAME, "evaluator_id": key})
+        assert "microfacet" in bsdf.to_string()
+    finally:
+        plugin.unregister_evaluator(key)
+    with pytest.raises(Exception, match="evaluator"):
+        dj.mi.load_dict({"type": plugin.PLUGIN_NAME, "evaluator_id": key})

@@ -2,10 +2,10 @@
 
 A render builds the Dr.Jit evaluator of the BRDF (:func:`.translate.to_evaluator`), wraps it
 in the Mitsuba plugin (:class:`.plugin.BRDFBSDF`), loads the named scene
-(:func:`.scenes.scene_dict`) and runs Mitsuba's ``path`` integrator (MIS between the BSDF's
-sampling and emitter sampling). Output is linear RGB ``(H, W, 3)`` float32 in the units of
-the lights (environment radiance × BRDF); the film's alpha gives the coverage and the
-foreground mask (pixels fully covered by the object, as Bagher 2016 §5 counts for PSNR).
+(:func:`.scenes.scene_dict`) and runs Mitsuba's ``direct`` (sphere scenes) or ``path``
+(knot) integrator, both with MIS between the BSDF's sampling and emitter sampling. Output
+is linear RGB ``(H, W, 3)`` float32 in the units of the lights (environment radiance ×
+BRDF); the film's alpha gives the coverage and the foreground mask (pixels fully covered by the object, as Bagher 2016 §5 counts for PSNR).
 """
 
 from __future__ import annotations
