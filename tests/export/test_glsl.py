@@ -40,6 +40,23 @@ def _sgd_approx():
                           GeneralizedSchlickFresnel(0.06, 0.02), diffuse=(0.04, 0.07, 0.3))
 
 
+def _npf_naive():
+    from brdffit.microfacet.npf_model import NPFNaiveBRDF
+
+    rng = np.random.default_rng(5)
+    m = _npf(5)
+    H = 0.5 + rng.random((180, 3))
+    return NPFNaiveBRDF(m.D.astype(np.float32), m.F.astype(np.float32), H.astype(np.float32),
+                        m.rho_d.astype(np.float32), m.rho_s.astype(np.float32))
+
+
+def _npf_bivariate():
+    from brdffit.microfacet.npf_model import NPFBivariateBRDF
+
+    rng = np.random.default_rng(6)
+    return NPFBivariateBRDF((0.1 + rng.random((90, 90, 3))).astype(np.float32))
+
+
 MODELS = {
     "gold-ggx": lambda: brdffit.synthetic("gold-ggx"),
     "aniso-ggx": lambda: brdffit.synthetic("aniso-ggx"),
@@ -47,6 +64,8 @@ MODELS = {
     "two-lobe-ggx": lambda: brdffit.synthetic("two-lobe-ggx"),
     "sgd-eq9": _sgd_approx,
     "npf": _npf,
+    "npf-naive": _npf_naive,
+    "npf-bivariate": _npf_bivariate,
 }
 
 
@@ -74,14 +93,15 @@ def test_tabulated_fit_resampling_error_small():
 
 
 @pytest.mark.skipif(not GL.glslang_available(), reason="glslangValidator (glslang-tools) absent")
-@pytest.mark.parametrize("name", ["aniso-ggx", "plastic-beckmann", "two-lobe-ggx", "sgd-eq9", "npf"])
+@pytest.mark.parametrize("name", ["aniso-ggx", "plastic-beckmann", "two-lobe-ggx", "sgd-eq9", "npf",
+                                  "npf-naive"])
 def test_glsl_compiles(name):
     src = GL.glsl_source(GL.model_spec(MODELS[name]()), main=True)
     ok, log = GL.compile_glsl(src)
     assert ok, log
     # and a broken shader is reported as such (the check can fail)
     ok2, _ = GL.compile_glsl(src.replace("bf_microfacet(wi, wo, D, G", "bf_microfacet(wi, D, G"))
-    assert name == "npf" or not ok2
+    assert name.startswith("npf") or not ok2
 
 
 def test_write_glsl_and_uber_texture(tmp_path):

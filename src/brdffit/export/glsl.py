@@ -25,7 +25,9 @@ Supported models
   optional ρd and ks; correlated (Dupuy Eq. 2) or uncorrelated Smith G.
 * ``SumBRDF`` of those, ``PerChannelMicrofacetBRDF`` and per-channel tabulated fits
   (``PerChannelBRDF``; one lobe per channel).
-* NPF models (Bagher 2016 Eq. 3, ``NPFMicrofacetBRDF``) from a row of the uber-texture.
+* NPF models (Bagher 2016 Eq. 3, ``NPFMicrofacetBRDF``) from a row of the uber-texture;
+  the naive model (Eq. 4, a 362-texel row: D, F, H(φd) over [0, π), ρd, ρs) and the
+  bivariate model (Eq. 5, a 90 × 90 texture) from their own textures.
 
 Textures are RGB float32 arrays ``(rows, width, 3)`` read with ``texelFetch`` (no hardware
 filtering: upload as ``RGB32F``, ``GL_NEAREST``); interpolation is done in the shader, so the
@@ -214,6 +216,56 @@ vec3 bf_npf(vec3 wi, vec3 wo, sampler2D uber, int row) {
     vec3 rho_s = texelFetch(uber, ivec2(271, row), 0).rgb;
     return rho_d + rho_s * D * F * G / (wi.z * wo.z);
 }
+// Rusinkiewicz phi_d of (wi, h): wi rotated by -phi_h about z, then by -theta_h about y.
+float bf_phi_d(vec3 wi, vec3 h) {
+    float ph = atan(h.y, h.x);
+    float th = acos(clamp(h.z, -1.0, 1.0));
+    float cp = cos(ph);
+    float sp = sin(ph);
+    vec3 a = vec3(cp * wi.x + sp * wi.y, -sp * wi.x + cp * wi.y, wi.z);
+    float ct = cos(th);
+    float st = sin(th);
+    vec3 d = vec3(ct * a.x - st * a.z, a.y, st * a.x + ct * a.z);
+    return atan(d.y, d.x);
+}
+// Naive NPF (Bagher 2016 Eq. 4) from one row: D [0,90), F [90,180), H [180,360) on
+// phi_d = k degrees in [0, 180) (periodic), rho_d at 360, rho_s at 361.
+vec3 bf_npf_naive(vec3 wi, vec3 wo, sampler2D tex, int row) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
+    vec3 h = normalize(wi + wo);
+    float th = acos(clamp(h.z, -1.0, 1.0));
+    float td = acos(clamp(dot(wi, h), -1.0, 1.0));
+    float uh = sqrt(clamp(th, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI)) * 90.0;
+    float ud = clamp(td, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI / 90.0);
+    float up = mod(mod(bf_phi_d(wi, h), BF_PI) / (BF_PI / 180.0), 180.0);
+    int i0 = int(floor(up)) % 180;
+    float t = up - floor(up);
+    vec3 H = texelFetch(tex, ivec2(180 + i0, row), 0).rgb * (1.0 - t)
+           + texelFetch(tex, ivec2(180 + (i0 + 1) % 180, row), 0).rgb * t;
+    vec3 D = bf_row_lerp(tex, row, 0, 90, uh);
+    vec3 F = bf_row_lerp(tex, row, 90, 90, ud);
+    vec3 rho_d = texelFetch(tex, ivec2(360, row), 0).rgb;
+    vec3 rho_s = texelFetch(tex, ivec2(361, row), 0).rgb;
+    return rho_d + rho_s * D * F * H;
+}
+// Bivariate model (Bagher 2016 Eq. 5): B on the 90 x 90 MERL (theta'_h = row, theta_d =
+// column) grid, bilinear.
+vec3 bf_npf_bivariate(vec3 wi, vec3 wo, sampler2D tex) {
+    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
+    vec3 h = normalize(wi + wo);
+    float th = acos(clamp(h.z, -1.0, 1.0));
+    float td = acos(clamp(dot(wi, h), -1.0, 1.0));
+    float uh = clamp(sqrt(clamp(th, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI)) * 90.0, 0.0, 89.0);
+    float ud = clamp(clamp(td, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI / 90.0), 0.0, 89.0);
+    int i0 = min(int(uh), 88);
+    int j0 = min(int(ud), 88);
+    float s = uh - float(i0);
+    float t = ud - float(j0);
+    return (1.0 - s) * (1.0 - t) * texelFetch(tex, ivec2(j0, i0), 0).rgb
+         + s * (1.0 - t) * texelFetch(tex, ivec2(j0, i0 + 1), 0).rgb
+         + (1.0 - s) * t * texelFetch(tex, ivec2(j0 + 1, i0), 0).rgb
+         + s * t * texelFetch(tex, ivec2(j0 + 1, i0 + 1), 0).rgb;
+}
 """
 
 
@@ -308,7 +360,7 @@ def model_spec(model) -> dict:
     ``model`` (see module docstring); :class:`ExportError` for unsupported models."""
     from ..fit.sgd import PerChannelMicrofacetBRDF
     from ..microfacet.model import MicrofacetBRDF, SumBRDF
-    from ..microfacet.npf_model import NPFMicrofacetBRDF
+    from ..microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF
 
     textures: dict = {}
     notes: list = []
@@ -333,9 +385,19 @@ def model_spec(model) -> dict:
     elif isinstance(model, NPFMicrofacetBRDF):
         textures["uber"] = npf_row(model)[None]
         lobes = [{"type": "npf", "tex": "uber", "row": 0}]
+    elif isinstance(model, NPFNaiveBRDF):
+        row = np.zeros((362, 3), np.float32)
+        row[0:90], row[90:180], row[180:360] = model.D, model.F, model.H
+        row[360], row[361] = model.rho_d, model.rho_s
+        textures["naive"] = row[None]
+        lobes = [{"type": "npf_naive", "tex": "naive", "row": 0}]
+    elif isinstance(model, NPFBivariateBRDF):
+        textures["bivariate"] = np.asarray(model.B, np.float32)
+        lobes = [{"type": "npf_bivariate", "tex": "bivariate"}]
     else:
         fail(model, "GLSL", "supported: MicrofacetBRDF (GGX/Beckmann/SGD/isotropic tabulated), "
-             "SumBRDF and PerChannelMicrofacetBRDF of those, NPFMicrofacetBRDF (Eq. 3)")
+             "SumBRDF, PerChannelMicrofacetBRDF and PerChannelBRDF of those, NPF models "
+             "(Bagher 2016 Eq. 3-5)")
     return {"lobes": lobes, "textures": textures, "notes": sorted(set(notes))}
 
 
@@ -353,9 +415,12 @@ def _v3(v) -> str:
 
 def _lobe_glsl(i: int, lobe: dict) -> str:
     fn = f"brdffit_lobe{i}"
-    if lobe["type"] == "npf":
+    if lobe["type"] in ("npf", "npf_naive"):
         return (f"vec3 {fn}(vec3 wi, vec3 wo) {{\n"
-                f"    return bf_npf(wi, wo, bf_tex_{lobe['tex']}, {int(lobe['row'])});\n}}\n")
+                f"    return bf_{lobe['type']}(wi, wo, bf_tex_{lobe['tex']}, {int(lobe['row'])});\n}}\n")
+    if lobe["type"] == "npf_bivariate":
+        return (f"vec3 {fn}(vec3 wi, vec3 wo) {{\n"
+                f"    return bf_npf_bivariate(wi, wo, bf_tex_{lobe['tex']});\n}}\n")
     d, f = lobe["dist"], lobe["fresnel"]
     lines = [f"vec3 {fn}(vec3 wi, vec3 wo) {{",
              "    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);",

@@ -201,10 +201,67 @@ def bf_npf(wi, wo, uber, row):
     return np.where(ok[..., None], f, 0.0)
 
 
+def bf_phi_d(wi, h):
+    ph = np.arctan2(h[..., 1], h[..., 0])
+    th = np.arccos(_clamp(h[..., 2], -1.0, 1.0))
+    cp = np.cos(ph)
+    sp = np.sin(ph)
+    a = np.stack([cp * wi[..., 0] + sp * wi[..., 1], -sp * wi[..., 0] + cp * wi[..., 1],
+                  wi[..., 2]], -1)
+    ct = np.cos(th)
+    st = np.sin(th)
+    d = np.stack([ct * a[..., 0] - st * a[..., 2], a[..., 1], st * a[..., 0] + ct * a[..., 2]], -1)
+    return np.arctan2(d[..., 1], d[..., 0])
+
+
+def bf_npf_naive(wi, wo, tex, row):
+    ok = (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        h = _normalize(wi + wo)
+        th = np.nan_to_num(np.arccos(_clamp(h[..., 2], -1.0, 1.0)))
+        td = np.nan_to_num(np.arccos(_clamp(_dot(wi, h), -1.0, 1.0)))
+        uh = np.sqrt(_clamp(th, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI)) * 90.0
+        ud = _clamp(td, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI / 90.0)
+        up = np.mod(np.mod(np.nan_to_num(bf_phi_d(wi, h)), BF_PI) / (BF_PI / 180.0), 180.0)
+        i0 = np.floor(up).astype(np.int64) % 180
+        t = (up - np.floor(up))[..., None]
+        H = (texelFetch(tex, 180 + i0, row) * (1.0 - t)
+             + texelFetch(tex, 180 + (i0 + 1) % 180, row) * t)
+        D = bf_row_lerp(tex, row, 0, 90, uh)
+        F = bf_row_lerp(tex, row, 90, 90, ud)
+        rho_d = texelFetch(tex, 360, row)
+        rho_s = texelFetch(tex, 361, row)
+        f = rho_d + rho_s * D * F * H
+    return np.where(ok[..., None], f, 0.0)
+
+
+def bf_npf_bivariate(wi, wo, tex):
+    ok = (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        h = _normalize(wi + wo)
+        th = np.nan_to_num(np.arccos(_clamp(h[..., 2], -1.0, 1.0)))
+        td = np.nan_to_num(np.arccos(_clamp(_dot(wi, h), -1.0, 1.0)))
+        uh = _clamp(np.sqrt(_clamp(th, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI)) * 90.0, 0.0, 89.0)
+        ud = _clamp(_clamp(td, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI / 90.0), 0.0, 89.0)
+        i0 = np.minimum(uh.astype(np.int64), 88)
+        j0 = np.minimum(ud.astype(np.int64), 88)
+        s = (uh - i0)[..., None]
+        t = (ud - j0)[..., None]
+        f = ((1.0 - s) * (1.0 - t) * texelFetch(tex, j0, i0)
+             + s * (1.0 - t) * texelFetch(tex, j0, i0 + 1)
+             + (1.0 - s) * t * texelFetch(tex, j0 + 1, i0)
+             + s * t * texelFetch(tex, j0 + 1, i0 + 1))
+    return np.where(ok[..., None], f, 0.0)
+
+
 # ------------------------------------------------------------------------------------------
 def _lobe(lobe, textures, wi, wo):
     if lobe["type"] == "npf":
         return bf_npf(wi, wo, textures[lobe["tex"]], lobe["row"])
+    if lobe["type"] == "npf_naive":
+        return bf_npf_naive(wi, wo, textures[lobe["tex"]], lobe["row"])
+    if lobe["type"] == "npf_bivariate":
+        return bf_npf_bivariate(wi, wo, textures[lobe["tex"]])
     ok = (wi[..., 2] > 0.0) & (wo[..., 2] > 0.0)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         h = _normalize(wi + wo)
