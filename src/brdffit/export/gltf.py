@@ -25,8 +25,8 @@ Mapping of a fit (:func:`gltf_material`) — a single GGX lobe
   luminance of F0 is ≥ 0.08 (``MATERIAL_METAL_F0``: common dielectrics, η ≤ 1.8, have
   F0 ≤ 0.08) and exceeds the luminance of the fit's ρd; otherwise a dielectric
   (``metallic = 0``, ``baseColorFactor = ρd`` clipped to [0, 1], glTF's fixed F0 = 0.04).
-  Tabulated fits have no ρd (their Fresnel table absorbs the diffuse part), so they are
-  metals unless F0 is in the dielectric range.
+  A fit without a diffuse term (tabulated fits: their Fresnel table absorbs the diffuse
+  part) is always a metal with ``baseColorFactor = F0`` (a dielectric would be black).
 * optionally (``optimize=True``, CLI ``--option optimize=true``) the rule's parameters are
   refined by least squares in BRDF space (:func:`optimize_parameters`);
 * the loss of fidelity is measured by :func:`gltf_fidelity` (BRDF-space metrics of
@@ -203,7 +203,8 @@ def gltf_parameters(model, anisotropy: bool = True) -> dict:
     F0c = np.clip(F0, 0.0, 1.0)
     rd = np.zeros(3) if m.diffuse is None else np.asarray(m.diffuse, float)
     lum = float(LUMA @ F0c)
-    metal = lum >= MATERIAL_METAL_F0 and float(LUMA @ rd) < lum
+    metal = (m.diffuse is None and lum > 0) or (lum >= MATERIAL_METAL_F0
+                                                 and float(LUMA @ rd) < lum)
     if metal:
         base = F0c
         if m.diffuse is not None:
@@ -228,8 +229,9 @@ def gltf_parameters(model, anisotropy: bool = True) -> dict:
 
 def optimize_parameters(model, p: dict, n: int = 8192, seed: int = 0) -> dict:
     """Refine the rule-based parameters ``p`` (baseColor, metallic, roughness; anisotropy
-    kept) by least squares (three starts: the rule, a metal with F0, a dielectric with ρd) on
-    the cosine-weighted BRDF difference to ``model`` at ``n`` random direction pairs (residual ``(f_glTF − f) cos θo / (f cos θo + mean)``, a relative
+    kept) by least squares (three starts: the rule, a metal with F0, a dielectric with ρd;
+    the best of starts and results by the cosine-weighted relative error is kept) on the
+    cosine-weighted BRDF difference to ``model`` at ``n`` random direction pairs (residual ``(f_glTF − f) cos θo / (f cos θo + mean)``, a relative
     error that does not let the peak dominate). The result replaces ``p`` only when it lowers
     the cosine-weighted relative error of :func:`brdffit.evaluation.metrics.brdf_metrics`."""
     from scipy import optimize
@@ -258,17 +260,19 @@ def optimize_parameters(model, p: dict, n: int = 8192, seed: int = 0) -> dict:
     f0 = np.clip(p["F0"], 0, 1).tolist()
     rd = np.clip(p["rho_d"], 0, 1).tolist()
     starts = [q0, np.array(f0 + [1.0, q0[4]]), np.array(rd + [0.0, q0[4]])]
-    r = min((optimize.least_squares(resid, np.clip(q, lo, hi), bounds=(lo, hi), max_nfev=100)
-             for q in starts), key=lambda res: res.cost)
     metric = ("cos_rel_error",)
-    before = brdf_metrics(model, make(q0), 1 << 14, metrics=metric)["cos_rel_error"]
-    after = brdf_metrics(model, make(r.x), 1 << 14, metrics=metric)["cos_rel_error"]
+    cands = [np.clip(q, lo, hi) for q in starts]
+    cands += [optimize.least_squares(resid, q, bounds=(lo, hi), max_nfev=100).x for q in cands]
+    errs = [brdf_metrics(model, make(q), 1 << 14, metrics=metric)["cos_rel_error"] for q in cands]
+    best = cands[int(np.argmin(errs))]              # best candidate by the reported metric
+    before = errs[0]
+    after = float(np.min(errs))
     if not after < before:
         return dict(p, notes=p["notes"] + ["optimisation did not lower the error: rule kept"])
     out = dict(p)
-    out["baseColorFactor"] = [float(x) for x in np.clip(r.x[:3], 0, 1)] + [1.0]
-    out["metallicFactor"] = float(np.clip(r.x[3], 0, 1))
-    out["roughnessFactor"] = float(np.clip(r.x[4], 0.01, 1))
+    out["baseColorFactor"] = [float(x) for x in np.clip(best[:3], 0, 1)] + [1.0]
+    out["metallicFactor"] = float(np.clip(best[3], 0, 1))
+    out["roughnessFactor"] = float(np.clip(best[4], 0.01, 1))
     out["alpha"] = out["roughnessFactor"] ** 2
     out["notes"] = p["notes"] + [f"baseColor/metallic/roughness optimised in BRDF space "
                                  f"(cos_rel_error {before:.4g} -> {after:.4g})"]
