@@ -16,10 +16,11 @@ Supported models
 * ``MicrofacetBRDF`` with GGX or Beckmann (anisotropic, with correlation ρ: the quadratic
   forms of Dupuy 2015 App. C), SGD (Bagher 2012 §4.2, D with the CPU-computed normaliser
   ``log_norm = ln(α Γ(1−p, α) π)``; G1 always the closed-form **Eq. 9 approximation**
-  (λ, c, k, θ0), computed with :meth:`SGD.g1_approximation` when the fit has none), or an
-  isotropic tabulated NDF (Dupuy 2015: ``log D`` and ``σ`` resampled on 1024 nodes uniform
-  in ``u = √(2θ/π)``, linear interpolation; **approximate**: the library interpolates its
-  90-node table with monotone cubics, the resampling error is reported);
+  (λ, c, k, θ0), computed with :meth:`SGD.g1_approximation` when the fit has none), or a
+  tabulated NDF (Dupuy 2015: ``log D`` and ``σ`` resampled on 1024 nodes uniform in
+  ``u = √(2θ/π)`` for isotropic tables, 256 × 128 (u, φ) nodes for anisotropic ones,
+  (bi)linear interpolation; **approximate**: the library interpolates its table with monotone
+  cubics, the resampling error is reported);
   Fresnel terms: none, Schlick / generalised Schlick (Bagher 2012 Eq. 11), conductor (η, k),
   dielectric (η), tabulated (on a uniform θd grid, e.g. the fitted 90-sample tables);
   optional ρd and ks; correlated (Dupuy Eq. 2) or uncorrelated Smith G.
@@ -144,6 +145,29 @@ float bf_table_D(vec3 m, sampler2D tex, int n) {
 float bf_table_lambda(vec3 w, sampler2D tex, int n) {
     float u = sqrt(acos(clamp(w.z, 0.0, 1.0)) * (2.0 / BF_PI)) * float(n - 1);
     return bf_row_lerp(tex, 1, 0, n, u).r / w.z - 1.0;
+}
+// Anisotropic tabulated NDF: rows [0, nphi) = log D, rows [nphi, 2 nphi) = sigma, columns
+// uniform in u = sqrt(2 theta / pi) (nu nodes on [0, 1]), rows uniform in phi (periodic).
+float bf_table2_lookup(sampler2D tex, int row0, int nu, int nphi, float u, float phi) {
+    u = clamp(u, 0.0, float(nu - 1));
+    int i0 = min(int(u), nu - 2);
+    float s = u - float(i0);
+    float v = mod(phi, 2.0 * BF_PI) / (2.0 * BF_PI) * float(nphi);
+    int j0 = int(floor(v)) % nphi;
+    int j1 = (j0 + 1) % nphi;
+    float t = v - floor(v);
+    float a = mix(texelFetch(tex, ivec2(i0, row0 + j0), 0).r, texelFetch(tex, ivec2(i0 + 1, row0 + j0), 0).r, s);
+    float b = mix(texelFetch(tex, ivec2(i0, row0 + j1), 0).r, texelFetch(tex, ivec2(i0 + 1, row0 + j1), 0).r, s);
+    return mix(a, b, t);
+}
+float bf_table2_D(vec3 m, sampler2D tex, int nu, int nphi) {
+    if (m.z <= 0.0) return 0.0;
+    float u = sqrt(acos(clamp(m.z, 0.0, 1.0)) * (2.0 / BF_PI)) * float(nu - 1);
+    return exp(bf_table2_lookup(tex, 0, nu, nphi, u, atan(m.y, m.x)));
+}
+float bf_table2_lambda(vec3 w, sampler2D tex, int nu, int nphi) {
+    float u = sqrt(acos(clamp(w.z, 0.0, 1.0)) * (2.0 / BF_PI)) * float(nu - 1);
+    return bf_table2_lookup(tex, nphi, nu, nphi, u, atan(w.y, w.x)) / w.z - 1.0;
 }
 // Fresnel terms of cos(theta_d).
 vec3 bf_fresnel_schlick2(float cosd, vec3 F0, vec3 F1) {   // Bagher 2012 Eq. 11 (F1=0: Schlick)
@@ -294,8 +318,7 @@ def _dist_spec(dist, textures: dict, notes: list, tag: str) -> dict:
                          f"{a['max_abs']:.3g})")
         return {"kind": "sgd", "alpha": dist.alpha, "p": dist.p,
                 "log_norm": float(dist._log_norm), **g}
-    if isinstance(dist, TabulatedSlopeDistribution) and dist.isotropic and \
-            type(dist).__name__ == "TabulatedSlopeDistribution":
+    if isinstance(dist, TabulatedSlopeDistribution) and dist.isotropic:
         n = TABLE_NODES
         u = np.linspace(0.0, 1.0, n)
         th = 0.5 * np.pi * u * u
@@ -311,8 +334,25 @@ def _dist_spec(dist, textures: dict, notes: list, tag: str) -> dict:
         notes.append(f"tabulated NDF resampled to {n} nodes (log D and sigma, linear in "
                      "sqrt(2 theta/pi))")
         return {"kind": "table", "tex": tag, "n": n}
+    if isinstance(dist, TabulatedSlopeDistribution):             # anisotropic table
+        nu, nphi = 256, 128
+        u = np.linspace(0.0, 1.0, nu)
+        th = np.minimum(0.5 * np.pi * u * u, 0.5 * np.pi - 1e-6)
+        ph = np.arange(nphi) * (2.0 * np.pi / nphi)
+        T, P = np.meshgrid(th, ph)                                   # (nphi, nu)
+        w = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1)
+        with np.errstate(divide="ignore"):
+            logd = np.log(np.maximum(np.asarray(dist.D(w), float), 1e-300))
+        sig = np.asarray(dist.sigma(w), float)
+        tex = np.zeros((2 * nphi, nu, 3), np.float32)
+        tex[:nphi] = logd[..., None]
+        tex[nphi:] = sig[..., None]
+        textures[tag] = tex
+        notes.append(f"anisotropic tabulated NDF resampled to {nu} x {nphi} nodes (log D and "
+                     "sigma, bilinear in (sqrt(2 theta/pi), phi))")
+        return {"kind": "table2", "tex": tag, "nu": nu, "nphi": nphi}
     raise ExportError(f"no GLSL translation for distribution {type(dist).__name__} "
-                      "(supported: GGX, Beckmann, SGD, isotropic tabulated)")
+                      "(supported: GGX, Beckmann, SGD, tabulated)")
 
 
 def _fresnel_spec(f, textures: dict, notes: list, tag: str) -> dict:
@@ -436,6 +476,11 @@ def _lobe_glsl(i: int, lobe: dict) -> str:
         lines += [f"    float D = bf_sgd_D(h, {_f(d['alpha'])}, {_f(d['p'])}, {_f(d['log_norm'])});",
                   f"    float Li = bf_lambda_eq9(wi, {g});",
                   f"    float Lo = bf_lambda_eq9(wo, {g});"]
+    elif d["kind"] == "table2":
+        t = f"bf_tex_{d['tex']}, {int(d['nu'])}, {int(d['nphi'])}"
+        lines += [f"    float D = bf_table2_D(h, {t});",
+                  f"    float Li = bf_table2_lambda(wi, {t});",
+                  f"    float Lo = bf_table2_lambda(wo, {t});"]
     else:
         t = f"bf_tex_{d['tex']}, {int(d['n'])}"
         lines += [f"    float D = bf_table_D(h, {t});",

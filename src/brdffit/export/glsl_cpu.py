@@ -117,6 +117,34 @@ def bf_table_lambda(w, tex, n):
     return bf_row_lerp(tex, 1, 0, n, u)[..., 0] / w[..., 2] - 1.0
 
 
+def _mix(x, y, a):
+    return x * (1.0 - a) + y * a
+
+
+def bf_table2_lookup(tex, row0, nu, nphi, u, phi):
+    u = _clamp(u, 0.0, float(nu - 1))
+    i0 = np.minimum(u.astype(np.int64), nu - 2)
+    s = u - i0
+    v = np.mod(phi, 2.0 * BF_PI) / (2.0 * BF_PI) * float(nphi)
+    j0 = np.floor(v).astype(np.int64) % nphi
+    j1 = (j0 + 1) % nphi
+    t = v - np.floor(v)
+    a = _mix(texelFetch(tex, i0, row0 + j0)[..., 0], texelFetch(tex, i0 + 1, row0 + j0)[..., 0], s)
+    b = _mix(texelFetch(tex, i0, row0 + j1)[..., 0], texelFetch(tex, i0 + 1, row0 + j1)[..., 0], s)
+    return _mix(a, b, t)
+
+
+def bf_table2_D(m, tex, nu, nphi):
+    u = np.sqrt(np.arccos(_clamp(m[..., 2], 0.0, 1.0)) * (2.0 / BF_PI)) * float(nu - 1)
+    v = np.exp(bf_table2_lookup(tex, 0, nu, nphi, u, np.arctan2(m[..., 1], m[..., 0])))
+    return np.where(m[..., 2] <= 0.0, 0.0, v)
+
+
+def bf_table2_lambda(w, tex, nu, nphi):
+    u = np.sqrt(np.arccos(_clamp(w[..., 2], 0.0, 1.0)) * (2.0 / BF_PI)) * float(nu - 1)
+    return bf_table2_lookup(tex, nphi, nu, nphi, u, np.arctan2(w[..., 1], w[..., 0])) / w[..., 2] - 1.0
+
+
 def bf_fresnel_schlick2(cosd, F0, F1):
     c = _clamp(cosd, 0.0, 1.0)[..., None]
     x = 1.0 - c
@@ -277,6 +305,10 @@ def _lobe(lobe, textures, wi, wo):
             g = (d["lam"], d["c"], d["k"])
             D = bf_sgd_D(h, d["alpha"], d["p"], d["log_norm"])
             Li, Lo = bf_lambda_eq9(wi, *g), bf_lambda_eq9(wo, *g)
+        elif d["kind"] == "table2":
+            tex, nu, nphi = textures[d["tex"]], d["nu"], d["nphi"]
+            D, Li, Lo = (bf_table2_D(h, tex, nu, nphi), bf_table2_lambda(wi, tex, nu, nphi),
+                         bf_table2_lambda(wo, tex, nu, nphi))
         else:
             tex = textures[d["tex"]]
             D, Li, Lo = bf_table_D(h, tex, d["n"]), bf_table_lambda(wi, tex, d["n"]), \
