@@ -129,3 +129,17 @@ def test_roughplastic_style_measured_in_mitsuba(tmp_path):
     assert np.isfinite(np.array(mi.render(scene))).all()
     with pytest.raises(ExportError, match="roughplastic"):
         M.plastic_bsdf(brdffit.synthetic("aniso-ggx"))
+
+
+@pytest.mark.render
+def test_plugin_scene_for_npf(tmp_path):
+    mi, _ = _mi()
+    from tests.export.test_glsl import _npf
+
+    model = _npf(3, "npf-test")
+    info = M.write_mitsuba_python(model, tmp_path / "npf.py")
+    assert info["plugin"] == "brdffit" and "builtin_unavailable" in info
+    ns: dict = {"__file__": str(tmp_path / "npf.py"), "__name__": "scene"}
+    exec(compile((tmp_path / "npf.py").read_text(), "npf.py", "exec"), ns)
+    img = np.array(mi.render(mi.load_dict(ns["scene_dict"](12, 4))))
+    assert np.isfinite(img).all() and img[..., :3].max() > 0
