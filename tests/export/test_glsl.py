@@ -107,7 +107,7 @@ def test_glsl_compiles(name):
 def test_write_glsl_and_uber_texture(tmp_path):
     m = _npf(1, "mat-a")
     info = GL.write_glsl(m, tmp_path / "npf.glsl")
-    idx = json.loads((tmp_path / "npf.json").read_text())
+    idx = json.loads((tmp_path / "npf.glsl.json").read_text())
     tex = np.load(tmp_path / idx["textures"]["bf_tex_uber"]["file"])
     assert tex.shape == (1, GL.UBER_WIDTH, 3) and len(info["files"]) == 3
     models = [_npf(s, f"mat-{s}") for s in range(4)]

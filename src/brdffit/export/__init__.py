@@ -27,7 +27,17 @@ from pathlib import Path
 
 from ..errors import ExportError
 
-__all__ = ["export", "TARGETS", "load_json", "ExportError"]
+__all__ = ["export", "TARGETS", "load_json", "ExportError", "load_sgd_table", "load_npf_table",
+           "pack_npf_uber_texture", "GLTFBRDF"]
+
+_LAZY = {"load_sgd_table": ".tables", "load_npf_table": ".tables",
+         "pack_npf_uber_texture": ".glsl", "GLTFBRDF": ".gltf"}
+
+
+def __getattr__(name):
+    if name in _LAZY:
+        return getattr(import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 #: target name -> (module, function); every function is ``fn(model, path, **options) -> dict``
 TARGETS = {

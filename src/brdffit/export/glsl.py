@@ -589,7 +589,8 @@ def pack_npf_uber_texture(models, path, exr: bool = True) -> dict:
 # ------------------------------------------------------------------------------------------
 def write_glsl(model, path, **_ignored) -> dict:
     """Write ``path`` (``.glsl``: library + ``brdffit_eval``), its textures
-    (``<stem>.<name>.npy``) and ``<stem>.json`` (texture index, notes, conventions)."""
+    (``<stem>.<name>.npy``) and ``<name>.json`` next to it (e.g. ``brdf.glsl.json``: texture
+    index, notes, conventions)."""
     path = Path(path)
     spec = model_spec(model)
     src = glsl_source(spec, version=None)
@@ -607,9 +608,10 @@ def write_glsl(model, path, **_ignored) -> dict:
         files.append(str(tp))
     with atomic_write(path, "w") as fh:
         fh.write(src)
-    with atomic_write(path.with_suffix(".json"), "w") as fh:
+    index_path = path.with_name(path.name + ".json")
+    with atomic_write(index_path, "w") as fh:
         json.dump(index, fh, indent=1)
-    files.append(str(path.with_suffix(".json")))
+    files.append(str(index_path))
     return {"files": files, "target": "glsl", "notes": spec["notes"]}
 
 
