@@ -80,11 +80,15 @@ def test_builtin_mapping_matches_mitsuba_eval(name):
 
 
 @pytest.mark.render
-def test_xml_and_python_scenes_render(tmp_path):
+@pytest.mark.parametrize("name", ["gold-ggx", "plastic-beckmann"])
+def test_xml_and_python_scenes_render(tmp_path, name):
     mi, _ = _mi()
-    model = brdffit.synthetic("gold-ggx")
+    model = brdffit.synthetic(name)
     info = M.write_mitsuba_xml(model, tmp_path / "gold.xml")
     scene = mi.load_file(str(tmp_path / "gold.xml"), res=16, spp=4)
+    if name == "plastic-beckmann":       # blendbsdf of diffuse + roughconductor, from XML
+        xml_bsdf = [s.bsdf() for s in scene.shapes()][0]
+        assert "BlendBSDF" in str(xml_bsdf)
     img = np.array(mi.render(scene))
     assert img.shape[:2] == (16, 16) and np.isfinite(img).all() and img[..., :3].max() > 0
     assert info["error"]["cos_rel_error"] >= 0

@@ -46,8 +46,8 @@ ready-to-render script.
 
 from __future__ import annotations
 
-import json
 import math
+import pprint
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -589,8 +589,7 @@ def write_mitsuba_python(model, path, prefer: str = "builtin", **_ignored) -> di
             summary["builtin_unavailable"] = str(exc)
     files = [str(path)]
     if bsdf is not None:
-        code = "BSDF = " + json.dumps(bsdf, indent=4).replace("true", "True").replace(
-            "false", "False") + "\n"
+        code = "BSDF = " + pprint.pformat(bsdf, indent=1, width=96, sort_dicts=False) + "\n"
         how = "built-in plugins only"
     else:
         if not isinstance(model, SerializableModel) or not model.fit_kind:
