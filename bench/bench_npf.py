@@ -53,7 +53,8 @@ from brdffit.grid import tabulate_merl_grid  # noqa: E402
 ZIP = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
 SPECULAR = ("nickel", "color-changing-paint1", "maroon-plastic", "white-fabric2")
 FIELDS = ["material", "variant", "time_s", "iterations", "gss_calls", "objective",
-          "normalised_objective", "relative_error", "fit_objective", "stop_reason", "status"]
+          "normalised_objective", "relative_error", "fit_objective", "stop_reason", "status",
+          "starts"]
 
 
 def variant_kwargs(v: str, args) -> dict:
@@ -206,6 +207,11 @@ def main(argv=None) -> int:
                            relative_error=f"{rel['relative_error']:.6g}",
                            fit_objective=f"{info['objective']:.9g}",
                            stop_reason=info.get("stop_reason", ""), status="ok")
+                if "starts" in info:         # independent-G: per start objective / status
+                    row["starts"] = ";".join(
+                        f"{st['start']}={st['objective']:.5g}" if "objective" in st
+                        else f"{st['start']}:{st.get('status')}" for st in info["starts"])
+                    row["starts"] += f";best={'/'.join(info['best_start_per_channel'])}"
                 facs = [np.asarray(a) for a in model.factors().values()]
                 if any(not np.all(np.isfinite(a)) or np.any(a < 0) for a in facs):
                     row["status"] = "NaN/negative factor"
