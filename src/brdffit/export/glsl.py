@@ -321,11 +321,10 @@ def _dist_spec(dist, textures: dict, notes: list, tag: str) -> dict:
     if isinstance(dist, TabulatedSlopeDistribution) and dist.isotropic:
         n = TABLE_NODES
         u = np.linspace(0.0, 1.0, n)
-        th = 0.5 * np.pi * u * u
+        th = np.minimum(0.5 * np.pi * u * u, 0.5 * np.pi - 1e-7)   # D is finite at grazing
         w = np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], -1)
         with np.errstate(divide="ignore"):
             logd = np.log(np.maximum(dist.D(w), 1e-300))
-        logd[-1] = logd[-2] + (logd[-2] - logd[-3])        # grazing node: extrapolate
         sig = np.asarray(dist.sigma(w), float)
         tex = np.zeros((2, n, 3), np.float32)
         tex[0] = logd[:, None]
