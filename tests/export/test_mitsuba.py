@@ -12,7 +12,7 @@ import brdffit
 from brdffit.errors import ExportError
 from brdffit.export import mitsuba as M
 from brdffit.export._common import principal_axes, rotate_z
-from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel
+from brdffit.microfacet import GGX
 
 os.environ.setdefault("DRJIT_LIBLLVM_PATH", M.LLVM_PATH)
 

@@ -35,7 +35,7 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..errors import BRDFFormatError
-from ._common import fail, label
+from ._common import fail
 
 __all__ = ["to_json_dict", "from_json_dict", "write_json", "load_json", "describe_parameters",
            "CONVENTIONS", "FORMAT"]
