@@ -25,3 +25,21 @@ def test_cli_export_errors(tmp_path, capsys):
     assert "glTF" in err and "sgd-paint" in err
     assert not (tmp_path / "x.gltf").exists()
     assert main(["export", "synthetic:gold-ggx", "--to", "nope", "-o", str(tmp_path / "x")]) != 0
+
+
+def test_cli_npf_uber_from_fit_files(tmp_path):
+    import numpy as np
+
+    from brdffit.export.tables import load_npf_table
+    from brdffit.io.fitfile import save_fit
+    from tests.export.test_glsl import _npf
+
+    paths = []
+    for s in range(2):
+        save_fit(_npf(s, f"m{s}"), tmp_path / f"m{s}.npz")
+        paths.append(str(tmp_path / f"m{s}.npz"))
+    assert main(["export", *paths, "--to", "npf-uber", "-o", str(tmp_path / "u.npy")]) == 0
+    back = load_npf_table(tmp_path / "u.npy")
+    assert list(back) == ["m0", "m1"]
+    np.testing.assert_allclose(back["m1"].D, _npf(1).D.astype(np.float32), rtol=1e-6)
+    assert main(["export", *paths, "--to", "json", "-o", str(tmp_path / "x.json")]) == 1
