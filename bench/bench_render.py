@@ -75,6 +75,29 @@ def _bench_one(label, brdf, args, reference=None, mode="auto"):
     return out, a
 
 
+def _scene_timings(args):
+    """Render ``args.scene_timings`` in every scene (same resolution/spp) and time it."""
+    from brdffit.evaluation.render import SCENES, Renderer, psnr
+    from brdffit.io import load
+
+    brdf = load(args.scene_timings)
+    print(f"scenes ({args.scene_timings}):")
+    out = {"brdf": args.scene_timings, "load_avg": os.getloadavg(), "scenes": []}
+    for scene in SCENES:
+        r = Renderer(brdf, scene=scene, envmap=args.envmap, spp=args.spp,
+                     resolution=args.resolution)
+        a, b = r.render(0), r.render(1)
+        rec = {"scene": scene, "setup_s": round(r.setup_seconds, 3),
+               "first_render_s": round(a.seconds, 3), "render_s": round(b.seconds, 3),
+               "render_cpu_s": round(b.cpu_seconds, 3),
+               "noise_floor_psnr": round(psnr(a.image, b.image, a.mask), 2),
+               "foreground_fraction": round(float(a.mask.mean()), 4)}
+        print(f"  {scene:<16} render {rec['render_s']:6.2f} s (CPU {rec['render_cpu_s']:6.2f} s)  "
+              f"noise-floor {rec['noise_floor_psnr']:6.2f} dB", flush=True)
+        out["scenes"].append(rec)
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--materials", nargs="*", default=None)
@@ -86,6 +109,10 @@ def main(argv=None) -> int:
     ap.add_argument("--fits", nargs="*", default=None,
                     help="fit and render these registered models (no value: all registered)")
     ap.add_argument("--quick", action="store_true", help="64², 32 spp, one material")
+    ap.add_argument("--scene-timings", default="synthetic:gold-ggx",
+                    help="time every scene of SCENES with this BRDF ('' to skip)")
+    ap.add_argument("--only-scenes", action="store_true",
+                    help="only the per-scene timings (merged into an existing --out file)")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "render.json"))
     args = ap.parse_args(argv)
     if args.quick:
@@ -98,6 +125,16 @@ def main(argv=None) -> int:
     if args.envmap not in envmap_names() and not Path(args.envmap).is_file():
         print(f"envmap {args.envmap!r} not found; using the procedural environment")
         args.envmap = None
+    if args.only_scenes:
+        out = Path(args.out)
+        results = json.loads(out.read_text()) if out.is_file() else {}
+        results["scenes"] = _scene_timings(args)
+        from brdffit._atomic import atomic_write
+
+        with atomic_write(out, "w") as fh:
+            json.dump(results, fh, indent=1, default=float)
+        print(f"wrote {out}")
+        return 0
     materials = args.materials
     if materials is None:
         materials = [m for m in DEFAULT_MATERIALS if Path(m.split(".zip:")[0] + (".zip" if ".zip:" in m else "")).exists()]
@@ -147,6 +184,8 @@ def main(argv=None) -> int:
                 rec, _ = _bench_one(f"{brdf.name}/{name}", model, args, reference=ref_img)
                 rec.update({"material": brdf.name, "fit": name, "fit_s": round(t_fit, 2)})
                 results["fits"].append(rec)
+    if args.scene_timings:
+        results["scenes"] = _scene_timings(args)
     results["machine"]["load_avg_end"] = os.getloadavg()
     all_recs = (results["measured"] + results["synthetic"]
                 + [r["table_path"] for r in results["synthetic"] if "table_path" in r]
