@@ -27,8 +27,9 @@ Pipeline of :func:`fit_tabulated`:
 The dominant eigenvalue is ``F0`` in the paper's notation (reported in ``fit_info``).
 
 Deliberate deviations / options (documented in the parameters): a Gauss-Legendre radial rule
-for accuracy (``rule="gauss"``, default for non-MERL input), an optional ``hotspot="G2"``
-backscattering model consistent with the height-correlated Smith term used for rendering,
+for accuracy (``rule="gauss"``, default for non-MERL input), the ``hotspot="G2"``
+backscattering model (default) consistent with the height-correlated Smith term used for
+rendering (the paper's Eq. 11 with G1 is ``hotspot="G1"``),
 a tolerance-based stop, and per-channel distributions.
 
 Conversions to analytic roughness by slope moments (Appendix C) are in :func:`to_beckmann`,
@@ -113,7 +114,7 @@ def backscatter(brdf: BRDF, theta, phi=None, rule: str | None = None):
 
 
 def solve_slope_pdf(b, rule: str = "merl", iterations: int = 4, tol: float | None = None,
-                    max_iterations: int = 1000, hotspot: str = "G1"):
+                    max_iterations: int = 1000, hotspot: str = "G2"):
     """Power iteration for the slope PDF from backscattering ``b`` (Eq. 14-18, Alg. 1/3).
 
     Parameters
@@ -371,7 +372,7 @@ def _fit_one(brdf, channel, *, n, n_phi, rule, iterations, tol, max_iterations, 
 
 def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int = 4, tol: float | None = None,
                   anisotropic: bool | None = None, per_channel: bool = False, n_phi: int = 90,
-                  rule: str = "auto", hotspot: str = "G1", max_iterations: int = 1000,
+                  rule: str = "auto", hotspot: str = "G2", max_iterations: int = 1000,
                   fresnel_max: float = 100.0, p_floor: float = 1e-6):
     """Fit the tabulated microfacet model of Dupuy et al. 2015 to ``brdf``.
 
@@ -396,7 +397,10 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int = 4, tol: float | Non
         (``merl_table``) with ``n = 90`` (read at their own samples, supplemental Eq. 20-22),
         else ``"gauss"``.
     hotspot:
-        Backscattering shadowing model, ``"G1"`` (paper, Eq. 11) or ``"G2"`` (Eq. 2).
+        Backscattering shadowing model: ``"G2"`` (default; Eq. 2, the height-correlated term
+        the fitted model is evaluated and rendered with, so the fit reproduces the input's
+        backscattering under its own ``eval``) or ``"G1"`` (the paper's Eq. 11, which biases
+        α by about −2 % at GGX α = 0.2 and −16 % at α = 0.8 for a G2 microsurface).
 
     Returns a ``MicrofacetBRDF(TabulatedSlopeDistribution, TabulatedFresnel)`` with
     ``fit_info`` (eigenvalue = F0 of the paper, relative change per iteration, timings) and
