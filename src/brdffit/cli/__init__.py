@@ -13,6 +13,15 @@ import sys
 import click
 import typer
 
+try:  # recent Typer vendors its own copy of Click; older ones use Click itself
+    from typer._click import exceptions as _typer_click
+except ImportError:  # pragma: no cover
+    _typer_click = click.exceptions
+
+_EXIT = tuple({click.exceptions.Exit, typer.Exit})
+_ABORT = tuple({click.exceptions.Abort, typer.Abort})
+_USAGE = tuple({click.ClickException, _typer_click.ClickException})
+
 from ..errors import BRDFError
 
 _COMMAND_MODULES = ["info", "convert", "fit", "render", "compare", "batch", "export", "demo"]
@@ -51,12 +60,14 @@ def main(argv: list[str] | None = None) -> int:
     debug = "--debug" in argv
     try:
         app(args=argv, prog_name="brdffit", standalone_mode=False)
-    except click.exceptions.Exit as exc:
+    except _EXIT as exc:
         return exc.exit_code
-    except click.exceptions.Abort:
+    except _ABORT:
         print("brdffit: aborted", file=sys.stderr)
         return 130
-    except click.ClickException as exc:
+    except _USAGE as exc:
+        if debug:
+            raise
         exc.show()
         return exc.exit_code
     except (BRDFError, OSError, ValueError) as exc:

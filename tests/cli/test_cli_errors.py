@@ -1,0 +1,21 @@
+"""The CLI's error contract: one line on stderr, non-zero status, no traceback (unless --debug)."""
+
+import pytest
+
+from brdffit.cli import main
+
+
+@pytest.mark.parametrize("argv, code", [
+    (["info", "--bogus"], 2),                         # usage error (Typer's vendored Click)
+    (["fit", "synthetic:gold-ggx", "--model", "nope"], 2),
+    (["info", "/nonexistent/file.binary"], 1),          # library error
+])
+def test_errors_are_short_and_have_a_status(argv, code, capsys):
+    assert main(argv) == code
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and err.strip()
+
+
+def test_debug_shows_the_traceback():
+    with pytest.raises(Exception, match="no such file"):
+        main(["--debug", "info", "/nonexistent/file.binary"])
