@@ -31,7 +31,6 @@ returned with pdf 0 (invalid samples), so ``pdf`` integrates to the valid fracti
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -433,9 +432,3 @@ class NPFBivariateBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
     def factors(self) -> dict[str, np.ndarray]:
         return {"B": self.B}
 
-
-def _check_math():  # pragma: no cover - tiny import-time sanity of the constants
-    assert math.isclose(G_THETA[-1], math.radians(89.0))
-
-
-_check_math()

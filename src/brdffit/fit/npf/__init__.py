@@ -43,10 +43,9 @@ from typing import Iterable
 import numpy as np
 
 from ...errors import FitError
-from ...evaluation.objective import ObjectiveData, ObjectiveOptions, prepare_objective
+from ...evaluation.objective import ObjectiveOptions, prepare_objective
 from ...grid import tabulate_merl_grid
-from ...microfacet.npf_model import (NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF,
-                                     smith_g_from_d)
+from ...microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF
 from . import _solver
 from ._solver import MFState, NaiveState, Samples
 
@@ -426,4 +425,3 @@ def _register_cli() -> None:
 
 
 _register_cli()
-_ = (ObjectiveData, smith_g_from_d)
