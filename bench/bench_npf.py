@@ -11,6 +11,7 @@ error.
 
 Variants (``--variants``, comma separated):
   indep1        independent-G, single start (data slices), up to --max-iter AWLS iterations
+  indep1lm      indep1 followed by ≥ 20 Levenberg–Marquardt polish iterations (extension)
   indep         independent-G, all starts (random ×4, ones, sgd, g-from-d, slices)
   gfromd        G-from-D
   naive         naive model (Eq. 4)
@@ -63,6 +64,9 @@ def variant_kwargs(v: str, args) -> dict:
     if base == "indep1":
         kw.update(variant="independent-g", starts=("slices",), start_max_iter=None,
                   max_iter=args.max_iter, polish=args.polish)
+    elif base == "indep1lm":
+        kw.update(variant="independent-g", starts=("slices",), start_max_iter=None,
+                  max_iter=args.max_iter, polish=max(args.polish, 20))
     elif base == "indep":
         kw.update(variant="independent-g", max_iter=args.max_iter, polish=args.polish,
                   start_max_iter=args.start_iter)
@@ -120,7 +124,7 @@ def summarise(rows: list[dict]) -> dict:
     for r in ok:
         by.setdefault(r["material"], {})[r["variant"]] = r
     findings = {}
-    for best in ("indep", "indep1"):
+    for best in ("indep", "indep1", "indep1lm"):
         for other in ("gfromd", "naive"):
             pairs = [(float(m[best]["objective"]), float(m[other]["objective"]))
                      for m in by.values() if best in m and other in m]
