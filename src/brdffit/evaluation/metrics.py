@@ -78,13 +78,11 @@ def __getattr__(name):
 # helpers
 # ------------------------------------------------------------------------------------------
 def npf_tonemap(img, exposure: float = 0.02, gamma: float = 2.2) -> np.ndarray:
-    """Tone mapping of Bagher et al. 2016 §5: ``(1 - 2^(-exposure·x))^(1/gamma)``.
+    """Tone mapping of Bagher et al. 2016 §5, ``(1 - 2^(-exposure·x))^(1/gamma)``
+    (:func:`brdffit.evaluation.tonemap.tonemap` with a fixed exposure)."""
+    from .tonemap import tonemap
 
-    Negative and non-finite inputs are clamped to 0 first; output lies in [0, 1).
-    """
-    x = np.nan_to_num(np.asarray(img, dtype=np.float64), nan=0.0, posinf=0.0, neginf=0.0)
-    x = np.maximum(x, 0.0)
-    return np.power(1.0 - np.exp2(-exposure * x), 1.0 / gamma)
+    return tonemap(img, exposure, gamma)
 
 
 def _check_pair(reference, test, mask):

@@ -15,6 +15,8 @@ import time
 
 import numpy as np
 
+from ..metrics import rendered_psnr as psnr  # Bagher 2016 §5 (one implementation)
+
 __all__ = ["RenderResult", "Renderer", "render", "render_ex", "noise_floor", "psnr",
            "foreground_mask"]
 
@@ -40,22 +42,6 @@ class RenderResult:
 def foreground_mask(alpha, threshold: float = 0.999) -> np.ndarray:
     """Pixels fully covered by the object (coverage ≥ ``threshold``)."""
     return np.asarray(alpha) >= threshold
-
-
-def psnr(reference, test, mask=None) -> float:
-    """Rendered PSNR of Bagher 2016 §5: linear values, over ``mask`` pixels, peak = the
-    maximum channel value of the reference's foreground. ``inf`` for identical images."""
-    ref = np.asarray(reference, dtype=np.float64)[..., :3]
-    tst = np.asarray(test, dtype=np.float64)[..., :3]
-    m = np.ones(ref.shape[:2], bool) if mask is None else np.asarray(mask, bool)
-    r, t = ref[m], tst[m]
-    mse = float(np.mean((r - t) ** 2)) if r.size else 0.0
-    peak = float(r.max()) if r.size else 0.0
-    if mse == 0.0:
-        return float("inf")
-    if peak <= 0.0:
-        return float("-inf")
-    return float(10.0 * np.log10(peak**2 / mse))
 
 
 def describe_evaluator(ev) -> str:
