@@ -41,8 +41,10 @@ def register(app: typer.Typer) -> None:
                              update_index=k == len(materials) - 1)
             rows = []
             for m in result.get("models", []):
-                psnr = (m.get("metrics") or {}).get("psnr")
-                if m.get("status") != "ok":
+                psnr = m.get("psnr")
+                if m.get("status") == "skipped":
+                    rows.append(f"{m['name']}: skipped ({m.get('error')})")
+                elif m.get("status") != "ok":
                     failures += 1
                     rows.append(f"{m['name']}: FAILED ({m.get('error', '?')})")
                 else:

@@ -21,7 +21,6 @@ still make it into the report.
 
 from __future__ import annotations
 
-import importlib
 import time
 import traceback
 from pathlib import Path
@@ -38,16 +37,6 @@ __all__ = ["compare", "compare_many", "resolve_reference", "resolve_fitter", "fi
            "model_params", "DEFAULT_MODELS"]
 
 DEFAULT_MODELS = ("tabulated", "ggx", "beckmann", "sgd", "npf")
-
-# Fall-back names → (module, function) when brdffit.fit.registry does not provide a fitter.
-_FALLBACK_FITTERS = {
-    "tabulated": ("brdffit.fit.tabulated", "fit_tabulated"),
-    "ggx": ("brdffit.fit.tabulated", "fit_ggx"),
-    "beckmann": ("brdffit.fit.tabulated", "fit_beckmann"),
-    "sgd": ("brdffit.fit.sgd", "fit_sgd"),
-    "npf": ("brdffit.fit.npf", "fit_npf"),
-}
-
 
 # ------------------------------------------------------------------------------------------
 # inputs
@@ -67,43 +56,11 @@ def resolve_reference(source, material: str | None = None):
 
 
 def resolve_fitter(name: str) -> Callable:
-    """The fitting function registered under ``name`` (``brdffit.fit.registry``), falling back
-    to the functions named in :mod:`brdffit.fit`. Raises ``KeyError`` naming the known ones."""
-    known: list[str] = []
-    try:
-        reg = importlib.import_module("brdffit.fit.registry")
-    except ModuleNotFoundError as exc:
-        if exc.name != "brdffit.fit.registry":
-            raise
-        reg = None
-    if reg is not None:
-        for fn_name in ("get_fitter", "fitter", "lookup"):
-            fn = getattr(reg, fn_name, None)
-            if callable(fn):
-                try:
-                    return fn(name)
-                except (KeyError, LookupError, ValueError):
-                    break
-        for tab_name in ("FITTERS", "REGISTRY", "_REGISTRY", "_FITTERS"):
-            tab = getattr(reg, tab_name, None)
-            if isinstance(tab, Mapping):
-                known = sorted(tab)
-                if name in tab:
-                    entry = tab[name]
-                    return getattr(entry, "fit", entry) if not callable(entry) else entry
-        lst = getattr(reg, "list_fitters", None) or getattr(reg, "available", None)
-        if callable(lst) and not known:
-            try:
-                known = sorted(lst())
-            except Exception:  # noqa: BLE001
-                pass
-    if name in _FALLBACK_FITTERS:
-        mod, fn = _FALLBACK_FITTERS[name]
-        try:
-            return getattr(importlib.import_module(mod), fn)
-        except (ModuleNotFoundError, AttributeError) as exc:
-            raise KeyError(f"model {name!r}: fitter {mod}.{fn} is not available ({exc})") from None
-    raise KeyError(f"unknown model {name!r}; known: {sorted(set(known) | set(_FALLBACK_FITTERS))}")
+    """The fitting function registered under ``name`` (:mod:`brdffit.fit.registry`);
+    ``KeyError`` names the known ones."""
+    from ..fit.registry import get
+
+    return get(name).fit
 
 
 def model_params(model) -> dict:
@@ -140,6 +97,15 @@ def _small(obj, limit: int = 24):
     if isinstance(obj, np.generic):
         return obj.item()
     return obj
+
+
+def _isotropic_only(name: str) -> bool:
+    from ..fit.registry import get
+
+    try:
+        return get(name).isotropic_only
+    except KeyError:
+        return False
 
 
 def fit_model(name: str, reference, options: Mapping | None = None):
@@ -307,6 +273,9 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
                 model = load_fit(what)
                 rec["origin"] = f"loaded {what}"
                 rec["fit_time"] = _num((getattr(model, "fit_info", None) or {}).get("time"))
+            elif _isotropic_only(str(what)) and not getattr(reference, "isotropic", False):
+                rec.update(status="skipped", error=f"{what} fits isotropic BRDFs only")
+                continue
             else:
                 say(f"{mat_name}: fitting {label}")
                 model, rec["fit_time"] = fit_model(str(what), reference, fit_options.get(label))

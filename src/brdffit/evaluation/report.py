@@ -252,7 +252,7 @@ def write_material_page(out_dir, result: dict, colorbar: str | None = "../assets
                          f"<b>{label}</b><br>PSNR {_e(_fmt(m.get('psnr')))} dB</div>")
         else:
             cells.append(f'<div class="cell fail" style="width:{disp}px"><b>{label}</b><br>'
-                         f"failed: {_e(m.get('error', 'no image'))}</div>")
+                         f"{_e(m.get('status', 'failed'))}: {_e(m.get('error', 'no image'))}</div>")
     parts.append('<h2>Renderings</h2><div class="grid">' + "".join(cells) + "</div>")
     cells = []
     for m in models:
@@ -272,7 +272,7 @@ def write_material_page(out_dir, result: dict, colorbar: str | None = "../assets
         cls = "best" if best is not None and _num(m.get("psnr")) == best else ""
         if not _ok(m):
             rows.append(f'<tr class="fail"><td class="l">{_e(m.get("name"))}</td>'
-                        f'<td class="l" colspan="8">failed: {_e(m.get("error"))}</td></tr>')
+                        f'<td class="l" colspan="8">{_e(m.get("status", "failed"))}: {_e(m.get("error"))}</td></tr>')
             continue
         rows.append(f'<tr class="{cls}"><td class="l">{_e(m.get("name"))}</td>'
                     + _td(m.get("psnr")) + _td(m.get("mean_de2000"))
@@ -417,7 +417,7 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
         for n in names:
             m = by.get(n)
             if m is None or not _ok(m):
-                cells.append('<td class="fail" data-sort="">' + ("failed" if m else "–") + "</td><td></td>")
+                cells.append('<td class="fail" data-sort="">' + (_e(m.get("status", "failed")) if m else "–") + "</td><td></td>")
                 continue
             cls = "best" if best is not None and _num(m.get("psnr")) == best else ""
             cells.append(_td(m.get("psnr"), cls=cls) + _td(m.get("mean_de2000")))

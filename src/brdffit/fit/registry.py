@@ -32,6 +32,7 @@ class Fitter:
     fit: Callable[..., Any]
     summary: Callable[[Any], dict] | None = None
     description: str = ""
+    isotropic_only: bool = False  # needs eval_hd on an isotropic input (two-slice, NPF, ...)
 
     def accepts(self, option: str) -> bool:
         """True when the fitting function takes keyword ``option`` (or ``**kwargs``)."""
@@ -47,14 +48,14 @@ FITTERS: dict[str, Fitter] = {}
 
 
 def register_fitter(name: str, fn: Callable[..., Any], summary_fn: Callable | None = None,
-                    description: str | None = None) -> Fitter:
+                    description: str | None = None, *, isotropic_only: bool = False) -> Fitter:
     """Register ``fn`` under ``name`` (re-registering a name replaces it)."""
     if not callable(fn):
         raise TypeError(f"register_fitter({name!r}): fn must be callable, got {fn!r}")
     if summary_fn is not None and not callable(summary_fn):
         raise TypeError(f"register_fitter({name!r}): summary_fn must be callable")
     doc = description if description is not None else (inspect.getdoc(fn) or "").split("\n")[0]
-    entry = Fitter(str(name), fn, summary_fn, doc)
+    entry = Fitter(str(name), fn, summary_fn, doc, bool(isotropic_only))
     FITTERS[entry.name] = entry
     return entry
 

@@ -767,20 +767,15 @@ def _fit_ggx_ct(brdf, **kw):
 
 
 def _register_fitters() -> None:
-    try:
-        from .registry import register_fitter
-    except ImportError:          # pragma: no cover
-        return
-    register_fitter("sgd", fit_sgd, summary,
-                    "Bagher et al. 2012 Shifted Gamma Distribution, two-slice fit per channel")
-    register_fitter("beckmann-2s", fit_beckmann_two_slice, summary,
-                    "Bagher et al. 2012 two-slice fit with a Beckmann distribution")
-    register_fitter("ggx-2s", fit_ggx_two_slice, summary,
-                    "Bagher et al. 2012 two-slice fit with a GGX distribution")
-    register_fitter("beckmann-ct", _fit_beckmann_ct, summary,
-                    "Cook-Torrance (Beckmann) full-data weighted least squares, per channel")
-    register_fitter("ggx-ct", _fit_ggx_ct, summary,
-                    "Cook-Torrance (GGX) full-data weighted least squares, per channel")
+    from .registry import register_fitter
+
+    for name, fn, doc in (
+            ("sgd", fit_sgd, "Bagher et al. 2012 Shifted Gamma Distribution, two-slice fit per channel"),
+            ("beckmann-2s", fit_beckmann_two_slice, "Bagher et al. 2012 two-slice fit with a Beckmann distribution"),
+            ("ggx-2s", fit_ggx_two_slice, "Bagher et al. 2012 two-slice fit with a GGX distribution"),
+            ("beckmann-ct", _fit_beckmann_ct, "Cook-Torrance (Beckmann) full-data weighted least squares, per channel"),
+            ("ggx-ct", _fit_ggx_ct, "Cook-Torrance (GGX) full-data weighted least squares, per channel")):
+        register_fitter(name, fn, summary, doc, isotropic_only=True)
 
 
 _register_fitters()
