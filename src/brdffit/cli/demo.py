@@ -8,6 +8,9 @@ from pathlib import Path
 import typer
 
 DEMO_MODELS = "tabulated,ggx,beckmann,sgd,npf-g-from-d,npf"
+# The demo's independent-G NPF runs one start (from the G-from-D fit) for a bounded number of
+# AWLS iterations, to stay within a few minutes; `brdffit fit/compare` run all starts.
+DEMO_FIT_OPTIONS = {"npf": {"starts": ("g-from-d",), "max_iter": 60, "start_max_iter": 60}}
 
 
 def register(app: typer.Typer) -> None:
@@ -38,7 +41,7 @@ def register(app: typer.Typer) -> None:
         for k, (name, spec) in enumerate(materials):
             t = time.perf_counter()
             result = compare(spec, model_list, out, name=name, spp=spp, resolution=resolution,
-                             update_index=k == len(materials) - 1)
+                             fit_options=DEMO_FIT_OPTIONS, update_index=k == len(materials) - 1)
             rows = []
             for m in result.get("models", []):
                 psnr = m.get("psnr")
