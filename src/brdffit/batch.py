@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 from ._atomic import atomic_write
+from ._json import json_default
 from .errors import BRDFError
 
 __all__ = ["Task", "enumerate_materials", "make_tasks", "run_task", "run_batch",
@@ -130,17 +131,7 @@ def make_tasks(materials: Iterable[tuple[str, str]], models: Sequence[str],
 
 def _write_json(path: Path, obj: dict) -> None:
     with atomic_write(path, "w") as fh:
-        json.dump(obj, fh, indent=1, sort_keys=True, default=_json_default)
-
-
-def _json_default(obj):
-    import numpy as np
-
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    return str(obj)
+        json.dump(obj, fh, indent=1, sort_keys=True, default=json_default)
 
 
 def run_task(task: Task, out_dir, metrics: bool = True) -> dict:

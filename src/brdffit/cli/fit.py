@@ -17,6 +17,8 @@ from pathlib import Path
 
 import typer
 
+from .._json import json_default
+
 __all__ = ["register", "parse_options", "run_fit"]
 
 
@@ -106,7 +108,7 @@ def register(app: typer.Typer) -> None:
             opts["iterations"] = iterations
         _, summary = run_fit(spec, model, out, opts)
         if as_json:
-            typer.echo(json.dumps(summary, default=_json_default, sort_keys=True))
+            typer.echo(json.dumps(summary, default=json_default, sort_keys=True))
             return
         typer.echo(f"{spec}: {model} fit in {summary.get('time_s', 0.0):.3f} s")
         for key in ("eigenvalue", "iterations", "relative_change", "beckmann_alpha", "ggx_alpha",
@@ -118,13 +120,3 @@ def register(app: typer.Typer) -> None:
         for key, val in summary.items():
             if key not in shown and val is not None and not isinstance(val, dict):
                 typer.echo(f"  {key:16s} {_fmt(val)}")
-
-
-def _json_default(obj):
-    import numpy as np
-
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    return str(obj)

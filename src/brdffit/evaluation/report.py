@@ -31,6 +31,7 @@ from typing import Iterable
 import numpy as np
 
 from .._atomic import atomic_write
+from .._json import json_default
 
 __all__ = ["RESULT_NAME", "slugify", "write_result", "read_results", "write_material_page",
            "write_index", "local_links", "missing_links", "summarize"]
@@ -105,16 +106,6 @@ def slugify(name: str) -> str:
     return s or "material"
 
 
-def _json_default(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    return repr(obj)
-
-
 def _clean(obj):
     """Replace non-finite floats by strings so the JSON stays standard ("inf", "nan")."""
     if isinstance(obj, dict):
@@ -132,7 +123,7 @@ def write_result(material_dir, result: dict) -> Path:
     """Write ``result.json`` of one material atomically."""
     path = Path(material_dir) / RESULT_NAME
     with atomic_write(path, "w") as fh:
-        json.dump(_clean(result), fh, indent=1, default=_json_default, allow_nan=False)
+        json.dump(_clean(result), fh, indent=1, default=json_default, allow_nan=False)
     return path
 
 
@@ -312,7 +303,7 @@ def write_material_page(out_dir, result: dict, colorbar: str | None = "../assets
             link = (f' (<a href="{_e(m["fit_file"])}">fit file</a>)' if m.get("fit_file") else "")
             prm.append(f"<h3>{_e(m.get('name'))}{link}</h3><pre>"
                        + _e(json.dumps({"params": p, "fit_info": info}, indent=1,
-                                       default=_json_default)[:6000]) + "</pre>")
+                                       default=json_default)[:6000]) + "</pre>")
     if prm:
         parts.append("<h2>Fitted parameters</h2>" + "".join(prm))
     if result.get("notes"):
@@ -432,7 +423,7 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
         fh.write(_page(title, "\n".join(parts)))
     summ_path = out_dir / "summary.json"
     with atomic_write(summ_path, "w") as fh:
-        json.dump(_clean(summ), fh, indent=1, default=_json_default, allow_nan=False)
+        json.dump(_clean(summ), fh, indent=1, default=json_default, allow_nan=False)
     return path
 
 

@@ -23,6 +23,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from .._atomic import atomic_write
+from .._json import strict_json_default
 from ..errors import BRDFFormatError
 
 __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "SerializableModel", "save_fit", "load_fit",
@@ -83,16 +84,6 @@ def source_checksum(spec) -> str | None:
     return h.hexdigest()
 
 
-def _json_default(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"not JSON serialisable: {type(obj).__name__}")
-
-
 def save_fit(model, path, *, source=None, options: dict | None = None,
              fit_info: dict | None = None) -> Path:
     """Write ``model`` to ``path`` (``.npz``) atomically and return the path."""
@@ -118,7 +109,7 @@ def save_fit(model, path, *, source=None, options: dict | None = None,
     for key in arrays:
         if key.startswith("__"):
             raise ValueError(f"array name {key!r} is reserved")
-    blob = json.dumps(header, default=_json_default, sort_keys=True).encode("utf-8")
+    blob = json.dumps(header, default=strict_json_default, sort_keys=True).encode("utf-8")
     path = Path(path)
     with atomic_write(path) as fh:
         np.savez(fh, __header__=np.frombuffer(blob, dtype=np.uint8),
