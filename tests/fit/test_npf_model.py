@@ -221,7 +221,7 @@ def test_sampling_chi2_detects_wrong_pdf():
 
 
 def test_compressive_objective_of_two_brdfs():
-    from brdffit.evaluation.objective import compressive_objective, cosine_weighted_relative_error
+    from brdffit.evaluation.objective import compressive_objective, weighted_mean_relative_error
 
     mf, _, _ = make_models()
     same = compressive_objective(mf, mf)
@@ -231,5 +231,5 @@ def test_compressive_objective_of_two_brdfs():
     o_nc = compressive_objective(brighter, mf, ObjectiveOptions(compressive=False))
     assert o["objective"] > 0 and o["normalised"] == pytest.approx(0.01, rel=1e-9)
     assert o_nc["normalised"] == pytest.approx(0.01, rel=1e-9)
-    rel = cosine_weighted_relative_error(brighter, mf)
+    rel = weighted_mean_relative_error(brighter, mf)
     assert rel["relative_error"] == pytest.approx(0.1, rel=0.02)

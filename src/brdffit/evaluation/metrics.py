@@ -22,7 +22,7 @@ BRDF space (functions of two BRDFs, independent of rendering)
   and :mod:`brdffit.evaluation.objective` (attribute access raises ``AttributeError`` naming
   the missing module otherwise). :class:`BRDFMetrics` wraps all three with the reference
   prepared once and scalar results.
-* Not to be confused with ``objective.cosine_weighted_relative_error`` (a weighted *mean of
+* Not to be confused with ``objective.weighted_mean_relative_error`` (a weighted *mean of
   per-sample relative errors* on the MERL grid): the one here is a *ratio of integrals*.
 
 Database summaries

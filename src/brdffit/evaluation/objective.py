@@ -21,7 +21,7 @@ itself, Eq. 9 is exactly zero on the whole θh = 0 and θd = 0 rows, which would
 factor components D₀ and F₀ without any equation in the AWLS updates (Eq. 14).
 
 This module is also the objective "as a function of two BRDFs" for the metrics code:
-:func:`compressive_objective` and :func:`cosine_weighted_relative_error`.
+:func:`compressive_objective` and :func:`weighted_mean_relative_error`.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ from ..grid import N_PHI_D, N_THETA_D, N_THETA_H, merl_phi_d, merl_theta_d, merl
 __all__ = [
     "ObjectiveOptions", "ObjectiveData", "merl_grid_geometry", "volume_form_weight",
     "compressive_weight", "weighted_median", "prepare_objective", "objective_from_values",
-    "compressive_objective", "cosine_weighted_relative_error",
+    "compressive_objective", "weighted_mean_relative_error",
 ]
 
 
@@ -228,7 +228,7 @@ def compressive_objective(fit, reference, options: ObjectiveOptions | None = Non
     return objective_from_values(fit_values, ref_values, ref_valid, options)
 
 
-def cosine_weighted_relative_error(fit, reference, eps_fraction: float = 0.01,
+def weighted_mean_relative_error(fit, reference, eps_fraction: float = 0.01,
                                    max_theta_io_deg: float = 89.0) -> dict:
     """Cosine-weighted mean relative error on the MERL grid.
 
@@ -249,7 +249,7 @@ def cosine_weighted_relative_error(fit, reference, eps_fraction: float = 0.01,
 
 def relative_error_from_values(fit_values, values, valid=None, eps_fraction: float = 0.01,
                                max_theta_io_deg: float = 89.0) -> dict:
-    """:func:`cosine_weighted_relative_error` on tables already on the MERL grid."""
+    """:func:`weighted_mean_relative_error` on tables already on the MERL grid."""
     data = prepare_objective(values, valid, ObjectiveOptions(compressive=False,
                                                              max_theta_io_deg=max_theta_io_deg))
     f = np.asarray(fit_values, dtype=np.float64).reshape(-1, 3)[data.index].T
