@@ -37,7 +37,9 @@ The naive model has the same ambiguity in (ρs, D, F, H).
 
 from __future__ import annotations
 
+import os
 import time
+from concurrent.futures import ThreadPoolExecutor
 from typing import Iterable
 
 import numpy as np
@@ -162,6 +164,15 @@ def _check_state(arrays, what):
             raise FitError(f"{what}: expected finite factors, found NaN/inf")
         if np.any(np.asarray(a) < 0):
             raise FitError(f"{what}: expected non-negative factors, found negative values")
+
+
+def _n_threads() -> int:
+    """Threads for the independent-G starts: the CPUs available, or ``$OMP_NUM_THREADS`` when
+    set (Dask workers set it to their thread count, so a batch does not oversubscribe)."""
+    env = os.environ.get("OMP_NUM_THREADS", "")
+    if env.isdigit() and int(env) > 0:
+        return int(env)
+    return len(os.sched_getaffinity(0))
 
 
 def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
@@ -308,13 +319,22 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
                                  "G-from-D fit"))
     runs = []
     best = None
+
+    def run_start(st):
+        return _solver.run_independent_g(st, smp, eps=eps, smoothing=g_smoothing, tol=tol,
+                                         max_iter=screen, extrapolate=extrapolate,
+                                         callback=callback)
+
+    # The starts are independent: run them on parallel threads (the AWLS kernels release the
+    # GIL) and merge the results in the fixed order of ``starts``, so the fit is deterministic.
+    todo = [st for _, st, _ in start_states if st is not None]
+    with ThreadPoolExecutor(max_workers=max(1, min(_n_threads(), len(todo)))) as pool:
+        results = iter(list(pool.map(run_start, todo)))
     for label, st, note in start_states:
         if st is None:
             runs.append({"start": label, "status": note})
             continue
-        res = _solver.run_independent_g(st, smp, eps=eps, smoothing=g_smoothing, tol=tol,
-                                        max_iter=screen, extrapolate=extrapolate,
-                                        callback=callback)
+        res = next(results)
         ok = all(np.all(np.isfinite(a)) for a in _arrays(res.state))
         entry = {"start": label, "status": "ok" if ok else "non-finite", "note": note,
                  "objective": float(res.E.sum()), "objective_per_channel": res.E.tolist(),
