@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import random_direction_pairs  # bench/ is on sys.path when run as a script
 
 from brdffit._atomic import atomic_write
 from brdffit.io import load, read_merl, read_utia, write_merl, write_utia
@@ -43,16 +44,6 @@ def _best(fn, repeat):
     return min(times), times
 
 
-def _directions(n, seed=0):
-    rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(2):
-        v = rng.normal(size=(n, 3))
-        v[:, 2] = np.abs(v[:, 2])
-        out.append(v / np.linalg.norm(v, axis=1, keepdims=True))
-    return out
-
-
 def main() -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1_000_000, help="evaluations per figure")
@@ -64,7 +55,7 @@ def main() -> dict:
     results: dict = {"n_evals": args.n, "repeat": args.repeat, "cpu_count": os.cpu_count(),
                      "machine": platform.machine(), "python": platform.python_version(),
                      "loadavg_1min_before": os.getloadavg()[0]}
-    wi, wo = _directions(args.n)
+    wi, wo = random_direction_pairs(args.n)
     with tempfile.TemporaryDirectory() as tmp:
         merl_path = Path(tmp) / "bench.binary"
         if zspec.is_file():

@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import random_direction_pairs  # bench/ is on sys.path when run as a script
 
 from brdffit._atomic import atomic_write
 from brdffit.microfacet import (GGX, Beckmann, ConductorFresnel, DielectricFresnel,
@@ -52,16 +53,6 @@ def _best(fn, repeat):
     return min(times), times, min(cpu)
 
 
-def _directions(n, seed=0):
-    rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(2):
-        v = rng.normal(size=(n, 3))
-        v[:, 2] = np.abs(v[:, 2])
-        out.append(v / np.linalg.norm(v, axis=1, keepdims=True))
-    return out
-
-
 def main() -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=1_000_000, help="evaluations per timing")
@@ -75,7 +66,7 @@ def main() -> dict:
                  "n_eval": args.n, "eval_seconds": {}, "chi2": {}, "g1_max_rel_error": {}}
 
     # -- eval timings ------------------------------------------------------------------------
-    wi, wo = _directions(args.n)
+    wi, wo = random_direction_pairs(args.n)
     models = {
         "ggx_iso_schlick": MicrofacetBRDF(GGX(0.3), SchlickFresnel(0.04)),
         "ggx_aniso_rho_schlick": MicrofacetBRDF(GGX(0.1, 0.4, 0.5), SchlickFresnel(0.04)),

@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _common import random_direction_pairs  # bench/ is on sys.path when run as a script
 
 from brdffit._atomic import atomic_write
 from brdffit.io.rgl import read_rgl
@@ -40,16 +41,6 @@ def _best(fn, repeat):
         fn()
         times.append(time.perf_counter() - t)
     return min(times)
-
-
-def _directions(n, seed=0):
-    rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(2):
-        v = rng.normal(size=(n, 3))
-        v[:, 2] = np.abs(v[:, 2])
-        out.append(v / np.linalg.norm(v, axis=1, keepdims=True))
-    return out
 
 
 def _mitsuba():
@@ -84,8 +75,8 @@ def main() -> dict:
     if not files:
         raise SystemExit(f"no RGL files found in {RGL_DIR}")
     mi = None if args.no_mitsuba else _mitsuba()
-    wi, wo = _directions(args.n)
-    ci, co = (v.astype(np.float32).astype(np.float64) for v in _directions(args.n_check, seed=1))
+    wi, wo = random_direction_pairs(args.n)
+    ci, co = (v.astype(np.float32).astype(np.float64) for v in random_direction_pairs(args.n_check, seed=1))
 
     result = {"n_evals": args.n, "repeat": args.repeat, "cpu_count": os.cpu_count(),
               "machine": platform.machine(), "python": platform.python_version(),
