@@ -12,6 +12,12 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _lerp(G, c, k, t):  # pragma: no cover
+    """G of channel ``c`` linearly interpolated between samples ``k`` and ``k + 1``."""
+    return G[c, k] + t * (G[c, k + 1] - G[c, k])
+
+
 @njit(cache=True, nogil=True)
 def p_stats(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz):  # pragma: no cover
     """Accumulate per (θh, θd) bin ``S1 = Σ w P``, ``S2 = Σ w P²``, ``Spz = Σ w P z`` for the
@@ -30,8 +36,8 @@ def p_stats(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz):  # 
         s = gto[j]
         ic = inv_cc[j]
         for c in range(3):
-            g_i = G[c, a] + t * (G[c, a + 1] - G[c, a])
-            g_o = G[c, b] + s * (G[c, b + 1] - G[c, b])
+            g_i = _lerp(G, c, a, t)
+            g_o = _lerp(G, c, b, s)
             P = g_i * g_o * ic
             wj = w[c, j]
             zj = z[c, j]
@@ -66,8 +72,8 @@ def g_normal_equations(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
         s = gto[j]
         ic = inv_cc[j]
         for c in range(3):
-            g_i = G[c, a] + t * (G[c, a + 1] - G[c, a])
-            g_o = G[c, b] + s * (G[c, b + 1] - G[c, b])
+            g_i = _lerp(G, c, a, t)
+            g_o = _lerp(G, c, b, s)
             wj = w[c, j]
             r = z[c, j] - rho_d[c]
             xk = X[c, k] * ic
@@ -121,8 +127,8 @@ def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_
         idx[2] = b
         idx[3] = b + 1
         for c in range(3):
-            g_i = G[c, a] + t * (G[c, a + 1] - G[c, a])
-            g_o = G[c, b] + s * (G[c, b + 1] - G[c, b])
+            g_i = _lerp(G, c, a, t)
+            g_o = _lerp(G, c, b, s)
             P = g_i * g_o * ic
             df = D[c, h] * F[c, d]
             q = rho_s[c] * df * ic
