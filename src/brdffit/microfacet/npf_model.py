@@ -86,6 +86,16 @@ def _lerp_periodic(table: np.ndarray, u: np.ndarray) -> np.ndarray:
     return table[i0] * (1.0 - t) + table[(i0 + 1) % n] * t
 
 
+def _hd_cosines(theta_h, theta_d, phi_d):
+    """Broadcast Rusinkiewicz angles and return them with ``cos θi``, ``cos θo``
+    (``cos θh cos θd ∓ sin θh sin θd cos φd``, the φh-independent form)."""
+    th, td, pd = np.broadcast_arrays(*(np.asarray(x, dtype=np.float64)
+                                       for x in (theta_h, theta_d, phi_d)))
+    a = np.cos(th) * np.cos(td)
+    b = np.sin(th) * np.sin(td) * np.cos(pd)
+    return th, td, pd, a - b, a + b
+
+
 def _as_table(x, n, name) -> np.ndarray:
     a = np.asarray(x, dtype=np.float64)
     if a.ndim == 1:
@@ -288,11 +298,7 @@ class NPFMicrofacetBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
         return np.where(((ci > 0) & (co > 0))[..., None], f, 0.0)
 
     def eval_hd(self, theta_h, theta_d, phi_d):
-        th, td, pd = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)
-                                           for a in (theta_h, theta_d, phi_d)))
-        a = np.cos(th) * np.cos(td)
-        b = np.sin(th) * np.sin(td) * np.cos(pd)
-        ci, co = a - b, a + b                                             # Eq. 1-2
+        th, td, pd, ci, co = _hd_cosines(theta_h, theta_d, phi_d)
         ti, to = np.arccos(np.clip(ci, -1, 1)), np.arccos(np.clip(co, -1, 1))
         f = self.rho_d + self.rho_s * self._spec(th, td, ti, to, ci, co)
         return np.where(((ci > 0) & (co > 0))[..., None], f, 0.0)
@@ -349,14 +355,10 @@ class NPFNaiveBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
         self._h_cdf = None
 
     def eval_hd(self, theta_h, theta_d, phi_d):
-        th, td, pd = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)
-                                           for a in (theta_h, theta_d, phi_d)))
+        th, td, pd, ci, co = _hd_cosines(theta_h, theta_d, phi_d)
         spec = (_lerp(self.D, _u_theta_h(th)) * _lerp(self.F, _u_theta_d(td))
                 * _lerp_periodic(self.H, np.mod(pd, np.pi) / (np.pi / N_PHI_D)))
-        a = np.cos(th) * np.cos(td)
-        b = np.sin(th) * np.sin(td) * np.cos(pd)
-        above = (a - b > 0) & (a + b > 0)
-        return np.where(above[..., None], self.rho_d + self.rho_s * spec, 0.0)
+        return np.where(((ci > 0) & (co > 0))[..., None], self.rho_d + self.rho_s * spec, 0.0)
 
     def _spec_profile(self):
         return (self.rho_s * self.D * self.F.max(axis=0) * self.H.max(axis=0)).mean(axis=1)
@@ -399,8 +401,7 @@ class NPFBivariateBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
         self._h_cdf = None
 
     def eval_hd(self, theta_h, theta_d, phi_d):
-        th, td, pd = np.broadcast_arrays(*(np.asarray(a, dtype=np.float64)
-                                           for a in (theta_h, theta_d, phi_d)))
+        th, td, pd, ci, co = _hd_cosines(theta_h, theta_d, phi_d)
         uh = np.clip(_u_theta_h(th), 0.0, N_THETA_H - 1.0)
         ud = np.clip(_u_theta_d(td), 0.0, N_THETA_D - 1.0)
         i0 = np.minimum(uh.astype(np.int64), N_THETA_H - 2)
@@ -410,10 +411,7 @@ class NPFBivariateBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
         B = self.B
         v = ((1 - s) * (1 - t) * B[i0, j0] + s * (1 - t) * B[i0 + 1, j0]
              + (1 - s) * t * B[i0, j0 + 1] + s * t * B[i0 + 1, j0 + 1])
-        a = np.cos(th) * np.cos(td)
-        b = np.sin(th) * np.sin(td) * np.cos(pd)
-        above = (a - b > 0) & (a + b > 0)
-        return np.where(above[..., None], v, 0.0)
+        return np.where(((ci > 0) & (co > 0))[..., None], v, 0.0)
 
     def _spec_profile(self):
         return self.B.max(axis=1).mean(axis=1)
