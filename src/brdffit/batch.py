@@ -9,10 +9,20 @@ means the task's outputs are complete. Output layout::
     OUT/records/<material>/<model>.json   status, metrics, parameters, timings, task key
     OUT/summary.csv, OUT/summary.json     one row per material × model
 
+**Rendering (optional).** With :class:`RenderSettings`, each material also gets one render
+task that waits for its fits, renders the reference and every fitted model with Mitsuba 3
+(:func:`brdffit.evaluation.compare.compare` on the saved fit files, no refitting) and writes
+its report page; the run ends by rebuilding the report index over the whole database::
+
+    OUT/report/<material>/index.html      renderings, dE2000 maps, plots, metrics
+    OUT/report/index.html, summary.json   every material; per-model PSNR/dE2000, wins/ties
+    OUT/renders/<material>.json           render record (status, PSNR/dE2000, task key)
+
 **Resuming.** Each task has a key: a hash of the load spec, the checksum of the file behind
 it, the model name, the options and the fit-file format version. A re-run skips a task whose
 record exists with the same key (``ok``, or ``failed`` unless ``retry_failed``) and redoes it
-when the key changed. Killing a run loses at most the tasks in flight.
+when the key changed. Killing a run loses at most the tasks in flight. A render task's key
+covers the keys of the fits it renders and the render settings.
 """
 
 from __future__ import annotations
@@ -29,8 +39,9 @@ from ._atomic import atomic_write
 from ._json import json_default
 from .errors import BRDFError
 
-__all__ = ["Task", "enumerate_materials", "make_tasks", "run_task", "run_batch",
-           "read_records", "write_summary", "TIMING_FIELDS"]
+__all__ = ["Task", "RenderSettings", "RenderTask", "enumerate_materials", "make_tasks",
+           "make_render_tasks", "run_task", "run_render_task", "run_batch", "read_records",
+           "write_summary", "TIMING_FIELDS"]
 
 #: Record fields that legitimately differ between two runs of the same task.
 TIMING_FIELDS = ("fit_time_s", "metrics_time_s", "metrics_seconds", "wall_time_s", "finished",
@@ -65,6 +76,43 @@ class Task:
 
     def record_path(self, out: Path) -> Path:
         return out / "records" / _safe(self.material) / f"{_safe(self.model)}.json"
+
+
+@dataclasses.dataclass(frozen=True)
+class RenderSettings:
+    """The render stage of a batch: scene, samples per pixel, image size, seed, and whether
+    to render the reference twice to measure the Monte Carlo noise floor (as
+    :func:`brdffit.evaluation.compare.compare`, whose defaults are the report's settings)."""
+
+    scene: str = "sphere-env"
+    spp: int = 64
+    resolution: int = 128
+    seed: int = 0
+    noise_floor: bool = True
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclasses.dataclass(frozen=True)
+class RenderTask:
+    """Render the reference and the fits of one material and write its report page."""
+
+    material: str
+    spec: str
+    fits: tuple  # (model, fit-task key) pairs, in the batch's model order
+    settings: RenderSettings = RenderSettings()
+
+    def key(self) -> str:
+        from .io.fitfile import source_checksum
+
+        payload = {"spec": self.spec, "source_sha256": source_checksum(self.spec),
+                   "fits": list(self.fits), "render": self.settings.as_dict()}
+        blob = json.dumps(payload, sort_keys=True, default=str).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+    def record_path(self, out: Path) -> Path:
+        return out / "renders" / f"{_safe(self.material)}.json"
 
 
 def _safe(name: str) -> str:
@@ -129,6 +177,14 @@ def make_tasks(materials: Iterable[tuple[str, str]], models: Sequence[str],
             for name, spec in materials for model in models]
 
 
+def make_render_tasks(tasks: Sequence[Task], settings: RenderSettings) -> list[RenderTask]:
+    """One :class:`RenderTask` per material of ``tasks`` (covering all its models)."""
+    fits: dict[tuple[str, str], list] = {}
+    for t in tasks:
+        fits.setdefault((t.material, t.spec), []).append((t.model, t.key()))
+    return [RenderTask(m, spec, tuple(f), settings) for (m, spec), f in fits.items()]
+
+
 def _write_json(path: Path, obj: dict) -> None:
     with atomic_write(path, "w") as fh:
         json.dump(obj, fh, indent=1, sort_keys=True, default=json_default)
@@ -176,7 +232,61 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
     return record
 
 
-def _existing(task: Task, out: Path) -> dict | None:
+def run_render_task(task: RenderTask, out_dir, *after) -> dict:
+    """Render one material's reference and saved fits and write its report page.
+
+    ``after`` are ignored: Dask passes the results of the fit tasks there, so this task starts
+    when they are done. Fits whose record is missing, failed or out of date are left out of
+    the page (and listed in the record's ``missing_fits``); a failure is recorded, not raised.
+    """
+    import os
+    import socket
+
+    from .evaluation.compare import compare
+    from .io import load
+
+    out = Path(out_dir)
+    record: dict[str, Any] = {"material": task.material, "spec": task.spec, "model": "render",
+                              "settings": task.settings.as_dict(), "key": task.key(),
+                              "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    t0 = time.perf_counter()
+    try:
+        models, missing = {}, []
+        for model, key in task.fits:
+            fit_task = Task(task.material, task.spec, model)
+            try:
+                rec = json.loads(fit_task.record_path(out).read_text())
+            except (FileNotFoundError, json.JSONDecodeError):
+                rec = {}
+            if rec.get("status") == "ok" and rec.get("key") == key:
+                models[model] = str(out / rec["fit_file"])
+            else:
+                missing.append(model)
+        record["missing_fits"] = missing
+        st = task.settings
+        result = compare(load(task.spec), models, out / "report", name=task.material,
+                         scene=st.scene, spp=st.spp, resolution=st.resolution, seed=st.seed,
+                         noise_floor=st.noise_floor, save_fits=False, update_index=False)
+        record["report_page"] = f"report/{result['slug']}/index.html"
+        record["noise_floor_psnr"] = result.get("noise_floor_psnr")
+        record["models"] = {m["name"]: {k: m.get(k) for k in ("status", "error", "psnr",
+                                                                "mean_de2000", "render_time")}
+                            for m in result["models"]}
+        failed = [n for n, m in record["models"].items() if m["status"] != "ok"]
+        record["status"] = "failed" if failed else "ok"
+        if failed:
+            record["error"] = "; ".join(f"{n}: {record['models'][n]['error']}" for n in failed)
+    except Exception as exc:  # noqa: BLE001 – recorded, the batch goes on
+        record["status"] = "failed"
+        record["error"] = f"{type(exc).__name__}: {exc}"
+        record["traceback"] = traceback.format_exc(limit=8)
+    record["wall_time_s"] = time.perf_counter() - t0
+    record["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S")
+    _write_json(task.record_path(out), record)
+    return record
+
+
+def _existing(task: Task | RenderTask, out: Path) -> dict | None:
     path = task.record_path(out)
     try:
         rec = json.loads(path.read_text())
@@ -236,26 +346,30 @@ def _client(scheduler: str | None, workers: int, memory_limit: str | None):
     if scheduler:
         return Client(scheduler), None
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           host="127.0.0.1", dashboard_address=None,
+                           host="127.0.0.1", dashboard_address=":0",
                            memory_limit=memory_limit or "auto", silence_logs=40)
     return Client(cluster), cluster
 
 
 def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
               workers: int = 2, memory_limit: str | None = None, metrics: bool = True,
-              retry_failed: bool = False, progress: Callable | bool = True) -> dict:
+              render: RenderSettings | None = None, retry_failed: bool = False,
+              progress: Callable | bool = True) -> dict:
     """Run ``tasks`` on Dask, skipping finished ones; return counts and the records.
 
     ``scheduler``: address of an existing Dask scheduler (``tcp://host:port``); by default a
-    local cluster of ``workers`` processes with one thread each. ``progress``: ``True`` for a
-    Rich progress bar, ``False`` for none, or a callable ``(record) -> None``.
+    local cluster of ``workers`` processes with one thread each. ``render``: also render
+    every material once its fits are done and write the report (module docstring).
+    ``progress``: ``True`` for a Rich progress bar, ``False`` for none, or a callable
+    ``(record) -> None``.
     """
     from dask.distributed import as_completed
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    render_tasks = make_render_tasks(tasks, render) if render is not None else []
     todo, skipped = [], []
-    for t in tasks:
+    for t in [*tasks, *render_tasks]:
         rec = _existing(t, out)
         if rec is not None and (rec.get("status") == "ok" or not retry_failed):
             skipped.append(rec)
@@ -266,9 +380,17 @@ def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
     if todo:
         client, cluster = _client(scheduler, workers, memory_limit)
         try:
-            futures = [client.submit(run_task, t, str(out), metrics, pure=False,
-                                     key=f"brdffit-{_safe(t.material)}-{_safe(t.model)}-{t.key()}")
-                       for t in todo]
+            futures, by_material = [], {}
+            for t in todo:
+                if isinstance(t, Task):
+                    fut = client.submit(run_task, t, str(out), metrics, pure=False,
+                                        key=f"brdffit-{_safe(t.material)}-{_safe(t.model)}-{t.key()}")
+                    by_material.setdefault(t.material, []).append(fut)
+                else:
+                    fut = client.submit(run_render_task, t, str(out),
+                                        *by_material.get(t.material, []), pure=False,
+                                        key=f"brdffit-{_safe(t.material)}-render-{t.key()}")
+                futures.append(fut)
             with _Progress(todo, enabled=progress is True) as bar:
                 for fut in as_completed(futures):
                     rec = fut.result()
@@ -282,7 +404,11 @@ def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
                 cluster.close()
     records = read_records(out)
     write_summary(out, records)
-    return {"ran": len(done), "skipped": len(skipped),
+    if render_tasks:
+        from .evaluation.report import write_index
+
+        write_index(out / "report", title=f"brdffit batch report – {out.name}")
+    return {"ran": len(done), "skipped": len(skipped), "render_tasks": len(render_tasks),
             "failed": sum(r.get("status") != "ok" for r in done),
             "wall_time_s": time.perf_counter() - t0, "records": records}
 
@@ -292,8 +418,9 @@ class _Progress:
 
     def __init__(self, tasks: Sequence[Task], enabled: bool):
         self.enabled = enabled
-        self.models = sorted({t.model for t in tasks})
-        self.total = {m: sum(t.model == m for t in tasks) for m in self.models}
+        kinds = [getattr(t, "model", "render") for t in tasks]
+        self.models = sorted(set(kinds))
+        self.total = {m: kinds.count(m) for m in self.models}
 
     def __enter__(self):
         if self.enabled:

@@ -99,3 +99,40 @@ def test_kill_and_resume_matches_uninterrupted_run(tmp_path):
     # a second re-run does nothing
     log = subprocess.run(_batch_cmd(out), check=True, timeout=300, capture_output=True, text=True)
     assert f"0 run (0 failed), {n_tasks} already done" in log.stdout
+
+
+@pytest.mark.slow
+def test_render_stage_writes_a_report_and_resumes(tmp_path):
+    """``--render``: one render task per material after its fits, a report page per material,
+    an index over the database; a re-run renders nothing, a new model re-renders."""
+    pytest.importorskip("mitsuba")
+    from brdffit.evaluation.report import missing_links
+
+    out = tmp_path / "run"
+    cmd = [sys.executable, "-m", "brdffit", "batch", "synthetic:gold-ggx,plastic-beckmann",
+           "--out", str(out), "--workers", "2", "--quiet", "--render", "--spp", "4",
+           "--resolution", "24", "--no-noise-floor"]
+    log = subprocess.run(cmd + ["--models", "ggx"], check=True, timeout=300,
+                         capture_output=True, text=True)
+    assert "2 fit + 2 render tasks: 4 run (0 failed)" in log.stdout
+    renders = {p.stem: json.loads(p.read_text()) for p in (out / "renders").glob("*.json")}
+    assert set(renders) == {"gold-ggx", "plastic-beckmann"}
+    for rec in renders.values():
+        assert rec["status"] == "ok" and rec["missing_fits"] == []
+        assert np.isfinite(rec["models"]["ggx"]["psnr"])
+    # the GGX fit of a GGX material renders like its reference (same sample streams)
+    assert renders["gold-ggx"]["models"]["ggx"]["psnr"] > 40
+    index = out / "report" / "index.html"
+    assert index.is_file() and missing_links(index) == []
+    assert json.loads((out / "report" / "summary.json").read_text())["n_materials"] == 2
+    for m in renders:
+        assert missing_links(out / "report" / m / "index.html") == []
+
+    log = subprocess.run(cmd + ["--models", "ggx"], check=True, timeout=300,
+                         capture_output=True, text=True)
+    assert "0 run (0 failed), 4 already done" in log.stdout
+    log = subprocess.run(cmd + ["--models", "ggx,beckmann"], check=True, timeout=300,
+                         capture_output=True, text=True)
+    assert "4 fit + 2 render tasks: 4 run (0 failed), 2 already done" in log.stdout
+    rec = json.loads((out / "renders" / "gold-ggx.json").read_text())
+    assert set(rec["models"]) == {"ggx", "beckmann"}
