@@ -19,6 +19,13 @@ done are skipped (``--resume``, default on), so the run can be interrupted and c
 
     .venv/bin/python bench/bench_report.py --database --limit 3 --out /tmp/brdffit-db
 
+``--from-batch DIR,...`` summarises the reports that ``brdffit batch --render`` wrote
+(``DIR/report/``, fits loaded, not refitted) instead of running anything, and checks the
+papers' ranking claims pair by pair (materials where the claimed order is reversed by more
+than the 2 dB tie margin are listed):
+
+    .venv/bin/python bench/bench_report.py --from-batch runs/merl-full,runs/rgl-full
+
 Timings on a shared machine are pessimistic; re-run to update the figures.
 """
 
@@ -190,6 +197,83 @@ def bench_database(args) -> dict:
     return fig
 
 
+#: Ranking claims of the papers (Bagher 2016 §5 and Table II; Bagher 2012 §6): (better, worse).
+PAPER_CLAIMS = [("npf", "npf-g-from-d"), ("npf", "npf-naive"), ("npf-g-from-d", "sgd"),
+                ("npf-naive", "sgd"), ("sgd", "ggx"), ("ggx", "beckmann"), ("sgd", "tabulated")]
+#: MERL materials that are bare metals (Matusik et al. 2003's classification, paints excluded).
+MERL_METALS = {"alum-bronze", "aluminium", "black-oxidized-steel", "brass", "chrome",
+               "chrome-steel", "grease-covered-steel", "hematite", "nickel", "ss440", "steel",
+               "tungsten-carbide"}
+
+
+def _claims(results: list[dict], tie_db: float) -> list[dict]:
+    """For each claim (a better than b): wins/ties/losses of a over b and the losing materials."""
+    from brdffit.evaluation.report import _models, _num, _ok
+
+    table = {}
+    for r in results:
+        table[r.get("material")] = {m["name"]: _num(m.get("psnr")) for m in _models(r) if _ok(m)}
+    out = []
+    for a, b in PAPER_CLAIMS:
+        for subset, names in (("all", None), ("metals", MERL_METALS)):
+            if subset == "metals" and (a, b) != ("sgd", "tabulated"):
+                continue
+            w = t = l = 0
+            losses = []
+            for mat, ps in table.items():
+                if names is not None and mat not in names:
+                    continue
+                if ps.get(a) is None or ps.get(b) is None:
+                    continue
+                d = ps[a] - ps[b]
+                if abs(d) <= tie_db:
+                    t += 1
+                elif d > 0:
+                    w += 1
+                else:
+                    l += 1
+                    losses.append((mat, round(d, 2)))
+            if w + t + l:
+                out.append({"claim": f"{a} > {b}", "subset": subset, "wins": w, "ties": t,
+                            "losses": l, "holds": w + t >= l,
+                            "reversed_on": sorted(losses, key=lambda x: x[1])})
+    return out
+
+
+def bench_from_batch(args) -> dict:
+    from brdffit.evaluation.report import read_results, summarize
+
+    results, dirs = [], [Path(d) for d in args.from_batch.split(",") if d]
+    for d in dirs:
+        results += read_results(d / "report")
+    summ = summarize(results)
+    ranking = sorted(((n, s["mean_psnr"]) for n, s in summ["per_model"].items()
+                      if s["mean_psnr"] is not None), key=lambda x: -x[1])
+    renders = []
+    for d in dirs:
+        renders += [json.loads(p.read_text()) for p in sorted((d / "renders").glob("*.json"))]
+    fig = {"benchmark": "database comparison (from brdffit batch --render)",
+           "batch_dirs": [str(d) for d in dirs], "n_materials": len(results),
+           "scene": results[0].get("scene") if results else None, "summary": summ,
+           "ranking_by_mean_psnr": ranking, "paper_claims": _claims(results, summ["tie_db"]),
+           "render_task_seconds": {"n": len(renders),
+                                   "sum": sum(r.get("wall_time_s", 0) for r in renders)},
+           "failures": [{"material": r["material"], "error": r.get("error")}
+                        for r in renders if r.get("status") != "ok"],
+           "reports": [str(d / "report" / "index.html") for d in dirs], "machine": machine()}
+    print(f"{len(results)} materials from {', '.join(map(str, dirs))}")
+    for n, s in summ["per_model"].items():
+        print(f"  {n:>14}: n={s['n']:3d} PSNR mean {s['mean_psnr'] or float('nan'):6.2f} median "
+              f"{s['median_psnr'] or float('nan'):6.2f} | dE2000 mean "
+              f"{s['mean_de2000'] or float('nan'):5.2f} median {s['median_de2000'] or float('nan'):5.2f}")
+    for c in fig["paper_claims"]:
+        print(f"  {c['claim']:>26} ({c['subset']}): {c['wins']}/{c['ties']}/{c['losses']} "
+              f"{'holds' if c['holds'] else 'does NOT hold'}; reversed on "
+              f"{', '.join(m for m, _ in c['reversed_on'][:8])}")
+    write_json(RESULTS / "report_database.json", fig)
+    return fig
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--material", default="merl_nbrdf.zip:gold-metallic-paint")
@@ -202,6 +286,7 @@ def main(argv=None) -> int:
     ap.add_argument("--fit-options", default=None,
                     help='JSON {model: {option: value}}, e.g. \'{"npf": {"max_iter": 200}}\'')
     ap.add_argument("--database", action="store_true")
+    ap.add_argument("--from-batch", default=None, help="comma-separated brdffit batch --render dirs")
     ap.add_argument("--collections", default="merl_nbrdf.zip,rgl/*_rgb.bsdf")
     ap.add_argument("--scenes", default="sphere-env")
     ap.add_argument("--limit", type=int, default=None)
@@ -209,7 +294,10 @@ def main(argv=None) -> int:
     ap.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True)
     args = ap.parse_args(argv)
     RESULTS.mkdir(parents=True, exist_ok=True)
-    (bench_database if args.database else bench_single)(args)
+    if args.from_batch:
+        bench_from_batch(args)
+    else:
+        (bench_database if args.database else bench_single)(args)
     return 0
 
 
