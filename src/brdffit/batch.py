@@ -199,7 +199,7 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
     import os
     import socket
 
-    from .evaluation.compare import fit_model, model_params
+    from .evaluation.compare import _isotropic_only, fit_model, model_params
     from .io import load
     from .io.fitfile import save_fit
 
@@ -210,6 +210,10 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
     t0 = time.perf_counter()
     try:
         reference = load(task.spec)
+        if _isotropic_only(task.model) and not getattr(reference, "isotropic", False):
+            record["status"] = "skipped"
+            record["error"] = f"{task.model} fits isotropic BRDFs only; {task.material} is anisotropic"
+            raise _Skip
         model, record["fit_time_s"] = fit_model(task.model, reference, task.options_dict())
         save_fit(model, task.fit_path(out), source=task.spec, options=task.options_dict())
         record["fit_file"] = str(task.fit_path(out).relative_to(out))
@@ -222,6 +226,8 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
             record["metrics_seconds"] = record["metrics"].pop("seconds", None)
             record["metrics_time_s"] = time.perf_counter() - t_m
         record["status"] = "ok"
+    except _Skip:
+        pass
     except Exception as exc:  # noqa: BLE001 – recorded, the batch goes on
         record["status"] = "failed"
         record["error"] = f"{type(exc).__name__}: {exc}"
@@ -230,6 +236,10 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
     record["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S")
     _write_json(task.record_path(out), record)
     return record
+
+
+class _Skip(Exception):
+    """The task does not apply to this material (recorded as ``skipped``, not failed)."""
 
 
 def run_render_task(task: RenderTask, out_dir, *after) -> dict:
@@ -371,7 +381,7 @@ def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
     todo, skipped = [], []
     for t in [*tasks, *render_tasks]:
         rec = _existing(t, out)
-        if rec is not None and (rec.get("status") == "ok" or not retry_failed):
+        if rec is not None and (rec.get("status") in ("ok", "skipped") or not retry_failed):
             skipped.append(rec)
         else:
             todo.append(t)
@@ -409,7 +419,7 @@ def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
 
         write_index(out / "report", title=f"brdffit batch report – {out.name}")
     return {"ran": len(done), "skipped": len(skipped), "render_tasks": len(render_tasks),
-            "failed": sum(r.get("status") != "ok" for r in done),
+            "failed": sum(r.get("status") not in ("ok", "skipped") for r in done),
             "wall_time_s": time.perf_counter() - t0, "records": records}
 
 
@@ -438,7 +448,7 @@ class _Progress:
     def advance(self, rec: dict) -> None:
         if self.enabled:
             m = rec["model"]
-            self._failed[m] += rec.get("status") != "ok"
+            self._failed[m] += rec.get("status") not in ("ok", "skipped")
             self._p.update(self._ids[m], advance=1, failed=self._failed[m])
 
     def __exit__(self, *exc):

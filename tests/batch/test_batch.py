@@ -136,3 +136,13 @@ def test_render_stage_writes_a_report_and_resumes(tmp_path):
     assert "4 fit + 2 render tasks: 4 run (0 failed), 2 already done" in log.stdout
     rec = json.loads((out / "renders" / "gold-ggx.json").read_text())
     assert set(rec["models"]) == {"ggx", "beckmann"}
+
+
+def test_isotropic_only_model_is_skipped_on_anisotropic_material(tmp_path):
+    from brdffit.batch import run_task
+
+    task, = make_tasks([("aniso", "synthetic:aniso-ggx")], ["sgd"])
+    rec = run_task(task, tmp_path)
+    assert rec["status"] == "skipped" and "isotropic" in rec["error"]
+    assert not task.fit_path(tmp_path).exists()
+    assert json.loads(task.record_path(tmp_path).read_text())["status"] == "skipped"
