@@ -4,7 +4,9 @@ whole-database run time.
 Runs ``brdffit.batch.run_batch`` on the first ``--limit`` materials of a database with each
 worker count into a fresh folder, and reports tasks per second and the speed-up (target:
 2 workers ≥ 1.8× one). ``--full`` instead runs the whole database once with every model of
-``--models`` (resumable: re-running continues) and reports the wall time.
+``--models`` (resumable: re-running continues; the wall time is summed over the
+invocations) and reports the wall time and per-model fit times; ``--render`` adds the render
+stage at the report's settings (``brdffit batch --render``) to the same folder.
 
     .venv/bin/python bench/bench_batch.py --limit 8 --models tabulated,ggx
     .venv/bin/python bench/bench_batch.py --full --out runs/merl-full \
@@ -23,7 +25,7 @@ import time
 from pathlib import Path
 
 from brdffit._atomic import atomic_write
-from brdffit.batch import enumerate_materials, make_tasks, run_batch
+from brdffit.batch import RenderSettings, enumerate_materials, make_tasks, run_batch
 
 RESULTS = Path(__file__).resolve().parent / "results"
 DEFAULT_SOURCE = Path(__file__).resolve().parents[2] / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
@@ -47,6 +49,43 @@ def throughput(source, models, limit, workers) -> dict:
             "wall_s": wall, "tasks_per_s": len(tasks) / wall}
 
 
+def _stats(xs) -> dict | None:
+    xs = [float(x) for x in xs if x is not None]
+    return {"min": min(xs), "avg": sum(xs) / len(xs), "max": max(xs), "n": len(xs)} if xs else None
+
+
+def full_run_summary(out: Path, models, source, n_tasks: int, invocation: dict | None) -> dict:
+    """Whole-database figure: the wall time summed over every invocation that worked on
+    ``out`` (a resumed run is several invocations; each appends itself to
+    ``out/bench_invocations.json``) and per-model fit time and metrics over the records."""
+    from brdffit.batch import read_records
+
+    inv_path = out / "bench_invocations.json"
+    invocations = json.loads(inv_path.read_text()) if inv_path.exists() else []
+    if invocation is not None:
+        invocations.append(invocation)
+        with atomic_write(inv_path, "w") as fh:
+            json.dump(invocations, fh, indent=1)
+    records = read_records(out)
+    per_model = {}
+    for m in models:
+        rs = [r for r in records if r["model"] == m]
+        ok = [r for r in rs if r.get("status") == "ok"]
+        metrics = sorted({k for r in ok for k in (r.get("metrics") or {})})
+        per_model[m] = {"ok": len(ok), "failed": sum(r.get("status") == "failed" for r in rs),
+                        "skipped": sum(r.get("status") == "skipped" for r in rs),
+                        "fit_time_s": _stats(r.get("fit_time_s") for r in ok),
+                        "task_wall_s": _stats(r.get("wall_time_s") for r in ok),
+                        "metrics_mean": {k: _stats((r.get("metrics") or {}).get(k) for r in ok)["avg"]
+                                         for k in metrics}}
+    return {"machine": machine(), "source": source, "models": models, "tasks": n_tasks,
+            "records": len(records), "materials": len({r["material"] for r in records}),
+            "wall_s": sum(i["wall_s"] for i in invocations), "invocations": invocations,
+            "task_seconds_sum": sum(r.get("wall_time_s", 0) for r in records),
+            "per_model": per_model,
+            "note": "fit times measured inside the 2-worker run (pessimistic: both cores busy)"}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--source", default=str(DEFAULT_SOURCE))
@@ -54,15 +93,25 @@ def main() -> None:
     ap.add_argument("--limit", type=int, default=8)
     ap.add_argument("--full", action="store_true")
     ap.add_argument("--out", default="runs/merl-full")
+    ap.add_argument("--render", action="store_true", help="with --full: also render")
+    ap.add_argument("--summarise", action="store_true",
+                    help="with --full: only (re)write the summary of the records in --out")
     args = ap.parse_args()
     models = args.models.split(",")
-    if args.full:
+    if args.full and args.summarise:
+        n = len(make_tasks(enumerate_materials(args.source, limit=args.limit or None), models))
+        result = full_run_summary(Path(args.out), models, args.source, n, None)
+        name = "batch_full.json"
+    elif args.full:
         tasks = make_tasks(enumerate_materials(args.source, limit=args.limit or None), models)
         t0 = time.perf_counter()
-        res = run_batch(tasks, args.out, workers=2)
-        result = {"machine": machine(), "source": args.source, "models": models,
-                  "tasks": len(tasks), "ran": res["ran"], "skipped": res["skipped"],
-                  "failed": res["failed"], "wall_s": time.perf_counter() - t0}
+        res = run_batch(tasks, args.out, workers=2,
+                        render=RenderSettings() if args.render else None)
+        wall = time.perf_counter() - t0
+        result = full_run_summary(Path(args.out), models, args.source, len(tasks),
+                                  {"wall_s": wall, "render": args.render, "ran": res["ran"], "skipped": res["skipped"],
+                                   "failed": res["failed"],
+                                   "finished": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())})
         name = "batch_full.json"
     else:
         runs = [throughput(args.source, models, args.limit, w) for w in (1, 2)]
