@@ -229,12 +229,21 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
     except _Skip:
         pass
     except Exception as exc:  # noqa: BLE001 – recorded, the batch goes on
-        record["status"] = "failed"
-        record["error"] = f"{type(exc).__name__}: {exc}"
-        record["traceback"] = traceback.format_exc(limit=8)
+        _record_failure(record, exc)
+    return _finish(record, t0, task.record_path(out))
+
+
+def _record_failure(record: dict, exc: Exception) -> None:
+    record["status"] = "failed"
+    record["error"] = f"{type(exc).__name__}: {exc}"
+    record["traceback"] = traceback.format_exc(limit=8)
+
+
+def _finish(record: dict, t0: float, path: Path) -> dict:
+    """Time-stamp ``record`` and write it atomically (the last output of a task)."""
     record["wall_time_s"] = time.perf_counter() - t0
     record["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S")
-    _write_json(task.record_path(out), record)
+    _write_json(path, record)
     return record
 
 
@@ -287,13 +296,8 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
         if failed:
             record["error"] = "; ".join(f"{n}: {record['models'][n]['error']}" for n in failed)
     except Exception as exc:  # noqa: BLE001 – recorded, the batch goes on
-        record["status"] = "failed"
-        record["error"] = f"{type(exc).__name__}: {exc}"
-        record["traceback"] = traceback.format_exc(limit=8)
-    record["wall_time_s"] = time.perf_counter() - t0
-    record["finished"] = time.strftime("%Y-%m-%dT%H:%M:%S")
-    _write_json(task.record_path(out), record)
-    return record
+        _record_failure(record, exc)
+    return _finish(record, t0, task.record_path(out))
 
 
 def _existing(task: Task | RenderTask, out: Path) -> dict | None:
