@@ -31,7 +31,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy.special import erf
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
@@ -47,36 +46,8 @@ OUT = ROOT / "bench" / "results" / "tabulated.json"
 
 
 # ------------------------------------------------------------------------------ references
-def beckmann_P(r, a):
-    return np.exp(-(r / a) ** 2) / (np.pi * a * a)
-
-
-def beckmann_lambda(theta, a):
-    t = np.tan(theta)
-    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-        nu = 1.0 / (a * t)
-        lam = 0.5 * (erf(nu) - 1.0) + np.exp(-nu * nu) / (2.0 * nu * np.sqrt(np.pi))
-    return np.where(t > 0, np.nan_to_num(lam, nan=0.0), 0.0)
-
-
-def ggx_P(r, a):
-    return 1.0 / (np.pi * a * a * (1.0 + (r / a) ** 2) ** 2)
-
-
-def ggx_lambda(theta, a):
-    t = np.tan(theta)
-    return 0.5 * (-1.0 + np.sqrt(1.0 + (a * t) ** 2))
-
-
-def eq12(theta, a, kind):
-    c = np.cos(theta)
-    P, lam = (beckmann_P, beckmann_lambda) if kind == "beckmann" else (ggx_P, ggx_lambda)
-    return P(np.tan(theta), a) / c**4 / (1.0 + lam(theta, a)) / (4.0 * c * c)
-
-
-def dirs(theta, phi=0.0):
-    theta, phi = np.broadcast_arrays(theta, phi)
-    return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], -1)
+from brdffit.testing.closed_forms import backscatter_eq12 as eq12  # noqa: E402
+from brdffit.testing.closed_forms import directions as dirs  # noqa: E402
 
 
 # ------------------------------------------------------------------------------ sections

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.special import erf
 
 from brdffit.brdf import BRDF
 from brdffit.errors import FitError
@@ -16,31 +15,14 @@ from brdffit.fit.tabulated import (beckmann_parameters, fit_tabulated,
                                    ggx_parameters, solve_slope_pdf, to_beckmann, to_ggx)
 from brdffit.microfacet import GGX, Beckmann, MicrofacetBRDF, SchlickFresnel
 from brdffit.microfacet.tabulated import TabulatedSlopeDistribution, radial_rule
+from brdffit.testing.closed_forms import backscatter_eq12, beckmann_lambda, beckmann_P
+from brdffit.testing.closed_forms import directions as dirs
 
 
-# -- independent closed forms ------------------------------------------------------------------
-def beckmann_P(r, a):
-    return np.exp(-(r / a) ** 2) / (np.pi * a * a)
-
-
-def beckmann_lambda(theta, a):
-    t = np.tan(theta)
-    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
-        nu = 1.0 / (a * t)
-        lam = 0.5 * (erf(nu) - 1.0) + np.exp(-nu * nu) / (2.0 * nu * np.sqrt(np.pi))
-    return np.where(t > 0, np.nan_to_num(lam, nan=0.0), 0.0)
-
-
+# -- independent closed forms (brdffit.testing.closed_forms) ----------------------------------
 def eq12_backscatter(theta, a):
     """Beckmann backscattering of Dupuy 2015 Eq. 12 with F0 = 1: D G1 / (4 cos²θ)."""
-    c = np.cos(theta)
-    D = beckmann_P(np.tan(theta), a) / c**4
-    return D / (1.0 + beckmann_lambda(theta, a)) / (4.0 * c * c)
-
-
-def dirs(theta, phi=0.0):
-    theta, phi = np.broadcast_arrays(theta, phi)
-    return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], -1)
+    return backscatter_eq12(theta, a, "beckmann")
 
 
 def backscatter_of(model_dist, theta, phi=None, hotspot="G2"):
