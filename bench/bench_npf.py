@@ -173,7 +173,12 @@ def from_batch(batch_dir: Path, json_path: Path, csv_path: Path) -> dict:
         row = {"material": rec["material"], "variant": v, "status": rec.get("status"),
                "time_s": rec.get("fit_time_s")}
         if rec.get("status") == "ok":
-            info = load_fit(batch_dir / rec["fit_file"]).fit_info or {}
+            fit = load_fit(batch_dir / rec["fit_file"])
+            info = fit.fit_info or {}
+            factors = [np.asarray(getattr(fit, k)) for k in ("D", "F", "G", "H", "B", "rho_d", "rho_s")
+                       if getattr(fit, k, None) is not None]
+            row["status"] = ("ok" if all(np.all(np.isfinite(f)) and np.all(f >= 0) for f in factors)
+                             else "non-finite or negative factor")
             met = rec.get("metrics") or {}
             row.update(iterations=info.get("iterations"), gss_calls=info.get("gss_calls", 0),
                        objective=info.get("objective"),
