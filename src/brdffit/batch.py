@@ -262,6 +262,8 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
     import socket
 
     from .evaluation.compare import compare
+    from .evaluation.metrics import BRDFMetrics
+    from .evaluation.report import write_material_page, write_result
     from .io import load
 
     out = Path(out_dir)
@@ -270,7 +272,7 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
                               "worker": f"{socket.gethostname()}:{os.getpid()}"}
     t0 = time.perf_counter()
     try:
-        models, missing = {}, []
+        models, missing, fit_metrics = {}, [], {}
         for model, key in task.fits:
             fit_task = Task(task.material, task.spec, model)
             try:
@@ -279,13 +281,21 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
                 rec = {}
             if rec.get("status") == "ok" and rec.get("key") == key:
                 models[model] = str(out / rec["fit_file"])
+                if rec.get("metrics"):
+                    fit_metrics[model] = rec["metrics"]
             else:
                 missing.append(model)
         record["missing_fits"] = missing
         st = task.settings
         result = compare(load(task.spec), models, out / "report", name=task.material,
                          scene=st.scene, spp=st.spp, resolution=st.resolution, seed=st.seed,
-                         noise_floor=st.noise_floor, save_fits=False, update_index=False)
+                         noise_floor=st.noise_floor, save_fits=False, update_index=False,
+                         brdf_metrics=() if len(fit_metrics) == len(models) else BRDFMetrics.ALL)
+        if len(fit_metrics) == len(models):  # the fit tasks measured them already: reuse
+            for m in result["models"]:
+                m["brdf"] = fit_metrics.get(m["name"], m.get("brdf"))
+            write_result(out / "report" / result["slug"], result)
+            write_material_page(out / "report", result)
         record["report_page"] = f"report/{result['slug']}/index.html"
         record["noise_floor_psnr"] = result.get("noise_floor_psnr")
         record["models"] = {m["name"]: {k: m.get(k) for k in ("status", "error", "psnr",

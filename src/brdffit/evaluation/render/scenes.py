@@ -54,13 +54,19 @@ def envmap_names() -> list[str]:
 
 # -- procedural content (NumPy) -------------------------------------------------------------
 def procedural_envmap(width: int = 512, height: int = 256) -> np.ndarray:
-    """The built-in environment: lat-long float32 ``(height, width, 3)``, all ≥ 0.
+    """The built-in environment: lat-long float32 ``(height, width, 3)``, all ≥ 0 (a fresh
+    copy of a cached image: every rendering of a report uses it).
 
     Sky gradient (blue zenith → warm horizon), a darker ground, a sun-like blob
     (≈ 3° Gaussian, peak radiance 400), and two rectangular area-light-like spots
     (radiance 30 and 15) on the sides, so that both broad and sharp lobes get features to
     reflect. Mitsuba's lat-long convention: +Y up, row 0 at the zenith.
     """
+    return _procedural_envmap(int(width), int(height)).copy()
+
+
+@lru_cache(maxsize=4)
+def _procedural_envmap(width: int, height: int) -> np.ndarray:
     v = (np.arange(height) + 0.5) / height
     u = (np.arange(width) + 0.5) / width
     theta = v * np.pi                      # from +Y
