@@ -6,6 +6,7 @@ Usage::
     .venv/bin/python bench/bench_sgd.py --real          # + all 100 Neural-BRDF MERL materials
     .venv/bin/python bench/bench_sgd.py --real --limit 10 --phi-stride 4
     .venv/bin/python bench/bench_sgd.py --skip-synthetic --modes 16   # paper vs default fit
+    .venv/bin/python bench/bench_sgd.py --skip-synthetic --modes 16 --psnr   # + renderings
 
 Synthetic part: SGD materials with known per-channel (α, p, ρd, ρs, F0, F1) are fitted with
 ``fit_sgd``; relative errors on α and p, absolute on F0/F1, time per material (full fit,
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 import traceback
@@ -224,12 +226,14 @@ def g1_approximation_stats(results: dict) -> dict:
 PAPER_MODE = {"selection": "slice", "linear": "slice", "bounded": False}
 
 
-def run_modes(names: list[str], prev: dict | None = None):
+def run_modes(names: list[str], prev: dict | None = None, psnr: bool = False):
     """Paper's two-slice procedure vs the default (safeguarded) fit, per material.
 
     For SGD, two-slice GGX and two-slice Beckmann: the compressive objective of Bagher et al.
-    2016 (normalised, ``brdf_metrics``) and the §6.3 normalised L2, fit time. Yields the
-    growing result dict (resumable: materials already in ``prev`` are skipped).
+    2016 (normalised, ``brdf_metrics``) and the §6.3 normalised L2, fit time; with ``psnr``
+    also the rendered PSNR (Bagher 2016 §5) of the SGD fits against the reference (Mitsuba,
+    sphere under the procedural environment, 128², 64 spp). Yields the growing result dict
+    (resumable: materials already in ``prev`` are skipped).
     """
     import brdffit
     from brdffit.evaluation.metrics import BRDFMetrics
@@ -242,6 +246,11 @@ def run_modes(names: list[str], prev: dict | None = None):
         brdf = brdffit.load(f"{NBRDF}:{name}")
         bm = BRDFMetrics(brdf, metrics=("compressive_objective", "normalized_l2"))
         rec = {}
+        ref_img = None
+        if psnr:
+            from brdffit.evaluation.render import render
+
+            ref_img, mask = render(brdf, resolution=128, spp=64, return_mask=True)
         for key, fn in fits.items():
             for mode, opts in (("paper", PAPER_MODE), ("default", {})):
                 t0 = time.perf_counter()
@@ -255,10 +264,17 @@ def run_modes(names: list[str], prev: dict | None = None):
                 rec[f"{key}/{mode}"] = {"compressive_objective": m["compressive_objective"],
                                         "normalized_l2": m["normalized_l2"], "time_s": dt,
                                         "params": _params(model)}
+                if ref_img is not None and key == "sgd":
+                    from brdffit.evaluation.metrics import rendered_psnr
+
+                    img = render(model, resolution=128, spp=64)
+                    rec[f"{key}/{mode}"]["psnr_db"] = rendered_psnr(ref_img, img, mask)
         results[name] = rec
         print(f"  [{i + 1:3d}/{len(names)}] {name:24s} " + "  ".join(
             f"{k} {rec[k + '/paper'].get('compressive_objective', np.nan):8.4g} → "
-            f"{rec[k + '/default'].get('compressive_objective', np.nan):8.4g}" for k in fits),
+            f"{rec[k + '/default'].get('compressive_objective', np.nan):8.4g}" for k in fits)
+            + ("" if ref_img is None else "  PSNR sgd {:.1f} → {:.1f} dB".format(
+                rec["sgd/paper"].get("psnr_db", np.nan), rec["sgd/default"].get("psnr_db", np.nan))),
             flush=True)
         yield results
 
@@ -279,7 +295,11 @@ def main(argv=None) -> int:
     ap.add_argument("--modes", type=int, default=None, metavar="N",
                     help="paper two-slice vs default fit (compressive objective) on the first "
                          "N Neural-BRDF materials")
+    ap.add_argument("--psnr", action="store_true",
+                    help="with --modes: also render the SGD fits (Mitsuba) and report PSNR")
     args = ap.parse_args(argv)
+    if args.psnr:
+        os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
 
     doc: dict = {}
     if OUT.exists():
@@ -306,12 +326,16 @@ def main(argv=None) -> int:
             names = list_materials(NBRDF)[:args.modes]
             print(f"paper vs default fit, compressive objective ({len(names)} materials):")
             prev = (doc.get("modes") or {}).get("materials") if args.resume else None
-            for results in run_modes(names, prev):
+            for results in run_modes(names, prev, psnr=args.psnr):
                 cols = {}
                 for rec in results.values():
                     for k, v in rec.items():
                         cols.setdefault(k, []).append(v.get("compressive_objective", np.nan))
+                ps = {k: [r[k]["psnr_db"] for r in results.values() if "psnr_db" in r.get(k, {})]
+                      for k in ("sgd/paper", "sgd/default")}
                 doc["modes"] = {"materials": results, "paper_options": PAPER_MODE,
+                                "median_psnr_db": {k: float(np.median(v)) for k, v in ps.items()
+                                                   if v},
                                 "median_compressive_objective":
                                     {k: float(np.nanmedian(v)) for k, v in cols.items()},
                                 "max_compressive_objective":
