@@ -146,3 +146,22 @@ def test_isotropic_only_model_is_skipped_on_anisotropic_material(tmp_path):
     assert rec["status"] == "skipped" and "isotropic" in rec["error"]
     assert not task.fit_path(tmp_path).exists()
     assert json.loads(task.record_path(tmp_path).read_text())["status"] == "skipped"
+
+
+def _malloc_env():
+    return {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_")}
+
+
+@pytest.mark.slow
+def test_local_workers_keep_numpy_temporaries_on_the_heap():
+    """Dask's nanny default (trim threshold 64 KiB) turns every NumPy temporary into an mmap;
+    the local cluster overrides it (brdffit.batch.WORKER_MALLOC_ENV)."""
+    from brdffit.batch import WORKER_MALLOC_ENV, _client
+
+    client, cluster = _client(None, 1, None)
+    try:
+        (env,) = client.run(_malloc_env).values()
+    finally:
+        client.close()
+        cluster.close()
+    assert env == {k: str(v) for k, v in WORKER_MALLOC_ENV.items()}
