@@ -80,7 +80,10 @@ def full_run_summary(out: Path, models, source, n_tasks: int, invocation: dict |
                                          for k in metrics}}
     return {"machine": machine(), "source": source, "models": models, "tasks": n_tasks,
             "records": len(records), "materials": len({r["material"] for r in records}),
-            "wall_s": sum(i["wall_s"] for i in invocations), "invocations": invocations,
+            "wall_s": sum(i["wall_s"] for i in invocations),
+            "wall_s_without_render": sum(i["wall_s"] for i in invocations if not i.get("render")),
+            "wall_s_render_invocations": sum(i["wall_s"] for i in invocations if i.get("render")),
+            "invocations": invocations,
             "task_seconds_sum": sum(r.get("wall_time_s", 0) for r in records),
             "per_model": per_model,
             "note": "fit times measured inside the 2-worker run (pessimistic: both cores busy)"}
