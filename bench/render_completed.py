@@ -32,6 +32,8 @@ def main(argv=None) -> int:
     ap.add_argument("--models", required=True)
     ap.add_argument("--extra", default="")
     ap.add_argument("--idle", type=float, default=900.0)
+    ap.add_argument("--reverse", action="store_true",
+                    help="walk the materials from the end (a second process next to a first)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     models = args.models.split(",")
@@ -39,7 +41,8 @@ def main(argv=None) -> int:
     last_work = time.time()
     while True:
         pending = 0
-        for name, spec in enumerate_materials(args.source):
+        materials = enumerate_materials(args.source)
+        for name, spec in (reversed(materials) if args.reverse else materials):
             tasks = make_tasks([(name, spec)], models + extra)
             main_recs = [_existing(t, out) for t in tasks[:len(models)]]
             render = make_render_tasks(tasks, RenderSettings())[0]
