@@ -272,7 +272,8 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
 
                 model = load_fit(what)
                 rec["origin"] = f"loaded {what}"
-                rec["fit_time"] = _num((getattr(model, "fit_info", None) or {}).get("time"))
+                info = getattr(model, "fit_info", None) or {}
+                rec["fit_time"] = _num(info.get("time", info.get("time_s")))  # NPF: time_s
             elif _isotropic_only(str(what)) and not getattr(reference, "isotropic", False):
                 rec.update(status="skipped", error=f"{what} fits isotropic BRDFs only")
                 continue
