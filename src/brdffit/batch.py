@@ -47,6 +47,9 @@ __all__ = ["Task", "RenderSettings", "RenderTask", "enumerate_materials", "make_
 TIMING_FIELDS = ("fit_time_s", "metrics_time_s", "metrics_seconds", "wall_time_s", "finished",
                  "worker")
 
+#: Statuses of finished work (not redone on resume, not counted as failures).
+DONE = ("ok", "skipped")
+
 _MEASURED_SUFFIXES = (".binary", ".bsdf", ".bin", ".h5")
 
 
@@ -68,8 +71,7 @@ class Task:
         payload = {"spec": self.spec, "source_sha256": source_checksum(self.spec),
                    "model": self.model, "options": self.options_dict(),
                    "fit_format": FORMAT_VERSION}
-        blob = json.dumps(payload, sort_keys=True, default=str).encode()
-        return hashlib.sha256(blob).hexdigest()[:16]
+        return _hash(payload)
 
     def fit_path(self, out: Path) -> Path:
         return out / "fits" / _safe(self.material) / f"{_safe(self.model)}.npz"
@@ -108,11 +110,16 @@ class RenderTask:
 
         payload = {"spec": self.spec, "source_sha256": source_checksum(self.spec),
                    "fits": list(self.fits), "render": self.settings.as_dict()}
-        blob = json.dumps(payload, sort_keys=True, default=str).encode()
-        return hashlib.sha256(blob).hexdigest()[:16]
+        return _hash(payload)
 
     def record_path(self, out: Path) -> Path:
         return out / "renders" / f"{_safe(self.material)}.json"
+
+
+def _hash(payload: dict) -> str:
+    """A task key: 16 hex digits of the SHA-256 of the canonical JSON of ``payload``."""
+    blob = json.dumps(payload, sort_keys=True, default=str).encode()
+    return hashlib.sha256(blob).hexdigest()[:16]
 
 
 def _safe(name: str) -> str:
@@ -406,7 +413,7 @@ def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
     todo, skipped = [], []
     for t in [*tasks, *render_tasks]:
         rec = _existing(t, out)
-        if rec is not None and (rec.get("status") in ("ok", "skipped") or not retry_failed):
+        if rec is not None and (rec.get("status") in DONE or not retry_failed):
             skipped.append(rec)
         else:
             todo.append(t)
@@ -444,7 +451,7 @@ def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
 
         write_index(out / "report", title=f"brdffit batch report – {out.name}")
     return {"ran": len(done), "skipped": len(skipped), "render_tasks": len(render_tasks),
-            "failed": sum(r.get("status") not in ("ok", "skipped") for r in done),
+            "failed": sum(r.get("status") not in DONE for r in done),
             "wall_time_s": time.perf_counter() - t0, "records": records}
 
 
@@ -473,7 +480,7 @@ class _Progress:
     def advance(self, rec: dict) -> None:
         if self.enabled:
             m = rec["model"]
-            self._failed[m] += rec.get("status") not in ("ok", "skipped")
+            self._failed[m] += rec.get("status") not in DONE
             self._p.update(self._ids[m], advance=1, failed=self._failed[m])
 
     def __exit__(self, *exc):
