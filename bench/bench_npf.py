@@ -3,7 +3,7 @@
 Over the Neural-BRDF MERL materials evaluated on the MERL grid, per variant: fitting time,
 AWLS iterations and golden-section (GSS) calls (min / avg / max, as the paper's Table I), the
 final objective (Eq. 7, always re-evaluated with compressive weighting so variants compare),
-and the cosine-weighted relative error (:func:`brdffit.evaluation.objective.
+and the cosine-weighted relative error (:func:`brdffit.losses.objective.
 relative_error_from_values`). Findings checked: independent-G reaches a lower objective than
 G-from-D and naive on most materials; G-from-D ≈ naive; without compressive weighting the
 specular materials (nickel, color-changing-paint1, maroon-plastic) are much worse in relative
@@ -55,7 +55,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from brdffit._atomic import atomic_write  # noqa: E402
-from brdffit.evaluation.objective import (ObjectiveOptions, objective_from_values,  # noqa: E402
+from brdffit.losses.objective import (ObjectiveOptions, objective_from_values,  # noqa: E402
                                           relative_error_from_values)
 from brdffit.fit.npf import fit_npf  # noqa: E402
 from brdffit.grid import tabulate_merl_grid  # noqa: E402

@@ -14,7 +14,7 @@ including the Eq. 6 G1 tables and the Eq. 9 approximation).
 
 Real part (``--real``): every material of ``../shared/data/nbrdf/merl_nbrdf.zip`` is fitted
 with the SGD and the two-slice Beckmann (and GGX) procedures, and the normalised L2 error of
-§6.3 (brdffit.evaluation.l2, MERL-grid quadrature) is computed over the full domain and over
+§6.3 (brdffit.losses.l2, MERL-grid quadrature) is computed over the full domain and over
 θi, θo ≤ 80°. Counts: materials where SGD beats two-slice Beckmann, NaN, failures. The
 materials the seed papers single out (two-layer-gold, color-changing-paint1, white-paint)
 are reported in detail, with the full-data Cook-Torrance fits for reference.
@@ -131,7 +131,7 @@ def _params(model):
 
 def run_real(limit: int | None, phi_stride: int, prev: dict | None) -> dict:
     import brdffit
-    from brdffit.evaluation.l2 import L2Reference
+    from brdffit.losses.l2 import L2Reference
     from brdffit.io.nbrdf import list_materials
 
     names = list_materials(NBRDF)

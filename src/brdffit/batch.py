@@ -206,7 +206,7 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
     import os
     import socket
 
-    from .evaluation.compare import _isotropic_only, fit_model, model_params
+    from .fit.registry import fit_model, is_isotropic_only, model_params
     from .io import load
     from .io.fitfile import save_fit
 
@@ -217,7 +217,7 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
     t0 = time.perf_counter()
     try:
         reference = load(task.spec)
-        if _isotropic_only(task.model) and not getattr(reference, "isotropic", False):
+        if is_isotropic_only(task.model) and not getattr(reference, "isotropic", False):
             record["status"] = "skipped"
             record["error"] = f"{task.model} fits isotropic BRDFs only; {task.material} is anisotropic"
             raise _Skip

@@ -127,7 +127,10 @@ def test_cli_compare(tmp_path, monkeypatch, capsys):
     seen = []
     fitters = {"lam": lambda brdf, albedo=0.3: seen.append(albedo) or Lambert([albedo] * 3),
                "mf": lambda brdf: FakeMicrofacet()}
-    monkeypatch.setattr(C, "resolve_fitter", lambda name: fitters[name])
+    from brdffit.fit import registry
+
+    for name, fn in fitters.items():
+        monkeypatch.setitem(registry.FITTERS, name, registry.Fitter(name, fn))
     rc = main(["compare", "whatever.h5", "--models", "lam,mf", "--out", str(tmp_path),
                "--spp", "4", "--resolution", "16", "--no-noise-floor", "-q",
                "--fit-options", '{"lam": {"albedo": 0.7}}'])

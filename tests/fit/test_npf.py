@@ -14,7 +14,7 @@ import pytest
 from brdffit.errors import FitError
 from brdffit.fit.npf import fit_npf
 from brdffit.fit.npf import _solver
-from brdffit.evaluation.objective import prepare_objective
+from brdffit.losses.objective import prepare_objective
 from brdffit.grid import tabulate_merl_grid
 from brdffit.microfacet.npf_model import (D_THETA_H, F_THETA_D, G_THETA, H_PHI_D,
                                           NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF,

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.special import erf
 
-from brdffit.evaluation.objective import (ObjectiveOptions, compressive_weight,
+from brdffit.losses.objective import (ObjectiveOptions, compressive_weight,
                                           merl_grid_geometry, prepare_objective,
                                           volume_form_weight, weighted_median)
 from brdffit.geometry import half_diff_to_io
@@ -221,7 +221,7 @@ def test_sampling_chi2_detects_wrong_pdf():
 
 
 def test_compressive_objective_of_two_brdfs():
-    from brdffit.evaluation.objective import compressive_objective, weighted_mean_relative_error
+    from brdffit.losses.objective import compressive_objective, weighted_mean_relative_error
 
     mf, _, _ = make_models()
     same = compressive_objective(mf, mf)

@@ -205,7 +205,7 @@ def test_registered_cli_fitters():
 def test_real_material_sgd_beats_two_slice_beckmann():
     # Bagher 2012 §6.3 / Fig. 11 on Neural-BRDF stand-ins of MERL materials
     import brdffit
-    from brdffit.evaluation.l2 import L2Reference
+    from brdffit.losses.l2 import L2Reference
     from tests.conftest import shared_data_path
 
     z = shared_data_path("nbrdf", "merl_nbrdf.zip")

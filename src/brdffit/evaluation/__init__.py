@@ -3,7 +3,8 @@
 * :mod:`.render` – Mitsuba 3 rendering of any BRDF of the library (``render``)
 * :mod:`.metrics` – rendered PSNR (Bagher et al. 2016 §5), CIE dE2000 images, BRDF-space
   metrics (cosine-weighted relative error; normalised L2 of Bagher et al. 2012 §6.3 from
-  :mod:`.l2`; the compressive objective of Bagher et al. 2016 from :mod:`.objective`), wins
+  :mod:`brdffit.losses.l2`; the compressive objective of Bagher et al. 2016 from
+  :mod:`brdffit.losses.objective`), wins
   and ties within 2 dB
 * :mod:`.plots` – lobes in the incidence plane, fitted factors, slices
 * :mod:`.compare` / :mod:`.report` – fit, render, measure and write the static HTML report

@@ -29,12 +29,12 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 import numpy as np
 
 from ..errors import BRDFError
+from ..fit.registry import fit_model, is_isotropic_only, model_params, small_json
 from . import metrics as M
 from . import plots as P
 from . import report as R
 
-__all__ = ["compare", "compare_many", "resolve_reference", "resolve_fitter", "fit_model",
-           "model_params", "DEFAULT_MODELS"]
+__all__ = ["compare", "compare_many", "resolve_reference", "DEFAULT_MODELS"]
 
 DEFAULT_MODELS = ("tabulated", "ggx", "beckmann", "sgd", "npf")
 
@@ -53,67 +53,6 @@ def resolve_reference(source, material: str | None = None):
     from ..io import load
 
     return load(spec)
-
-
-def resolve_fitter(name: str) -> Callable:
-    """The fitting function registered under ``name`` (:mod:`brdffit.fit.registry`);
-    ``KeyError`` names the known ones."""
-    from ..fit.registry import get
-
-    return get(name).fit
-
-
-def model_params(model) -> dict:
-    """JSON-friendly parameters of a fitted model for the report (small arrays only)."""
-    out: dict[str, Any] = {}
-    to_state = getattr(model, "to_state", None)
-    if callable(to_state):
-        try:
-            params, arrays = to_state()
-            out.update(params or {})
-            out["tables"] = {k: list(np.shape(v)) for k, v in (arrays or {}).items()}
-        except Exception:  # noqa: BLE001
-            pass
-    for attr in ("distribution", "fresnel"):
-        part = getattr(model, attr, None)
-        if part is not None and callable(getattr(part, "params", None)):
-            try:
-                out.setdefault(attr, {"type": type(part).__name__, **(part.params() or {})})
-            except Exception:  # noqa: BLE001
-                pass
-    if not out and callable(getattr(model, "describe", None)):
-        out = model.describe()
-    return _small(out)
-
-
-def _small(obj, limit: int = 24):
-    if isinstance(obj, Mapping):
-        return {str(k): _small(v, limit) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple, np.ndarray)):
-        arr = np.asarray(obj, dtype=object) if not isinstance(obj, np.ndarray) else obj
-        if arr.size > limit:
-            return f"<array shape {list(np.shape(obj))}>"
-        return [_small(v, limit) for v in (obj.tolist() if isinstance(obj, np.ndarray) else obj)]
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
-
-
-def _isotropic_only(name: str) -> bool:
-    from ..fit.registry import get
-
-    try:
-        return get(name).isotropic_only
-    except KeyError:
-        return False
-
-
-def fit_model(name: str, reference, options: Mapping | None = None):
-    """Fit model ``name`` to ``reference``; returns ``(model, seconds)``."""
-    fitter = resolve_fitter(name)
-    t0 = time.perf_counter()
-    model = fitter(reference, **dict(options or {}))
-    return model, time.perf_counter() - t0
 
 
 def _default_renderer():
@@ -207,7 +146,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
         The reference: a BRDF object, a fit file, ``synthetic:NAME`` or a load spec
         (``INPUT`` with ``material`` → ``INPUT:MATERIAL``).
     models:
-        Model names to fit (``"tabulated"``, ``"ggx"``, … resolved by :func:`resolve_fitter`),
+        Model names to fit (``"tabulated"``, ``"ggx"``, … resolved by :func:`brdffit.fit.registry.get`),
         paths to saved fit files (``.npz``), ``"label=path.npz"``, or a mapping
         label → (BRDF object | fit-file path | model name).
     out_dir:
@@ -274,7 +213,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
                 rec["origin"] = f"loaded {what}"
                 info = getattr(model, "fit_info", None) or {}
                 rec["fit_time"] = _num(info.get("time", info.get("time_s")))  # NPF: time_s
-            elif _isotropic_only(str(what)) and not getattr(reference, "isotropic", False):
+            elif is_isotropic_only(str(what)) and not getattr(reference, "isotropic", False):
                 rec.update(status="skipped", error=f"{what} fits isotropic BRDFs only")
                 continue
             else:
@@ -286,7 +225,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
             rec["params"] = model_params(model)
             info = getattr(model, "fit_info", None)
             if info:
-                rec["fit_info"] = _small(dict(info))
+                rec["fit_info"] = small_json(dict(info))
             if save_fits and rec["origin"] == "fitted":
                 try:
                     from ..io.fitfile import SerializableModel, save_fit, table_bytes

@@ -18,8 +18,8 @@ BRDF space (functions of two BRDFs, independent of rendering)
 * :func:`cosine_weighted_relative_error` – defined and implemented here.
 * ``normalized_l2(ref, fit)`` (Bagher, Soler, Holzschuch 2012 §6.3) and
   ``compressive_objective(fit, reference) -> dict`` (Bagher et al. 2016 Eq. 7-12; note its
-  argument order and dict result) are re-exported as is from :mod:`brdffit.evaluation.l2`
-  and :mod:`brdffit.evaluation.objective` (attribute access raises ``AttributeError`` naming
+  argument order and dict result) are re-exported as is from :mod:`brdffit.losses.l2`
+  and :mod:`brdffit.losses.objective` (attribute access raises ``AttributeError`` naming
   the missing module otherwise). :class:`BRDFMetrics` wraps all three with the reference
   prepared once and scalar results.
 * Not to be confused with ``objective.weighted_mean_relative_error`` (a weighted *mean of
@@ -63,14 +63,14 @@ def __getattr__(name):
     if name in _REEXPORTS:
         mod_name, candidates = _REEXPORTS[name]
         try:
-            mod = importlib.import_module(f"{__package__}.{mod_name}")
+            mod = importlib.import_module(f"brdffit.losses.{mod_name}")
         except ModuleNotFoundError as exc:
-            raise AttributeError(f"{name} needs brdffit.evaluation.{mod_name}, which is not "
+            raise AttributeError(f"{name} needs brdffit.losses.{mod_name}, which is not "
                                  f"available: {exc}") from None
         for cand in candidates:
             if hasattr(mod, cand):
                 return getattr(mod, cand)
-        raise AttributeError(f"brdffit.evaluation.{mod_name} has none of {candidates}")
+        raise AttributeError(f"brdffit.losses.{mod_name} has none of {candidates}")
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -268,10 +268,10 @@ class BRDFMetrics:
     ``BRDFMetrics(ref).evaluate(fit)`` returns a dict with
 
     * ``cos_rel_error`` – :func:`cosine_weighted_relative_error` (always);
-    * ``normalized_l2`` – Bagher et al. 2012 §6.3 via :class:`brdffit.evaluation.l2.L2Reference`
+    * ``normalized_l2`` – Bagher et al. 2012 §6.3 via :class:`brdffit.losses.l2.L2Reference`
       (MERL-grid quadrature for isotropic references, Monte Carlo otherwise);
     * ``compressive_objective`` – Eq. 7 of Bagher et al. 2016 with the weights of Eq. 8-12
-      (:mod:`brdffit.evaluation.objective`), *normalised* by the objective of the all-zero
+      (:mod:`brdffit.losses.objective`), *normalised* by the objective of the all-zero
       model (``Σ w ρ*²``) so that it is comparable across materials; isotropic references only.
 
     A metric whose module is missing or that fails is ``None``, with the reason under
@@ -296,7 +296,7 @@ class BRDFMetrics:
         if "normalized_l2" in self.metrics:
             t0 = time.perf_counter()
             try:
-                from .l2 import L2Reference
+                from ..losses.l2 import L2Reference
 
                 iso = bool(getattr(reference, "isotropic", False)) and hasattr(reference, "eval_hd")
                 self._l2 = L2Reference(reference, "grid" if iso else "mc", seed=seed)
@@ -310,7 +310,7 @@ class BRDFMetrics:
                 if not getattr(reference, "isotropic", False):
                     raise ValueError("the compressive objective needs an isotropic reference")
                 from ..grid import merl_phi_d, merl_theta_d, merl_theta_h, tabulate_merl_grid
-                from .objective import prepare_objective
+                from ..losses.objective import prepare_objective
 
                 vals, valid = tabulate_merl_grid(reference)
                 self._obj = prepare_objective(vals, valid, source=getattr(reference, "name", None))

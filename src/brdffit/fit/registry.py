@@ -18,10 +18,14 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import time
+from collections.abc import Mapping
 from typing import Any, Callable
 
+import numpy as np
+
 __all__ = ["Fitter", "FITTERS", "register_fitter", "get_fitter", "get", "list_fitters",
-           "fit", "summarize"]
+           "fit", "fit_model", "is_isotropic_only", "summarize", "model_params", "small_json"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -99,3 +103,58 @@ def summarize(name: str, model) -> dict:
         return dict(entry.summary(model))
     info = getattr(model, "fit_info", None) or {}
     return {"model": name, "time_s": info.get("time", info.get("time_s"))}
+
+
+# -- fitting orchestration (used by compare and batch) --------------------------------------
+def model_params(model) -> dict:
+    """JSON-friendly parameters of a fitted model for the report (small arrays only)."""
+    out: dict[str, Any] = {}
+    to_state = getattr(model, "to_state", None)
+    if callable(to_state):
+        try:
+            params, arrays = to_state()
+            out.update(params or {})
+            out["tables"] = {k: list(np.shape(v)) for k, v in (arrays or {}).items()}
+        except Exception:  # noqa: BLE001
+            pass
+    for attr in ("distribution", "fresnel"):
+        part = getattr(model, attr, None)
+        if part is not None and callable(getattr(part, "params", None)):
+            try:
+                out.setdefault(attr, {"type": type(part).__name__, **(part.params() or {})})
+            except Exception:  # noqa: BLE001
+                pass
+    if not out and callable(getattr(model, "describe", None)):
+        out = model.describe()
+    return small_json(out)
+
+
+def small_json(obj, limit: int = 24):
+    """``obj`` with NumPy scalars as Python numbers and arrays above ``limit`` elements
+    replaced by a ``"<array shape [...]>"`` note (what reports and records keep)."""
+    if isinstance(obj, Mapping):
+        return {str(k): small_json(v, limit) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        arr = np.asarray(obj, dtype=object) if not isinstance(obj, np.ndarray) else obj
+        if arr.size > limit:
+            return f"<array shape {list(np.shape(obj))}>"
+        return [small_json(v, limit) for v in (obj.tolist() if isinstance(obj, np.ndarray) else obj)]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def is_isotropic_only(name: str) -> bool:
+    """True when model ``name`` fits isotropic BRDFs only (False for unknown names)."""
+    try:
+        return get(name).isotropic_only
+    except KeyError:
+        return False
+
+
+def fit_model(name: str, reference, options: Mapping | None = None):
+    """Fit model ``name`` to ``reference``; returns ``(model, seconds)``."""
+    fitter = get(name).fit
+    t0 = time.perf_counter()
+    model = fitter(reference, **dict(options or {}))
+    return model, time.perf_counter() - t0

@@ -71,7 +71,7 @@ Hence, per channel:
 4. **Selection** (``selection="full"``): the candidate with the smallest weighted error on
    that grid wins, rather than the smallest slice residual. Weights: Bagher, Snyder,
    Nowrouzezahrai 2016 Eq. 8 (volume form × cos θi cos θo × compressive weight; θi, θo ≤
-   89°) as in :mod:`brdffit.evaluation.objective` (the §6.3 L2 weights alone let the few
+   89°) as in :mod:`brdffit.losses.objective` (the §6.3 L2 weights alone let the few
    largest grazing values decide). Grid: all 90 θh, every 4th θd below 76° and every θd
    from 76° (grazing rows vary fast: every 4th row there picked fits 10× worse on *brass*),
    every 15th φd (≈ 20 000 samples with θi, θo ≤ 89°). ``refine=k`` additionally refines
@@ -700,12 +700,12 @@ def _albedo_rows(kind: str, alpha: float, p: float | None) -> np.ndarray:
 def _selection_data(brdf, theta_d_stride: int, phi_stride: int) -> dict:
     """The reference on a subsampled MERL grid with the weights of Bagher et al. 2016 Eq. 8.
 
-    ``w = wV wI wC`` exactly as :mod:`brdffit.evaluation.objective` (volume form of the
+    ``w = wV wI wC`` exactly as :mod:`brdffit.losses.objective` (volume form of the
     MERL cell, ``cos θi cos θo``, compressive weight with ρ̄ the weighted median of the
     subsample, per channel; θi, θo ≤ 89°), every ``theta_d_stride``-th θd and
     ``phi_stride``-th φd node (weights scaled by the strides).
     """
-    from ..evaluation.objective import compressive_weight, volume_form_weight, weighted_median
+    from ..losses.objective import compressive_weight, volume_form_weight, weighted_median
     from ..geometry import half_diff_to_io
 
     sd, sp = int(theta_d_stride), int(phi_stride)
@@ -988,7 +988,7 @@ def fit_ggx_two_slice(brdf, *, weighting: str = "cosine", starts: int = 3,
 # full-data weighted least squares Cook-Torrance
 # ------------------------------------------------------------------------------------------
 def _full_data(brdf, theta_d_stride: int, phi_stride: int):
-    from ..evaluation.l2 import merl_grid_weights
+    from ..losses.l2 import merl_grid_weights
     from ..geometry import half_diff_to_io
 
     w, _ = merl_grid_weights(phi_stride)
@@ -1021,7 +1021,7 @@ def fit_cook_torrance(brdf, distribution: str = "beckmann", *, theta_d_stride: i
     Unknowns per channel: ρd, ρs (linear, NNLS inside the residual) and α, F0 (outer bounded
     TRF least squares from a grid search). Data: the MERL grid subsampled in θd and φd;
     weights: the §6.3 quadrature weights ``cos θi cos θo dωi dωo`` (see
-    :mod:`brdffit.evaluation.l2`), i.e. this minimises the unnormalised §6.3 error.
+    :mod:`brdffit.losses.l2`), i.e. this minimises the unnormalised §6.3 error.
     """
     t0 = time.perf_counter()
     if distribution not in ("beckmann", "ggx"):

@@ -7,7 +7,7 @@
 * ``"naive"`` – Eq. 4 (D(θh) F(θd) H(φd));
 * ``"bivariate"`` – Eq. 5 (B(θh, θd), one weighted-average step),
 
-minimising the compressive-weighted objective (Eq. 7-12, :mod:`brdffit.evaluation.objective`)
+minimising the compressive-weighted objective (Eq. 7-12, :mod:`brdffit.losses.objective`)
 with alternating weighted least squares (AWLS, §4.2; solvers in :mod:`._solver`).
 
 Deviations from the paper (deliberate, documented):
@@ -22,7 +22,7 @@ Deviations from the paper (deliberate, documented):
 * Independent-G does one G step per outer iteration (D, F, G, ρ), with the golden-section
   search whenever that step increases the objective (the paper iterates G "until it converges
   or increases the objective").
-* Objective weights at cell centres (see :mod:`brdffit.evaluation.objective`).
+* Objective weights at cell centres (see :mod:`brdffit.losses.objective`).
 * The start "from the SGD fit" uses :func:`brdffit.fit.sgd.fit_sgd` when that module exists
   (the paper used its authors' earlier Bagher et al. 2012 fits); otherwise it is skipped and
   ``fit_info["starts"]`` says so.
@@ -45,7 +45,7 @@ from typing import Iterable
 import numpy as np
 
 from ...errors import FitError
-from ...evaluation.objective import ObjectiveOptions, prepare_objective
+from ...losses.objective import ObjectiveOptions, prepare_objective
 from ...grid import tabulate_merl_grid
 from ...microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF
 from . import _solver
@@ -196,7 +196,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
     data:
         Optional ``(values (90, 90, 180, 3), valid (90, 90, 180))`` instead of ``brdf``.
     compressive, restrict_deg, p, max_theta_io_deg:
-        Objective options (:class:`~brdffit.evaluation.objective.ObjectiveOptions`): wC on/off
+        Objective options (:class:`~brdffit.losses.objective.ObjectiveOptions`): wC on/off
         (Fig. 7), restricted angular range (Fig. 15), compressive power, θi/θo cut (89°).
     max_iter, tol:
         Stopping rule (see :mod:`._solver`); ``max_iter`` defaults per variant

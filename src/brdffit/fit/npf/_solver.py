@@ -25,7 +25,7 @@ import numpy as np
 from scipy.linalg import solve_banded
 from scipy.ndimage import gaussian_filter1d
 
-from ...evaluation.objective import ObjectiveData
+from ...losses.objective import ObjectiveData
 from ...microfacet.npf_model import smith_g_from_d
 from . import _kernels
 

@@ -1,4 +1,4 @@
-"""Normalised L2 error of Bagher 2012 §6.3 (evaluation.l2)."""
+"""Normalised L2 error of Bagher 2012 §6.3 (losses.l2)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from brdffit.brdf import IsotropicBRDF
-from brdffit.evaluation.l2 import L2Reference, merl_grid_weights, normalized_l2
+from brdffit.losses.l2 import L2Reference, merl_grid_weights, normalized_l2
 
 
 class _Lambert(IsotropicBRDF):
