@@ -39,7 +39,7 @@ import numpy as np
 from ...errors import BRDFError
 
 __all__ = ["to_evaluator", "is_reciprocal", "register_translator", "resampling_error", "tabulate_4d",
-           "evaluate_drjit", "TABLE4D_SHAPE"]
+           "evaluate_drjit", "albedo_drjit", "furnace_drjit", "TABLE4D_SHAPE"]
 
 _TRANSLATORS: dict[str, Callable] = {}
 TABLE4D_SHAPE = (40, 40, 32, 40)
@@ -314,6 +314,50 @@ def evaluate_drjit(evaluator, wi, wo, alpha_scale=1.0) -> np.ndarray:
     dj = _dj()
     f = evaluator.eval(dj.to_vec3(wi), dj.to_vec3(wo), alpha_scale, True)
     return np.stack([np.asarray(f[k], dtype=np.float64) for k in range(3)], axis=-1)
+
+
+def albedo_drjit(evaluator, theta_i: float, n: int = 1 << 20, seed: int = 0,
+                 alpha_scale=1.0, batch: int = 1 << 20) -> tuple[np.ndarray, np.ndarray]:
+    """Importance-sampled directional albedo of a Dr.Jit evaluator, as a renderer estimates
+    it: ``mean(f cos θo / pdf)`` over ``wo`` drawn by ``evaluator.sample`` (``wi`` at polar
+    angle ``theta_i``, φi = 0), with the pdf ``sample`` returns; samples with pdf 0 count as
+    0. Returns ``(mean, standard error)``, RGB (:mod:`brdffit.testing.furnace`)."""
+    from ...testing.furnace import estimator_values
+
+    dj = _dj()
+    mi = dj.mi
+    rng = np.random.default_rng(seed)
+    wi1 = np.array([np.sin(theta_i), 0.0, np.cos(theta_i)])
+    s1, s2, done = np.zeros(3), np.zeros(3), 0
+    while done < n:
+        m = min(batch, n - done)
+        wi = dj.to_vec3(np.broadcast_to(wi1, (m, 3)))
+        u = rng.random((m, 3)).astype(np.float32)
+        wo, pdf = evaluator.sample(wi, mi.Float(u[:, 0]), mi.Point2f(u[:, 1], u[:, 2]),
+                                   alpha_scale, True)
+        f = dj.to_numpy(evaluator.eval(wi, wo, alpha_scale, True))
+        val = estimator_values(f, dj.to_numpy(wo), dj.to_numpy(pdf))
+        s1 += val.sum(0)
+        s2 += (val * val).sum(0)
+        done += m
+    mean = s1 / n
+    return mean, np.sqrt(np.maximum(s2 / n - mean**2, 0.0) / max(n - 1, 1))
+
+
+def furnace_drjit(evaluator, thetas_deg=(0.0, 40.0, 80.0), n: int = 1 << 20, seed: int = 0,
+                  alpha_scale=1.0, tol: float = 0.01, k: float = 4.0, **quad_kw):
+    """Furnace test of a Dr.Jit evaluator: :func:`albedo_drjit` against the quadrature of
+    the evaluator's own ``eval`` (:func:`brdffit.testing.furnace.albedo_quadrature`), one
+    :class:`~brdffit.testing.furnace.FurnaceResult` per incidence."""
+    from ...testing.furnace import FurnaceResult, albedo_quadrature
+
+    out = []
+    for j, t in enumerate(np.radians(np.atleast_1d(thetas_deg))):
+        est, se = albedo_drjit(evaluator, float(t), n=n, seed=seed + j, alpha_scale=alpha_scale)
+        q = albedo_quadrature(lambda a, b: evaluate_drjit(evaluator, a, b, alpha_scale),
+                              float(t), **quad_kw)
+        out.append(FurnaceResult(float(t), est, se, q, tol, k))
+    return out
 
 
 def _random_pairs(n, seed):
