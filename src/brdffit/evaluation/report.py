@@ -101,9 +101,11 @@ window.addEventListener('load', function () {
 # result files
 # ------------------------------------------------------------------------------------------
 def slugify(name: str) -> str:
-    """A file-system and URL safe directory name for a material."""
-    s = re.sub(r"[^A-Za-z0-9._-]+", "-", str(name)).strip("-.")
-    return s or "material"
+    """A file-system and URL safe directory name for a material: :func:`brdffit.paths.slug`
+    (the package's one name-to-path function; distinct names never share a folder)."""
+    from ..paths import slug
+
+    return slug(name)
 
 
 def _clean(obj):
