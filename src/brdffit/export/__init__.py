@@ -23,7 +23,6 @@ One module per target (conventions of every target in ``docs/conventions.md``):
 from __future__ import annotations
 
 from importlib import import_module
-from pathlib import Path
 
 from ..errors import ExportError
 
@@ -55,12 +54,17 @@ def export(model, to: str, path, **options) -> dict:
     """Write ``model`` in the target format ``to`` at ``path``; returns a summary dict
     (files written, approximations made and their measured error where applicable).
 
-    Raises :class:`~brdffit.errors.ExportError` when the model cannot go to the target.
+    Raises :class:`~brdffit.errors.ExportError` when the model cannot go to the target, and
+    when an output cannot be written: one line naming the file (what was expected, what was
+    found); a failed export leaves no partial output (see :mod:`._common`).
     """
+    from ._common import check_output_path
+
     if to not in TARGETS:
         raise ExportError(f"unknown export target {to!r}; expected one of {', '.join(TARGETS)}")
+    path = check_output_path(path)
     mod, fn = TARGETS[to]
-    return getattr(import_module(mod, __name__), fn)(model, Path(path), **options)
+    return getattr(import_module(mod, __name__), fn)(model, path, **options)
 
 
 def load_json(path):

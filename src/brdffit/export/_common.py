@@ -1,20 +1,174 @@
-"""Helpers shared by the export targets: model inspection, errors, frames."""
+"""Helpers shared by the export targets: model inspection, errors, frames, safe output.
+
+Output files (issue 12): every exporter writes through :func:`writing` (an ``OSError`` becomes
+a one-line :class:`ExportError` naming the output file, what was expected and what was
+found) and, when it writes several files, through :class:`StagedFiles` (all files are written
+in a temporary folder next to the destination and moved into place only when all are
+complete; on any error nothing is left and earlier outputs are kept). Names a user controls
+are never pasted into generated code: see :func:`shown` for messages and each exporter for
+its language's escaping.
+"""
 
 from __future__ import annotations
+
+import contextlib
+import os
+import re
+import shutil
+import tempfile
+from pathlib import Path
 
 import numpy as np
 
 from ..errors import ExportError
 
-__all__ = ["label", "fail", "principal_axes", "microfacet_parts", "is_elliptical", "LUMA"]
+__all__ = ["label", "fail", "principal_axes", "microfacet_parts", "is_elliptical", "LUMA",
+           "shown", "check_output_path", "write_problem", "writing", "StagedFiles"]
 
 #: Rec. 709 / linear-sRGB luminance weights (used for RGL ``luminance`` and reports)
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
 def label(model) -> str:
-    """``ClassName 'name'`` of a model, for messages."""
+    """``ClassName 'name'`` of a model, for messages (the name as a Python ``repr``: quotes,
+    newlines and control characters escaped, so it stays on one line)."""
     return f"{type(model).__name__} {getattr(model, 'name', '')!r}"
+
+
+# ------------------------------------------------------------------------------------------
+# output files: one-line errors naming the file, nothing partial left behind
+# ------------------------------------------------------------------------------------------
+def shown(path) -> str:
+    """``path`` for a one-line message: as is when printable, else its ``repr`` (a name with
+    a newline, NUL or escape sequence cannot break the line or the terminal)."""
+    s = os.fsdecode(path) if isinstance(path, (bytes, os.PathLike)) else str(path)
+    return s if s.isprintable() else repr(s)
+
+
+def check_output_path(path) -> Path:
+    """``path`` as a :class:`Path`; :class:`ExportError` when it cannot name a file (NUL
+    character, empty name, ``.`` or ``..``)."""
+    s = os.fsdecode(path) if isinstance(path, (bytes, os.PathLike)) else str(path)
+    if "\x00" in s:
+        raise ExportError(f"{shown(s)}: expected an output file name without NUL characters, "
+                          "found one")
+    p = Path(s)
+    if not s or p.name in ("", ".", ".."):
+        raise ExportError(f"{shown(s)}: expected an output file name, found "
+                          f"{'nothing' if not s else 'a folder'}")
+    return p
+
+
+_SHORT_WRITE = re.compile(r"(\d+) requested and (\d+) written")
+
+
+def write_problem(exc: BaseException) -> str:
+    """What went wrong in a write, in words: ``could not write the file (no space left on
+    device)``, or for NumPy's short writes (no errno) ``could not write 6144 bytes, only 4064
+    were written (no space left on device or file size limit?)``."""
+    if isinstance(exc, OSError) and exc.errno is not None and exc.strerror:
+        why = exc.strerror[:1].lower() + exc.strerror[1:]
+        return f"could not write the file ({why})"
+    text = " ".join(str(exc).split())
+    m = _SHORT_WRITE.search(text)
+    if m:
+        return (f"could not write {m[1]} bytes, only {m[2]} were written (no space left on "
+                "device or file size limit?)")
+    return f"could not write the file ({type(exc).__name__}: {text or 'no details'})"
+
+
+@contextlib.contextmanager
+def writing(path, catch: tuple = (OSError,)):
+    """Turn an error of type ``catch`` (default ``OSError``) raised while writing ``path``
+    into a one-line :class:`ExportError` naming ``path``; brdffit's own errors pass."""
+    from ..errors import BRDFError
+
+    try:
+        yield
+    except BRDFError:
+        raise
+    except catch as exc:
+        raise ExportError(f"{shown(path)}: {write_problem(exc)}") from exc
+
+
+class StagedFiles:
+    """The files of one export, written as a whole.
+
+    ``with StagedFiles(main) as st:`` creates a hidden temporary folder next to ``main``
+    (same filesystem); ``st.path(final)`` is where a writer writes the file that belongs at
+    ``final`` (same suffix: some writers append one), ``st.open(final)`` opens it. When the
+    block ends without error every file is moved into place with ``os.replace`` (``main``
+    last, so a script never appears before the data it loads); if a move fails, the files
+    already moved are restored to their previous content (or removed when they did not
+    exist). On any error the temporary folder is removed: a failed export leaves the output
+    folder as it was. Every ``OSError`` becomes a one-line :class:`ExportError` naming the
+    final file (:func:`writing`).
+    """
+
+    def __init__(self, main):
+        self.main = check_output_path(main)
+        self.dir: Path | None = None
+        self._files: list[tuple[Path, Path]] = []
+
+    def __enter__(self) -> "StagedFiles":
+        parent = self.main.parent
+        with writing(self.main):
+            parent.mkdir(parents=True, exist_ok=True)
+            self.dir = Path(tempfile.mkdtemp(prefix=f".{self.main.name[:48]}.",
+                                             suffix=".partial", dir=parent))
+        return self
+
+    def path(self, final) -> Path:
+        """The temporary path for the file that belongs at ``final``."""
+        final = check_output_path(final)
+        tmp = self.dir / f"{len(self._files)}{final.suffix[:16]}"
+        self._files.append((final, tmp))
+        return tmp
+
+    @contextlib.contextmanager
+    def open(self, final, mode: str = "wb"):
+        """Open the temporary file of ``final`` for writing (errors name ``final``)."""
+        tmp = self.path(final)
+        with writing(final):
+            with open(tmp, mode) as fh:
+                yield fh
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        try:
+            if exc_type is None:
+                self._commit()
+        finally:
+            if self.dir is not None:
+                shutil.rmtree(self.dir, ignore_errors=True)
+        return False
+
+    def _commit(self) -> None:
+        order = sorted(self._files, key=lambda ft: ft[0] == self.main)   # main file last
+        done: list[tuple[Path, Path | None, bool]] = []
+        try:
+            for i, (final, tmp) in enumerate(order):
+                if not tmp.is_file():
+                    raise ExportError(f"{shown(final)}: expected the file to be written, found "
+                                      "nothing")
+                existed = os.path.lexists(final)
+                backup = None
+                if existed and not final.is_dir():
+                    backup = self.dir / f"previous{i}"
+                    try:
+                        os.link(final, backup, follow_symlinks=False)
+                    except OSError:
+                        backup = None
+                with writing(final):
+                    os.replace(tmp, final)
+                done.append((final, backup, existed))
+        except BaseException:
+            for final, backup, existed in reversed(done):
+                with contextlib.suppress(OSError):
+                    if backup is not None:
+                        os.replace(backup, final)
+                    elif not existed:
+                        os.unlink(final)
+            raise
 
 
 def fail(model, target: str, need: str):

@@ -35,6 +35,11 @@ filtering: upload as ``RGB32F``, ``GL_NEAREST``); interpolation is done in the s
 CPU translation reproduces it exactly. The uber-texture (:func:`pack_npf_uber_texture`, after
 Bagher 2016 Fig. 16) has one row per material and 272 texels: ``[0, 90)`` D(θ'h),
 ``[90, 180)`` F(θd), ``[180, 270)`` G(θ = k°), 270 ρd, 271 ρs (RGB = the three channels).
+
+The GLSL text holds no user-controlled string (no material or file name, not even in a
+comment): identifiers are generated (``bf_tex_l0_ndf``...), names go only to the JSON index
+(``json.dump``). Shader, textures and index are written as a whole
+(:class:`~brdffit.export._common.StagedFiles`): nothing is left when a write fails.
 """
 
 from __future__ import annotations
@@ -47,9 +52,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._atomic import atomic_path, atomic_write
 from ..errors import ExportError
-from ._common import fail, is_elliptical, label
+from ._common import StagedFiles, check_output_path, fail, is_elliptical, label, writing
 
 __all__ = ["GLSL_LIBRARY", "model_spec", "glsl_source", "write_glsl", "pack_npf_uber_texture",
            "npf_row", "compile_glsl", "glslang_available", "UBER_WIDTH", "TABLE_NODES"]
@@ -553,7 +557,7 @@ def pack_npf_uber_texture(models, path, exr: bool = True) -> dict:
     Writes ``path`` (``.npy``), ``path.with_suffix(".json")`` (index: row → name, layout) and,
     with ``exr``, ``path.with_suffix(".exr")`` (float32 RGB image, row = material).
     """
-    path = Path(path)
+    path = check_output_path(path)
     models = list(models)
     if not models:
         raise ExportError("pack_npf_uber_texture: expected at least one NPF model, found none")
@@ -569,17 +573,21 @@ def pack_npf_uber_texture(models, path, exr: bool = True) -> dict:
                         "(cos theta_i cos theta_o) per channel (Bagher 2016 Eq. 3)",
              "sampling": "texelFetch + linear interpolation in the shader (bf_npf)"}
     files = [str(path), str(path.with_suffix(".json"))]
-    with atomic_path(path, suffix=".npy") as tmp:
-        np.save(tmp, tex)
-    if exr:
-        from ..evaluation.imageio import write_exr
-
-        write_exr(path.with_suffix(".exr"), tex)
-        files.append(str(path.with_suffix(".exr")))
-        index["exr"] = path.with_suffix(".exr").name
     index["npy"] = path.name
-    with atomic_write(path.with_suffix(".json"), "w") as fh:
-        json.dump(index, fh, indent=1)
+    with StagedFiles(path) as staged:
+        with staged.open(path) as fh:
+            np.save(fh, tex)
+        if exr:
+            from ..evaluation import imageio
+
+            exr_path = path.with_suffix(".exr")
+            tmp = staged.path(exr_path)
+            with writing(exr_path, catch=(Exception,)):   # OpenEXR raises plain exceptions
+                imageio.write_exr(tmp, tex)
+            files.append(str(exr_path))
+            index["exr"] = exr_path.name
+        with staged.open(path.with_suffix(".json")) as fh:
+            fh.write(json.dumps(index, indent=1).encode("ascii"))
     return {"files": files, "shape": list(tex.shape), "rows": names}
 
 
@@ -590,7 +598,7 @@ def write_glsl(model, path, **_ignored) -> dict:
     """Write ``path`` (``.glsl``: library + ``brdffit_eval``), its textures
     (``<stem>.<name>.npy``) and ``<name>.json`` next to it (e.g. ``brdf.glsl.json``: texture
     index, notes, conventions)."""
-    path = Path(path)
+    path = check_output_path(path)
     spec = model_spec(model)
     src = glsl_source(spec, version=None)
     files = [str(path)]
@@ -599,17 +607,18 @@ def write_glsl(model, path, **_ignored) -> dict:
              "textures": {}, "notes": spec["notes"], "lobes": spec["lobes"],
              "conventions": "local frame n=+z, wi to light, wo to viewer; linear RGB of the "
                             "source; textures RGB32F read with texelFetch (no filtering)"}
-    for name, tex in spec["textures"].items():
-        tp = path.with_name(f"{path.stem}.{name}.npy")
-        with atomic_path(tp, suffix=".npy") as tmp:
-            np.save(tmp, np.asarray(tex, np.float32))
-        index["textures"][f"bf_tex_{name}"] = {"file": tp.name, "shape": list(tex.shape)}
-        files.append(str(tp))
-    with atomic_write(path, "w") as fh:
-        fh.write(src)
     index_path = path.with_name(path.name + ".json")
-    with atomic_write(index_path, "w") as fh:
-        json.dump(index, fh, indent=1)
+    with StagedFiles(path) as staged:
+        for name, tex in spec["textures"].items():
+            tp = path.with_name(f"{path.stem}.{name}.npy")
+            with staged.open(tp) as fh:
+                np.save(fh, np.asarray(tex, np.float32))
+            index["textures"][f"bf_tex_{name}"] = {"file": tp.name, "shape": list(tex.shape)}
+            files.append(str(tp))
+        with staged.open(path) as fh:
+            fh.write(src.encode("ascii"))
+        with staged.open(index_path) as fh:
+            fh.write(json.dumps(index, indent=1).encode("ascii"))
     files.append(str(index_path))
     return {"files": files, "target": "glsl", "notes": spec["notes"]}
 

@@ -38,13 +38,12 @@ Colours are the fit's linear RGB, written unchanged (glTF factors are linear).
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 
 from .._atomic import atomic_write
 from ..brdf import IsotropicBRDF, _as_dirs
-from ._common import LUMA, fail, is_elliptical
+from ._common import LUMA, check_output_path, fail, is_elliptical, writing
 
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material", "gltf_equivalent", "gltf_fidelity",
            "write_gltf", "MATERIAL_METAL_F0"]
@@ -331,12 +330,15 @@ def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
                optimize: bool = False, **_ignored) -> dict:
     """Write a minimal valid glTF 2.0 JSON (``asset`` + one ``material``), atomically;
     ``optimize`` refines the rule-based parameters (:func:`optimize_parameters`)."""
+    check_output_path(path)
     mat = gltf_material(model, fidelity=fidelity, anisotropy=anisotropy, optimize=optimize)
     doc = {"asset": {"version": "2.0", "generator": "brdffit export"}, "materials": [mat]}
     if "extensions" in mat:
         doc["extensionsUsed"] = list(mat["extensions"])
-    with atomic_write(Path(path), "w") as fh:
-        json.dump(doc, fh, indent=1, allow_nan=False)
+    data = json.dumps(doc, indent=1, allow_nan=False).encode("ascii")   # names \u-escaped
+    path = check_output_path(path)
+    with writing(path), atomic_write(path, "wb") as fh:
+        fh.write(data)
     return {"files": [str(path)], "target": "gltf", "material": mat["pbrMetallicRoughness"],
             "notes": mat["extras"]["brdffit"]["notes"],
             "fidelity": mat["extras"]["brdffit"].get("fidelity")}

@@ -35,7 +35,7 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..errors import BRDFFormatError
-from ._common import fail
+from ._common import check_output_path, fail, writing
 
 __all__ = ["to_json_dict", "from_json_dict", "write_json", "load_json", "describe_parameters",
            "CONVENTIONS", "FORMAT"]
@@ -173,10 +173,11 @@ def to_json_dict(model) -> dict[str, Any]:
 
 def write_json(model, path, **_ignored) -> dict:
     """Write the parameters of ``model`` as JSON (atomically); returns a summary."""
+    path = check_output_path(path)
     doc = to_json_dict(model)
-    text = json.dumps(doc, indent=1, allow_nan=False, default=_default)
-    with atomic_write(Path(path), "w") as fh:
-        fh.write(text)
+    text = json.dumps(doc, indent=1, allow_nan=False, default=_default)   # ASCII: \u escapes
+    with writing(path), atomic_write(path, "wb") as fh:
+        fh.write(text.encode("ascii"))
     return {"files": [str(path)], "target": "json", "model": doc["model"]}
 
 

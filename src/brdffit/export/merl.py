@@ -2,29 +2,31 @@
 
 The model is tabulated on the MERL grid (90 θh × 90 θd × 180 φd, Matusik et al. 2003) with
 :func:`brdffit.grid.tabulate_merl_grid` and written in MERL units (values divided by the MERL
-colour scales, so the file reads back as the model's RGB). Written atomically. Anisotropic
+colour scales, so the file reads back as the model's RGB). Written atomically; a failed write
+is one error naming the file (:func:`brdffit.export._common.writing`). Anisotropic
 models raise :class:`~brdffit.errors.ExportError`: the MERL grid has no φh.
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
-from ._common import fail
+from ._common import check_output_path, fail, writing
 
 __all__ = ["export_merl"]
 
 
 def export_merl(model, path, **_ignored) -> dict:
     """Write ``model`` as a MERL ``.binary`` file; returns a summary (samples, invalid)."""
-    from ..io.merl import resample_to_merl
+    from ..io.merl import resample_to_merl, write_merl
 
     if not getattr(model, "isotropic", False):
         fail(model, "MERL .binary", "an isotropic BRDF (the MERL grid has no φh axis); "
              "anisotropic fits can go to 'json', 'mitsuba' or 'glsl'")
-    table = resample_to_merl(model, Path(path))
+    path = check_output_path(path)
+    table = resample_to_merl(model)
+    with writing(path):
+        write_merl(table, path)
     vals, valid = table.merl_table()
     return {"files": [str(path)], "target": "merl", "n_samples": int(table.n_samples),
             "n_invalid": int(table.n_invalid),

@@ -42,12 +42,22 @@ Tabulated, SGD and NPF fits (and anything else the render module translates) use
 ``brdffit`` BSDF of :mod:`brdffit.evaluation.render.plugin` (Dr.Jit evaluator registered in
 the running process). Such a model has no XML form; the Python export writes the fit next to a
 ready-to-render script.
+
+Untrusted names (issue 12)
+--------------------------
+Material names, source specs and output file names are never pasted into generated code: the
+Python script carries them only as ``ascii()`` string literals (``MATERIAL``, ``FIT_FILE``,
+``OUTPUT_NAME``; its docstring is fixed text) and every other value is written by
+:func:`py_literal` (finite floats, ints, booleans, ASCII-escaped strings); in XML every string
+goes through :func:`~xml.sax.saxutils.quoteattr` (characters XML cannot hold are refused) and
+the header comment is neutralised (every ``--`` broken up). Script and fit file are
+written as a whole (:class:`~brdffit.export._common.StagedFiles`).
 """
 
 from __future__ import annotations
 
 import math
-import pprint
+import re
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -55,11 +65,13 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..errors import ExportError
-from ._common import fail, is_elliptical, label, principal_axes
+from ._common import StagedFiles, check_output_path, fail, is_elliptical, label, principal_axes
+from ._common import writing
 
 __all__ = ["fit_conductor_fresnel", "builtin_terms", "builtin_bsdf", "mitsuba_equivalent",
            "mitsuba_error", "mitsuba_eval", "mitsuba_eval_error", "plastic_bsdf", "to_xml", "scene_xml", "plugin_bsdf", "mitsuba_bsdf",
-           "example_scene_dict", "write_mitsuba_xml", "write_mitsuba_python", "LLVM_PATH"]
+           "example_scene_dict", "write_mitsuba_xml", "write_mitsuba_python", "LLVM_PATH",
+           "py_literal", "xml_comment"]
 
 LLVM_PATH = "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1"
 
@@ -387,7 +399,34 @@ _BSDF_TYPES = {"diffuse", "roughconductor", "blendbsdf", "roughplastic", "roughd
 
 
 def _fmt(x) -> str:
-    return repr(float(x))
+    x = float(x)
+    if not math.isfinite(x):
+        raise ExportError(f"cannot write the non-finite value {x!r} in a Mitsuba scene; expected "
+                          "finite parameters")
+    return repr(x)
+
+
+# characters XML 1.0 cannot hold at all (not even escaped)
+_XML_BAD = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ud800-\udfff\ufffe\uffff]")
+
+
+def _xml_attr(v, what: str) -> str:
+    """``quoteattr`` of a string, refusing characters that XML 1.0 cannot represent."""
+    v = str(v)
+    bad = _XML_BAD.search(v)
+    if bad:
+        raise ExportError(f"cannot write {what} = {v!r} as XML: it contains "
+                          f"U+{ord(bad.group()):04X}, which XML cannot represent")
+    return quoteattr(v)
+
+
+def xml_comment(text: str) -> str:
+    """``<!-- text -->`` that cannot end early or be malformed: characters XML cannot hold are
+    written as ``\\uXXXX`` and every ``--`` is broken up (``- -``)."""
+    text = _XML_BAD.sub(lambda m: f"\\u{ord(m.group()):04x}", str(text))
+    text = re.sub("-(?=-)", "- ", text)
+    return f"<!-- {text} -->"          # the spaces keep a leading/trailing '-' off '--'
+
 
 
 def to_xml(d: dict, name: str | None = None, indent: int = 0) -> str:
@@ -403,7 +442,7 @@ def to_xml(d: dict, name: str | None = None, indent: int = 0) -> str:
         tag = {"sphere": "shape", "rectangle": "shape", "constant": "emitter", "point": "emitter",
                "perspective": "sensor", "hdrfilm": "film", "independent": "sampler",
                "path": "integrator", "direct": "integrator"}.get(typ, "bsdf")
-    attrs = f" type={quoteattr(typ)}" + (f" name={quoteattr(name)}" if name else "")
+    attrs = f" type={_xml_attr(typ, 'type')}" + (f" name={_xml_attr(name, 'name')}" if name else "")
     lines = [f"{pad}<{tag}{attrs}>"]
     for k, v in d.items():
         if k == "type":
@@ -415,13 +454,13 @@ def to_xml(d: dict, name: str | None = None, indent: int = 0) -> str:
             child_name = None if k.startswith(("bsdf_", "film", "sampler", "rfilter")) else k
             lines.append(to_xml(v, child_name, indent + 1))
         elif isinstance(v, bool):
-            lines.append(f'{p}<boolean name={quoteattr(k)} value="{str(v).lower()}"/>')
-        elif isinstance(v, int):
-            lines.append(f'{p}<integer name={quoteattr(k)} value="{v}"/>')
-        elif isinstance(v, float):
-            lines.append(f'{p}<float name={quoteattr(k)} value="{_fmt(v)}"/>')
+            lines.append(f'{p}<boolean name={_xml_attr(k, "name")} value="{str(v).lower()}"/>')
+        elif isinstance(v, (int, np.integer)):
+            lines.append(f'{p}<integer name={_xml_attr(k, "name")} value="{int(v)}"/>')
+        elif isinstance(v, (float, np.floating)):
+            lines.append(f'{p}<float name={_xml_attr(k, "name")} value="{_fmt(v)}"/>')
         elif isinstance(v, str):
-            lines.append(f'{p}<string name={quoteattr(k)} value={quoteattr(v)}/>')
+            lines.append(f'{p}<string name={_xml_attr(k, "name")} value={_xml_attr(v, k)}/>')
         elif k == "rgb_value":
             lines.append(f'{p}<rgb name="radiance" value="{", ".join(_fmt(x) for x in v)}"/>')
         else:
@@ -430,15 +469,22 @@ def to_xml(d: dict, name: str | None = None, indent: int = 0) -> str:
     return "\n".join(lines)
 
 
+def _count(v, what: str) -> int:
+    """A positive integer option (resolution, samples per pixel) or a one-line error."""
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 0 < int(v) <= 1 << 20:
+        raise ExportError(f"expected {what} to be a positive integer (at most 2^20), found {v!r}")
+    return int(v)
+
+
 def scene_xml(bsdf: dict, comment: str = "", resolution: int = 256, spp: int = 64) -> str:
     """A ready-to-render Mitsuba 3 XML scene: the BSDF (``id="material"``) on a sphere under a
     constant environment and a point light, path tracer, perspective camera."""
     body = to_xml(bsdf, None, 1).replace("<bsdf ", '<bsdf id="material" ', 1)
-    cmt = f"<!-- {comment.replace('--', '- -')} -->\n" if comment else ""
+    cmt = xml_comment(comment) + "\n" if comment else ""
     return f"""<?xml version="1.0" encoding="utf-8"?>
 {cmt}<scene version="3.0.0">
-    <default name="spp" value="{int(spp)}"/>
-    <default name="res" value="{int(resolution)}"/>
+    <default name="spp" value="{_count(spp, 'spp')}"/>
+    <default name="res" value="{_count(resolution, 'resolution')}"/>
     <integrator type="path"><integer name="max_depth" value="4"/></integrator>
     <sensor type="perspective">
         <float name="fov" value="30"/>
@@ -512,6 +558,9 @@ def write_mitsuba_xml(model, path, resolution: int = 256, spp: int = 64,
     ``"conductor"``: roughconductor/diffuse/blendbsdf, exact up to the documented
     approximations; ``"plastic"``: :func:`plastic_bsdf`); raises :class:`ExportError` for
     models without one (use :func:`write_mitsuba_python`)."""
+    check_output_path(path)
+    _count(resolution, "resolution")
+    _count(spp, "spp")
     if style == "plastic":
         bsdf, info = plastic_bsdf(model)
         err = info.pop("error")
@@ -523,21 +572,28 @@ def write_mitsuba_xml(model, path, resolution: int = 256, spp: int = 64,
     comment = (f"brdffit export of {label(model)}; alpha = slope-scale roughness (Mitsuba's "
                f"alpha); notes: {'; '.join(info['notes']) or 'exact'}; "
                f"cosine-weighted relative error vs the fit: {err['cos_rel_error']:.4g}")
-    with atomic_write(Path(path), "w") as fh:
-        fh.write(scene_xml(bsdf, comment, resolution, spp))
+    data = scene_xml(bsdf, comment, resolution, spp).encode("utf-8")   # as declared
+    path = check_output_path(path)
+    with writing(path), atomic_write(path, "wb") as fh:
+        fh.write(data)
     return {"files": [str(path)], "target": "mitsuba-xml", **info, "error": err}
 
 
-_SCRIPT = '''"""Ready-to-render Mitsuba 3 scene exported by brdffit ({label}).
+_SCRIPT = '''"""Ready-to-render Mitsuba 3 scene exported by brdffit (the model: EXPORTED, MATERIAL).
 
-Run: python {script}  [out.exr]   (needs mitsuba 3 + llvm; {how})
+Run: python <this script>  [out.exr]   (needs mitsuba 3 + llvm; {how})
 Conventions: alpha = slope-scale roughness (Mitsuba's alpha); RGB = the source's linear RGB.
 """
 import os
 import sys
 from pathlib import Path
 
-os.environ.setdefault("DRJIT_LIBLLVM_PATH", {llvm!r})
+EXPORTED = {exported}
+MATERIAL = {material}
+FIT_FILE = {fit_file}
+OUTPUT_NAME = {output_name}
+
+os.environ.setdefault("DRJIT_LIBLLVM_PATH", {llvm})
 import mitsuba as mi  # noqa: E402
 
 mi.set_variant("llvm_ad_rgb")
@@ -560,11 +616,35 @@ def scene_dict(resolution=256, spp=64):
 
 
 if __name__ == "__main__":
-    out = sys.argv[1] if len(sys.argv) > 1 else str(HERE / "{stem}.exr")
+    out = sys.argv[1] if len(sys.argv) > 1 else str(HERE / OUTPUT_NAME)
     image = mi.render(mi.load_dict(scene_dict()))
     mi.util.write_bitmap(out, image)
     print("wrote", out)
 '''
+
+
+def py_literal(obj, indent: int = 0) -> str:
+    """Python source of a plain value (dict with string keys, list, str, finite float, int,
+    bool, None): strings as ``ascii()`` literals, so no value can become code."""
+    pad = "    " * (indent + 1)
+    if obj is None or isinstance(obj, (bool, np.bool_)):
+        return repr(None if obj is None else bool(obj))
+    if isinstance(obj, (int, np.integer)):
+        return repr(int(obj))
+    if isinstance(obj, (float, np.floating)):
+        return _fmt(obj)
+    if isinstance(obj, str):
+        return ascii(obj)
+    if isinstance(obj, dict):
+        items = []
+        for k, v in obj.items():
+            if not isinstance(k, str):
+                raise ExportError(f"cannot write the key {k!r} in a Python scene; expected str")
+            items.append(f"{pad}{ascii(k)}: {py_literal(v, indent + 1)},")
+        return "{\n" + "\n".join(items) + "\n" + "    " * indent + "}" if items else "{}"
+    if isinstance(obj, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(py_literal(v, indent + 1) for v in obj) + "]"
+    raise ExportError(f"cannot write a {type(obj).__name__} value in a Python scene")
 
 
 def write_mitsuba_python(model, path, prefer: str = "builtin", **_ignored) -> dict:
@@ -573,11 +653,12 @@ def write_mitsuba_python(model, path, prefer: str = "builtin", **_ignored) -> di
     Built-in mapping when available (``prefer="builtin"``; the BSDF dict is inlined, no
     brdffit needed to render); otherwise the fit is saved next to it
     (``<stem>.fit.npz``, :func:`brdffit.io.fitfile.save_fit`) and the script loads it and
-    uses the project's ``brdffit`` plugin.
+    uses the project's ``brdffit`` plugin. Both files are written as a whole (nothing is left
+    on an error) and names reach the script only as string literals.
     """
     from ..io.fitfile import SerializableModel, save_fit
 
-    path = Path(path)
+    path = check_output_path(path)
     stem = path.stem
     summary: dict = {"target": "mitsuba"}
     bsdf = None
@@ -587,28 +668,39 @@ def write_mitsuba_python(model, path, prefer: str = "builtin", **_ignored) -> di
             summary.update(info, error=mitsuba_error(model), plugin="builtin")
         except ExportError as exc:
             summary["builtin_unavailable"] = str(exc)
-    files = [str(path)]
+    elif prefer != "plugin":
+        raise ExportError(f"expected prefer='builtin' or 'plugin', found {prefer!r}")
+    name = getattr(model, "name", None)
+    fit_path = None
     if bsdf is not None:
-        code = "BSDF = " + pprint.pformat(bsdf, indent=1, width=96, sort_dicts=False) + "\n"
+        code = "BSDF = " + py_literal(bsdf) + "\n"
         how = "built-in plugins only"
     else:
         if not isinstance(model, SerializableModel) or not model.fit_kind:
             fail(model, "the brdffit Mitsuba plugin", "a serialisable fit (save_fit) so that "
                  "the script can load it")
         fit_path = path.with_name(f"{stem}.fit.npz")
-        save_fit(model, fit_path)
-        files.append(str(fit_path))
         code = (
             "from brdffit.evaluation.render import to_evaluator  # noqa: E402\n"
             "from brdffit.evaluation.render.plugin import register_evaluator  # noqa: E402\n"
             "from brdffit.io.fitfile import load_fit  # noqa: E402\n\n"
-            f"MODEL = load_fit(HERE / {fit_path.name!r})\n"
+            "MODEL = load_fit(HERE / FIT_FILE)\n"
             "BSDF = {\"type\": \"brdffit\", \"evaluator_id\": register_evaluator(to_evaluator(MODEL))}\n")
         how = "the brdffit package for its Python BSDF plugin"
         summary["plugin"] = "brdffit"
-    text = _SCRIPT.format(label=label(model).replace('"', "'"), script=path.name, how=how,
-                          llvm=LLVM_PATH, bsdf_code=code, stem=stem)
-    with atomic_write(path, "w") as fh:
-        fh.write(text)
+    text = _SCRIPT.format(exported=ascii(label(model)),
+                          material=ascii(None if name is None else str(name)),
+                          fit_file=ascii(None if fit_path is None else fit_path.name),
+                          output_name=ascii(f"{stem}.exr"), how=how, llvm=ascii(LLVM_PATH),
+                          bsdf_code=code)
+    files = [str(path)]
+    with StagedFiles(path) as staged:
+        if fit_path is not None:
+            tmp = staged.path(fit_path)
+            with writing(fit_path):
+                save_fit(model, tmp)
+            files.append(str(fit_path))
+        with staged.open(path, "wb") as fh:
+            fh.write(text.encode("ascii"))
     summary["files"] = files
     return summary

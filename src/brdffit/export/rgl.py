@@ -31,11 +31,9 @@ particular, also GGX/Beckmann/SGD) map: other models have no NDF/σ; anisotropic
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
-from ._common import LUMA, fail, label
+from ._common import LUMA, StagedFiles, check_output_path, fail, label, writing
 
 __all__ = ["rgl_fields", "export_rgl", "rgl_error"]
 
@@ -140,15 +138,26 @@ def rgl_error(model, path, n: int = 1 << 14, seed: int = 0) -> dict:
                                           metrics=("cos_rel_error",))["cos_rel_error"]}
 
 
-def export_rgl(model, path, check: bool = True, **options) -> dict:
-    """Write the RGL-style ``.bsdf`` file (atomically); returns a summary with the read-back
-    error when ``check``."""
+def export_rgl(model, path, check: bool = True, n_theta: int = 32, n_ndf: int = 256,
+               vndf_res: int = 128, rgb_res: int = 64, **_ignored) -> dict:
+    """Write the RGL-style ``.bsdf`` file (atomically; with ``check`` it is read back before it
+    is moved into place, and nothing is left when that fails); returns a summary with the
+    read-back error when ``check``. Sizes as in :func:`rgl_fields`."""
+    from ..errors import ExportError
     from ..io.tensorfile import write_tensor_file
 
-    fields = rgl_fields(model, **options)
-    write_tensor_file(Path(path), fields)
+    path = check_output_path(path)
+    sizes = {"n_theta": n_theta, "n_ndf": n_ndf, "vndf_res": vndf_res, "rgb_res": rgb_res}
+    for k, v in sizes.items():
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 2 <= v <= 4096:
+            raise ExportError(f"expected {k} to be an integer in [2, 4096], found {v!r}")
+    fields = rgl_fields(model, **{k: int(v) for k, v in sizes.items()})
     out = {"files": [str(path)], "target": "rgl",
            "shapes": {k: list(np.shape(v)) for k, v in fields.items() if not isinstance(v, str)}}
-    if check:
-        out["error"] = rgl_error(model, path)
+    with StagedFiles(path) as staged:
+        tmp = staged.path(path)
+        with writing(path):
+            write_tensor_file(tmp, fields)
+        if check:
+            out["error"] = rgl_error(model, tmp)
     return out
