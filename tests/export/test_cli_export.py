@@ -43,3 +43,34 @@ def test_cli_npf_uber_from_fit_files(tmp_path):
     assert list(back) == ["m0", "m1"]
     np.testing.assert_allclose(back["m1"].D, _npf(1).D.astype(np.float32), rtol=1e-6)
     assert main(["export", *paths, "--to", "json", "-o", str(tmp_path / "x.json")]) == 1
+
+
+def test_cli_export_bad_options_are_usage_errors(tmp_path, capsys):
+    """Unknown options and values of the wrong type: status 2 and one message, no traceback,
+    nothing written (issue 12: was a TypeError/OverflowError traceback)."""
+    import pytest
+
+    cases = [("rgl", "synthetic:gold-ggx", "bogus=1", "unknown option 'bogus'"),
+             ("mitsuba-xml", "synthetic:gold-ggx", "spp=Infinity", "expected spp to be an integer"),
+             ("mitsuba-xml", "synthetic:gold-ggx", 'resolution="1\\"/><evil/>"',
+              "expected resolution to be an integer"),
+             ("gltf", "synthetic:gold-ggx", "fidelity=3", "expected fidelity to be true or false"),
+             ("json", "synthetic:gold-ggx", "x=1", "expected one of (none)")]
+    for to, fit, opt, msg in cases:
+        try:
+            rc = main(["export", fit, "--to", to, "-o", str(tmp_path / f"x.{to}"), "--option", opt])
+        except Exception as exc:  # noqa: BLE001 - the old code raised here
+            pytest.fail(f"--to {to} --option {opt}: traceback {type(exc).__name__}: {exc}")
+        err = capsys.readouterr().err
+        assert rc == 2 and msg in err and "Traceback" not in err, (to, opt, err)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_cli_npf_uber_options_reach_the_packer(tmp_path):
+    from brdffit.io.fitfile import save_fit
+    from tests.export.test_glsl import _npf
+
+    save_fit(_npf(0, "m0"), tmp_path / "m0.npz")
+    assert main(["export", str(tmp_path / "m0.npz"), "--to", "npf-uber", "-o",
+                 str(tmp_path / "u.npy"), "--option", "exr=false"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m0.npz", "u.json", "u.npy"]

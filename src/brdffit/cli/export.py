@@ -6,7 +6,9 @@
 ``mitsuba-xml`` (XML scene, built-in plugins only), ``gltf``, ``glsl``, ``merl``, ``rgl``,
 ``json``; plus ``npf-uber`` (several NPF fits packed as the Bagher 2016 uber-texture). The
 summary (files, approximations, measured errors) is printed; ``--json`` prints it as JSON.
-A model that cannot go to the target exits with status 1 and the reason.
+A model that cannot go to the target, or an output that cannot be written, exits with status 1
+and one line naming the file (nothing partial is left behind); an unknown target or
+``--option`` (or a value of the wrong type) is a usage error (status 2).
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ from pathlib import Path
 
 import typer
 
-__all__ = ["register", "load_model", "run_export"]
+__all__ = ["register", "load_model", "run_export", "target_options", "check_options"]
 
 
 def load_model(spec: str):
@@ -34,15 +36,67 @@ def load_model(spec: str):
     return load_fit(spec)
 
 
+def _writer(to: str):
+    from importlib import import_module
+
+    from ..export import TARGETS
+
+    if to == "npf-uber":
+        from ..export.glsl import pack_npf_uber_texture
+
+        return pack_npf_uber_texture
+    mod, fn = TARGETS[to]
+    return getattr(import_module(mod, "brdffit.export"), fn)
+
+
+def target_options(to: str) -> dict:
+    """``{option: default}`` of the writer of target ``to`` (what ``--option`` accepts)."""
+    import inspect
+
+    params = inspect.signature(_writer(to)).parameters
+    return {k: p.default for k, p in params.items()
+            if k not in ("model", "models", "path") and p.kind is p.POSITIONAL_OR_KEYWORD
+            and p.default is not p.empty}
+
+
+def check_options(to: str, options: dict) -> None:
+    """Raise ``ValueError`` (one line) for an option the target does not know or a value of
+    the wrong type (the type of the option's default: boolean, integer, number, string)."""
+    import math
+
+    known = target_options(to)
+    for key, val in options.items():
+        if key not in known:
+            raise ValueError(f"unknown option {key!r} for --to {to}; expected one of "
+                             f"{', '.join(known) or '(none)'}")
+        d = known[key]
+        if isinstance(d, bool):
+            ok, want = isinstance(val, bool), "true or false"
+        elif isinstance(d, int):
+            ok, want = isinstance(val, int) and not isinstance(val, bool), "an integer"
+        elif isinstance(d, float):
+            ok = (isinstance(val, (int, float)) and not isinstance(val, bool)
+                  and math.isfinite(val))
+            want = "a finite number"
+        elif isinstance(d, str):
+            ok, want = isinstance(val, str), "a string"
+        else:
+            ok, want = True, ""
+        if not ok:
+            raise ValueError(f"expected {key} to be {want}, found {val!r}")
+
+
 def run_export(fits: list[str], to: str, out: Path, options: dict | None = None) -> dict:
     """Load ``fits`` and export them to ``to`` at ``out``; returns the summary."""
     from ..errors import ExportError
+    from ..export._common import check_output_path
 
+    out = check_output_path(out)
     models = [load_model(f) for f in fits]
     if to == "npf-uber":
         from ..export.glsl import pack_npf_uber_texture
 
-        return {"target": to, **pack_npf_uber_texture(models, out)}
+        return {"target": to, **pack_npf_uber_texture(models, out, **(options or {}))}
     if len(models) != 1:
         raise ExportError(f"--to {to} exports one fit, found {len(models)} (only npf-uber packs "
                           "several)")
@@ -67,18 +121,24 @@ def register(app: typer.Typer) -> None:
         as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
     ) -> None:
         """Export a fit to Mitsuba 3, glTF 2.0, GLSL, MERL, RGL or JSON."""
+        import click
+
+        from ..export._common import shown
         from .fit import parse_options
 
         if to not in targets:
-            import click
-
             raise click.BadParameter(f"expected one of {', '.join(targets)}, found {to!r}",
                                      param_hint="--to")
-        summary = run_export(fits, to, out, parse_options(option))
+        options = parse_options(option)
+        try:
+            check_options(to, options)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--option") from None
+        summary = run_export(fits, to, out, options)
         if as_json:
             typer.echo(json.dumps(summary, default=str))
             return
-        typer.echo(f"wrote {', '.join(summary.get('files', [str(out)]))} ({to})")
+        typer.echo(f"wrote {', '.join(shown(f) for f in summary.get('files', [str(out)]))} ({to})")
         for note in summary.get("notes", []):
             typer.echo(f"  approximation: {note}")
         for key in ("error", "fidelity"):

@@ -190,10 +190,27 @@ def _page(title: str, body: str) -> str:
             f"<style>{_CSS}</style></head><body>\n{body}\n{_SORT_JS}</body></html>\n")
 
 
+def _url(path) -> str | None:
+    """A relative link to a file of the report: each path segment percent-encoded (spaces,
+    ``#``, ``?``, ``%``, quotes, non-ASCII), or ``None`` for anything that is not a relative
+    path (a scheme such as ``javascript:``/``data:``, ``//host``, an absolute path, a
+    backslash or a control character): result files may come from elsewhere (issue 12)."""
+    from urllib.parse import quote
+
+    s = str(path) if path is not None else ""
+    if (not s or re.match(r"^[A-Za-z][A-Za-z0-9+.-]*:", s) or s.startswith("/") or "\\" in s
+            or not s.isprintable()):
+        return None
+    return "/".join(quote(seg, safe="") for seg in s.split("/"))
+
+
 def _img(src, alt, cls="", width=None) -> str:
+    url = _url(src)
+    if url is None:                       # not a file of the report: no link, say so
+        return f'<span class="fail">{_e(alt)}: link removed ({_e(src)})</span>'
     w = f' width="{int(width)}"' if width else ""
     c = f' class="{cls}"' if cls else ""
-    return f'<img src="{_e(src)}" alt="{_e(alt)}"{c}{w} loading="eager">'
+    return f'<img src="{_e(url)}" alt="{_e(alt)}"{c}{w} loading="eager">'
 
 
 def _models(result) -> list[dict]:
@@ -302,7 +319,8 @@ def write_material_page(out_dir, result: dict, colorbar: str | None = "../assets
         p = m.get("params")
         info = m.get("fit_info")
         if p or info or m.get("fit_file"):
-            link = (f' (<a href="{_e(m["fit_file"])}">fit file</a>)' if m.get("fit_file") else "")
+            link = (f' (<a href="{_e(_url(m["fit_file"]))}">fit file</a>)'
+                    if _url(m.get("fit_file")) else "")
             prm.append(f"<h3>{_e(m.get('name'))}{link}</h3><pre>"
                        + _e(json.dumps({"params": p, "fit_info": info}, indent=1,
                                        default=json_default)[:6000]) + "</pre>")
@@ -415,7 +433,8 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
             cls = "best" if best is not None and _num(m.get("psnr")) == best else ""
             cells.append(_td(m.get("psnr"), cls=cls) + _td(m.get("mean_de2000")))
         rows.append(f'<tr><td class="l">{thumb}</td><td class="l" data-sort="{_e(str(r.get("material", slug)).lower())}">'
-                    f'<a href="{_e(slug)}/index.html">{_e(r.get("material", slug))}</a></td>'
+                    + (f'<a href="{_e(_url(slug))}/index.html">{_e(r.get("material", slug))}</a></td>'
+                       if _url(slug) else f'{_e(r.get("material", slug))}</td>')
                     + _td(r.get("noise_floor_psnr")) + "".join(cells) + "</tr>")
     parts.append("<h2>Materials</h2><table class=\"sortable\" id=\"materials\"><thead><tr>"
                  "<th class=\"l\">reference</th><th class=\"l\">material</th><th>noise floor PSNR</th>"
@@ -436,9 +455,12 @@ _LINK_RE = re.compile(r"""(?:src|href)\s*=\s*["']([^"'#]+)""", re.IGNORECASE)
 
 
 def local_links(html_path) -> list[str]:
-    """Every relative ``src``/``href`` of a page (external schemes are reported as is)."""
+    """Every relative ``src``/``href`` of a page, HTML- and URL-decoded (external schemes are
+    reported as is)."""
+    from urllib.parse import unquote
+
     text = Path(html_path).read_text(encoding="utf-8")
-    return [html.unescape(u) for u in _LINK_RE.findall(text)]
+    return [unquote(html.unescape(u)) for u in _LINK_RE.findall(text)]
 
 
 def missing_links(html_path) -> list[str]:
