@@ -19,8 +19,9 @@ def atomic_path(path, suffix: str | None = None):
     """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix or path.suffix or ".tmp",
-                               dir=path.parent)
+    # name parts truncated: a legal 255-byte file name must not give a too long temporary name
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:64]}.",
+                               suffix=(suffix or path.suffix or ".tmp")[:16], dir=path.parent)
     os.close(fd)
     umask = os.umask(0)
     os.umask(umask)

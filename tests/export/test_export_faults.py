@@ -276,3 +276,16 @@ def test_real_file_size_limit_mitsuba(tmp_path):
     assert len(lines) == 1 and lines[0].startswith("brdffit: error: s."), r.stderr
     assert "file too large" in lines[0] and "Errno" not in lines[0]
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("to, ext", [("json", ".json"), ("mitsuba-xml", ".xml"),
+                                     ("mitsuba", ".py"), ("glsl", ".gl")])
+def test_longest_legal_file_name(tmp_path, to, ext):
+    """A 255-byte name (the usual limit) is written: temporary names stay short. (glsl: the
+    index ``<name>.json`` must fit too, so the shader's name is 250 bytes.)"""
+    n = 255 if to != "glsl" else 250
+    out = tmp_path / ("n" * (n - len(ext)) + ext)
+    export(brdffit.synthetic("gold-ggx"), to, out)
+    assert out.is_file()
+    names = sorted(p.name for p in tmp_path.iterdir())
+    assert all(not n.startswith(".") for n in names), names
