@@ -330,8 +330,9 @@ class MicrofacetBRDF(BRDF, SerializableModel):
         ok = (wi[..., 2] > 0) & (wo[..., 2] > 0) & (hn > 0) & (ih > 0) & (h[..., 2] > 0)
         D = self.distribution.D(h)
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            if self._has_vndf:   # G1(i) <i,h> D(h) / cos θi / (4 <i,h>)
-                p = self.distribution.G1(wi) * D / (4.0 * np.where(ok, wi[..., 2], 1.0))
+            if self._has_vndf:   # <i,h> D(h) / σ_v(i) / (4 <i,h>), σ_v = cos θi / G1(i)
+                sv = self.distribution.sigma_visible(wi)
+                p = D / (4.0 * np.where(ok & (sv > 0), sv, 1.0))
             else:                # D(h) cos θh / (4 <o,h>)
                 p = D * h[..., 2] / (4.0 * np.where(ok, ih, 1.0))
         return np.where(ok, p, 0.0)

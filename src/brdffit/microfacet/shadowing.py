@@ -406,6 +406,15 @@ class ScaledDistribution(SlopeDistribution):
         up = w[..., 2] > 0
         return np.where(up, np.where(up, w[..., 2], 0.0) * (1.0 + np.where(up, self.Lambda(w), 0.0)), 0.0)
 
+    def sigma_visible(self, w) -> np.ndarray:
+        """``cos θw · σ_v,base(w*)/cos θw*`` (stretch invariance, as :meth:`Lambda`), the
+        normaliser of :meth:`sample_visible`."""
+        w = np.asarray(w, dtype=np.float64)
+        up = w[..., 2] > 0
+        ws = self._stretch(w)
+        cs = np.where(ws[..., 2] > 0, ws[..., 2], 1.0)
+        return np.where(up, np.where(up, w[..., 2], 0.0) * self.base.sigma_visible(ws) / cs, 0.0)
+
     def sample_visible(self, w, u) -> np.ndarray:
         from ..geometry import normal_to_slope
 

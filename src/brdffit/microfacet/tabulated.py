@@ -587,6 +587,27 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         ys = ygrid[k] + np.clip(fr, 0.0, 1.0) * (ygrid[k + 1] - ygrid[k])
         return xs, sgn * ys
 
+    def sigma_visible(self, w) -> np.ndarray:
+        """Normaliser of :meth:`sample_visible` (isotropic tables): ``cos θw · N(t*)`` with
+        ``N(t) = ∫ (1 − x̃ t)₊ P = A0(1/t) − t A1(1/t)`` from the sampler's own cumulative
+        moments (:meth:`_visible_tables`) and ``t*`` the tangent of the roughness-stretched
+        direction. :meth:`sigma` comes from the fit quadrature of Eq. 3 on the table nodes,
+        which is not the integral of the interpolated ``D``: for a GGX-shaped table the two
+        differ by 0.8 % at θ = 30° and 2.8 % at 80°, and using σ in the visible-normal pdf
+        biased importance-sampled albedos by as much (furnace test)."""
+        if not self.table_isotropic:
+            return super().sigma_visible(w)
+        w = np.asarray(w, dtype=np.float64)
+        ax, ay = self._alphas()
+        cz = w[..., 2]
+        up = cz > 0
+        t = np.hypot(w[..., 0] * ax, w[..., 1] * ay) / np.where(up, cz, 1.0)
+        x, a0, a1 = self._visible_tables()[:3]
+        with np.errstate(divide="ignore"):
+            xc = np.minimum(np.where(t > 0, 1.0 / np.where(t > 0, t, 1.0), np.inf), x[-1])
+        total = np.interp(xc, x, a0) - t * np.interp(xc, x, a1)
+        return np.where(up, np.where(up, cz, 0.0) * total, 0.0)
+
     def sample_visible(self, w, u) -> np.ndarray:
         """Visible normals for direction ``w`` (Heitz & d'Eon 2014), isotropic tables.
 
