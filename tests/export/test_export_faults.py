@@ -289,3 +289,18 @@ def test_longest_legal_file_name(tmp_path, to, ext):
     assert out.is_file()
     names = sorted(p.name for p in tmp_path.iterdir())
     assert all(not n.startswith(".") for n in names), names
+
+
+@pytest.mark.parametrize("to", ["json", "glsl"])
+def test_non_finite_parameters_are_one_line_errors(tmp_path, to):
+    """A NaN that reached a model in memory (fit files are validated on load) is refused with
+    one line naming the model, not written as ``nan`` into JSON or GLSL code."""
+    import numpy as np
+
+    m = brdffit.synthetic("gold-ggx")
+    m.fresnel.eta = np.array([np.nan, 0.2, 0.3])
+    with pytest.raises(ExportError) as ei:
+        export(m, to, tmp_path / f"x.{to}")
+    msg = str(ei.value)
+    assert "\n" not in msg and "gold-ggx" in msg and "finite" in msg, msg
+    assert list(tmp_path.iterdir()) == []

@@ -448,8 +448,12 @@ def model_spec(model) -> dict:
 # spec -> GLSL text
 # ------------------------------------------------------------------------------------------
 def _f(x) -> str:
-    s = repr(float(x))
-    return s if ("." in s or "e" in s or "inf" in s or "nan" in s) else s + ".0"
+    x = float(x)
+    if not np.isfinite(x):
+        raise ExportError(f"cannot write the non-finite value {x!r} as a GLSL literal; expected "
+                          "finite parameters")
+    s = repr(x)
+    return s if ("." in s or "e" in s) else s + ".0"
 
 
 def _v3(v) -> str:
@@ -600,7 +604,10 @@ def write_glsl(model, path, **_ignored) -> dict:
     index, notes, conventions)."""
     path = check_output_path(path)
     spec = model_spec(model)
-    src = glsl_source(spec, version=None)
+    try:
+        src = glsl_source(spec, version=None)
+    except ExportError as exc:
+        fail(model, "GLSL", str(exc))
     files = [str(path)]
     index = {"format": "brdffit-glsl", "version": 1, "model": label(model),
              "entry": "vec3 brdffit_eval(vec3 wi, vec3 wo)  // f_r, 1/sr, no cosine",

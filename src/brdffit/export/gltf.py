@@ -43,7 +43,7 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..brdf import IsotropicBRDF, _as_dirs
-from ._common import LUMA, check_output_path, fail, is_elliptical, writing
+from ._common import LUMA, check_output_path, fail, is_elliptical, shown, writing
 
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material", "gltf_equivalent", "gltf_fidelity",
            "write_gltf", "MATERIAL_METAL_F0"]
@@ -316,7 +316,7 @@ def gltf_material(model, name: str | None = None, fidelity: bool = True,
                              "linear RGB of the source data; glTF Appendix B BRDF"}
     if fidelity:
         extras["fidelity"] = gltf_fidelity(model, anisotropy=anisotropy, optimize=optimize)
-    mat = {"name": name or getattr(model, "name", "material"),
+    mat = {"name": str(name or getattr(model, "name", None) or "material"),
            "pbrMetallicRoughness": {"baseColorFactor": p["baseColorFactor"],
                                     "metallicFactor": p["metallicFactor"],
                                     "roughnessFactor": p["roughnessFactor"]},
@@ -335,8 +335,15 @@ def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
     doc = {"asset": {"version": "2.0", "generator": "brdffit export"}, "materials": [mat]}
     if "extensions" in mat:
         doc["extensionsUsed"] = list(mat["extensions"])
-    data = json.dumps(doc, indent=1, allow_nan=False).encode("ascii")   # names \u-escaped
     path = check_output_path(path)
+    try:
+        data = json.dumps(doc, indent=1, allow_nan=False).encode("ascii")   # names \u-escaped
+    except ValueError as exc:
+        from ..errors import ExportError
+
+        raise ExportError(f"cannot export {model.__class__.__name__} {getattr(model, 'name', '')!r}"
+                          f" to {shown(path)}: expected finite parameters, found NaN or infinity "
+                          f"({exc})") from None
     with writing(path), atomic_write(path, "wb") as fh:
         fh.write(data)
     return {"files": [str(path)], "target": "gltf", "material": mat["pbrMetallicRoughness"],

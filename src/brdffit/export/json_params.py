@@ -35,7 +35,7 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..errors import BRDFFormatError
-from ._common import check_output_path, fail, writing
+from ._common import check_output_path, fail, label, shown, writing
 
 __all__ = ["to_json_dict", "from_json_dict", "write_json", "load_json", "describe_parameters",
            "CONVENTIONS", "FORMAT"]
@@ -173,9 +173,15 @@ def to_json_dict(model) -> dict[str, Any]:
 
 def write_json(model, path, **_ignored) -> dict:
     """Write the parameters of ``model`` as JSON (atomically); returns a summary."""
+    from ..errors import ExportError
+
     path = check_output_path(path)
     doc = to_json_dict(model)
-    text = json.dumps(doc, indent=1, allow_nan=False, default=_default)   # ASCII: \u escapes
+    try:
+        text = json.dumps(doc, indent=1, allow_nan=False, default=_default)  # ASCII: \u escapes
+    except ValueError as exc:
+        raise ExportError(f"cannot export {label(model)} to {shown(path)}: expected finite "
+                          f"parameters, found NaN or infinity ({exc})") from None
     with writing(path), atomic_write(path, "wb") as fh:
         fh.write(text.encode("ascii"))
     return {"files": [str(path)], "target": "json", "model": doc["model"]}
