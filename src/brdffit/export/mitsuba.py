@@ -58,15 +58,14 @@ from __future__ import annotations
 
 import math
 import re
-from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
 from .._atomic import atomic_write
 from ..errors import ExportError
-from ._common import StagedFiles, check_output_path, fail, is_elliptical, label, principal_axes
-from ._common import writing
+from ._common import (StagedFiles, check_output_path, fail, is_elliptical, label,
+                      principal_axes, writing)
 
 __all__ = ["fit_conductor_fresnel", "builtin_terms", "builtin_bsdf", "mitsuba_equivalent",
            "mitsuba_error", "mitsuba_eval", "mitsuba_eval_error", "plastic_bsdf", "to_xml", "scene_xml", "plugin_bsdf", "mitsuba_bsdf",
