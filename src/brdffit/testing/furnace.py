@@ -185,6 +185,16 @@ def _ggx_slope_table(n: int = 90) -> np.ndarray:
     return 1.0 / (np.pi * (1.0 + r * r) ** 2)
 
 
+def _ggx_slope_table_2d(n: int = 40, n_phi: int = 40, ay: float = 0.5) -> np.ndarray:
+    """Elliptical GGX slope pdf (αx, αy) = (1, ``ay``) on an anisotropic (θ, φ) table."""
+    from ..microfacet.tabulated import radial_rule
+
+    r = radial_rule(n, "merl")[2][:, None]
+    phi = 2.0 * np.pi * np.arange(n_phi)[None, :] / n_phi
+    q = (r * np.cos(phi)) ** 2 + (r * np.sin(phi) / ay) ** 2
+    return 1.0 / (np.pi * ay * (1.0 + q) ** 2)
+
+
 def model_zoo(alpha: float) -> dict:
     """The library's BRDF models with (main) lobe roughness ``alpha``, one per render
     translator / sampler: name → BRDF.
@@ -192,7 +202,9 @@ def model_zoo(alpha: float) -> dict:
     ``ggx`` (closed form, Schlick, diffuse), ``beckmann`` (closed form, conductor Fresnel →
     table Fresnel), ``ggx-aniso``/``beckmann-aniso`` (αy = 2α capped at 1, ρ ≠ 0), ``sgd``
     (SGD(α, 0.84) radial table, generalised Schlick, diffuse), ``tabulated`` (tabulated slope
-    pdf of Dupuy 2015 scaled by α), ``sum`` (GGX α + GGX min(10α, 1) + diffuse),
+    pdf of Dupuy 2015 scaled by α), ``tabulated-aniso`` (a 2D table: elliptical GGX (1, 0.5)
+    scaled by α, rendered through the generic 4D table), ``sum`` (GGX α + GGX min(10α, 1) +
+    diffuse),
     ``per-channel-sgd`` (Bagher 2012 lobes of widths R α, G 0.05, B 0.5),
     ``per-channel-tabulated`` (tabulated fits R α, G 0.05, B 0.5), ``npf``, ``npf-naive``,
     ``npf-bivariate`` (Bagher 2016 tables of a GGX α lobe).
@@ -226,6 +238,9 @@ def model_zoo(alpha: float) -> dict:
         "per-channel-sgd": PerChannelMicrofacetBRDF(
             [dict(distribution=SGD(w, 0.84), rho_d=d, rho_s=0.05, F0=1.0, F1=-0.3)
              for w, d in zip(widths, (0.2, 0.04, 0.03))]),
+        "tabulated-aniso": MicrofacetBRDF(
+            TabulatedSlopeDistribution(_ggx_slope_table_2d()).with_roughness(a), None,
+            diffuse=0.05),
         "per-channel-tabulated": PerChannelBRDF(
             [MicrofacetBRDF(tab.with_roughness(w), SchlickFresnel(0.8), diffuse=0.05)
              for w in widths]),
