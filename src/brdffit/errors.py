@@ -28,7 +28,17 @@ class BRDFFormatError(BRDFError, ValueError):
     def __init__(self, path, problem: str):
         self.path = None if path is None else str(path)
         self.problem = problem
-        super().__init__(f"{self.path}: {problem}" if self.path else problem)
+        super().__init__(f"{_printable(self.path)}: {problem}" if self.path else problem)
+
+
+def _printable(text: str) -> str:
+    """``text`` with control characters, line separators and undecodable bytes escaped
+    (``\\n``, ``\\x1b``, ``\\udcff``), so that a hostile file name keeps a message on one line."""
+    if text.isprintable():
+        return text
+    return "".join(c if c.isprintable() or c == " " else c.encode("unicode_escape",
+                                                                   "backslashreplace").decode()
+                   for c in text)
 
 
 class FitError(BRDFError, RuntimeError):

@@ -79,7 +79,10 @@ _find = find_data_file  # used by brdffit.batch
 
 
 def _sniff(path: Path) -> str | None:
-    """Format from the first bytes (for files with an unknown or misleading extension)."""
+    """Format from the first bytes (for files with an unknown or misleading extension).
+
+    ``path`` must be a regular file (checked by :func:`resolve_spec`: a FIFO would block).
+    """
     try:
         with open(path, "rb") as fh:
             head = fh.read(16)
@@ -90,12 +93,12 @@ def _sniff(path: Path) -> str | None:
     if head.startswith(b"\x89HDF\r\n\x1a\n"):
         return "nbrdf"
     if head.startswith(b"PK"):
-        import zipfile
+        from ._limits import open_zip
 
         try:
-            with zipfile.ZipFile(path) as zf:
+            with open_zip(path, "a .zip archive") as zf:
                 names = zf.namelist()
-        except (zipfile.BadZipFile, OSError):
+        except BRDFFormatError:
             return None
         return "fit" if "__header__.npy" in names else "nbrdf-collection"
     if len(head) >= 12:
@@ -105,9 +108,28 @@ def _sniff(path: Path) -> str | None:
             return "merl"
     from .utia import UTIA_FILE_SIZE
 
-    if path.stat().st_size == UTIA_FILE_SIZE:
-        return "utia"
+    try:
+        if path.stat().st_size == UTIA_FILE_SIZE:
+            return "utia"
+    except OSError:
+        return None
     return None
+
+
+def _check_path_text(text: str, shown) -> None:
+    if "\0" in text:
+        raise BRDFFormatError(shown, "expected a path or spec without NUL bytes, found one")
+
+
+def _find_checked(path: Path, shown) -> Path | None:
+    """:func:`find_data_file` with path errors (name too long, ...) as ``BRDFFormatError``."""
+    try:
+        return _find(path)
+    except (OSError, ValueError) as exc:
+        from ._limits import describe_exception
+
+        raise BRDFFormatError(shown, f"expected a BRDF file, found an unusable path "
+                                     f"({describe_exception(exc)})") from None
 
 
 def resolve_spec(spec) -> tuple[str, Path | None, str | None]:
@@ -115,18 +137,22 @@ def resolve_spec(spec) -> tuple[str, Path | None, str | None]:
 
     ``kind`` is a format name of :data:`SUPPORTED_FORMATS` or ``"synthetic"``; ``member`` is
     the material of a ``.zip`` collection or the synthetic name. Raises
-    :class:`~brdffit.errors.BRDFFormatError` for a missing file or an unknown format.
+    :class:`~brdffit.errors.BRDFFormatError` for a missing file, a path that is not a regular
+    file (directory, FIFO, device: never opened) or an unknown format.
     """
     text = os.fspath(spec)
+    if isinstance(text, bytes):
+        text = os.fsdecode(text)
+    _check_path_text(text, text)
     if text.startswith("synthetic:"):
         return "synthetic", None, text[len("synthetic:"):]
     path = Path(text)
     member = None
-    found = _find(path)
+    found = _find_checked(path, text)
     if found is None and ":" in text:
         # archive.zip:material  (the zip part may be relative, absolute or on the data path)
         head, _, tail = text.rpartition(":")
-        zpath = _find(Path(head))
+        zpath = _find_checked(Path(head), head)
         if zpath is not None and zpath.is_file():
             found, member = zpath, tail
         elif head.lower().endswith(".zip"):
@@ -134,8 +160,9 @@ def resolve_spec(spec) -> tuple[str, Path | None, str | None]:
     if found is None:
         raise BRDFFormatError(text, "expected a BRDF file or spec (path, collection.zip:material "
                                     "or synthetic:NAME), found no such file")
-    if found.is_dir():
-        raise BRDFFormatError(found, "expected a BRDF file, found a directory")
+    from ._limits import regular_file_size
+
+    regular_file_size(found, "a BRDF file")  # directories, FIFOs, devices: never opened
     kind = SUPPORTED_FORMATS.get(found.suffix.lower()) or _sniff(found)
     if kind is None:
         raise BRDFFormatError(found, f"expected one of the formats {sorted(SUPPORTED_FORMATS)} "
@@ -169,6 +196,13 @@ def load(spec, **options):
                 raise
             raise BRDFFormatError(spec, "expected a synthetic material, found no "
                                         "brdffit.synthetic module in this installation") from None
+        from ..synthetic import list_synthetic
+
+        known = list_synthetic()
+        if member not in known:
+            raise BRDFFormatError(os.fspath(spec), f"expected a synthetic material "
+                                                   f"({', '.join(known)}), found none named "
+                                                   f"{member!r}")
         return synthetic(member, **options)
     if kind == "merl":
         from .merl import read_merl

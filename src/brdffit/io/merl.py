@@ -25,6 +25,7 @@ import numpy as np
 from .._atomic import atomic_write
 from ..brdf import IsotropicBRDF
 from ..errors import BRDFFormatError
+from ._limits import check_plausible_float64, describe_exception, regular_file_size
 from ..grid import (N_PHI_D, N_THETA_D, N_THETA_H, phi_d_to_index, tabulate_merl_grid,
                     theta_d_to_index, theta_h_to_index)
 
@@ -340,38 +341,46 @@ class MERLBRDF(IsotropicBRDF):
 def read_merl(path, interpolation: str = "trilinear") -> MERLBRDF:
     """Read a MERL ``.binary`` file into a :class:`MERLBRDF` (values scaled to MERL units).
 
-    Raises :class:`~brdffit.errors.BRDFFormatError` naming the file for a missing file, a
-    bad header, a size that does not match the header, or NaN/inf values.
+    Raises :class:`~brdffit.errors.BRDFFormatError` naming the file for a missing or
+    non-regular file, a bad header (other, absurd or byte-swapped dimensions), a size that
+    does not match the header, NaN/inf values, or values that cannot be reflectance data
+    (magnitude above :data:`~brdffit.io._limits.MAX_ABS_VALUE` or subnormal: typically a
+    byte-swapped file). The header and the file size are checked before the table is read.
     """
     if interpolation not in _INTERPOLATIONS:
         raise ValueError(f"interpolation must be one of {_INTERPOLATIONS}, got {interpolation!r}")
     path = Path(path)
-    if not path.is_file():
-        raise BRDFFormatError(path, "expected a MERL .binary file, found no such file")
-    size = path.stat().st_size
+    size = regular_file_size(path, "a MERL .binary file")
     if size < _HEADER_BYTES:
         raise BRDFFormatError(path, f"expected a MERL header of {_HEADER_BYTES} bytes, "
                                     f"found a file of {size} bytes (truncated)")
-    with open(path, "rb") as fh:
-        dims = np.frombuffer(fh.read(_HEADER_BYTES), dtype="<i4")
-        found = tuple(int(d) for d in dims)
-        if found != MERL_SHAPE:
-            if any(d <= 0 or d > 100_000 for d in found):
-                problem = f"absurd dimensions {found} in the header (not a MERL file?)"
-            else:
-                problem = f"unsupported dimensions {found} in the header"
-            raise BRDFFormatError(path, f"expected header {MERL_SHAPE}, found {problem}")
-        if size != MERL_FILE_SIZE:
-            what = "truncated file" if size < MERL_FILE_SIZE else "trailing bytes"
-            raise BRDFFormatError(path, f"expected {MERL_FILE_SIZE} bytes for a {MERL_SHAPE} "
-                                        f"table, found {size} ({what})")
-        raw = np.fromfile(fh, dtype="<f8", count=3 * _N)
-    if raw.size != 3 * _N:  # file shrank while reading
-        raise BRDFFormatError(path, f"expected {3 * _N} float64 values, found {raw.size}")
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(_HEADER_BYTES)
+            dims = np.frombuffer(head, dtype="<i4") if len(head) == _HEADER_BYTES else None
+            found = None if dims is None else tuple(int(d) for d in dims)
+            if found is not None and found != MERL_SHAPE:
+                if tuple(int(d) for d in dims.byteswap()) == MERL_SHAPE:
+                    problem = (f"a big-endian header {MERL_SHAPE} (byte-swapped file; MERL "
+                               f"files are little-endian)")
+                elif any(d <= 0 or d > 100_000 for d in found):
+                    problem = f"absurd dimensions {found} in the header (not a MERL file?)"
+                else:
+                    problem = f"unsupported dimensions {found} in the header"
+                raise BRDFFormatError(path, f"expected header {MERL_SHAPE}, found {problem}")
+            if size != MERL_FILE_SIZE:
+                what = "truncated file" if size < MERL_FILE_SIZE else "trailing bytes"
+                raise BRDFFormatError(path, f"expected {MERL_FILE_SIZE} bytes for a {MERL_SHAPE} "
+                                            f"table, found {size} ({what})")
+            raw = np.fromfile(fh, dtype="<f8", count=3 * _N) if found is not None else None
+    except OSError as exc:
+        raise BRDFFormatError(path, f"expected a readable MERL .binary file, found "
+                                    f"{describe_exception(exc)}") from None
+    if raw is None or raw.size != 3 * _N:  # file shrank while reading
+        raise BRDFFormatError(path, f"expected {3 * _N} float64 values, found "
+                                    f"{0 if raw is None else raw.size} (file changed while read)")
+    check_plausible_float64(raw, path, "values")
     raw = raw.reshape(3, _N)
-    if not np.isfinite(raw).all():
-        bad = int(np.count_nonzero(~np.isfinite(raw)))
-        raise BRDFFormatError(path, f"expected finite float64 values, found {bad} NaN/inf")
     valid = np.all(raw >= 0, axis=0).reshape(MERL_SHAPE)
     values = (raw.T * MERL_SCALE).reshape(MERL_SHAPE + (3,))
     raw.flags.writeable = False

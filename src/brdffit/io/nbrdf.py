@@ -31,6 +31,10 @@ import numpy as np
 
 from ..brdf import IsotropicBRDF
 from ..errors import BRDFFormatError
+from ._limits import (MAX_LAYER_UNITS, MAX_NETWORK_FILE_BYTES, MAX_NETWORK_LAYERS,
+                      MAX_NETWORK_WEIGHTS, MAX_SIDECAR_BYTES, describe_exception, h5_child,
+                      h5_dataset_shape, h5_hard_child, h5_read_dataset, h5_string_list_attr,
+                      open_zip, read_file_capped, read_zip_member, unsafe_member_reason)
 
 __all__ = ["NBRDF", "read_nbrdf", "read_nbrdf_collection", "list_materials"]
 
@@ -100,7 +104,6 @@ else:  # pragma: no cover  (vectorised NumPy fall-backs)
 
 _DEFAULT_ACTIVATIONS = ["relu", "relu", "linear"]
 _CHUNK = 1 << 14
-_MAX_MEMBER_BYTES = 64 << 20  # a 6-21-21-3 network is ~20 kB; refuse absurd members
 
 
 class NBRDF(IsotropicBRDF):
@@ -213,22 +216,94 @@ class NBRDF(IsotropicBRDF):
 
 
 # -- parsing ------------------------------------------------------------------------------
+# Files are untrusted: every size, shape, dtype, storage and link is checked before anything
+# is read (see brdffit.io._limits for the caps and the promises).
 def _activations_from_json(text: bytes | str, where) -> list[str]:
     """Activations of the Dense layers of a Keras model description; checks the final Lambda."""
+    def bad(found: str):
+        return BRDFFormatError(where, f"expected a Keras model description (JSON), found {found}")
+
     try:
         model = json.loads(text)
-        layers = model["config"]["layers"] if isinstance(model["config"], dict) else model["config"]
-    except (json.JSONDecodeError, KeyError, TypeError, UnicodeDecodeError) as exc:
-        raise BRDFFormatError(where, f"expected a Keras model description (JSON), found: {exc}")
+    except (ValueError, RecursionError) as exc:  # JSONDecodeError, UnicodeDecodeError, depth
+        raise bad(describe_exception(exc)) from None
+    config = model.get("config") if isinstance(model, dict) else None
+    layers = config.get("layers") if isinstance(config, dict) else config
+    if not isinstance(layers, list):
+        raise bad(f"no list of layers (config is {type(config).__name__})")
+    if len(layers) > 4 * MAX_NETWORK_LAYERS:
+        raise bad(f"{len(layers)} layers (at most {4 * MAX_NETWORK_LAYERS} expected)")
     acts = []
-    for layer in layers:
+    for k, layer in enumerate(layers):
+        if not isinstance(layer, dict) or not isinstance(layer.get("config", {}), dict):
+            raise bad(f"layer #{k} as a {type(layer).__name__}, not an object with a config")
         cls = layer.get("class_name")
         if cls == "Dense":
-            acts.append(layer.get("config", {}).get("activation", "linear"))
+            act = layer.get("config", {}).get("activation", "linear")
+            acts.append(act if isinstance(act, str) else repr(act))
         elif cls not in ("Lambda", "InputLayer"):
             raise BRDFFormatError(where, f"expected Dense layers and a final Lambda, found a "
-                                         f"{cls!r} layer")
+                                         f"{str(cls)[:60]!r} layer")
     return acts
+
+
+def _layer_names(root, where) -> list[str]:
+    names = h5_string_list_attr(root, "layer_names", where, max_len=4 * MAX_NETWORK_LAYERS)
+    if not names:
+        keys = []
+        for k in root.keys():  # link names only: nothing is followed
+            if k.startswith("dense"):
+                keys.append(k)
+                if len(keys) > MAX_NETWORK_LAYERS:
+                    raise BRDFFormatError(where, f"expected at most {MAX_NETWORK_LAYERS} Dense "
+                                                 f"layers, found more 'dense*' groups")
+        names = sorted(keys, key=lambda k: (len(k), k))
+    return names
+
+
+def _weight_datasets(f, where) -> list[tuple[str, object, object]]:
+    """``[(layer, kernel dataset, bias dataset)]``, validated, nothing read yet."""
+    root = f
+    if f.id.links.exists(b"model_weights"):
+        root = h5_child(f, "model_weights", where, what="group")
+    found = []
+    for name in _layer_names(root, where):
+        group = h5_child(root, name, where, what="layer group")
+        wnames = h5_string_list_attr(group, "weight_names", where, max_len=16)
+        if not wnames:
+            inner = h5_hard_child(group, name)
+            if inner is not None and h5_hard_child(inner, "kernel:0") is not None:
+                wnames = [f"{name}/kernel:0", f"{name}/bias:0"]
+            else:
+                continue  # weightless layer (the exp(y)-1 Lambda)
+        kernel = [w for w in wnames if w.endswith("kernel:0")]
+        bias = [w for w in wnames if w.endswith("bias:0")]
+        if len(kernel) != 1 or len(bias) != 1:
+            raise BRDFFormatError(where, f"layer {name!r}: expected one kernel and one bias, "
+                                         f"found weights {wnames[:8]}")
+        k = h5_child(group, kernel[0], where, what=f"kernel of layer {name!r}")
+        b = h5_child(group, bias[0], where, what=f"bias of layer {name!r}")
+        found.append((name, k, b))
+        if len(found) > MAX_NETWORK_LAYERS:
+            raise BRDFFormatError(where, f"expected at most {MAX_NETWORK_LAYERS} Dense layers, "
+                                         f"found more")
+    if not found:
+        raise BRDFFormatError(where, "expected Dense layer weights in the HDF5 file, found none")
+    n_in, total = 6, 0
+    for name, k, b in found:
+        ks = h5_dataset_shape(k, where, f"the kernel of layer {name!r}", ndim=2,
+                              max_dim=MAX_LAYER_UNITS, max_elements=MAX_NETWORK_WEIGHTS)
+        bs = h5_dataset_shape(b, where, f"the bias of layer {name!r}", ndim=1,
+                              max_dim=MAX_LAYER_UNITS, max_elements=MAX_NETWORK_WEIGHTS)
+        if ks[0] != n_in or bs != ks[1:]:
+            raise BRDFFormatError(where, f"layer {name!r}: expected kernel ({n_in}, n) and bias "
+                                         f"(n,), found {ks} and {bs}")
+        n_in = ks[1]
+        total += ks[0] * ks[1] + bs[0]
+    if total > MAX_NETWORK_WEIGHTS:
+        raise BRDFFormatError(where, f"expected a network of at most {MAX_NETWORK_WEIGHTS} "
+                                     f"weights, found {total}")
+    return found
 
 
 def _layers_from_h5(fileobj, where) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -236,40 +311,16 @@ def _layers_from_h5(fileobj, where) -> list[tuple[np.ndarray, np.ndarray]]:
 
     try:
         with h5py.File(fileobj, "r") as f:
-            root = f["model_weights"] if "model_weights" in f else f
-            names = [n.decode() if isinstance(n, bytes) else str(n)
-                     for n in root.attrs.get("layer_names", [])]
-            if not names:
-                names = sorted((k for k in root.keys() if k.startswith("dense")),
-                               key=lambda k: (len(k), k))
-            layers = []
-            for name in names:
-                group = root[name]
-                wnames = [n.decode() if isinstance(n, bytes) else str(n)
-                          for n in group.attrs.get("weight_names", [])]
-                if not wnames:
-                    if "kernel:0" in group.get(name, {}):
-                        wnames = [f"{name}/kernel:0", f"{name}/bias:0"]
-                    else:
-                        continue  # weightless layer (the exp(y)-1 Lambda)
-                kernel = [w for w in wnames if w.endswith("kernel:0")]
-                bias = [w for w in wnames if w.endswith("bias:0")]
-                if len(kernel) != 1 or len(bias) != 1:
-                    raise BRDFFormatError(where, f"layer {name!r}: expected one kernel and one bias, "
-                                                 f"found weights {wnames}")
-                k = np.asarray(group[kernel[0]][()])
-                b = np.asarray(group[bias[0]][()])
-                if k.dtype.kind != "f" or b.dtype.kind != "f":
-                    raise BRDFFormatError(where, f"layer {name!r}: expected float weights, found "
-                                                 f"{k.dtype} and {b.dtype}")
-                layers.append((k, b))
+            return [(h5_read_dataset(k, where, f"the kernel of layer {name!r}",
+                                     max_raw_bytes=MAX_NETWORK_FILE_BYTES),
+                     h5_read_dataset(b, where, f"the bias of layer {name!r}",
+                                     max_raw_bytes=MAX_NETWORK_FILE_BYTES))
+                    for name, k, b in _weight_datasets(f, where)]
     except BRDFFormatError:
         raise
-    except (OSError, KeyError, ValueError, TypeError) as exc:
-        raise BRDFFormatError(where, f"expected Keras HDF5 weights, could not read them: {exc}")
-    if not layers:
-        raise BRDFFormatError(where, "expected Dense layer weights in the HDF5 file, found none")
-    return layers
+    except Exception as exc:  # the HDF5 library's errors on a damaged file (OSError, KeyError...)
+        raise BRDFFormatError(where, f"expected Keras HDF5 weights, could not read them "
+                                     f"({describe_exception(exc)})") from None
 
 
 def _build(layers, acts, *, name, source, precision) -> NBRDF:
@@ -287,39 +338,56 @@ def read_nbrdf(path, *, precision: str = "float32") -> NBRDF:
 
     The sidecar, when next to the weights, supplies the layers' activations and is checked
     against the weights; without it the published architecture (ReLU, ReLU, linear) is used.
+    The file (at most :data:`~brdffit.io._limits.MAX_NETWORK_FILE_BYTES`) is read in memory
+    and validated before any weight is read: only datasets stored in the file, reached by
+    hard links, of float type and of bounded shape are accepted.
     """
     path = Path(path)
-    if not path.is_file():
-        raise BRDFFormatError(path, "expected a Neural-BRDF .h5 file, found no such file")
-    layers = _layers_from_h5(path, path)
+    blob = read_file_capped(path, "a Neural-BRDF .h5 file", MAX_NETWORK_FILE_BYTES)
+    layers = _layers_from_h5(io.BytesIO(blob), path)
     sidecar = path.with_suffix(".json")
-    acts = _activations_from_json(sidecar.read_bytes(), sidecar) if sidecar.is_file() else None
+    acts = None
+    if sidecar.is_file():
+        acts = _activations_from_json(
+            read_file_capped(sidecar, "a Keras JSON sidecar", MAX_SIDECAR_BYTES), sidecar)
     return _build(layers, acts, name=path.stem, source=str(path), precision=precision)
 
 
 def _open_zip(zip_path) -> zipfile.ZipFile:
-    zip_path = Path(zip_path)
-    if not zip_path.is_file():
-        raise BRDFFormatError(zip_path, "expected a Neural-BRDF .zip collection, found no such file")
-    try:
-        return zipfile.ZipFile(zip_path)
-    except (zipfile.BadZipFile, OSError) as exc:
-        raise BRDFFormatError(zip_path, f"expected a .zip collection, found: {exc}")
+    return open_zip(zip_path, "a Neural-BRDF .zip collection")
+
+
+def _index(zf: zipfile.ZipFile):
+    """``(materials, unsafe)``: material name -> ``.h5`` members (several when duplicated),
+    and material name -> (member, reason) for members whose names are never used."""
+    materials: dict[str, list[zipfile.ZipInfo]] = {}
+    unsafe: dict[str, tuple[zipfile.ZipInfo, str]] = {}
+    for info in zf.infolist():
+        p = PurePosixPath(info.filename)
+        if p.suffix != ".h5" or info.is_dir() or "__MACOSX" in p.parts:
+            continue
+        reason = unsafe_member_reason(info.filename)
+        if reason is None and p.stem in ("", ".", ".."):
+            reason = f"a material name {p.stem!r}"
+        if reason is None:
+            materials.setdefault(p.stem, []).append(info)
+        else:
+            unsafe.setdefault(p.stem, (info, reason))
+    return materials, unsafe
 
 
 def _members(zf: zipfile.ZipFile) -> dict[str, str]:
-    out = {}
-    for n in zf.namelist():
-        p = PurePosixPath(n)
-        if p.suffix == ".h5" and "__MACOSX" not in p.parts:
-            out.setdefault(p.stem, n)
-    return out
+    """Material name -> member name (safe, unambiguous members only)."""
+    return {k: v[0].filename for k, v in _index(zf)[0].items() if len(v) == 1}
 
 
 def list_materials(zip_path) -> list[str]:
-    """Sorted material names (``.h5`` members, without folder or suffix) of a collection."""
+    """Sorted material names (``.h5`` members, without folder or suffix) of a collection.
+
+    Members with unsafe names (absolute, ``..``, control characters) are not listed.
+    """
     with _open_zip(zip_path) as zf:
-        return sorted(_members(zf))
+        return sorted(_index(zf)[0])
 
 
 def read_nbrdf_collection(zip_path, material: str, *, precision: str = "float32") -> NBRDF:
@@ -327,31 +395,38 @@ def read_nbrdf_collection(zip_path, material: str, *, precision: str = "float32"
 
     ``material`` may be the bare name (``gold-metallic-paint``), or carry the folder and/or the
     ``.h5`` suffix. An unknown name raises :class:`~brdffit.errors.BRDFFormatError` listing
-    close matches.
+    close matches. Nothing is extracted: members are read in memory with a cap on their
+    inflated size; a material stored twice, or only under an unsafe member name (absolute,
+    ``..``), is refused.
     """
     zip_path = Path(zip_path)
     key = PurePosixPath(str(material)).name
     if key.endswith(".h5"):
         key = key[:-3]
     with _open_zip(zip_path) as zf:
-        members = _members(zf)
-        if key not in members:
-            close = difflib.get_close_matches(key, list(members), n=5, cutoff=0.5)
+        materials, unsafe = _index(zf)
+        if key not in materials:
+            if key in unsafe:
+                info, reason = unsafe[key]
+                raise BRDFFormatError(zip_path, f"expected a safe member name for material "
+                                                f"{key!r}, found the unsafe member "
+                                                f"{info.filename!r} ({reason})")
+            close = difflib.get_close_matches(key, list(materials), n=5, cutoff=0.5)
             hint = f"; close matches: {', '.join(close)}" if close else ""
             raise BRDFFormatError(zip_path, f"expected a material of this collection "
-                                            f"({len(members)} materials), found no {key!r}{hint}")
-        h5name = members[key]
+                                            f"({len(materials)} materials), found no {key!r}{hint}")
+        infos = materials[key]
+        if len(infos) > 1:
+            raise BRDFFormatError(zip_path, f"expected one member for material {key!r}, found "
+                                            f"{len(infos)}: {[i.filename for i in infos][:5]}")
+        h5info = infos[0]
         where = f"{zip_path}:{key}"
-        size = zf.getinfo(h5name).file_size
-        if size > _MAX_MEMBER_BYTES:
-            raise BRDFFormatError(where, f"expected a small network file (< {_MAX_MEMBER_BYTES} "
-                                         f"bytes), found {size} bytes")
-        try:
-            blob = zf.read(h5name)
-            js = h5name[:-3] + ".json"
-            sidecar = zf.read(js) if js in zf.namelist() else None
-        except (zipfile.BadZipFile, OSError, EOFError) as exc:
-            raise BRDFFormatError(zip_path, f"could not read member {h5name!r}: {exc}")
+        blob = read_zip_member(zf, h5info, where, MAX_NETWORK_FILE_BYTES)
+        js = h5info.filename[:-3] + ".json"
+        side = [i for i in zf.infolist() if i.filename == js]
+        if len(side) > 1:
+            raise BRDFFormatError(zip_path, f"expected one member {js!r}, found {len(side)}")
+        sidecar = read_zip_member(zf, side[0], where, MAX_SIDECAR_BYTES) if side else None
     layers = _layers_from_h5(io.BytesIO(blob), where)
     acts = _activations_from_json(sidecar, where) if sidecar is not None else None
     return _build(layers, acts, name=key, source=where, precision=precision)

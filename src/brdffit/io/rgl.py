@@ -387,6 +387,12 @@ class RGLBRDF(BRDF):
         if not (np.all(np.diff(self.theta_i) > 0) and np.all(np.diff(self.phi_i) > 0)):
             raise BRDFFormatError(path, "expected strictly increasing theta_i and phi_i, found "
                                         f"{self.theta_i.tolist()} / {self.phi_i.tolist()}")
+        if self.theta_i[0] < 0 or self.theta_i[-1] > np.pi / 2 + 1e-4:
+            raise BRDFFormatError(path, f"expected theta_i in [0, π/2] radians, found "
+                                        f"[{float(self.theta_i[0]):g}, {float(self.theta_i[-1]):g}]")
+        if self.phi_i[0] < -2 * np.pi - 1e-4 or self.phi_i[-1] > 2 * np.pi + 1e-4:
+            raise BRDFFormatError(path, f"expected phi_i in [-2π, 2π] radians, found "
+                                        f"[{float(self.phi_i[0]):g}, {float(self.phi_i[-1]):g}]")
         if self.vndf.shape[:2] != (nphi, nth) or min(self.vndf.shape[2:]) < 2:
             raise BRDFFormatError(path, f"expected vndf of shape ({nphi}, {nth}, H>=2, W>=2), "
                                         f"found {self.vndf.shape}")

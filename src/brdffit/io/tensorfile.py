@@ -15,9 +15,11 @@ of Mitsuba 2, kept by Mitsuba 3's tensor reader): ``Invalid = 0, UInt8, Int8, UI
 UInt32, Int32, UInt64, Int64, Float16, Float32, Float64``, i.e. 1 = uint8 ... 10 = float32,
 11 = float64.
 
-:func:`read_tensor_file` validates everything it reads (magic, version, field count, header
-bounds, dtype codes, data offsets and sizes inside the file, duplicate names, NaN/inf in float
-fields) and raises :class:`~brdffit.errors.BRDFFormatError` naming the file, what was expected
+:func:`read_tensor_file` validates everything it reads (file size at most
+:data:`~brdffit.io._limits.MAX_TENSOR_FILE_BYTES`, magic, version, field count, header bounds,
+dtype codes, data offsets and sizes inside the file, no overlapping fields, no absurd
+dimensions even for empty fields, duplicate names, NaN/inf in float fields) before allocating
+anything and raises :class:`~brdffit.errors.BRDFFormatError` naming the file, what was expected
 and what was found. :func:`write_tensor_file` writes the same format atomically.
 """
 
@@ -32,6 +34,7 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..errors import BRDFFormatError
+from ._limits import MAX_TENSOR_FILE_BYTES, read_file_capped
 
 __all__ = ["MAGIC", "VERSION", "DTYPE_CODES", "TensorField", "read_tensor_header",
            "read_tensor_file", "write_tensor_file", "is_tensor_file"]
@@ -135,11 +138,22 @@ def _parse_header(buf: bytes | memoryview, path) -> tuple[dict[str, TensorField]
                                    tuple(int(s) for s in shape))
     header_end = pos
     for f in fields.values():
+        if f.nbytes == 0 and any(s > size for s in f.shape):
+            # an empty field may still declare absurd dimensions (NumPy: "array is too big")
+            raise BRDFFormatError(path, f"expected the dimensions of the empty field {f.name!r} "
+                                        f"to be at most the file size ({size}), found shape "
+                                        f"{f.shape}")
         if f.offset < header_end or f.offset + f.nbytes > size:
             raise BRDFFormatError(
                 path, f"expected the data of field {f.name!r} ({f.nbytes} bytes, shape "
                       f"{f.shape}, {f.dtype}) inside the file between the header end "
                       f"({header_end}) and the file size ({size}), found offset {f.offset}")
+    placed = sorted((f for f in fields.values() if f.nbytes), key=lambda f: f.offset)
+    for a, b in zip(placed, placed[1:]):
+        if a.offset + a.nbytes > b.offset:
+            raise BRDFFormatError(path, f"expected fields stored without overlap, found "
+                                        f"{a.name!r} (bytes {a.offset}..{a.offset + a.nbytes}) "
+                                        f"overlapping {b.name!r} (from byte {b.offset})")
     return fields, header_end
 
 
@@ -151,10 +165,7 @@ def read_tensor_header(path) -> dict[str, TensorField]:
 
 
 def _read_bytes(path: Path) -> bytes:
-    try:
-        return path.read_bytes()
-    except OSError as exc:
-        raise BRDFFormatError(path, f"expected a readable tensor file, found {exc.strerror or exc}") from exc
+    return read_file_capped(path, "a tensor file", MAX_TENSOR_FILE_BYTES)
 
 
 def read_tensor_file(path, *, string_fields=STRING_FIELDS, check_finite: bool = True

@@ -22,6 +22,7 @@ import numpy as np
 from .._atomic import atomic_write
 from ..brdf import BRDF, _as_dirs
 from ..errors import BRDFFormatError
+from ._limits import check_plausible_float64, describe_exception, regular_file_size
 from ..geometry import cartesian_to_spherical, spherical_to_cartesian
 from .merl import _gather_interp, _numba, _pack
 
@@ -210,21 +211,26 @@ class UTIABRDF(BRDF):
 
 
 def read_utia(path) -> UTIABRDF:
-    """Read a UTIA ``.bin`` file (raw float64, no header; see the module docstring)."""
+    """Read a UTIA ``.bin`` file (raw float64, no header; see the module docstring).
+
+    The size is checked before reading; NaN/inf, magnitudes above
+    :data:`~brdffit.io._limits.MAX_ABS_VALUE` and subnormal values (a byte-swapped file: the
+    format has no header to tell) raise :class:`~brdffit.errors.BRDFFormatError`.
+    """
     path = Path(path)
-    if not path.is_file():
-        raise BRDFFormatError(path, "expected a UTIA .bin file, found no such file")
-    size = path.stat().st_size
+    size = regular_file_size(path, "a UTIA .bin file")
     if size != UTIA_FILE_SIZE:
         what = "truncated file" if size < UTIA_FILE_SIZE else "trailing bytes"
         raise BRDFFormatError(path, f"expected {UTIA_FILE_SIZE} bytes (48x6x48x6x3 float64), "
                                     f"found {size} ({what})")
-    raw = np.fromfile(path, dtype="<f8")
+    try:
+        raw = np.fromfile(path, dtype="<f8", count=UTIA_FILE_SIZE // 8)
+    except OSError as exc:
+        raise BRDFFormatError(path, f"expected a readable UTIA .bin file, found "
+                                    f"{describe_exception(exc)}") from None
     if raw.size * 8 != UTIA_FILE_SIZE:
         raise BRDFFormatError(path, f"expected {UTIA_FILE_SIZE // 8} float64, found {raw.size}")
-    if not np.isfinite(raw).all():
-        raise BRDFFormatError(path, f"expected finite float64 values, found "
-                                    f"{int(np.count_nonzero(~np.isfinite(raw)))} NaN/inf")
+    check_plausible_float64(raw, path, "values")
     # C view [c][θi][φi][θv][φv] -> (θi, φi, θv, φv, c)
     values = np.moveaxis(raw.reshape(3, N_THETA, N_PHI, N_THETA, N_PHI), 0, -1)
     valid = np.all(values >= 0, axis=-1)
