@@ -6,6 +6,9 @@ Image space
   computed on the *linear* rendered values (no tone mapping), over foreground pixels only
   (pixels covered by the object), with the numerator taken as the maximum intensity of any
   RGB component of any foreground pixel of the ground-truth rendering.
+* :func:`crn_psnr` – the same PSNR estimated from K independent batches rendered with common
+  random numbers (reference and model share every random number within a batch), with its
+  standard error; :func:`combine_psnr` – mean over scenes with the propagated error.
 * :func:`delta_e2000_image` / :func:`mean_delta_e2000` – CIE dE2000 difference images as
   shown in the supplemental of Dupuy et al. 2015 (per-material "CIE dE00" rows), computed
   with ``colour-science`` after the conversion documented in :func:`to_lab`.
@@ -41,6 +44,7 @@ import numpy as np
 
 __all__ = [
     "DELTA_E_VMAX", "DELTA_E_CMAP", "npf_tonemap", "foreground_mask", "rendered_psnr",
+    "crn_psnr", "combine_psnr", "psnr_from_mse",
     "to_lab", "delta_e2000_image", "mean_delta_e2000", "colorize_delta_e",
     "cosine_weighted_relative_error", "count_wins", "brdf_metrics", "BRDFMetrics",
     "normalized_l2", "compressive_objective",
@@ -148,6 +152,130 @@ def rendered_psnr(reference, test, mask=None) -> float:
     if mse == 0.0:
         return float("inf")
     return float(10.0 * np.log10(peak * peak / mse))
+
+
+_DB = 10.0 / np.log(10.0)
+
+
+def psnr_from_mse(peak: float, mse: float) -> float:
+    """``10 log10(peak² / mse)``; ``inf`` for ``mse == 0``."""
+    if mse <= 0:
+        return float("inf")
+    return float(10.0 * np.log10(peak * peak / mse))
+
+
+def crn_psnr(reference, test, mask=None, peak: float | None = None) -> dict:
+    """Rendered PSNR (Bagher 2016 §5) with its standard error, from K independent batches.
+
+    ``reference`` and ``test`` are ``(K, H, W, 3)`` stacks of linear renderings: batch ``k``
+    of both rendered with the same seed and common random numbers (same directions, pdfs and
+    MIS weights, :mod:`brdffit.evaluation.render.proposal`), different batches with
+    independent seeds. ``mask``: ``(H, W)`` foreground (default all pixels).
+
+    Estimator. Let ``D_k`` be the per-pixel, per-channel difference ``test_k − reference_k``
+    over the foreground (P values) and ``Δ`` its expectation, the difference of the converged
+    images. The quantity of interest is ``MSE = mean_P Δ²``. Each ``D_k = Δ + ε_k`` with
+    zero-mean noise; with CRN the reference's own noise cancels in ``D_k`` and ``ε_k`` is of
+    the order of ``Δ`` (it vanishes with it), so the estimator is not swamped by the noise of
+    the images. Still, ``mean_P D_k²`` is biased upwards by ``mean_P Var(ε)``, and the MSE of
+    the batch means by ``mean_P Var(ε)/K``. We remove that bias exactly with the U-statistic
+    over pairs of independent batches (``E[D_j D_k] = Δ²`` for ``j ≠ k``)::
+
+        MSE_U = mean_P (S² − Q) / (K (K − 1)),    S = Σ_k D_k,   Q = Σ_k D_k²,
+
+    unbiased for any K ≥ 2 (``mse_plain = mean_P (S/K)²`` is reported as well, and
+    ``noise_mse = mse_plain − MSE_U``, the removed variance term). Its standard error is the
+    delete-one-batch jackknife (``se² = (K−1)/K Σ_k (U_(−k) − Ū)²``, K ≥ 3; the jackknife
+    variance of a U-statistic is conservative), and the PSNR's by the delta method:
+    ``psnr = 10 log10(peak² / MSE_U)``, ``psnr_se = (10 / ln 10) · se(MSE_U) / MSE_U``.
+
+    ``peak`` (the PSNR numerator: max RGB component of the reference foreground) is taken
+    from the mean of the K reference batches (the converged reference as well as we have it;
+    the max of one noisy batch is biased upwards) and treated as a constant: it is the same
+    for every model of a scene, so it shifts all their PSNRs alike.
+
+    When ``D ≡ 0`` (a model rendered against itself) the PSNR is ``inf`` with se 0. When the
+    difference is not resolved (``MSE_U ≤ 0``: it is below the noise of its own estimate), the
+    returned ``psnr`` is the lower bound ``10 log10(peak² / (max(MSE_U, 0) + 2 se))`` and
+    ``bound == "lower"``; ``resolved`` is ``MSE_U > 2 se``.
+
+    Returns a dict: ``psnr``, ``psnr_se``, ``mse``, ``mse_se``, ``mse_plain``, ``noise_mse``,
+    ``peak``, ``batches``, ``resolved``, ``bound`` (``None`` or ``"lower"``),
+    ``psnr_plain`` (PSNR of the mean images, biased low).
+    """
+    ref = np.asarray(reference, dtype=np.float64)
+    tst = np.asarray(test, dtype=np.float64)
+    if ref.ndim == 3:
+        ref, tst = ref[None], tst[None]
+    if ref.ndim != 4 or ref.shape[-1] != 3 or tst.shape != ref.shape:
+        raise ValueError(f"expected two (K, H, W, 3) stacks of the same shape, found {ref.shape} "
+                         f"and {tst.shape}")
+    K = ref.shape[0]
+    if mask is None:
+        m = np.ones(ref.shape[1:3], bool)
+    else:
+        m = np.asarray(mask).astype(bool)
+        if m.shape != ref.shape[1:3]:
+            raise ValueError(f"foreground mask: expected shape {ref.shape[1:3]}, found {m.shape}")
+    if not m.any():
+        raise ValueError("foreground mask: expected at least one foreground pixel, found none")
+    R = ref[:, m, :].reshape(K, -1)
+    D = tst[:, m, :].reshape(K, -1) - R
+    if not np.all(np.isfinite(D)):
+        raise ValueError("test image: expected finite values on the foreground, found NaN/inf")
+    if peak is None:
+        peak = float(np.max(R.mean(0)))
+    if not np.isfinite(peak) or peak <= 0:
+        raise ValueError(f"reference foreground: expected a positive finite peak, found {peak}")
+    S = D.sum(0)
+    Q = np.square(D).sum(0)
+    mse_plain = float(np.mean(np.square(S / K)))
+    out = {"batches": int(K), "peak": float(peak), "mse_plain": mse_plain,
+           "psnr_plain": psnr_from_mse(peak, mse_plain)}
+    if not np.any(D):
+        return out | {"psnr": float("inf"), "psnr_se": 0.0, "mse": 0.0, "mse_se": 0.0,
+                      "noise_mse": 0.0, "resolved": True, "bound": None}
+    if K < 2:
+        return out | {"psnr": out["psnr_plain"], "psnr_se": float("nan"), "mse": mse_plain,
+                      "mse_se": float("nan"), "noise_mse": float("nan"), "resolved": False,
+                      "bound": "lower"}
+    base = np.mean(S * S - Q)
+    mse = float(base / (K * (K - 1)))
+    se = float("nan")
+    if K >= 3:
+        # U without batch k: mean_P[(S − D_k)² − (Q − D_k²)] / ((K−1)(K−2))
+        loo = (base - 2.0 * (D @ S) / D.shape[1] + 2.0 * np.mean(D * D, axis=1)) / ((K - 1) * (K - 2))
+        se = float(np.sqrt((K - 1) / K * np.sum(np.square(loo - loo.mean()))))
+    out |= {"mse": mse, "mse_se": se, "noise_mse": mse_plain - mse}
+    if mse > 0:
+        resolved = bool(np.isfinite(se) and mse > 2.0 * se)
+        return out | {"psnr": psnr_from_mse(peak, mse),
+                      "psnr_se": float(_DB * se / mse) if np.isfinite(se) else float("nan"),
+                      "resolved": resolved, "bound": None}
+    bound_mse = max(mse, 0.0) + (2.0 * se if np.isfinite(se) else mse_plain)
+    return out | {"psnr": psnr_from_mse(peak, bound_mse), "psnr_se": float("nan"),
+                  "resolved": False, "bound": "lower"}
+
+
+def combine_psnr(per_scene: Sequence[Mapping]) -> dict:
+    """Mean PSNR over scenes (Bagher 2016 §5 averages its four scenes) and its standard error
+    ``sqrt(Σ se_s²) / S`` (scenes rendered with independent random numbers). A scene at
+    ``inf`` makes the mean ``inf``; a scene given as a lower bound makes the mean one
+    (``bound == "lower"``, se NaN)."""
+    ps = [float(r["psnr"]) for r in per_scene]
+    if not ps:
+        return {"psnr": float("nan"), "psnr_se": float("nan"), "bound": None, "n_scenes": 0}
+    ses = [float(r.get("psnr_se", float("nan"))) for r in per_scene]
+    bound = "lower" if any(r.get("bound") == "lower" for r in per_scene) else None
+    mean = float(np.mean(ps))
+    if np.isinf(mean):
+        se = 0.0 if all(np.isinf(p) for p in ps) else float("nan")
+    elif bound:
+        se = float("nan")
+    else:
+        finite = [s for p, s in zip(ps, ses) if np.isfinite(p)]
+        se = float(np.sqrt(np.sum(np.square(finite))) / len(ps))
+    return {"psnr": mean, "psnr_se": se, "bound": bound, "n_scenes": len(ps)}
 
 
 def to_lab(img, exposure: float = 0.02, gamma: float = 2.2, tonemap=None) -> np.ndarray:

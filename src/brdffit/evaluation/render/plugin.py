@@ -14,6 +14,14 @@ the distinction moot, but it keeps non-reciprocal tables right). The plugin is t
 Spatially varying roughness (Dupuy 2015 Eq. 9, Fig. 1/4): with ``alpha_texture`` (a 2D array
 of positive scales), the roughness multiplier at the hit point's ``uv`` is read with bilinear
 filtering (``mi.Texture2f``) and passed to the evaluator's distribution.
+
+Common random numbers (issue 13): with ``proposal`` (an object with the evaluators'
+``sample``/``pdf`` interface, e.g. :class:`.proposal.Proposal` fitted to a comparison's
+reference), ``sample`` and ``pdf`` come from the proposal and only ``eval`` from the model.
+Two BSDFs sharing a proposal then draw the same light directions with the same densities and
+MIS weights from the same random numbers (``sample`` always consumes one 1D and one 2D
+sample, whatever the model), so images of different models rendered with one seed differ
+only through the BRDF values.
 """
 
 from __future__ import annotations
@@ -36,7 +44,7 @@ _ids = itertools.count()
 class BRDFBSDF(mi.BSDF):
     """Mitsuba BSDF wrapping a Dr.Jit evaluator (see module docstring)."""
 
-    def __init__(self, props, evaluator=None, alpha_texture=None):
+    def __init__(self, props, evaluator=None, alpha_texture=None, proposal=None):
         mi.BSDF.__init__(self, props)
         if evaluator is None:
             key = props.get("evaluator_id", None) if hasattr(props, "get") else None
@@ -44,6 +52,8 @@ class BRDFBSDF(mi.BSDF):
                 raise ValueError(f"{PLUGIN_NAME} BSDF needs an evaluator (evaluator_id {key!r} unknown)")
             evaluator = _EVALUATORS[key]
         self.evaluator = evaluator
+        self.proposal = proposal
+        self.sampler = evaluator if proposal is None else proposal
         self.alpha_tex = None
         if alpha_texture is not None:
             a = np.asarray(alpha_texture, dtype=np.float32)
@@ -76,7 +86,7 @@ class BRDFBSDF(mi.BSDF):
         flip = si.wi.z < 0
         view = self._flip(si.wi, flip)
         s = self._scale(si)
-        light, pdf = self.evaluator.sample(view, sample1, sample2, s, active)
+        light, pdf = self.sampler.sample(view, sample1, sample2, s, active)
         ok = active & (light.z > 0) & (pdf > 0)
         f = self.evaluator.eval(light, view, s, ok)
         weight = f * (light.z / dr.select(ok, pdf, 1.0))
@@ -101,7 +111,7 @@ class BRDFBSDF(mi.BSDF):
         view = self._flip(si.wi, flip)
         light = self._flip(wo, flip)
         ok = active & (light.z > 0) & (view.z > 0)
-        return dr.select(ok, self.evaluator.pdf(view, light, self._scale(si), ok), 0.0)
+        return dr.select(ok, self.sampler.pdf(view, light, self._scale(si), ok), 0.0)
 
     def eval_pdf(self, ctx, si, wo, active=True):
         return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
@@ -110,7 +120,8 @@ class BRDFBSDF(mi.BSDF):
         pass
 
     def to_string(self):
-        return f"BRDFBSDF[{getattr(self.evaluator, 'kind', type(self.evaluator).__name__)}]"
+        kind = getattr(self.evaluator, "kind", type(self.evaluator).__name__)
+        return f"BRDFBSDF[{kind}" + (", proposal]" if self.proposal is not None else "]")
 
 
 def _factory(props):
@@ -120,12 +131,13 @@ def _factory(props):
 mi.register_bsdf(PLUGIN_NAME, _factory)
 
 
-def make_bsdf(evaluator, alpha_texture=None) -> BRDFBSDF:
+def make_bsdf(evaluator, alpha_texture=None, proposal=None) -> BRDFBSDF:
     """A ready BSDF object to put in a Mitsuba scene dict (``{"type": "sphere", "bsdf": it}``).
 
-    ``alpha_texture``: optional positive ``(H, W)`` roughness-scale texture.
+    ``alpha_texture``: optional positive ``(H, W)`` roughness-scale texture; ``proposal``:
+    sample/pdf from this object instead of the evaluator (common random numbers).
     """
-    return BRDFBSDF(mi.Properties(), evaluator, alpha_texture)
+    return BRDFBSDF(mi.Properties(), evaluator, alpha_texture, proposal)
 
 
 def register_evaluator(evaluator) -> str:

@@ -25,11 +25,48 @@ Russian roulette before depth 100) for interreflections. Emitters are hidden
 
 Environment maps: ``envmap=None`` uses :func:`procedural_envmap` (the project's own, no
 external data); a name (``"studio"``) picks ``../shared/data/envmaps/<name>.exr``; a path
-loads that EXR. Maps are clamped at 0 (the CC0 maps have small negative values).
+loads that EXR. Maps are clamped at 0 (the CC0 maps have small negative values). A scene
+name may carry its map: ``sphere-<map>`` / ``knot-<map>`` (e.g. ``sphere-sunrise``).
+
+The paper's scene suite (Bagher, Snyder, Nowrouzezahrai 2016 §5)
+----------------------------------------------------------------
+The NPF paper scores every material on four scenes: a sphere in three HDR light probes of
+different character (Grace, Ennis, St. Peter's) and a mesh (the Stanford Buddha) in two of
+them, and reports the PSNR of each scene and their mean. :data:`SUITES` ``["paper"]`` is our
+equivalent with the CC0 maps of ``../shared/data/envmaps`` (:func:`scene_suite`):
+
+=====================  ==================================================================
+``sphere-courtyard``   low dynamic range: a covered courtyard, soft light, no sun
+                       (luminance max/median 1.0e3, 4.0 decades between the max and the 1st
+                       percentile, 3 % of the energy in the brightest 0.1 % of the sphere)
+``sphere-studio``      studio: black surroundings and two area lights (max/median 1.2e5,
+                       6.0 decades, 55 % of the energy in the brightest 0.1 %)
+``sphere-sunrise``     sunny, high dynamic range: open field with the sun low on the horizon
+                       (max 3.3e4, max/median 2.9e5, 6.5 decades, 58 % of the energy in the
+                       sun)
+``knot-courtyard``     the torus-knot mesh (:func:`torus_knot`; concavities,
+                       interreflections, every normal direction) in the low-DR courtyard,
+                       as the paper puts its Buddha in its low-DR Ennis map
+=====================  ==================================================================
+
+Why these maps (measured with ``bench/bench_render.py --envmaps``): they span the range of
+the eight maps from the softest (courtyard) through concentrated artificial lights (studio)
+to the brightest point-like source (the sun of sunrise), like Grace / St. Peter's / Ennis;
+``interior`` and ``city`` are as high-DR as ``sunrise`` but their bright pixels are
+windows/lamps rather than one sun, ``night`` is mostly black. Without the shared data set the
+suite falls back to the procedural environment (``sphere-env`` and ``knot``), with a note.
+
+Tone mapping of pictures (:func:`scene_exposure`): the paper's fixed operator
+``(1 − 2^(−exposure·x))^(1/γ)`` with one exposure per *scene*, not per material. The paper's
+0.02 belongs to its light probes' units; ours is ``1 / mean radiance`` of the map (a grey
+Lambertian of albedo ρ then maps to ``x·exposure ≈ ρ``, about the paper's look), and
+``γ = 2.2`` for every scene (deviation: the paper switches to exposure 1, γ 2.8 for its dark
+Ennis map only because of its units, which this normalisation makes unnecessary).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from functools import lru_cache
 from pathlib import Path
@@ -40,7 +77,8 @@ from ...errors import BRDFFormatError
 from ._mitsuba import load as _load
 
 __all__ = ["SCENES", "scene_dict", "procedural_envmap", "load_envmap", "torus_knot",
-           "roughness_texture", "ENVMAP_DIR", "envmap_names"]
+           "roughness_texture", "ENVMAP_DIR", "envmap_names", "SUITES", "SceneSpec",
+           "scene_suite", "scene_spec", "scene_exposure", "envmap_stats"]
 
 ENVMAP_DIR = Path(os.environ.get("BRDFFIT_ENVMAP_DIR", "")
                   or Path(__file__).resolve().parents[5] / "shared" / "data" / "envmaps")
@@ -211,10 +249,12 @@ def _knot_mesh(bsdf):
 
 def scene_dict(bsdf, scene: str = "sphere-env", envmap=None, spp: int = 256,
                resolution: int = 256) -> dict:
-    """Mitsuba scene dict of the named scene with ``bsdf`` on the object."""
+    """Mitsuba scene dict of the named scene with ``bsdf`` on the object (``scene`` may be a
+    suite name such as ``sphere-studio``: its map then replaces ``envmap``)."""
     mi, _ = _load()
     if scene not in SCENES:
-        raise ValueError(f"unknown scene {scene!r}; expected one of {', '.join(SCENES)}")
+        spec = scene_spec(scene, envmap)
+        scene, envmap = spec.base, spec.envmap
     d = {"type": "scene", "sensor": _camera(resolution, spp),
          "integrator": {"type": "direct", "hide_emitters": True}}
     if scene in ("sphere-env", "sphere-svrough"):
@@ -234,3 +274,136 @@ def scene_dict(bsdf, scene: str = "sphere-env", envmap=None, spp: int = 256,
                            "hide_emitters": True}
         d["object"] = _knot_mesh(bsdf)
     return d
+
+
+# -- the scene suite (Bagher 2016 §5) ---------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class SceneSpec:
+    """One scene of a comparison: ``name`` (as reported), ``base`` (one of :data:`SCENES`),
+    ``envmap`` (a map name/path or ``None`` = procedural), ``max_depth`` (2 = direct lighting
+    of a convex object, 4 = up to three bounces on the knot), the tone map of its pictures
+    (``exposure``, ``gamma``) and a ``note``."""
+
+    name: str
+    base: str
+    envmap: object = None
+    max_depth: int = 2
+    exposure: float = 1.0
+    gamma: float = 2.2
+    note: str = ""
+
+    def as_dict(self) -> dict:
+        d = dataclasses.asdict(self)
+        d["envmap"] = None if self.envmap is None else (
+            self.envmap if isinstance(self.envmap, str) else "array")
+        return d
+
+
+#: Named scene suites: ``paper`` is the four scenes of the module docstring.
+SUITES = {"paper": (("sphere-courtyard", "low dynamic range (overcast-like courtyard)"),
+                    ("sphere-studio", "studio lights (concentrated area lights)"),
+                    ("sphere-sunrise", "sunny, high dynamic range (low sun)"),
+                    ("knot-courtyard", "torus-knot mesh, interreflections"))}
+_FALLBACK = (("sphere-env", "procedural environment (../shared/data/envmaps absent)"),
+             ("knot", "torus-knot mesh in the procedural environment (../shared/data/envmaps absent)"))
+
+
+def _lum_mean(arr) -> float:
+    """Solid-angle weighted mean luminance of a lat-long map."""
+    lum = np.asarray(arr, np.float64)[..., :3] @ np.array([0.2126, 0.7152, 0.0722])
+    h = lum.shape[0]
+    w = np.sin((np.arange(h) + 0.5) / h * np.pi)[:, None]
+    return float((lum * w).sum() / (w.sum() * lum.shape[1]))
+
+
+def envmap_stats(envmap=None) -> dict:
+    """Dynamic-range figures of an environment map (luminance, solid-angle weighted):
+    ``max``, ``mean``, ``median``, ``max_over_median``, ``decades`` (log10 of max over the
+    1st percentile of positive pixels) and ``top_energy`` (share of the energy in the
+    brightest 0.1 % of the sphere)."""
+    arr = load_envmap(envmap)
+    lum = arr.astype(np.float64) @ np.array([0.2126, 0.7152, 0.0722])
+    h = lum.shape[0]
+    w = np.broadcast_to(np.sin((np.arange(h) + 0.5) / h * np.pi)[:, None], lum.shape)
+    order = np.argsort(-lum.ravel())
+    cs = np.cumsum(w.ravel()[order]) / w.sum()
+    ce = np.cumsum((lum * w).ravel()[order]) / max((lum * w).sum(), 1e-300)
+    pos = lum[lum > 0]
+    med = float(np.median(lum))
+    return {"max": float(lum.max()), "mean": _lum_mean(arr), "median": med,
+            "max_over_median": float(lum.max() / med) if med > 0 else float("inf"),
+            "decades": float(np.log10(lum.max() / np.percentile(pos, 1))) if pos.size else 0.0,
+            "top_energy": float(ce[min(np.searchsorted(cs, 0.001), ce.size - 1)])}
+
+
+def scene_exposure(base: str, envmap=None) -> float:
+    """The fixed tone-mapping exposure of a scene (independent of the material): ``1 / mean
+    radiance`` of its environment map, ``π / E`` for the point (E = 40/|p|², |p|² = 37.25)
+    and distant (E = 3) lights."""
+    if base == "sphere-point":
+        return float(np.pi / (40.0 / 37.25))
+    if base == "sphere-distant":
+        return float(np.pi / 3.0)
+    return float(1.0 / max(_lum_mean(load_envmap(envmap)), 1e-12))
+
+
+def scene_spec(name: str, envmap=None, note: str = "") -> SceneSpec:
+    """Resolve a scene name: one of :data:`SCENES` (``envmap`` applies to its environment) or
+    ``sphere-<map>`` / ``knot-<map>`` with a map of :func:`envmap_names`."""
+    base, env = name, envmap
+    if name not in SCENES:
+        for prefix, b in (("sphere-", "sphere-env"), ("knot-", "knot")):
+            if name.startswith(prefix) and name[len(prefix):]:
+                base, env = b, name[len(prefix):]
+                break
+        else:
+            raise ValueError(f"unknown scene {name!r}; expected one of {', '.join(SCENES)}, "
+                             "a suite (paper) or sphere-<map>/knot-<map> with a map of "
+                             f"{ENVMAP_DIR} ({', '.join(envmap_names()) or 'none present'})")
+        if env not in envmap_names() and not Path(env).is_file():
+            raise ValueError(f"scene {name!r}: no environment map {env!r} in {ENVMAP_DIR} "
+                             f"({', '.join(envmap_names()) or 'none present'})")
+    uses_env = base in ("sphere-env", "knot", "sphere-svrough")
+    if not uses_env:
+        env = None
+    return SceneSpec(name=name, base=base, envmap=env, max_depth=4 if base == "knot" else 2,
+                     exposure=scene_exposure(base, env if uses_env else None), gamma=2.2,
+                     note=note)
+
+
+def scene_suite(scenes="paper", envmap=None) -> tuple[list[SceneSpec], list[str]]:
+    """The scenes of a comparison and notes about them.
+
+    ``scenes``: a suite name of :data:`SUITES` (``"paper"``), one scene name or a list /
+    comma-separated string of names (see :func:`scene_spec`; ``envmap`` applies to the plain
+    :data:`SCENES` names). When the shared environment maps are absent the paper suite falls
+    back to the procedural environment (``sphere-env``, ``knot``), with a note saying so.
+    """
+    notes: list[str] = []
+    if isinstance(scenes, str):
+        names = [s.strip() for s in scenes.split(",") if s.strip()]
+    else:
+        names = [str(s) for s in scenes]
+    if not names:
+        raise ValueError("expected at least one scene")
+    out: list[SceneSpec] = []
+    for n in names:
+        if n in SUITES:
+            members = SUITES[n]
+            have = set(envmap_names())
+            if not all(m.split("-", 1)[1] in have for m, _ in members):
+                notes.append(f"scene suite {n!r}: the environment maps of {ENVMAP_DIR} are "
+                             "absent, so the procedural environment replaces them "
+                             f"({', '.join(m for m, _ in _FALLBACK)} instead of "
+                             f"{', '.join(m for m, _ in members)})")
+                members = _FALLBACK
+            out += [scene_spec(m, None, note) for m, note in members]
+        else:
+            out.append(scene_spec(n, envmap))
+    seen = set()
+    uniq = []
+    for s in out:
+        if s.name not in seen:
+            seen.add(s.name)
+            uniq.append(s)
+    return uniq, notes
