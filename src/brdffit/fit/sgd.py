@@ -119,13 +119,16 @@ from ..brdf import IsotropicBRDF, _as_dirs, cosine_hemisphere_pdf, cosine_hemisp
 from ..errors import FitError
 from ..geometry import slope_to_normal
 from ..grid import merl_phi_d, merl_theta_d, merl_theta_h
-from ..io.fitfile import SerializableModel
 from ..microfacet.beckmann import Beckmann
 from ..microfacet.fresnel import GeneralizedSchlickFresnel
 from ..microfacet.ggx import GGX
-from ..microfacet.model import MicrofacetBRDF, distribution_from_state, distribution_to_state
+from ..microfacet.model import (MicrofacetBRDF, _lookup_distribution, distribution_from_state,
+                                distribution_to_state)
 from ..microfacet.gamma import upper_gamma
 from ..microfacet.sgd import SGD, SGDApproxG1, sgd_log_p22, sgd_mu_lambda
+from ..schema import (ALBEDO_MAX, F1_MAX, SPECULAR_MAX, Choice, Component, ListOf, Nested, Number,
+                      Opt, Schema, Text)
+from ..serialization import SerializableModel
 
 __all__ = ["fit_sgd", "fit_beckmann_two_slice", "fit_ggx_two_slice", "fit_cook_torrance",
            "fit_two_slice", "PerChannelMicrofacetBRDF", "summary"]
@@ -311,6 +314,23 @@ class PerChannelMicrofacetBRDF(IsotropicBRDF, SerializableModel):
     """
 
     fit_kind = "per_channel_microfacet"
+    #: fit-file state (:mod:`brdffit.schema`): three channels (distribution arrays under
+    #: ``c0.``...), ρd in [0, ALBEDO_MAX], ρs in [0, SPECULAR_MAX], F0 in [0, 1] and
+    #: |F1| <= F1_MAX (Eq. 11 with F(π/2) = 1 gives F1 ≪ 0 when ρs → 0); Eq. 9 parameters
+    #: λ, c, k in (0, 1e6]
+    state_schema = Schema(
+        {"channels": ListOf(Nested(Schema(
+            {"distribution": Component(_lookup_distribution, what="distribution"),
+             "rho_d": Number(ge=0, le=ALBEDO_MAX), "rho_s": Number(ge=0, le=SPECULAR_MAX),
+             "F0": Number(ge=0, le=1), "F1": Number(ge=-F1_MAX, le=F1_MAX)},
+            required=("distribution", "rho_d", "rho_s", "F0", "F1"))),
+            min_len=3, max_len=3, item_prefix="c{index}."),
+         "g1_approx": Opt(ListOf(Opt(Nested(Schema(
+             {"lambda": Number(gt=0, le=1e6), "c": Number(gt=0, le=1e6),
+              "k": Number(gt=0, le=1e6)}, required=("lambda", "c", "k")))),
+             min_len=3, max_len=3)),
+         "g1": Choice("table", "approx"), "name": Opt(Text()), "source": Opt(Text())},
+        required=("channels",))
 
     def __init__(self, channels, *, g1_approx=None, g1: str = "table", name: str | None = None,
                  source: str | None = None):

@@ -44,10 +44,11 @@ import numpy as np
 
 from ..brdf import BRDF
 from ..errors import FitError
-from ..io.fitfile import SerializableModel
 from ..grid import N_THETA_H, merl_theta_d, tabulate_merl_grid
 from ..microfacet.tabulated import (TabulatedSlopeDistribution,
                                     azimuthal_clamped_cosine_integral, radial_rule)
+from ..schema import ListOf, Nested, Opt, Schema, Text
+from ..serialization import SerializableModel
 
 __all__ = ["fit_tabulated", "fit_ggx", "fit_beckmann", "to_ggx", "to_beckmann", "with_roughness",
            "solve_slope_pdf", "extract_fresnel", "luminance", "backscatter",
@@ -458,6 +459,12 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int = 4, tol: float | Non
     return model
 
 
+def _microfacet_schema() -> Schema:
+    from ..microfacet.model import MicrofacetBRDF
+
+    return MicrofacetBRDF.state_schema
+
+
 class PerChannelBRDF(BRDF, SerializableModel):
     """Three single-channel fits (``per_channel=True``): channel ``c`` of the result is
     channel ``c`` of ``models[c]`` (one slope distribution and Fresnel per channel).
@@ -467,6 +474,12 @@ class PerChannelBRDF(BRDF, SerializableModel):
     """
 
     fit_kind = "tabulated_per_channel"
+    #: fit-file state (:mod:`brdffit.schema`): three ``microfacet`` states, arrays under
+    #: ``c0.``, ``c1.``, ``c2.``
+    state_schema = Schema(
+        {"models": ListOf(Nested(_microfacet_schema), min_len=3, max_len=3,
+                          item_prefix="c{index}."),
+         "name": Opt(Text()), "source": Opt(Text())}, required=("models",))
 
     def __init__(self, models, name="brdf", source=None):
         self.models = list(models)

@@ -15,13 +15,18 @@ parameter, and are subclasses of :class:`brdffit.microfacet.base.Fresnel`.
   curves extracted by Dupuy 2015 §4.4 or Bagher 2016), clamped outside the grid.
 
 Serialisation: ``params()`` gives JSON-able parameters (``cls(**params())`` rebuilds the
-object); :class:`TabulatedFresnel` also has ``to_state``/``from_state`` for its tables.
+object); :class:`TabulatedFresnel` also has ``to_state``/``from_state`` for its tables. Each
+class declares the ``state_schema`` a fit file must follow (:mod:`brdffit.schema`): Schlick
+``f0`` and generalised-Schlick ``F0`` in [0, 1], ``|F1|`` ≤ ``F1_MAX``; indices ``eta`` in
+(0, ``INDEX_MAX``], ``k`` in [0, ``INDEX_MAX``]; tables: a strictly increasing θd grid in
+[0, π/2] of 2 to 8192 nodes and values in [0, ``FRESNEL_MAX``].
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..schema import F1_MAX, FRESNEL_MAX, INDEX_MAX, RGB, Array, Integer, Schema
 from .base import Fresnel
 
 __all__ = ["SchlickFresnel", "GeneralizedSchlickFresnel", "DielectricFresnel",
@@ -57,6 +62,7 @@ class SchlickFresnel(Fresnel):
     """Schlick's approximation ``F0 + (1 − F0)(1 − cos θd)⁵`` (Schlick 1994)."""
 
     kind = "schlick"
+    state_schema = Schema({"f0": RGB(ge=0, le=1)}, required=("f0",), strict=True)
 
     def __init__(self, f0):
         self.f0 = _rgb("f0", f0, 0.0, 1.0, "SchlickFresnel")
@@ -83,6 +89,8 @@ class GeneralizedSchlickFresnel(Fresnel):
     """
 
     kind = "generalized_schlick"
+    state_schema = Schema({"F0": RGB(ge=0, le=1), "F1": RGB(ge=-F1_MAX, le=F1_MAX)},
+                          required=("F0",), strict=True)
 
     def __init__(self, F0, F1=0.0):
         self.F0 = _rgb("F0", F0, cls="GeneralizedSchlickFresnel")
@@ -112,6 +120,7 @@ class DielectricFresnel(Fresnel):
     """
 
     kind = "dielectric"
+    state_schema = Schema({"eta": RGB(gt=0, le=INDEX_MAX)}, required=("eta",), strict=True)
 
     def __init__(self, eta):
         self.eta = _rgb("eta", eta, cls="DielectricFresnel")
@@ -146,6 +155,8 @@ class ConductorFresnel(Fresnel):
     """
 
     kind = "conductor"
+    state_schema = Schema({"eta": RGB(gt=0, le=INDEX_MAX), "k": RGB(ge=0, le=INDEX_MAX)},
+                          required=("eta", "k"), strict=True)
 
     def __init__(self, eta, k):
         self.eta = _rgb("eta", eta, cls="ConductorFresnel")
@@ -192,6 +203,11 @@ class TabulatedFresnel(Fresnel):
     """
 
     kind = "tabulated"
+    state_schema = Schema(
+        {"n": Integer(ge=2, le=8192)},
+        arrays={"theta_d": Array(("n",), ge=0, le=np.pi / 2 + 1e-6, increasing=True),
+                "values": Array([("n", 3), ("n",)], ge=0, le=FRESNEL_MAX)},
+        dims={"n": (2, 8192)})
 
     def __init__(self, theta_d_grid, values):
         t = np.asarray(theta_d_grid, dtype=np.float64)

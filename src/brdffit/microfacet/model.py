@@ -20,7 +20,7 @@ Sampling (``MicrofacetBRDF.sample``)
     below the horizon, so ``∫ pdf dω`` equals the probability of a valid sample.
 
 Serialisation and the component registry
-    ``MicrofacetBRDF`` is a :class:`~brdffit.io.fitfile.SerializableModel` of kind
+    ``MicrofacetBRDF`` is a :class:`~brdffit.serialization.SerializableModel` of kind
     ``"microfacet"`` (``SumBRDF``: ``"microfacet_sum"``). Its distribution and Fresnel are
     stored through two small registries mapping a string ``kind`` to a class::
 
@@ -37,6 +37,12 @@ Serialisation and the component registry
     When a file names an unregistered kind, ``brdffit.microfacet.<kind>`` and the modules in
     ``_COMPONENT_MODULES`` (``sgd``, ``tabulated``) are imported so they can register
     themselves (this is how ``sgd`` and the tabulated distributions load lazily).
+
+State schemas (:mod:`brdffit.schema`)
+    Every registered component class declares ``state_schema`` (its ``params`` and arrays,
+    with physical ranges); a file's ``distribution``/``fresnel`` entry is checked against the
+    schema of the class its ``kind`` names before the component is built. A class with its
+    own ``to_state`` and no schema gets only the generic checks (finite numeric arrays).
 """
 
 from __future__ import annotations
@@ -48,7 +54,9 @@ import numpy as np
 
 from ..brdf import BRDF, IsotropicBRDF, _as_dirs, cosine_hemisphere_pdf, cosine_hemisphere_sample
 from ..geometry import half_diff_to_io, slope_to_normal
-from ..io.fitfile import SerializableModel
+from ..schema import (ALBEDO_MAX, ALPHA_MAX, SPECULAR_MAX, RGB, Bool, Component, ListOf, Number,
+                      Opt, Schema, Text)
+from ..serialization import SerializableModel, resolve_kind
 from .base import Fresnel, SlopeDistribution
 from .beckmann import Beckmann
 from .fresnel import (ConductorFresnel, DielectricFresnel, GeneralizedSchlickFresnel,
@@ -192,8 +200,21 @@ def _scaled_from_state(cls, params, arrays):
     return cls(distribution_from_state(params["base"], sub), params["ax"], params["ay"])
 
 
+def _lookup_distribution(kind: str) -> type:
+    return _lookup(kind, _DISTRIBUTIONS, "distribution")
+
+
+def _lookup_fresnel(kind: str) -> type:
+    return _lookup(kind, _FRESNELS, "fresnel")
+
+
 ScaledDistribution.to_state = _scaled_to_state
 ScaledDistribution.from_state = classmethod(_scaled_from_state)
+#: roughness scales of Eq. 9 (> 0, <= ALPHA_MAX) and the base distribution (any kind)
+ScaledDistribution.state_schema = Schema(
+    {"ax": Number(gt=0, le=ALPHA_MAX), "ay": Number(gt=0, le=ALPHA_MAX),
+     "base": Component(_lookup_distribution, prefix="base.", what="distribution")},
+    required=("ax", "ay", "base"))
 
 
 def _supports_vndf(dist) -> bool:
@@ -246,6 +267,15 @@ class MicrofacetBRDF(BRDF, SerializableModel):
     """
 
     fit_kind = "microfacet"
+    #: ``distribution`` and ``fresnel`` follow the schema of their kind (arrays under
+    #: ``distribution.`` / ``fresnel.``); ρd in [0, ALBEDO_MAX], ks in [0, SPECULAR_MAX]
+    state_schema = Schema(
+        {"distribution": Component(_lookup_distribution, prefix="distribution.",
+                                   what="distribution"),
+         "fresnel": Opt(Component(_lookup_fresnel, prefix="fresnel.", what="fresnel")),
+         "diffuse": Opt(RGB(ge=0, le=ALBEDO_MAX)), "specular": Opt(RGB(ge=0, le=SPECULAR_MAX)),
+         "correlated": Bool(), "name": Opt(Text()), "source": Opt(Text())},
+        required=("distribution",))
 
     def __new__(cls, distribution=None, *args, **kwargs):
         if cls is MicrofacetBRDF and getattr(distribution, "isotropic", False):
@@ -442,6 +472,13 @@ class SumBRDF(BRDF, SerializableModel):
     """
 
     fit_kind = "microfacet_sum"
+    #: 1 to 16 lobes, each ``{"model": KIND, "params": ...}`` with the schema of that kind
+    #: and its arrays under ``c0.``, ``c1.``...
+    state_schema = Schema(
+        {"components": ListOf(Component(resolve_kind, kind_key="model", what="model"),
+                              min_len=1, max_len=16, item_prefix="c{index}."),
+         "name": Opt(Text()), "source": Opt(Text())},
+        required=("components",))
 
     def __new__(cls, components=None, *args, **kwargs):
         if cls is SumBRDF and components is not None and all(
@@ -516,15 +553,13 @@ class SumBRDF(BRDF, SerializableModel):
 
     @classmethod
     def from_state(cls, params: dict[str, Any], arrays: dict[str, np.ndarray]):
-        from ..io.fitfile import model_registry
-
-        reg = model_registry()
         comps = []
         for k, meta in enumerate(params["components"]):
-            if meta["model"] not in reg:
-                raise ValueError(f"unknown component model {meta['model']!r}")
-            comps.append(reg[meta["model"]].from_state(meta["params"],
-                                                       _unprefixed(arrays, f"c{k}.")))
+            try:
+                cls_k = resolve_kind(meta["model"])
+            except KeyError:
+                raise ValueError(f"unknown component model {meta['model']!r}") from None
+            comps.append(cls_k.from_state(meta["params"], _unprefixed(arrays, f"c{k}.")))
         return SumBRDF(comps, name=params.get("name"), source=params.get("source"))
 
     def __repr__(self) -> str:

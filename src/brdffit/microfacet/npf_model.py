@@ -38,7 +38,17 @@ import numpy as np
 from ..brdf import IsotropicBRDF, _as_dirs, cosine_hemisphere_pdf, cosine_hemisphere_sample
 from ..geometry import io_to_half_diff
 from ..grid import N_PHI_D, N_THETA_D, N_THETA_H
-from ..io.fitfile import SerializableModel
+from ..schema import FACTOR_MAX, Array, Opt, Schema, Text
+from ..serialization import SerializableModel
+
+def _factor(n: int) -> Array:
+    """A fit-file factor table: (n, 3) (or (n,)), finite, in [0, FACTOR_MAX]."""
+    return Array([(n, 3), (n,)], ge=0, le=FACTOR_MAX)
+
+
+#: ρd, ρs as stored: (2, 3), finite, in [0, FACTOR_MAX]
+_RHO = Array((2, 3), ge=0, le=FACTOR_MAX)
+_META = {"name": Opt(Text()), "layout": Opt(Text())}
 
 __all__ = ["NPFMicrofacetBRDF", "NPFNaiveBRDF", "NPFBivariateBRDF", "smith_g_from_d",
            "normalise_d", "G_THETA", "D_THETA_H", "F_THETA_D", "H_PHI_D"]
@@ -266,6 +276,11 @@ class NPFMicrofacetBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
     """
 
     fit_kind = "npf"
+    #: fit-file state (:mod:`brdffit.schema`): D, F, G (90, 3) and rho (2, 3), all finite and
+    #: in [0, FACTOR_MAX] (fits are max-normalised; ρs carries the scale)
+    state_schema = Schema({"variant": Text(max_len=64), **_META},
+                          arrays={"D": _factor(N_THETA_H), "F": _factor(N_THETA_D),
+                                  "G": _factor(N_G), "rho": _RHO})
 
     def __init__(self, D, F, G, rho_d, rho_s, *, variant: str = "independent-g",
                  name: str = "npf", source: str | None = None):
@@ -341,6 +356,9 @@ class NPFNaiveBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
     ``ρ = ρd + ρs D(θh) F(θd) H(φd)``, H tabulated at 180 φd samples in [0, π)."""
 
     fit_kind = "npf-naive"
+    #: fit-file state: D, F (90, 3), H (180, 3), rho (2, 3), finite, in [0, FACTOR_MAX]
+    state_schema = Schema(dict(_META), arrays={"D": _factor(N_THETA_H), "F": _factor(N_THETA_D),
+                                               "H": _factor(N_PHI_D), "rho": _RHO})
 
     def __init__(self, D, F, H, rho_d, rho_s, *, name: str = "npf-naive",
                  source: str | None = None):
@@ -389,6 +407,9 @@ class NPFBivariateBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
     ``ρ = B(θh, θd)``, B (90, 90, 3) on the MERL (θ'h, θd) grid, bilinear in between."""
 
     fit_kind = "npf-bivariate"
+    #: fit-file state: B (90, 90, 3), finite, in [0, FACTOR_MAX]
+    state_schema = Schema(dict(_META), arrays={"B": Array((N_THETA_H, N_THETA_D, 3), ge=0,
+                                                          le=FACTOR_MAX)})
 
     def __init__(self, B, *, name: str = "npf-bivariate", source: str | None = None):
         B = np.asarray(B, dtype=np.float64)

@@ -46,6 +46,7 @@ import functools
 import numpy as np
 from scipy import interpolate, optimize, special
 
+from ..schema import ALPHA_MAX, P_EXPONENT_MAX, Number, Schema
 from .base import SlopeDistribution
 from .gamma import upper_gamma
 
@@ -154,6 +155,10 @@ class SGD(SlopeDistribution):
 
     isotropic = True
     kind = "sgd"              # component kind in microfacet.model's registry (fit files)
+    #: fit-file state: α in (0, ALPHA_MAX], |p| <= P_EXPONENT_MAX (fits use −2 <= p <= 4)
+    state_schema = Schema({"alpha": Number(gt=0, le=ALPHA_MAX),
+                           "p": Number(ge=-P_EXPONENT_MAX, le=P_EXPONENT_MAX)},
+                          required=("alpha", "p"), strict=True)
 
     def __init__(self, alpha: float, p: float):
         self.alpha, self.p = _check(alpha, p)
@@ -401,6 +406,12 @@ class SGDApproxG1(SGD):
     """
 
     kind = "sgd_eq9"
+    #: fit-file state: the SGD's α, p and Eq. 9's λ, c, k (finite, > 0, <= 1e6)
+    state_schema = Schema({"alpha": Number(gt=0, le=ALPHA_MAX),
+                           "p": Number(ge=-P_EXPONENT_MAX, le=P_EXPONENT_MAX),
+                           "lam": Number(gt=0, le=1e6), "c": Number(gt=0, le=1e6),
+                           "k": Number(gt=0, le=1e6)},
+                          required=("alpha", "p", "lam", "c", "k"), strict=True)
 
     def __init__(self, alpha: float, p: float, lam: float, c: float, k: float):
         super().__init__(alpha, p)

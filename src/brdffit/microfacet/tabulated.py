@@ -45,6 +45,8 @@ import numpy as np
 from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from ..geometry import slope_to_normal
+from ..schema import (ALPHA_MAX, FRESNEL_MAX, TABLE_MAX, Array, Bool, Choice, Integer, Numbers,
+                      Schema, StateError)
 from .base import SlopeDistribution
 from .fresnel import TabulatedFresnel
 
@@ -142,6 +144,15 @@ def _hermite(x_nodes, y, dy, x, col=None, clamp=False):
     return out
 
 
+def _check_table_size(params, arrays, path, field) -> None:
+    """2D tables: at most 1024 θ nodes and 65,536 entries (fits use 90 × 90)."""
+    P = arrays.get("P")
+    if P is not None and len(P.shape) == 2 and (P.shape[0] > 1024
+                                                 or P.shape[0] * P.shape[1] > 65536):
+        raise StateError(field("P"), f"expected a 2D table of at most 1024 θ nodes and "
+                                     f"65,536 entries, found shape {tuple(P.shape)}")
+
+
 class TabulatedSlopeDistribution(SlopeDistribution):
     """Tabulated slope PDF ``P`` (Dupuy 2015), isotropic (1D) or anisotropic (2D).
 
@@ -157,6 +168,17 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         Roughness scales of Eq. 9 (1 = the fitted table). Scalars or arrays broadcasting
         with the batch shape of the directions passed to :meth:`D`, :meth:`Lambda`, ...
     """
+
+    #: fit-file state (:mod:`brdffit.schema`): ``P`` (n,) with 2 <= n <= 4096, or (n, m) with
+    #: n <= 1024 and n·m <= 65,536 (load time grows as n²m), finite, >= 0, not all 0;
+    #: the optional σ table (n,) >= 0; roughness scales in (0, ALPHA_MAX]
+    state_schema = Schema(
+        {"rule": Choice("merl", "gauss"), "isotropic": Bool(),
+         "n_theta": Integer(ge=2, le=4096), "n_phi": Integer(ge=1, le=1024),
+         "alpha_x": Numbers(gt=0, le=ALPHA_MAX), "alpha_y": Numbers(gt=0, le=ALPHA_MAX)},
+        arrays={"P": Array([("n",), ("n", "m")], ge=0, le=TABLE_MAX, nonzero=True),
+                "sigma": Array(("n",), ge=0, le=TABLE_MAX, required=False)},
+        dims={"n": (2, 4096), "m": (1, 1024)}, checks=(_check_table_size,))
 
     def __new__(cls, p=None, *args, **kwargs):
         if cls is TabulatedSlopeDistribution and np.ndim(p) == 2:
@@ -800,6 +822,10 @@ class FittedFresnel(TabulatedFresnel):
     """
 
     kind = "tabulated_merl"
+    #: fit-file state: values (n, 3) (or (n,)), 2 <= n <= 8192, in [0, FRESNEL_MAX]
+    state_schema = Schema({"n": Integer(ge=2, le=8192)},
+                          arrays={"values": Array([("n", 3), ("n",)], ge=0, le=FRESNEL_MAX)},
+                          dims={"n": (2, 8192)})
 
     def __init__(self, values, theta_d_grid=None):
         v = np.asarray(values, dtype=np.float32).astype(np.float64)
