@@ -42,9 +42,10 @@ constant                 value                           used for
 ``FRESNEL_MAX``          1e4                             Fresnel tables (≥ 0; the tabulated fit
                                                          clips its extracted curve at 100)
 ``INDEX_MAX``            100                             refractive indices η (> 0), k (≥ 0)
-``FACTOR_MAX``           1e6                             NPF factors D, F, G, H, ρd, ρs and the
+``FACTOR_MAX``           1e8                             NPF factors D, F, G, H, ρd, ρs and the
                                                          bivariate table B (≥ 0; fits are
-                                                         max-normalised, ρs carries the peak)
+                                                         max-normalised, ρs carries the peak:
+                                                         up to 6e4 on MERL materials)
 ``TABLE_MAX``            1e15                            tabulated slope PDF P (≥ 0, not all 0)
 ``F1_MAX``               1e12                            ``|F1|`` of Bagher 2012 Eq. 11 (the fit
                                                          can return F1 ≪ 0 when ρs → 0)
@@ -77,7 +78,7 @@ ALBEDO_MAX = 10.0
 SPECULAR_MAX = 1e3
 FRESNEL_MAX = 1e4
 INDEX_MAX = 100.0
-FACTOR_MAX = 1e6
+FACTOR_MAX = 1e8
 TABLE_MAX = 1e15
 F1_MAX = 1e12
 #: elements of one array of a kind without a schema (generic check), 8 Mi

@@ -317,7 +317,7 @@ class PerChannelMicrofacetBRDF(IsotropicBRDF, SerializableModel):
     #: fit-file state (:mod:`brdffit.schema`): three channels (distribution arrays under
     #: ``c0.``...), ρd in [0, ALBEDO_MAX], ρs in [0, SPECULAR_MAX], F0 in [0, 1] and
     #: |F1| <= F1_MAX (Eq. 11 with F(π/2) = 1 gives F1 ≪ 0 when ρs → 0); Eq. 9 parameters
-    #: λ, c, k in (0, 1e6]
+    #: λ in (0, 1e6], c in (0, 1e15] (MERL fits reach 1.1e7), k in (0, 1e3]
     state_schema = Schema(
         {"channels": ListOf(Nested(Schema(
             {"distribution": Component(_lookup_distribution, what="distribution"),
@@ -326,8 +326,8 @@ class PerChannelMicrofacetBRDF(IsotropicBRDF, SerializableModel):
             required=("distribution", "rho_d", "rho_s", "F0", "F1"))),
             min_len=3, max_len=3, item_prefix="c{index}."),
          "g1_approx": Opt(ListOf(Opt(Nested(Schema(
-             {"lambda": Number(gt=0, le=1e6), "c": Number(gt=0, le=1e6),
-              "k": Number(gt=0, le=1e6)}, required=("lambda", "c", "k")))),
+             {"lambda": Number(gt=0, le=1e6), "c": Number(gt=0, le=1e15),
+              "k": Number(gt=0, le=1e3)}, required=("lambda", "c", "k")))),
              min_len=3, max_len=3)),
          "g1": Choice("table", "approx"), "name": Opt(Text()), "source": Opt(Text())},
         required=("channels",))

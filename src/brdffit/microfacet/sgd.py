@@ -406,11 +406,11 @@ class SGDApproxG1(SGD):
     """
 
     kind = "sgd_eq9"
-    #: fit-file state: the SGD's α, p and Eq. 9's λ, c, k (finite, > 0, <= 1e6)
+    #: fit-file state: the SGD's α, p and Eq. 9's λ <= 1e6, c <= 1e15, k <= 1e3 (all > 0)
     state_schema = Schema({"alpha": Number(gt=0, le=ALPHA_MAX),
                            "p": Number(ge=-P_EXPONENT_MAX, le=P_EXPONENT_MAX),
-                           "lam": Number(gt=0, le=1e6), "c": Number(gt=0, le=1e6),
-                           "k": Number(gt=0, le=1e6)},
+                           "lam": Number(gt=0, le=1e6), "c": Number(gt=0, le=1e15),
+                           "k": Number(gt=0, le=1e3)},
                           required=("alpha", "p", "lam", "c", "k"), strict=True)
 
     def __init__(self, alpha: float, p: float, lam: float, c: float, k: float):
