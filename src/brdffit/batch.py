@@ -3,33 +3,67 @@
 One task per (material, model). A task loads the material *on the worker* (only its load spec
 travels through the scheduler), fits the model, saves the fit and computes BRDF-space metrics,
 then writes its record; everything is written atomically, the record last, so a record on disk
-means the task's outputs are complete. Output layout::
+means the task's outputs are complete. Output layout (``<material>`` and ``<model>`` are
+:func:`brdffit.paths.slug` of the names; records and the report keep the readable names)::
 
     OUT/fits/<material>/<model>.npz       the fitted model (brdffit fit file)
-    OUT/records/<material>/<model>.json   status, metrics, parameters, timings, task key
+    OUT/records/<material>/<model>.json   status, metrics, parameters, timings, task key,
+                                          SHA-256 of the fit file
     OUT/summary.csv, OUT/summary.json     one row per material × model
+    OUT/.lock                             who runs a batch on OUT (see *Locking*)
 
 **Rendering (optional).** With :class:`RenderSettings`, each material also gets one render
-task that waits for its fits, renders the reference and every fitted model with Mitsuba 3
-(:func:`brdffit.evaluation.compare.compare` on the saved fit files, no refitting) and writes
-its report page; the run ends by rebuilding the report index over the whole database::
+task, submitted once its fits are done, that renders the reference and every fitted model
+with Mitsuba 3 (:func:`brdffit.evaluation.compare.compare` on the saved fit files, no
+refitting) and writes its report page; the run ends by rebuilding the report index over the
+whole database::
 
     OUT/report/<material>/index.html      renderings, dE2000 maps, plots, metrics
     OUT/report/index.html, summary.json   every material; per-model PSNR/dE2000, wins/ties
     OUT/renders/<material>.json           render record (status, PSNR/dE2000, task key)
 
+**Names.** Material names are unique within a batch: :func:`enumerate_materials` names a
+file by its stem, and by its file name (then its spec) when stems collide (``nan.bin`` and
+``nan.binary``); :func:`run_batch` refuses two different specs under one name up front.
+
 **Resuming.** Each task has a key: a hash of the load spec, the checksum of the file behind
 it, the model name, the options and the fit-file format version. A re-run skips a task whose
 record exists with the same key (``ok``, or ``failed`` unless ``retry_failed``) and redoes it
-when the key changed. Killing a run loses at most the tasks in flight. A render task's key
-covers the keys of the fits it renders and the render settings.
+when the key changed, when the record is unreadable or malformed (with a warning), and — for
+``ok`` fits — when the fit file is missing or its SHA-256 differs from the record's (records
+of older versions without a checksum: when the file does not load). Killing a run loses at
+most the tasks in flight. A render task's key covers the keys of the fits it renders and the
+render settings; its report page must exist.
+
+**Faults.** A task that kills its worker (out of memory, SIGKILL) is retried on another
+worker by Dask, up to ``retries`` more times on the local cluster (the scheduler's
+``distributed.scheduler.allowed-failures`` on an external one), then recorded ``failed``
+with "worker died (out of memory or killed) N times"; the batch goes on. A task whose
+result is lost for another reason (e.g. the connection to the scheduler) is reported as
+lost and not recorded, so the next run redoes it.
+
+**Locking.** :func:`run_batch` holds an exclusive ``flock`` on ``OUT/.lock`` (holder's pid,
+host, start time and command inside) for the whole run: a second batch on the same folder is
+refused with :class:`OutputLocked` naming the holder (``brdffit batch`` exits 2), or waits
+with ``wait_lock=True``. The kernel releases the lock when the holder dies, so a killed
+batch never leaves a stale lock. (Over NFS this relies on the server's lock manager.)
+
+**Clusters.** Every path is made absolute on the client (the output folder and the files of
+the load specs), then a probe runs on every worker before anything is submitted: the worker
+must see a file the client just wrote to ``OUT`` (a shared filesystem), be able to write
+there, read every data file, and run the same brdffit and fit-file format versions;
+otherwise :class:`BatchError` says which worker and why (``brdffit batch`` exits 1).
+Workers that join after the probe are not checked.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import hashlib
 import json
+import logging
+import os
 import time
 import traceback
 from pathlib import Path
@@ -38,19 +72,39 @@ from typing import Any, Callable, Iterable, Sequence
 from ._atomic import atomic_write
 from ._json import json_default
 from .errors import BRDFError
+from .paths import slug
 
 __all__ = ["Task", "RenderSettings", "RenderTask", "enumerate_materials", "make_tasks",
            "make_render_tasks", "run_task", "run_render_task", "run_batch", "read_records",
-           "write_summary", "TIMING_FIELDS"]
+           "write_summary", "lock_output", "BatchError", "OutputLocked", "TIMING_FIELDS",
+           "DEFAULT_RETRIES"]
 
-#: Record fields that legitimately differ between two runs of the same task.
+_log = logging.getLogger("brdffit.batch")
+
+#: Record fields that legitimately differ between two runs of the same task (the fit file
+#: holds its creation time, hence its checksum).
 TIMING_FIELDS = ("fit_time_s", "metrics_time_s", "metrics_seconds", "wall_time_s", "finished",
-                 "worker")
+                 "worker", "fit_sha256")
 
 #: Statuses of finished work (not redone on resume, not counted as failures).
 DONE = ("ok", "skipped")
 
+#: Local cluster: how many more times a task that killed its worker is tried.
+DEFAULT_RETRIES = 2
+
 _MEASURED_SUFFIXES = (".binary", ".bsdf", ".bin", ".h5")
+
+
+class BatchError(BRDFError):
+    """The batch cannot run as asked (names, cluster, output folder)."""
+
+
+class OutputLocked(BatchError):
+    """Another batch holds the lock of the output folder."""
+
+
+def _warn(message: str) -> None:
+    _log.warning("brdffit: warning: %s", message)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,10 +128,10 @@ class Task:
         return _hash(payload)
 
     def fit_path(self, out: Path) -> Path:
-        return out / "fits" / _safe(self.material) / f"{_safe(self.model)}.npz"
+        return Path(out) / "fits" / slug(self.material) / f"{slug(self.model)}.npz"
 
     def record_path(self, out: Path) -> Path:
-        return out / "records" / _safe(self.material) / f"{_safe(self.model)}.json"
+        return Path(out) / "records" / slug(self.material) / f"{slug(self.model)}.json"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -113,7 +167,7 @@ class RenderTask:
         return _hash(payload)
 
     def record_path(self, out: Path) -> Path:
-        return out / "renders" / f"{_safe(self.material)}.json"
+        return Path(out) / "renders" / f"{slug(self.material)}.json"
 
 
 def _hash(payload: dict) -> str:
@@ -122,8 +176,92 @@ def _hash(payload: dict) -> str:
     return hashlib.sha256(blob).hexdigest()[:16]
 
 
-def _safe(name: str) -> str:
-    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+def _file_sha256(path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+# -- materials ------------------------------------------------------------------------------
+def _absolute_spec(spec: str, base: Path | None = None) -> str:
+    """``spec`` with its file made absolute (as the client finds it: working directory, data
+    search path, then ``base``), so that workers elsewhere load the same file; unchanged when
+    it is ``synthetic:`` or names no existing file (the task then fails with that error)."""
+    if spec.startswith("synthetic:"):
+        return spec
+    from .io import resolve_spec
+
+    for candidate in (spec, str(base / spec) if base is not None else None):
+        if candidate is None:
+            continue
+        try:
+            _, path, member = resolve_spec(candidate)
+        except BRDFError:
+            continue
+        path = os.path.abspath(path)
+        return f"{path}:{member}" if member is not None else path
+    return spec
+
+
+def _unique_names(entries: list[tuple[list[str], str]], where: str) -> list[tuple[str, str]]:
+    """``(name, spec)`` pairs from ``(candidate names, spec)``: identical specs are kept once,
+    and materials whose names collide move on to their next, more specific candidate (stem →
+    file name → spec) until every name is unique."""
+    items, seen = [], set()
+    for cands, spec in entries:
+        if spec in seen:
+            _warn(f"{where}: {spec} listed twice; fitting it once")
+            continue
+        seen.add(spec)
+        items.append([cands, spec, 0])
+    while True:
+        groups: dict[str, list] = {}
+        for it in items:
+            groups.setdefault(it[0][it[2]], []).append(it)
+        bumped = False
+        for grp in groups.values():
+            if len(grp) > 1:
+                for it in grp:
+                    if it[2] < len(it[0]) - 1:
+                        it[2] += 1
+                        bumped = True
+        if not bumped:
+            break
+    pairs = [(it[0][it[2]], it[1]) for it in items]
+    _check_materials(pairs, where)
+    return pairs
+
+
+def _check_materials(pairs: Iterable[tuple[str, str]], where: str = "batch") -> None:
+    """Refuse two specs under one material name, or two names sharing a folder."""
+    specs: dict[str, str] = {}
+    for name, spec in pairs:
+        if specs.setdefault(name, spec) != spec:
+            raise BatchError(f"{where}: two materials are named {name!r} "
+                             f"({specs[name]} and {spec}); material names must be unique")
+    try:
+        from .paths import check_unique
+
+        check_unique(specs, "materials")
+    except ValueError as exc:
+        raise BatchError(f"{where}: {exc}") from None
+
+
+def _synthetic_names(body: str) -> list[str]:
+    from .synthetic import list_synthetic
+
+    body = body.strip()
+    if body.startswith("[") and body.endswith("]"):  # synthetic:[a,b] as in the help text
+        body = body[1:-1]
+    names = [n.strip() for n in body.split(",") if n.strip()]
+    known = list(list_synthetic())
+    unknown = [n for n in names if n not in known]
+    if unknown:
+        raise BatchError(f"synthetic:{body}: unknown synthetic material(s) "
+                         f"{', '.join(map(repr, unknown))}; available: {', '.join(known)}")
+    return names or known
 
 
 def enumerate_materials(source, only: Sequence[str] | None = None,
@@ -132,46 +270,55 @@ def enumerate_materials(source, only: Sequence[str] | None = None,
 
     ``source`` is a folder of measured files (MERL ``.binary``, RGL ``.bsdf``, UTIA ``.bin``,
     Neural-BRDF ``.h5``), a Neural-BRDF ``.zip`` collection, a list file (one load spec per
-    line, ``#`` comments), or ``synthetic:`` / ``synthetic:a,b`` for the built-in materials.
-    ``only`` keeps the named materials (an unknown name is an error); ``limit`` keeps the first N.
+    line, ``#`` comments; relative paths as :func:`brdffit.io.load` finds them, else relative
+    to the list file), or ``synthetic:`` / ``synthetic:a,b`` / ``synthetic:[a,b]`` for the
+    built-in materials. File specs are made absolute. Names are unique: a file is named by its
+    stem, or by its file name when stems collide (then by its spec). ``only`` keeps the named
+    materials (an unknown name is an error); ``limit`` keeps the first N.
     """
     src = str(source)
     if src.startswith("synthetic:"):
-        from .synthetic import list_synthetic
-
-        names = [n for n in src.split(":", 1)[1].split(",") if n] or list(list_synthetic())
-        pairs = [(n, f"synthetic:{n}") for n in names]
+        pairs = [(n, f"synthetic:{n}") for n in dict.fromkeys(_synthetic_names(src[10:]))]
     else:
         from .io import find_data_file  # the same data search path as load()
 
         path = find_data_file(Path(src))
         if path is None:
-            raise BRDFError(f"{src}: no such file or folder")
+            raise BatchError(f"{src}: no such file or folder")
+        path = Path(os.path.abspath(path))
         if path.is_dir():
-            files = sorted(p for p in path.iterdir() if p.suffix in _MEASURED_SUFFIXES)
+            files = sorted(p for p in path.iterdir()
+                           if p.suffix in _MEASURED_SUFFIXES and p.is_file())
             if not files:
-                raise BRDFError(f"{path}: expected measured BRDF files "
-                                f"({', '.join(_MEASURED_SUFFIXES)}), found none")
-            pairs = [(p.stem, str(p)) for p in files]
+                raise BatchError(f"{path}: expected measured BRDF files "
+                                 f"({', '.join(_MEASURED_SUFFIXES)}), found none")
+            pairs = _unique_names([([p.stem, p.name, str(p)], str(p)) for p in files], str(path))
         elif path.suffix == ".zip":
             from .io.nbrdf import list_materials
 
-            pairs = [(m, f"{path}:{m}") for m in list_materials(path)]
+            pairs = _unique_names([([m], f"{path}:{m}") for m in list_materials(path)], str(path))
         else:
-            pairs = []
-            for line in path.read_text().splitlines():
+            entries = []
+            try:
+                text = path.read_text(encoding="utf-8")
+            except UnicodeDecodeError:
+                raise BatchError(f"{path}: expected a text list of load specs, found binary "
+                                 f"data") from None
+            for line in text.splitlines():
                 line = line.split("#", 1)[0].strip()
                 if line:
-                    name = line.rsplit(":", 1)[-1] if ":" in line else Path(line).stem
-                    pairs.append((Path(name).stem, line))
-            if not pairs:
-                raise BRDFError(f"{path}: expected a list of load specs, found no entries")
+                    last = line.rsplit(":", 1)[-1] if ":" in line else Path(line).name
+                    spec = _absolute_spec(line, path.parent)
+                    entries.append(([Path(last).stem, Path(last).name, line, spec], spec))
+            if not entries:
+                raise BatchError(f"{path}: expected a list of load specs, found no entries")
+            pairs = _unique_names(entries, str(path))
     if only:
         known = {n for n, _ in pairs}
         missing = [n for n in only if n not in known]
         if missing:
-            raise BRDFError(f"{src}: unknown material(s) {missing}; "
-                            f"{len(known)} available, e.g. {sorted(known)[:5]}")
+            raise BatchError(f"{src}: unknown material(s) {missing}; "
+                             f"{len(known)} available, e.g. {sorted(known)[:5]}")
         pairs = [p for p in pairs if p[0] in set(only)]
     return pairs[:limit] if limit else pairs
 
@@ -192,9 +339,23 @@ def make_render_tasks(tasks: Sequence[Task], settings: RenderSettings) -> list[R
     return [RenderTask(m, spec, tuple(f), settings) for (m, spec), f in fits.items()]
 
 
+# -- records --------------------------------------------------------------------------------
 def _write_json(path: Path, obj: dict) -> None:
     with atomic_write(path, "w") as fh:
         json.dump(obj, fh, indent=1, sort_keys=True, default=json_default)
+
+
+def _base_record(task: Task | RenderTask) -> dict[str, Any]:
+    import socket
+
+    record: dict[str, Any] = {"material": task.material, "spec": task.spec,
+                              "key": task.key(),
+                              "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    if isinstance(task, Task):
+        record.update(model=task.model, options=task.options_dict())
+    else:
+        record.update(model="render", settings=task.settings.as_dict())
+    return record
 
 
 def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
@@ -203,17 +364,12 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
     A failure of loading, fitting or measuring is caught and recorded (``status: failed``
     with the error), so one bad material never stops a batch.
     """
-    import os
-    import socket
-
     from .fit.registry import fit_model, is_isotropic_only, model_params
     from .io import load
     from .io.fitfile import save_fit
 
     out = Path(out_dir)
-    record: dict[str, Any] = {"material": task.material, "spec": task.spec, "model": task.model,
-                              "options": task.options_dict(), "key": task.key(),
-                              "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    record = _base_record(task)
     t0 = time.perf_counter()
     try:
         reference = load(task.spec)
@@ -222,8 +378,10 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
             record["error"] = f"{task.model} fits isotropic BRDFs only; {task.material} is anisotropic"
             raise _Skip
         model, record["fit_time_s"] = fit_model(task.model, reference, task.options_dict())
-        save_fit(model, task.fit_path(out), source=task.spec, options=task.options_dict())
-        record["fit_file"] = str(task.fit_path(out).relative_to(out))
+        fit_path = task.fit_path(out)
+        save_fit(model, fit_path, source=task.spec, options=task.options_dict())
+        record["fit_file"] = fit_path.relative_to(out).as_posix()
+        record["fit_sha256"] = _file_sha256(fit_path)
         record["params"] = model_params(model)
         if metrics:
             from .evaluation.metrics import brdf_metrics
@@ -258,37 +416,51 @@ class _Skip(Exception):
     """The task does not apply to this material (recorded as ``skipped``, not failed)."""
 
 
+def _read_record(path: Path, quiet_missing: bool = True) -> tuple[dict | None, str | None]:
+    """``(record, None)``, or ``(None, why)`` when the file is missing (why ``None``),
+    unreadable, not JSON, or not a record (a JSON object with string ``material``, ``model``
+    and ``status``)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return None, None
+    except (OSError, UnicodeDecodeError) as exc:
+        return None, f"unreadable ({exc})"
+    try:
+        rec = json.loads(text)
+    except ValueError as exc:
+        return None, f"not JSON ({exc})"
+    if not isinstance(rec, dict):
+        return None, f"expected a JSON object, found {type(rec).__name__}"
+    missing = [k for k in ("material", "model", "status") if not isinstance(rec.get(k), str)]
+    if missing:
+        return None, f"expected the fields {', '.join(missing)}, found none"
+    return rec, None
+
+
 def run_render_task(task: RenderTask, out_dir, *after) -> dict:
     """Render one material's reference and saved fits and write its report page.
 
-    ``after`` are ignored: Dask passes the results of the fit tasks there, so this task starts
-    when they are done. Fits whose record is missing, failed or out of date are left out of
-    the page (and listed in the record's ``missing_fits``); a failure is recorded, not raised.
+    ``after`` are ignored (kept for callers that pass the fit tasks' results). Fits whose
+    record is missing, failed or out of date are left out of the page (and listed in the
+    record's ``missing_fits``); a failure is recorded, not raised.
     """
-    import os
-    import socket
-
     from .evaluation.compare import compare
     from .evaluation.metrics import BRDFMetrics
     from .evaluation.report import write_material_page, write_result
     from .io import load
 
     out = Path(out_dir)
-    record: dict[str, Any] = {"material": task.material, "spec": task.spec, "model": "render",
-                              "settings": task.settings.as_dict(), "key": task.key(),
-                              "worker": f"{socket.gethostname()}:{os.getpid()}"}
+    record = _base_record(task)
     t0 = time.perf_counter()
     try:
         models, missing, fit_metrics = {}, [], {}
         for model, key in task.fits:
             fit_task = Task(task.material, task.spec, model)
-            try:
-                rec = json.loads(fit_task.record_path(out).read_text())
-            except (FileNotFoundError, json.JSONDecodeError):
-                rec = {}
-            if rec.get("status") == "ok" and rec.get("key") == key:
-                models[model] = str(out / rec["fit_file"])
-                if rec.get("metrics"):
+            rec, _ = _read_record(fit_task.record_path(out))
+            if rec is not None and rec["status"] == "ok" and rec.get("key") == key:
+                models[model] = str(fit_task.fit_path(out))
+                if isinstance(rec.get("metrics"), dict):
                     fit_metrics[model] = rec["metrics"]
             else:
                 missing.append(model)
@@ -317,31 +489,72 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
     return _finish(record, t0, task.record_path(out))
 
 
-def _existing(task: Task | RenderTask, out: Path) -> dict | None:
-    path = task.record_path(out)
-    try:
-        rec = json.loads(path.read_text())
-    except (FileNotFoundError, json.JSONDecodeError):
+def _outputs_problem(task: Task | RenderTask, rec: dict, out: Path) -> str | None:
+    """Why the outputs an ``ok`` record describes cannot be trusted (``None`` if they can)."""
+    if isinstance(task, RenderTask):
+        page = rec.get("report_page")
+        if not isinstance(page, str) or not (out / page).is_file():
+            return f"its report page {page!r} is missing"
         return None
-    return rec if rec.get("key") == task.key() else None
+    fit = task.fit_path(out)
+    if rec.get("fit_file") != fit.relative_to(out).as_posix():
+        return f"it describes the fit file {rec.get('fit_file')!r}, expected " \
+               f"{fit.relative_to(out).as_posix()!r}"
+    expected = rec.get("fit_sha256")
+    try:
+        if expected is not None:
+            actual = _file_sha256(fit)
+            if actual != expected:
+                return f"{fit} has SHA-256 {actual[:12]}…, the record says {str(expected)[:12]}…"
+        else:  # a record of an older version: the file must at least load
+            from .io.fitfile import load_fit
+
+            load_fit(fit)
+    except FileNotFoundError:
+        return f"{fit} is missing"
+    except Exception as exc:  # noqa: BLE001 – any unreadable file means: redo the task
+        return f"{fit} cannot be read ({type(exc).__name__}: {exc})"
+    return None
+
+
+def _existing(task: Task | RenderTask, out: Path) -> dict | None:
+    """The record of ``task`` if it is current and its outputs are intact, else ``None``
+    (a malformed record or damaged output is reported with a warning)."""
+    path = task.record_path(out)
+    rec, why = _read_record(path)
+    if rec is None:
+        if why is not None:
+            _warn(f"{path}: {why}; redoing the task")
+        return None
+    if rec.get("key") != task.key():
+        return None
+    if rec["status"] == "ok":
+        problem = _outputs_problem(task, rec, out)
+        if problem is not None:
+            _warn(f"{path}: {problem}; redoing the task")
+            return None
+    return rec
 
 
 def read_records(out_dir) -> list[dict]:
-    """Every record under ``OUT/records`` (sorted by material, then model)."""
+    """Every fit record under ``OUT/records`` (sorted by folder, then model); files that are
+    not records are skipped with a warning."""
     out = Path(out_dir)
     recs = []
     for p in sorted((out / "records").glob("*/*.json")):
         if p.name.startswith("."):  # a temporary file left by a killed writer
             continue
-        try:
-            recs.append(json.loads(p.read_text()))
-        except json.JSONDecodeError:
+        rec, why = _read_record(p)
+        if rec is None:
+            _warn(f"{p}: {why or 'vanished'}; ignored")
             continue
+        recs.append(rec)
     return recs
 
 
 def write_summary(out_dir, records: list[dict] | None = None) -> tuple[Path, Path]:
-    """Write ``summary.json`` and ``summary.csv`` (one row per material × model)."""
+    """Write ``summary.json`` and ``summary.csv`` (one row per material × model); entries
+    of ``records`` that are not records are skipped."""
     import csv
     import io
 
@@ -349,12 +562,16 @@ def write_summary(out_dir, records: list[dict] | None = None) -> tuple[Path, Pat
     records = read_records(out) if records is None else records
     rows = []
     for r in records:
-        row = {"material": r["material"], "model": r["model"], "status": r.get("status"),
+        if not isinstance(r, dict):
+            continue
+        row = {"material": r.get("material"), "model": r.get("model"), "status": r.get("status"),
                "fit_time_s": r.get("fit_time_s"), "error": r.get("error", "")}
-        for k, v in (r.get("metrics") or {}).items():
+        metrics = r.get("metrics") if isinstance(r.get("metrics"), dict) else {}
+        for k, v in metrics.items():
             if not isinstance(v, dict):
                 row[f"metric_{k}"] = v
-        for k, v in (r.get("params") or {}).items():
+        params = r.get("params") if isinstance(r.get("params"), dict) else {}
+        for k, v in params.items():
             if isinstance(v, (int, float, str, bool)) or v is None:
                 row[f"param_{k}"] = v
         rows.append(row)
@@ -371,6 +588,58 @@ def write_summary(out_dir, records: list[dict] | None = None) -> tuple[Path, Pat
     return out / "summary.json", out / "summary.csv"
 
 
+# -- the lock -------------------------------------------------------------------------------
+def _describe_holder(path: Path) -> str:
+    try:
+        info = json.loads(path.read_text())
+        return (f"pid {info['pid']} on {info['host']}, started {info['started']}: "
+                f"{info.get('command', '?')}")
+    except Exception:  # noqa: BLE001 – being written, or not ours
+        return "holder unknown"
+
+
+@contextlib.contextmanager
+def lock_output(out_dir, wait: bool = False):
+    """Hold an exclusive lock on ``OUT/.lock`` (created) for the ``with`` block; yields the
+    holder information written into it (pid, host, start time, command).
+
+    Raises :class:`OutputLocked` naming the holder when another process has it, unless
+    ``wait`` (then blocks until it is released). ``flock`` locks belong to the open file:
+    the kernel drops them when the holder exits or is killed, so no lock is ever stale.
+    """
+    import socket
+    import sys
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / ".lock"
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX: no locking
+        yield {"pid": os.getpid(), "host": socket.gethostname(), "locked": False}
+        return
+    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = _describe_holder(path)
+            if not wait:
+                raise OutputLocked(f"{out}: another batch is writing there ({holder}); wait for "
+                                   f"it to finish, or pass --wait-lock") from None
+            _warn(f"{out}: waiting for the batch holding its lock ({holder})")
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        info = {"pid": os.getpid(), "host": socket.gethostname(),
+                "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+                "command": " ".join(sys.argv) or "?", "locked": True}
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, json.dumps(info).encode(), 0)
+        yield info
+    finally:
+        os.close(fd)  # releases the lock
+
+
+# -- the cluster ----------------------------------------------------------------------------
 #: glibc malloc settings of the local workers. Dask's nanny sets ``MALLOC_TRIM_THRESHOLD_``
 #: to 64 KiB, which also switches off glibc's dynamic mmap threshold: every NumPy temporary
 #: above 128 KiB is then mmap'd and unmapped again, and the page faults cost the AWLS fits
@@ -379,80 +648,241 @@ def write_summary(out_dir, records: list[dict] | None = None) -> tuple[Path, Pat
 WORKER_MALLOC_ENV = {"MALLOC_MMAP_THRESHOLD_": 64 << 20, "MALLOC_TRIM_THRESHOLD_": 128 << 20}
 
 
-def _client(scheduler: str | None, workers: int, memory_limit: str | None):
+def _client(scheduler: str | None, workers: int, memory_limit: str | None,
+            retries: int = DEFAULT_RETRIES):
+    """A client of ``scheduler``, or of a new local cluster (returned too, to be closed).
+
+    The local scheduler gives up on a task after ``retries + 1`` worker deaths
+    (``allowed-failures``) and sends each worker one task at a time (``worker-saturation``
+    1.0), so that a worker killed by one task does not take queued innocent tasks with it.
+    """
     import dask
     from dask.distributed import Client, LocalCluster
 
     if scheduler:
-        return Client(scheduler), None
+        return Client(scheduler, timeout="30s"), None
     environ = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_MALLOC_ENV}
-    with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+    with dask.config.set({"distributed.nanny.pre-spawn-environ": environ,
+                          "distributed.scheduler.allowed-failures": int(retries),
+                          "distributed.scheduler.worker-saturation": 1.0}):
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                host="127.0.0.1", dashboard_address=":0",
                                memory_limit=memory_limit or "auto", silence_logs=40)
     return Client(cluster), cluster
 
 
+def _data_files(tasks: Iterable[Task | RenderTask]) -> list[str]:
+    """The distinct existing files behind the tasks' load specs (what workers must read)."""
+    files = []
+    for spec in dict.fromkeys(t.spec for t in tasks):
+        if spec.startswith("synthetic:"):
+            continue
+        path = spec.split(":", 1)[0] if ":" in spec and not os.path.exists(spec) else spec
+        if os.path.isfile(path):
+            files.append(path)
+    return list(dict.fromkeys(files))
+
+
+def _probe_workers(client, out: Path, tasks: Sequence[Task | RenderTask],
+                   wait_s: float = 60.0) -> dict:
+    """Check every worker before submitting anything (module docstring, *Clusters*);
+    returns ``{worker address: probe result}`` or raises :class:`BatchError`."""
+    import secrets
+
+    from . import __version__
+    from .io.fitfile import FORMAT_VERSION
+
+    def probe(out: str, token: str, files: list) -> dict:  # runs on the workers; by value
+        import os
+        import socket
+
+        res = {"where": f"{socket.gethostname()}:{os.getpid()}", "cwd": os.getcwd(),
+               "problems": [], "version": None, "fit_format": None}
+        try:
+            import brdffit
+            from brdffit.io.fitfile import FORMAT_VERSION as fmt
+
+            res["version"], res["fit_format"] = brdffit.__version__, fmt
+        except Exception as exc:  # noqa: BLE001
+            res["problems"].append(f"cannot import brdffit ({type(exc).__name__}: {exc})")
+        marker = os.path.join(out, f".probe-{token}")
+        try:
+            with open(marker, encoding="ascii") as fh:
+                seen = fh.read() == token
+        except OSError:
+            seen = False
+        if not seen:
+            res["problems"].append(f"does not see the file {marker} the client wrote (the "
+                                   f"output folder must be on a filesystem shared with the "
+                                   f"client, at the same path)")
+        else:
+            mine = f"{marker}-{socket.gethostname()}-{os.getpid()}"
+            try:
+                with open(mine, "w", encoding="ascii") as fh:
+                    fh.write(token)
+                os.unlink(mine)
+            except OSError as exc:
+                res["problems"].append(f"cannot write to {out} ({exc.strerror})")
+        unreadable = [f for f in files if not os.access(f, os.R_OK)]
+        if unreadable:
+            res["problems"].append(f"cannot read {len(unreadable)} data file(s), e.g. "
+                                   f"{unreadable[0]}")
+        return res
+
+    try:
+        client.wait_for_workers(1, timeout=wait_s)
+    except Exception:  # noqa: BLE001 – dask raises TimeoutError (or its own) here
+        where = getattr(client.scheduler, "address", None) or "the scheduler"
+        raise BatchError(f"no Dask worker connected to {where} within {wait_s:.0f} s") from None
+    token = secrets.token_hex(8)
+    marker = out / f".probe-{token}"
+    marker.write_text(token, encoding="ascii")
+    try:
+        results = client.run(probe, str(out), token, _data_files(tasks))
+    except Exception as exc:  # noqa: BLE001
+        raise BatchError(f"the workers could not run brdffit's probe ({type(exc).__name__}: "
+                         f"{exc})") from None
+    finally:
+        marker.unlink(missing_ok=True)
+    problems = []
+    for addr, res in sorted(results.items()):
+        mine = list(res["problems"])
+        if res["version"] is not None and (res["version"], res["fit_format"]) != (
+                __version__, FORMAT_VERSION):
+            mine.append(f"runs brdffit version {res['version']} (fit format "
+                        f"{res['fit_format']}), the client {__version__} (fit format "
+                        f"{FORMAT_VERSION}); install the same version on every machine")
+        problems += [f"worker {addr} ({res['where']}, cwd {res['cwd']}): {p}" for p in mine]
+    if problems:
+        raise BatchError("refusing to start the batch:\n  " + "\n  ".join(problems))
+    return results
+
+
+def _lost_record(task: Task | RenderTask, exc: BaseException, out: Path, t0: float) -> dict:
+    """The record of a task whose result never came back. A task that killed its workers
+    is recorded ``failed`` on disk; any other loss only in memory (the next run redoes it)."""
+    from distributed import KilledWorker
+
+    record = _base_record(task)
+    record.update(status="failed", worker="client")
+    if isinstance(exc, KilledWorker):
+        deaths = getattr(exc, "allowed_failures", 0) + 1
+        record["error"] = (f"worker died (out of memory or killed) {deaths} times while "
+                           f"running this task")
+        record["worker_deaths"] = deaths
+        try:
+            return _finish(record, t0, task.record_path(out))
+        except OSError as err:
+            _warn(f"cannot record the failure of {task.material}/{record['model']}: {err}")
+            record["lost"] = True
+            return record
+    record["error"] = f"result lost ({type(exc).__name__}: {exc}); the next run redoes it"
+    record["lost"] = True
+    return record
+
+
 def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
               workers: int = 2, memory_limit: str | None = None, metrics: bool = True,
               render: RenderSettings | None = None, retry_failed: bool = False,
-              progress: Callable | bool = True) -> dict:
+              progress: Callable | bool = True, client=None, retries: int = DEFAULT_RETRIES,
+              wait_lock: bool = False) -> dict:
     """Run ``tasks`` on Dask, skipping finished ones; return counts and the records.
 
-    ``scheduler``: address of an existing Dask scheduler (``tcp://host:port``); by default a
-    local cluster of ``workers`` processes with one thread each. ``render``: also render
-    every material once its fits are done and write the report (module docstring).
-    ``progress``: ``True`` for a Rich progress bar, ``False`` for none, or a callable
-    ``(record) -> None``.
+    ``scheduler``: address of an existing Dask scheduler (``tcp://host:port``); ``client``:
+    an existing :class:`distributed.Client` (left open); by default a local cluster of
+    ``workers`` processes with one thread each, where a task that kills its worker is tried
+    ``retries`` more times. ``render``: also render every material once its fits are done
+    and write the report (module docstring). ``wait_lock``: wait for another batch on the
+    same folder instead of raising :class:`OutputLocked`. ``progress``: ``True`` for a Rich
+    progress bar, ``False`` for none, or a callable ``(record) -> None``.
+
+    Returns ``ran`` (tasks run now), ``failed`` (of those), ``lost`` (results that never
+    came back, not recorded), ``skipped`` (already done), ``failed_total`` (tasks of this
+    batch whose record says failed, now or from an earlier run), ``render_tasks``,
+    ``wall_time_s`` and ``records`` (every fit record in the folder).
     """
     from dask.distributed import as_completed
 
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    render_tasks = make_render_tasks(tasks, render) if render is not None else []
-    todo, skipped = [], []
-    for t in [*tasks, *render_tasks]:
-        rec = _existing(t, out)
-        if rec is not None and (rec.get("status") in DONE or not retry_failed):
-            skipped.append(rec)
-        else:
-            todo.append(t)
-    done: list[dict] = []
-    t0 = time.perf_counter()
-    if todo:
-        client, cluster = _client(scheduler, workers, memory_limit)
-        try:
-            futures, by_material = [], {}
-            for t in todo:
-                if isinstance(t, Task):
-                    fut = client.submit(run_task, t, str(out), metrics, pure=False,
-                                        key=f"brdffit-{_safe(t.material)}-{_safe(t.model)}-{t.key()}")
-                    by_material.setdefault(t.material, []).append(fut)
-                else:
-                    fut = client.submit(run_render_task, t, str(out),
-                                        *by_material.get(t.material, []), pure=False,
-                                        key=f"brdffit-{_safe(t.material)}-render-{t.key()}")
-                futures.append(fut)
-            with _Progress(todo, enabled=progress is True) as bar:
-                for fut in as_completed(futures):
-                    rec = fut.result()
-                    done.append(rec)
-                    bar.advance(rec)
-                    if callable(progress):
-                        progress(rec)
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
-    records = read_records(out)
-    write_summary(out, records)
-    if render_tasks:
-        from .evaluation.report import write_index
+    out = Path(os.path.abspath(out_dir))  # workers may run in another working directory
+    _check_materials(((t.material, t.spec) for t in tasks), "batch")
+    with lock_output(out, wait=wait_lock):
+        render_tasks = make_render_tasks(tasks, render) if render is not None else []
+        todo, skipped = [], []
+        for t in [*tasks, *render_tasks]:
+            rec = _existing(t, out)
+            if rec is not None and (rec["status"] in DONE or not retry_failed):
+                skipped.append(rec)
+            else:
+                todo.append(t)
+        done: list[dict] = []
+        t0 = time.perf_counter()
+        if todo:
+            own = client is None
+            if own:
+                client, cluster = _client(scheduler, workers, memory_limit, retries)
+            try:
+                _probe_workers(client, out, todo)
+                done = _run_todo(client, todo, out, metrics, progress, as_completed)
+            finally:
+                if own:
+                    client.close()
+                    if cluster is not None:
+                        cluster.close()
+        records = read_records(out)
+        write_summary(out, records)
+        if render_tasks:
+            from .evaluation.report import write_index
 
-        write_index(out / "report", title=f"brdffit batch report – {out.name}")
+            write_index(out / "report", title=f"brdffit batch report – {out.name}")
+    final = {(r["material"], r["model"]): r for r in [*skipped, *done] if not r.get("lost")}
     return {"ran": len(done), "skipped": len(skipped), "render_tasks": len(render_tasks),
             "failed": sum(r.get("status") not in DONE for r in done),
+            "lost": sum(bool(r.get("lost")) for r in done),
+            "failed_total": sum(r.get("status") not in DONE for r in final.values()),
             "wall_time_s": time.perf_counter() - t0, "records": records}
+
+
+def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed) -> list[dict]:
+    """Submit the fit tasks, and each render task once its material's fits are over."""
+    fits = [t for t in todo if isinstance(t, Task)]
+    renders = {t.material: t for t in todo if isinstance(t, RenderTask)}
+    pending = {m: 0 for m in renders}
+    tasks_of: dict = {}
+    started: dict = {}
+
+    def submit(fn, t, *args):
+        kind = t.model if isinstance(t, Task) else "render"
+        fut = client.submit(fn, t, str(out), *args, pure=False,
+                            key=f"brdffit-{slug(t.material)}-{slug(kind)}-{t.key()}")
+        tasks_of[fut.key] = t
+        started[fut.key] = time.perf_counter()
+        return fut
+
+    futures = []
+    for t in fits:
+        futures.append(submit(run_task, t, metrics))
+        if t.material in pending:
+            pending[t.material] += 1
+    futures += [submit(run_render_task, r) for m, r in renders.items() if pending[m] == 0]
+    done: list[dict] = []
+    with _Progress(todo, enabled=progress is True) as bar:
+        queue = as_completed(futures)
+        for fut in queue:
+            t = tasks_of[fut.key]
+            try:
+                rec = fut.result()
+            except Exception as exc:  # noqa: BLE001 – KilledWorker, lost connection, ...
+                rec = _lost_record(t, exc, out, started[fut.key])
+            fut.release()
+            done.append(rec)
+            bar.advance(rec)
+            if callable(progress):
+                progress(rec)
+            if isinstance(t, Task) and t.material in pending:
+                pending[t.material] -= 1
+                if pending[t.material] == 0:
+                    queue.add(submit(run_render_task, renders[t.material]))
+    return done
 
 
 class _Progress:

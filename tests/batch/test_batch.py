@@ -1,24 +1,17 @@
-"""Batch processing on a two-worker local Dask cluster: enumeration, kill and resume."""
+"""Batch processing on a local Dask cluster: enumeration, keys, rendering, resume."""
 
 from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
-import time
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from brdffit.batch import TIMING_FIELDS, enumerate_materials, make_tasks, read_records
+from brdffit.batch import enumerate_materials, make_tasks
 from brdffit.errors import BRDFError
-
-MATERIALS = "synthetic:gold-ggx,plastic-beckmann,sgd-paint,two-lobe-ggx"
-MODELS = "ggx"
-
 
 def test_enumerate_list_file_and_folder(tmp_path):
     (tmp_path / "a.binary").write_bytes(b"")
@@ -50,55 +43,7 @@ def test_task_key_changes_with_options():
                                                         ["tabulated"])[0].key()
 
 
-def _batch_cmd(out):
-    return [sys.executable, "-m", "brdffit", "batch", MATERIALS, "--models", MODELS,
-            "--out", str(out), "--workers", "2", "--quiet"]
-
-
-def _comparable(rec):
-    return {k: v for k, v in rec.items() if k not in TIMING_FIELDS}
-
-
-@pytest.mark.slow
-def test_kill_and_resume_matches_uninterrupted_run(tmp_path):
-    n_tasks = len(MATERIALS.split(":")[1].split(",")) * len(MODELS.split(","))
-    ref_out, out = tmp_path / "ref", tmp_path / "run"
-    subprocess.run(_batch_cmd(ref_out), check=True, timeout=300)
-    reference = {(r["material"], r["model"]): r for r in read_records(ref_out)}
-    assert len(reference) == n_tasks and all(r["status"] == "ok" for r in reference.values())
-
-    proc = subprocess.Popen(_batch_cmd(out), start_new_session=True)
-    deadline = time.time() + 240
-    while time.time() < deadline and not list((out / "records").glob("*/[!.]*.json")):
-        time.sleep(0.02)
-    os.killpg(proc.pid, signal.SIGKILL)  # the client, the scheduler and both workers
-    proc.wait()
-    partial = len(list((out / "records").glob("*/[!.]*.json")))
-    assert 1 <= partial < n_tasks, f"kill landed after {partial} of {n_tasks} tasks"
-
-    log = subprocess.run(_batch_cmd(out), check=True, timeout=300, capture_output=True, text=True)
-    assert f"{partial} already done" in log.stdout
-    files = sorted((out / "records").glob("*/[!.]*.json"))
-    assert len(files) == n_tasks  # each result exactly once
-    for f in files:
-        rec = json.loads(f.read_text())
-        assert _comparable(rec) == _comparable(reference[(rec["material"], rec["model"])])
-    # the saved fits evaluate identically to the uninterrupted run's
-    from brdffit.io.fitfile import load_fit
-
-    rng = np.random.default_rng(0)
-    wi, wo = (v / np.linalg.norm(v, axis=-1, keepdims=True) * [1, 1, 1]
-              for v in np.abs(rng.normal(size=(2, 500, 3))))
-    for key, rec in reference.items():
-        a = load_fit(ref_out / rec["fit_file"]).eval(wi, wo)
-        b = load_fit(out / rec["fit_file"]).eval(wi, wo)
-        np.testing.assert_array_equal(a, b)
-    summary = (out / "summary.csv").read_text().splitlines()
-    assert len(summary) == n_tasks + 1
-
-    # a second re-run does nothing
-    log = subprocess.run(_batch_cmd(out), check=True, timeout=300, capture_output=True, text=True)
-    assert f"0 run (0 failed), {n_tasks} already done" in log.stdout
+# Kill-and-resume of the whole run: tests/batch/test_faults.py
 
 
 @pytest.mark.slow

@@ -66,7 +66,7 @@ def test_convert_merl_to_utia_and_back_errors(merl_with_holes, tmp_path, capsys)
     err = capsys.readouterr().err
     assert err.startswith("brdffit: error:") and "isotropic" in err and err.count("\n") == 1
     assert not (tmp_path / "x.binary").exists()
-    assert main(["convert", str(path), str(tmp_path / "x.png")]) == 1
+    assert main(["convert", str(path), str(tmp_path / "x.png")]) == 2  # usage: bad OUT
     assert ".png" in capsys.readouterr().err and not (tmp_path / "x.png").exists()
     assert main(["info", str(tmp_path / "absent.binary")]) == 1
     assert "absent.binary" in capsys.readouterr().err

@@ -51,6 +51,11 @@ def register(app: typer.Typer) -> None:
                                    help="Output file: .binary (MERL) or .bin (UTIA)."),
     ) -> None:
         """Resample a BRDF onto the MERL (.binary) or UTIA (.bin) grid and write it."""
+        if dst.suffix.lower() not in _OUTPUTS:
+            from . import usage_error
+
+            raise usage_error("OUT", f"expected an output ending in "
+                                     f"{' or '.join(sorted(_OUTPUTS))}, found {dst.name!r}")
         info = convert(src, dst)
         typer.echo(f"wrote {info['out']} ({info['format']}, {info['n_samples']} samples, "
                    f"{info['n_invalid']} invalid) from {src}")

@@ -27,13 +27,18 @@ def register(app: typer.Typer) -> None:
         """Fit every model to built-in synthetic materials, render, and write the HTML report.
 
         No external data or network is needed. Example: brdffit demo --out demo-out
+        Exit status: 0 all done, 1 error, 2 usage, 3 some fits failed (the rest is written).
         """
         from ..batch import enumerate_materials
         from ..evaluation.compare import compare
 
+        from . import check_models, usage_error
+
+        model_list = check_models([m.strip() for m in models.split(",") if m.strip()])
+        if not model_list:
+            raise usage_error("--models", f"expected at least one model name, found {models!r}")
         source = data or "synthetic:"
         materials = enumerate_materials(source, limit=limit or None)
-        model_list = [m.strip() for m in models.split(",") if m.strip()]
         typer.echo(f"brdffit demo: {len(materials)} materials × {len(model_list)} models "
                    f"({', '.join(model_list)}) → {out}/")
         t0 = time.perf_counter()

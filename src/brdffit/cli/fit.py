@@ -6,7 +6,9 @@ al. 2015; other modules add theirs, e.g. ``sgd``, ``npf``), prints a short summa
 (eigenvalue, fitted α's, Fresnel at normal incidence, time; ``--json`` prints it as one JSON
 object) and, with ``-o``, writes the fit file (:func:`brdffit.io.fitfile.save_fit`).
 Extra fitting options go through ``--option key=value`` (values parsed as JSON when they
-can be, e.g. ``--option tol=1e-6 --option anisotropic=true``).
+can be, e.g. ``--option tol=1e-6 --option anisotropic=true``); an option the model's fitting
+function does not take is a usage error (exit status 2) listing the accepted ones
+(:func:`accepted_options`).
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ import typer
 
 from .._json import json_default
 
-__all__ = ["register", "parse_options", "run_fit"]
+__all__ = ["register", "parse_options", "run_fit", "accepted_options", "check_options"]
 
 
 def parse_options(items: list[str] | None) -> dict:
@@ -38,6 +40,78 @@ def parse_options(items: list[str] | None) -> dict:
     return out
 
 
+def accepted_options(fn, _seen: frozenset = frozenset(), _skip: int = 1) -> tuple[set, bool]:
+    """``(names, open_ended)``: the keyword options a fitting function accepts.
+
+    The named parameters after the BRDF (private ``_x`` ones excluded); when the function
+    takes ``**kwargs``, those of the module-level functions it forwards them to
+    (``f(brdf, **kwargs)`` in its source), recursively. ``open_ended`` is True when some
+    ``**kwargs`` could not be followed: then unknown names cannot be ruled out up front.
+    """
+    import ast
+    import inspect
+    import textwrap
+
+    fn = inspect.unwrap(fn)
+    if fn in _seen:
+        return set(), False
+    try:
+        params = list(inspect.signature(fn).parameters.values())
+    except (TypeError, ValueError):
+        return set(), True
+    names, var_kw = set(), None
+    for i, p in enumerate(params):
+        if p.kind is p.VAR_KEYWORD:
+            var_kw = p.name
+        elif (p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and i >= _skip
+              and not p.name.startswith("_")):
+            names.add(p.name)
+    if var_kw is None:
+        return names, False
+    try:
+        tree = ast.parse(textwrap.dedent(inspect.getsource(fn)))
+    except (OSError, TypeError, SyntaxError):
+        return names, True
+    open_ended, forwarded = False, False
+    for node in ast.walk(tree):
+        if not (isinstance(node, ast.Call) and any(
+                k.arg is None and isinstance(k.value, ast.Name) and k.value.id == var_kw
+                for k in node.keywords)):
+            continue
+        forwarded = True
+        callee = getattr(fn, "__globals__", {}).get(node.func.id) \
+            if isinstance(node.func, ast.Name) else None
+        if not callable(callee):
+            open_ended = True
+            continue
+        sub, sub_open = accepted_options(callee, _seen | {fn}, len(node.args))
+        names |= sub - {k.arg for k in node.keywords if k.arg}
+        open_ended |= sub_open
+    return names, open_ended or not forwarded
+
+
+def check_options(model: str, options: dict) -> None:
+    """Usage error (exit 2) naming an option ``model``'s fitter does not take, and the
+    accepted ones."""
+    from ..fit import registry
+    from . import usage_error
+
+    names, open_ended = accepted_options(registry.get(model).fit)
+    unknown = sorted(set(options) - names)
+    if unknown and not open_ended:
+        raise usage_error("--option", f"model {model!r} has no option "
+                                      f"{', '.join(map(repr, unknown))}; accepted: "
+                                      f"{', '.join(sorted(names)) or 'none'}")
+
+
+def _unexpected_option(exc: TypeError, options: dict) -> str | None:
+    """The user option a fitter rejected with ``TypeError: ... unexpected keyword argument``."""
+    import re
+
+    m = re.search(r"unexpected keyword argument '([^']+)'", str(exc))
+    return m.group(1) if m and m.group(1) in options else None
+
+
 def run_fit(spec: str, model: str = "tabulated", out: Path | None = None,
             options: dict | None = None) -> tuple[object, dict]:
     """Load ``spec``, fit it with ``model`` and optionally save; returns ``(fit, summary)``."""
@@ -47,7 +121,17 @@ def run_fit(spec: str, model: str = "tabulated", out: Path | None = None,
     entry = registry.get(model)
     brdf = load(spec)
     t0 = time.perf_counter()
-    fitted = entry.fit(brdf, **(options or {}))
+    try:
+        fitted = entry.fit(brdf, **(options or {}))
+    except TypeError as exc:  # an option the up-front check could not rule out
+        bad = _unexpected_option(exc, options or {})
+        if bad is None:
+            raise
+        from . import usage_error
+
+        names, _ = accepted_options(entry.fit)
+        raise usage_error("--option", f"model {model!r} has no option {bad!r}; accepted: "
+                                      f"{', '.join(sorted(names)) or 'none'}") from None
     elapsed = time.perf_counter() - t0
     summary = registry.summarize(model, fitted)
     summary["model"] = model
@@ -101,8 +185,10 @@ def register(app: typer.Typer) -> None:
         except KeyError as exc:
             raise click.BadParameter(str(exc.args[0]), param_hint="--model") from None
         opts = parse_options(option)
+        check_options(model, opts)
         if iterations is not None:
-            if not entry.accepts("iterations"):
+            names, open_ended = accepted_options(entry.fit)
+            if "iterations" not in names and not open_ended:
                 raise click.BadParameter(f"model {model!r} has no 'iterations' option",
                                          param_hint="--iterations")
             opts["iterations"] = iterations

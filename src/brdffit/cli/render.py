@@ -17,9 +17,10 @@ __all__ = ["register", "load_brdf"]
 
 
 def _UsageError(option: str, message: str):
-    """A bad option value: a :class:`ValueError` (``brdffit.cli.main`` prints it and exits 1;
-    ``typer.BadParameter`` would escape ``main`` because typer vendors its own click)."""
-    return ValueError(f"{option}: {message}")
+    """A bad option value: a usage error (``brdffit.cli.main`` prints it and exits 2)."""
+    from . import usage_error
+
+    return usage_error(option, message)
 
 
 def load_brdf(spec: str):
