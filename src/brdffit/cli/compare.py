@@ -71,6 +71,9 @@ def register(app: typer.Typer) -> None:
         model_list = [m.strip() for m in models.split(",") if m.strip()]
         if not model_list:
             raise ValueError(f"--models: expected at least one model name, found {models!r}")
+        from . import check_models  # model names (not saved fits) must be known: exit 2
+
+        check_models([m for m in model_list if "=" not in m and not m.endswith(".npz")])
         exp = exposure if exposure == "auto" else float(exposure)
         try:
             fopts = json.loads(fit_options) if fit_options else None
@@ -104,3 +107,7 @@ def register(app: typer.Typer) -> None:
                     cells.append(f"{m['name']} failed")
             typer.echo(f"{r['material']}: " + "; ".join(cells))
         typer.echo(f"report: {(Path(out) / 'index.html').resolve()}")
+        if any(("error" in r and "models" not in r)
+               or any(m.get("status") not in ("ok", "skipped") for m in r.get("models", []))
+               for r in results):
+            raise typer.Exit(3)  # some fits or renders failed; the report has the rest
