@@ -146,6 +146,19 @@ def test_save_fit_refuses_a_state_that_would_not_load(tmp_path):
         assert list(tmp_path.iterdir()) == []
 
 
+def test_parameter_json_states_are_checked_by_the_same_schema(tmp_path):
+    """``brdffit export`` also reads parameter JSON (``state`` = params + arrays): the same
+    schema applies."""
+    from brdffit.export.json_params import from_json_dict, to_json_dict
+    from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel
+
+    doc = to_json_dict(MicrofacetBRDF(GGX(0.2), SchlickFresnel(0.05)))
+    assert from_json_dict(json.loads(json.dumps(doc))).distribution.alpha_x == 0.2
+    doc["state"]["params"]["distribution"]["params"]["alpha_x"] = 1e300
+    with pytest.raises(BRDFFormatError, match=r"params\.distribution\.params\.alpha_x"):
+        from_json_dict(doc, path=tmp_path / "p.json")
+
+
 # ------------------------------------------------------------------------------------------
 # exporting a lying file fails like loading it
 # ------------------------------------------------------------------------------------------

@@ -248,6 +248,7 @@ def from_json_dict(doc: dict, path=None):
             raise BRDFFormatError(path, f"expected a known model kind {sorted(reg)}, found {kind!r}")
         arrays = {k: _decode_array(v, path) for k, v in (state.get("arrays") or {}).items()}
         try:
+            reg[kind].validate_state(state.get("params") or {}, arrays)   # brdffit.schema
             m = reg[kind].from_state(state.get("params") or {}, arrays)
         except (KeyError, TypeError, ValueError) as exc:
             raise BRDFFormatError(path, f"expected a valid {kind!r} state, found an error: {exc}") from None
