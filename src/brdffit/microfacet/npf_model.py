@@ -198,9 +198,12 @@ class _HalfVectorSampling:
     def _build_sampler(self):
         s = np.maximum(np.asarray(self._spec_profile(), dtype=np.float64), 0.0)
         s = np.concatenate([s, s[-1:]])                                   # knot at π/2
-        peak = max(float(s.max()), 1e-300)
-        t = np.maximum(s[:-1], s[1:]) * np.cos(_CELL_EDGES[:-1]) + 1e-4 * peak
+        t = np.maximum(s[:-1], s[1:]) * np.cos(_CELL_EDGES[:-1])
         dcos = np.cos(_CELL_EDGES[:-1]) - np.cos(_CELL_EDGES[1:])
+        # a floor carrying 0.1 % of the mass, uniform in solid angle (a floor relative to the
+        # peak *density*, 1e-4 × max, put 99 % of the half vectors of an α = 0.001 lobe
+        # outside the lobe, whose cells are 1e-7 sr wide: standard error 10 % at 2^18 samples)
+        t = t + 1e-3 * max(float(np.sum(t * dcos)), 1e-300)
         mass = t * dcos
         total = mass.sum()
         self._h_density = t / (2.0 * np.pi * total)                       # pdf of h per cell
@@ -256,9 +259,27 @@ class _HalfVectorSampling:
         return np.where((wi[..., 2] > 0) & (wo[..., 2] > 0), p, 0.0)
 
 
+def _albedo_normal_incidence(brdf) -> float:
+    """Mean RGB albedo at normal incidence by quadrature in the half vector: for ``wi = n``
+    and an isotropic BRDF the integrand depends on θh only, ``θo = 2θh``,
+    ``dωo = 4 cos θh dωh``; composite 8-point Gauss-Legendre on panels of 0.25 in
+    ``ln θh`` ∈ [ln 1e-6, ln π/4] (a cosine-sampled estimate misses a lobe of α = 0.001)."""
+    x, w = np.polynomial.legendre.leggauss(8)
+    lo, hi = np.log(1e-6), np.log(np.pi / 4)
+    edges = np.linspace(lo, hi, int(np.ceil((hi - lo) / 0.25)) + 1)
+    half = 0.5 * np.diff(edges)
+    v = ((0.5 * (edges[:-1] + edges[1:]))[:, None] + half[:, None] * x).ravel()
+    wv = (half[:, None] * w).ravel()
+    th = np.exp(v)
+    wo = np.stack([np.sin(2 * th), np.zeros_like(th), np.cos(2 * th)], -1)
+    wi = np.broadcast_to([0.0, 0.0, 1.0], wo.shape)
+    f = np.nan_to_num(np.asarray(brdf.eval(wi, wo), np.float64)).mean(axis=-1)
+    return float(np.sum(f * np.cos(2 * th) * 4 * np.cos(th) * 2 * np.pi * np.sin(th) * th * wv))
+
+
 def _estimate_diffuse_fraction(brdf, diffuse_albedo: float) -> float:
     """Mixture weight of the cosine lobe: diffuse albedo / total albedo at normal incidence."""
-    total = float(np.mean(IsotropicBRDF.albedo(brdf, [0.0], n_samples=4096, seed=0)))
+    total = _albedo_normal_incidence(brdf)
     if not np.isfinite(total) or total <= 0:
         return 0.5
     return diffuse_albedo / total
