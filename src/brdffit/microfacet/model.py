@@ -55,7 +55,7 @@ import numpy as np
 from ..brdf import BRDF, IsotropicBRDF, _as_dirs, cosine_hemisphere_pdf, cosine_hemisphere_sample
 from ..geometry import half_diff_to_io, slope_to_normal
 from ..schema import (ALBEDO_MAX, ALPHA_MAX, SPECULAR_MAX, RGB, Bool, Component, ListOf, Number,
-                      Opt, Schema, Text)
+                      Opt, Schema, StateError, Text)
 from ..serialization import SerializableModel, resolve_kind
 from .base import Fresnel, SlopeDistribution
 from .beckmann import Beckmann
@@ -463,6 +463,25 @@ def _brdf_weight(b, wi) -> np.ndarray:
     return np.ones(np.shape(wi)[:-1])
 
 
+#: most lobes a saved sum may hold in all (nested sums counted through)
+MAX_SUM_LOBES = 64
+
+
+def _check_lobe_count(params, arrays, path, field) -> None:
+    """A saved sum holds at most :data:`MAX_SUM_LOBES` lobes, nested sums included (each
+    level allows 16; without a total, a 4 MB header could nest thousands)."""
+    n, stack = 0, [params]
+    while stack:
+        for comp in stack.pop().get("components", ()):
+            if comp.get("model") == "microfacet_sum" and isinstance(comp.get("params"), dict):
+                stack.append(comp["params"])
+            else:
+                n += 1
+    if n > MAX_SUM_LOBES:
+        raise StateError(f"{path}.components", f"expected at most {MAX_SUM_LOBES} lobes in all, "
+                                               f"found {n}")
+
+
 class SumBRDF(BRDF, SerializableModel):
     """``f_r = Σ_k f_k`` of BRDFs (e.g. two microfacet lobes), sampled as a mixture.
 
@@ -478,7 +497,7 @@ class SumBRDF(BRDF, SerializableModel):
         {"components": ListOf(Component(resolve_kind, kind_key="model", what="model"),
                               min_len=1, max_len=16, item_prefix="c{index}."),
          "name": Opt(Text()), "source": Opt(Text())},
-        required=("components",))
+        required=("components",), checks=(_check_lobe_count,))
 
     def __new__(cls, components=None, *args, **kwargs):
         if cls is SumBRDF and components is not None and all(

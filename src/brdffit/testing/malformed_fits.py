@@ -737,6 +737,18 @@ def _state_cases() -> list[Case]:
                                "alpha_x"], -0.3),
                          ("params.components[1].params.distribution.params.alpha_x",),
                          "a negative α in the second lobe"))
+    def nested_sum(header, arrays):
+        lobe = _state("ggx")[0]["params"]
+
+        def nest(level):
+            if level == 0:
+                return {"model": "microfacet", "params": lobe}
+            return {"model": "microfacet_sum",
+                    "params": {"components": [nest(level - 1) for _ in range(16)]}}
+        header["params"] = nest(3)["params"]
+        arrays.clear()
+    C.append(_state_case("sum-4096-lobes", "sum", nested_sum, ("params.components", "lobes"),
+                         "sums of sums of 16 lobes each: 4096 lobes in a 1.2 MB header"))
     C.append(_state_case("per-channel-rho-d-negative", "per-channel-sgd",
                          _set(["params", "channels", 0, "rho_d"], -0.5),
                          ("params.channels[0].rho_d",), "a negative per-channel ρd"))
