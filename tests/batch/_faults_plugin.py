@@ -9,8 +9,9 @@ pytest). Nothing in brdffit itself knows about these fitters.
   nanny's memory limit do to a material that exhausts the worker's memory).
 * ``test-copy``: returns the (synthetic, saveable) reference itself — a fit that costs
   nothing, for tests of the batch's bookkeeping rather than of fitting.
-* ``test-slow-ggx``: writes ``<marker_dir>/<pid>`` (so the test knows which worker runs it),
-  waits ``delay`` seconds, then fits GGX — a task the test can kill its worker under.
+* ``test-slow-copy``: writes ``<marker_dir>/<pid>.<random>`` (one per attempt; so the test knows which worker runs it),
+  waits ``delay`` seconds, then returns the reference — a task the test can kill its worker
+  under.
 * With ``BRDFFIT_TEST_WORKER_VERSION`` set in the test process (copied into the preload's
   config by the test), the worker pretends to be another brdffit version.
 """
@@ -34,17 +35,15 @@ def _copy(brdf, **_):
     return brdf
 
 
-def _slow_ggx(brdf, marker_dir: str, delay: float = 2.0):
-    from brdffit.fit.tabulated import fit_ggx
-
-    (Path(marker_dir) / str(os.getpid())).write_text("running")
+def _slow_copy(brdf, marker_dir: str, delay: float = 2.0):
+    (Path(marker_dir) / f"{os.getpid()}.{os.urandom(4).hex()}").write_text("running")
     time.sleep(delay)
-    return fit_ggx(brdf)
+    return brdf
 
 
 register_fitter("test-poison", _poison, description="test: SIGKILLs its worker")
 register_fitter("test-copy", _copy, description="test: the reference itself")
-register_fitter("test-slow-ggx", _slow_ggx, description="test: slow GGX fit")
+register_fitter("test-slow-copy", _slow_copy, description="test: slow copy")
 
 _version = os.environ.get("BRDFFIT_TEST_WORKER_VERSION")
 if _version:

@@ -37,18 +37,18 @@ def _rows(out):
 # -- a worker dies -------------------------------------------------------------------------
 @pytest.mark.slow
 def test_poisonous_material_is_recorded_failed_and_the_batch_goes_on(tmp_path):
-    tasks = make_tasks([("gold", "synthetic:gold-ggx")], ["ggx", "test-poison"])
+    tasks = make_tasks([("gold", "synthetic:gold-ggx")], ["test-copy", "test-poison"])
     out = tmp_path / "out"
     with dask.config.set({"distributed.worker.preload": [PLUGIN]}):
         res = run_batch(tasks, out, workers=1, retries=1, metrics=False, progress=False)
     by_model = {r["model"]: r for r in res["records"]}
-    assert by_model["ggx"]["status"] == "ok"
+    assert by_model["test-copy"]["status"] == "ok"
     poison = by_model["test-poison"]
     assert poison["status"] == "failed"
     assert "worker died (out of memory or killed) 2 times" in poison["error"]
     assert res["failed"] == 1 and res["failed_total"] == 1
     assert json.loads(tasks[1].record_path(out).read_text())["status"] == "failed"
-    assert {r["model"] for r in _rows(out)} == {"ggx", "test-poison"}
+    assert {r["model"] for r in _rows(out)} == {"test-copy", "test-poison"}
     # the resume neither crashes nor redoes anything (failed is kept unless --retry-failed)
     again = run_batch(tasks, out, workers=1, progress=False)
     assert again["ran"] == 0 and again["failed_total"] == 1
@@ -59,16 +59,17 @@ def test_worker_killed_mid_task_is_retried(tmp_path):
     markers = tmp_path / "markers"
     markers.mkdir()
     tasks = make_tasks([("gold", "synthetic:gold-ggx"), ("plastic", "synthetic:plastic-beckmann")],
-                       ["test-slow-ggx"], {"test-slow-ggx": {"marker_dir": str(markers),
-                                                             "delay": 1.5}})
+                       ["test-slow-copy"], {"test-slow-copy": {"marker_dir": str(markers),
+                                                               "delay": 2.0}})
     killed = []
 
     def killer():
         deadline = time.time() + 60
         while time.time() < deadline and not killed:
             for m in markers.iterdir():
-                os.kill(int(m.name), signal.SIGKILL)
-                killed.append(int(m.name))
+                pid = int(m.name.split(".")[0])
+                os.kill(pid, signal.SIGKILL)
+                killed.append(pid)
                 return
             time.sleep(0.02)
 
