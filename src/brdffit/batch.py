@@ -528,6 +528,11 @@ def _existing(task: Task | RenderTask, out: Path) -> dict | None:
         return None
     if rec.get("key") != task.key():
         return None
+    model = task.model if isinstance(task, Task) else "render"
+    if (rec["material"], rec["model"]) != (task.material, model):
+        _warn(f"{path}: it is the record of {rec['material']!r}/{rec['model']!r}, expected "
+              f"{task.material!r}/{model!r}; redoing the task")
+        return None
     if rec["status"] == "ok":
         problem = _outputs_problem(task, rec, out)
         if problem is not None:

@@ -299,3 +299,23 @@ def test_workers_with_another_brdffit_version_are_refused(tmp_path, monkeypatch,
     err = capsys.readouterr().err
     assert rc == 1 and "0.0.0-other" in err and "version" in err and "Traceback" not in err
     assert not (tmp_path / "out" / "records").exists()
+
+
+def test_a_record_of_another_material_in_the_folder_is_not_trusted(tmp_path, dask_client, caplog):
+    """Folders of older versions could hold another material's record (``mat a`` and ``mat_a``
+    shared ``mat_a/``); with the same spec and model its key even matches."""
+    a, b = make_tasks([("mat a", "synthetic:gold-ggx"), ("mat_a", "synthetic:gold-ggx")],
+                      ["test-copy"])
+    out = tmp_path / "out"
+    kw = dict(client=dask_client, metrics=False, progress=False)
+    run_batch([a], out, **kw)
+    b.record_path(out).parent.mkdir(parents=True)
+    rec = json.loads(a.record_path(out).read_text())
+    rec["fit_file"] = b.fit_path(out).relative_to(out).as_posix()  # consistent otherwise
+    b.record_path(out).write_text(json.dumps(rec))
+    b.fit_path(out).parent.mkdir(parents=True)
+    b.fit_path(out).write_bytes(a.fit_path(out).read_bytes())
+    caplog.set_level(logging.WARNING, logger="brdffit.batch")
+    assert run_batch([a, b], out, **kw)["ran"] == 1
+    assert any("expected 'mat_a'" in r.message for r in caplog.records)
+    assert json.loads(b.record_path(out).read_text())["material"] == "mat_a"
