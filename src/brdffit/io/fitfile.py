@@ -41,10 +41,8 @@ from __future__ import annotations
 import datetime as _dt
 import hashlib
 import json
-import math
 import zipfile
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.lib import format as _npy
@@ -52,7 +50,7 @@ from numpy.lib import format as _npy
 from .._atomic import atomic_write
 from .._json import strict_json_default
 from ..errors import BRDFFormatError
-from ..schema import ArrayHeader, StateError
+from ..schema import ArrayHeader, StateError, show
 from ..serialization import SerializableModel, model_registry, resolve_kind
 
 __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "SerializableModel", "save_fit", "load_fit",
@@ -371,8 +369,6 @@ def _json_depth_ok(obj) -> bool:
 
 
 def _type_name(v) -> str:
-    from ..schema import show
-
     return show(v)
 
 
