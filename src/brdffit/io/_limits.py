@@ -421,6 +421,9 @@ def h5_read_dataset(dset, where, label: str, *, max_raw_bytes: int) -> np.ndarra
                                          f"{max_raw_bytes} stored bytes, found {info.size}")
         mask, raw = dset.id.read_direct_chunk(offset)
         data = bytes(raw)
+        if len(data) != info.size:
+            raise BRDFFormatError(where, f"expected a chunk of {label} of {info.size} stored "
+                                         f"bytes, found {len(data)}")
         for k in reversed(range(len(filters))):
             if mask & (1 << k):
                 continue  # this filter was skipped for this chunk
@@ -456,6 +459,7 @@ def h5_read_dataset(dset, where, label: str, *, max_raw_bytes: int) -> np.ndarra
                                          f"once decoded, found {len(data)}")
         block = np.frombuffer(data, dtype=dtype).reshape(chunk)
         sl = tuple(slice(o, min(o + c, s)) for o, c, s in zip(offset, chunk, shape))
-        out[sl] = block[tuple(slice(0, x.stop - x.start) for x in sl)]
+        with np.errstate(invalid="ignore"):  # NaN payloads: refused later, with the file named
+            out[sl] = block[tuple(slice(0, x.stop - x.start) for x in sl)]
     return out
 

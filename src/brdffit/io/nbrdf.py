@@ -22,7 +22,6 @@ Collections (``merl_nbrdf.zip``…) are read in memory, never extracted to disk.
 from __future__ import annotations
 
 import difflib
-import io
 import json
 import zipfile
 from pathlib import Path, PurePosixPath
@@ -31,10 +30,9 @@ import numpy as np
 
 from ..brdf import IsotropicBRDF
 from ..errors import BRDFFormatError
-from ._limits import (MAX_LAYER_UNITS, MAX_NETWORK_FILE_BYTES, MAX_NETWORK_LAYERS,
-                      MAX_NETWORK_WEIGHTS, MAX_SIDECAR_BYTES, describe_exception, h5_child,
-                      h5_dataset_shape, h5_hard_child, h5_read_dataset, h5_string_list_attr,
-                      open_zip, read_file_capped, read_zip_member, unsafe_member_reason)
+from ._limits import (MAX_NETWORK_FILE_BYTES, MAX_NETWORK_LAYERS, MAX_SIDECAR_BYTES,
+                      describe_exception, open_zip, read_file_capped, read_zip_member,
+                      unsafe_member_reason)
 
 __all__ = ["NBRDF", "read_nbrdf", "read_nbrdf_collection", "list_materials"]
 
@@ -217,7 +215,8 @@ class NBRDF(IsotropicBRDF):
 
 # -- parsing ------------------------------------------------------------------------------
 # Files are untrusted: every size, shape, dtype, storage and link is checked before anything
-# is read (see brdffit.io._limits for the caps and the promises).
+# is read (see brdffit.io._limits for the caps and the promises); the HDF5 weights are parsed
+# in a child process (brdffit.io._h5sandbox).
 def _activations_from_json(text: bytes | str, where) -> list[str]:
     """Activations of the Dense layers of a Keras model description; checks the final Lambda."""
     def bad(found: str):
@@ -247,80 +246,13 @@ def _activations_from_json(text: bytes | str, where) -> list[str]:
     return acts
 
 
-def _layer_names(root, where) -> list[str]:
-    names = h5_string_list_attr(root, "layer_names", where, max_len=4 * MAX_NETWORK_LAYERS)
-    if not names:
-        keys = []
-        for k in root.keys():  # link names only: nothing is followed
-            if k.startswith("dense"):
-                keys.append(k)
-                if len(keys) > MAX_NETWORK_LAYERS:
-                    raise BRDFFormatError(where, f"expected at most {MAX_NETWORK_LAYERS} Dense "
-                                                 f"layers, found more 'dense*' groups")
-        names = sorted(keys, key=lambda k: (len(k), k))
-    return names
+def _layers_from_h5(blob: bytes, where) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The ``(kernel, bias)`` pairs of an HDF5 network, parsed in an isolated child process
+    (:func:`brdffit.io._h5sandbox.parse_network_h5_isolated`: libhdf5 can crash on a hostile
+    file)."""
+    from ._h5sandbox import parse_network_h5_isolated
 
-
-def _weight_datasets(f, where) -> list[tuple[str, object, object]]:
-    """``[(layer, kernel dataset, bias dataset)]``, validated, nothing read yet."""
-    root = f
-    if f.id.links.exists(b"model_weights"):
-        root = h5_child(f, "model_weights", where, what="group")
-    found = []
-    for name in _layer_names(root, where):
-        group = h5_child(root, name, where, what="layer group")
-        wnames = h5_string_list_attr(group, "weight_names", where, max_len=16)
-        if not wnames:
-            inner = h5_hard_child(group, name)
-            if inner is not None and h5_hard_child(inner, "kernel:0") is not None:
-                wnames = [f"{name}/kernel:0", f"{name}/bias:0"]
-            else:
-                continue  # weightless layer (the exp(y)-1 Lambda)
-        kernel = [w for w in wnames if w.endswith("kernel:0")]
-        bias = [w for w in wnames if w.endswith("bias:0")]
-        if len(kernel) != 1 or len(bias) != 1:
-            raise BRDFFormatError(where, f"layer {name!r}: expected one kernel and one bias, "
-                                         f"found weights {wnames[:8]}")
-        k = h5_child(group, kernel[0], where, what=f"kernel of layer {name!r}")
-        b = h5_child(group, bias[0], where, what=f"bias of layer {name!r}")
-        found.append((name, k, b))
-        if len(found) > MAX_NETWORK_LAYERS:
-            raise BRDFFormatError(where, f"expected at most {MAX_NETWORK_LAYERS} Dense layers, "
-                                         f"found more")
-    if not found:
-        raise BRDFFormatError(where, "expected Dense layer weights in the HDF5 file, found none")
-    n_in, total = 6, 0
-    for name, k, b in found:
-        ks = h5_dataset_shape(k, where, f"the kernel of layer {name!r}", ndim=2,
-                              max_dim=MAX_LAYER_UNITS, max_elements=MAX_NETWORK_WEIGHTS)
-        bs = h5_dataset_shape(b, where, f"the bias of layer {name!r}", ndim=1,
-                              max_dim=MAX_LAYER_UNITS, max_elements=MAX_NETWORK_WEIGHTS)
-        if ks[0] != n_in or bs != ks[1:]:
-            raise BRDFFormatError(where, f"layer {name!r}: expected kernel ({n_in}, n) and bias "
-                                         f"(n,), found {ks} and {bs}")
-        n_in = ks[1]
-        total += ks[0] * ks[1] + bs[0]
-    if total > MAX_NETWORK_WEIGHTS:
-        raise BRDFFormatError(where, f"expected a network of at most {MAX_NETWORK_WEIGHTS} "
-                                     f"weights, found {total}")
-    return found
-
-
-def _layers_from_h5(fileobj, where) -> list[tuple[np.ndarray, np.ndarray]]:
-    import h5py
-
-    try:
-        with h5py.File(fileobj, "r") as f:
-            return [(h5_read_dataset(k, where, f"the kernel of layer {name!r}",
-                                     max_raw_bytes=MAX_NETWORK_FILE_BYTES),
-                     h5_read_dataset(b, where, f"the bias of layer {name!r}",
-                                     max_raw_bytes=MAX_NETWORK_FILE_BYTES))
-                    for name, k, b in _weight_datasets(f, where)]
-    except BRDFFormatError:
-        raise
-    except Exception as exc:  # the HDF5 library's errors on a damaged file (OSError, KeyError...)
-        raise BRDFFormatError(where, f"expected Keras HDF5 weights, could not read them "
-                                     f"({describe_exception(exc)})") from None
+    return parse_network_h5_isolated(blob, where)
 
 
 def _build(layers, acts, *, name, source, precision) -> NBRDF:
@@ -344,7 +276,7 @@ def read_nbrdf(path, *, precision: str = "float32") -> NBRDF:
     """
     path = Path(path)
     blob = read_file_capped(path, "a Neural-BRDF .h5 file", MAX_NETWORK_FILE_BYTES)
-    layers = _layers_from_h5(io.BytesIO(blob), path)
+    layers = _layers_from_h5(blob, path)
     sidecar = path.with_suffix(".json")
     acts = None
     if sidecar.is_file():
@@ -427,6 +359,6 @@ def read_nbrdf_collection(zip_path, material: str, *, precision: str = "float32"
         if len(side) > 1:
             raise BRDFFormatError(zip_path, f"expected one member {js!r}, found {len(side)}")
         sidecar = read_zip_member(zf, side[0], where, MAX_SIDECAR_BYTES) if side else None
-    layers = _layers_from_h5(io.BytesIO(blob), where)
+    layers = _layers_from_h5(blob, where)
     acts = _activations_from_json(sidecar, where) if sidecar is not None else None
     return _build(layers, acts, name=key, source=where, precision=precision)

@@ -61,7 +61,7 @@ import numpy as np
 
 __all__ = ["Case", "cases", "CASES", "case_by_name", "valid_merl_bytes", "valid_utia_bytes",
            "valid_rgl_bytes", "write_network_h5", "network_h5_bytes", "keras_json",
-           "write_collection", "random_weights", "deflate_bomb", "LAYER_SIZES"]
+           "write_collection", "random_weights", "deflate_bomb", "crashing_h5_bytes", "LAYER_SIZES"]
 
 #: Layer sizes of the published Neural-BRDF networks (data README).
 LAYER_SIZES = [(6, 21), (21, 21), (21, 3)]
@@ -724,6 +724,27 @@ def _(folder):
     return _h5_with(folder, dataset=_flip_h5_dataset(make))
 
 
+def crashing_h5_bytes() -> bytes:
+    """A network whose first filtered dataset's object-header *filter pipeline* message
+    (type 11) is retyped to the unknown message type 207: one changed byte that makes
+    libhdf5 2.0 segfault when the dataset is opened (found by fuzzing)."""
+    data = bytearray(network_h5_bytes(dataset=lambda g, n, d: g.create_dataset(
+        n, data=d, chunks=d.shape, compression="gzip", shuffle=True, fletcher32=True)))
+    pos = data.find(b"shuffle\x00") - 24   # v1 message header: type, size, flags, reserved
+    if pos < 0 or data[pos:pos + 2] != b"\x0b\x00":
+        raise RuntimeError("unexpected HDF5 layout: filter pipeline message not found")
+    data[pos] = 207
+    return bytes(data)
+
+
+@_case("nbrdf-h5-crashes-libhdf5", "nbrdf-h5", _H, "expected", cli=True)
+def _(folder):
+    """One byte that crashes libhdf5 (SIGSEGV): must become one error line, not a dead
+    process."""
+    (folder / _H).write_bytes(crashing_h5_bytes())
+    return str(folder / _H)
+
+
 @_case("nbrdf-h5-external-storage", "nbrdf-h5", _H, "external", cli=True)
 def _(folder):
     """The kernel's bytes stored in a host file (HDF5 external storage, absolute path)."""
@@ -1049,6 +1070,12 @@ def _(folder):
         lambda g, n, d: g.create_dataset(n, shape=(6, 200_000_000), dtype="f4",
                                          chunks=(6, 1 << 14), compression="gzip")))
     write_collection(folder / _Z, [("coll/gold.h5", blob)])
+    return _zip_spec(folder)
+
+
+@_case("nbrdf-zip-crashes-libhdf5", "nbrdf-zip", _Z, "expected")
+def _(folder):
+    write_collection(folder / _Z, [("coll/gold.h5", crashing_h5_bytes())])
     return _zip_spec(folder)
 
 
