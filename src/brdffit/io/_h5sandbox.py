@@ -199,7 +199,8 @@ def parse_network_h5_isolated(blob: bytes, where) -> list[tuple[np.ndarray, np.n
         except ValueError:
             name = f"signal {sig}"
         what = ("ran out of its CPU time" if sig == signal.SIGXCPU
-                else f"crashed the HDF5 library ({name})")
+                else f"got the HDF5 reader killed ({name}: out of CPU time or memory)"
+                if sig == signal.SIGKILL else f"crashed the HDF5 library ({name})")
         raise BRDFFormatError(where, f"expected Keras HDF5 weights, found a file that {what} "
                                      f"(parsed in an isolated process)")
     if proc.returncode != 0:

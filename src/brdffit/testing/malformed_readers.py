@@ -327,7 +327,7 @@ def _merl_with(folder: Path, data: bytes, name: str = _M) -> str:
     return str(p)
 
 
-@_case("merl-empty", "merl", _M, "header", "0 bytes", cli=True)
+@_case("merl-empty", "merl", _M, "header", "0 bytes")
 def _(folder):
     """An empty file."""
     return _merl_with(folder, b"")
@@ -360,7 +360,7 @@ def _(folder):
     return _merl_with(folder, struct.pack("<3i", -90, 90, 180) + valid_merl_bytes()[12:])
 
 
-@_case("merl-overflowing-dims", "merl", _M, "expected header", "absurd", cli=True)
+@_case("merl-overflowing-dims", "merl", _M, "expected header", "absurd")
 def _(folder):
     """Dimensions whose product overflows 64 bits (2^31-1 cubed times 3 channels)."""
     return _merl_with(folder, struct.pack("<3i", 2**31 - 1, 2**31 - 1, 2**31 - 1) + b"\0" * 64)
@@ -400,7 +400,7 @@ def _(folder):
     return _merl_with(folder, bytes(raw))
 
 
-@_case("merl-inf", "merl", _M, "inf", cli=True)
+@_case("merl-inf", "merl", _M, "inf")
 def _(folder):
     raw = bytearray(valid_merl_bytes())
     struct.pack_into("<d", raw, len(raw) - 8, float("-inf"))
@@ -453,7 +453,7 @@ def _(folder):
     return _utia_with(folder, b"")
 
 
-@_case("utia-truncated", "utia", _U, "truncated", cli=True)
+@_case("utia-truncated", "utia", _U, "truncated")
 def _(folder):
     return _utia_with(folder, valid_utia_bytes()[:-1])
 
@@ -477,7 +477,7 @@ def _(folder):
     return _utia_with(folder, bytes(raw))
 
 
-@_case("utia-big-endian", "utia", _U, "byte", cli=True)
+@_case("utia-big-endian", "utia", _U, "byte")
 def _(folder):
     """The whole table byte-swapped (UTIA files have no header to tell)."""
     return _utia_with(folder, np.frombuffer(valid_utia_bytes(), "<f8").byteswap().tobytes())
@@ -541,7 +541,7 @@ def _(folder):
     return _rgl_with(folder, b"")
 
 
-@_case("rgl-truncated", "rgl", _R, "expected", cli=True)
+@_case("rgl-truncated", "rgl", _R, "expected")
 def _(folder):
     return _rgl_with(folder, valid_rgl_bytes()[:3000])
 
@@ -682,7 +682,7 @@ def _h5_with(folder: Path, **kwargs) -> str:
     return str(p)
 
 
-@_case("nbrdf-h5-empty", "nbrdf-h5", _H, "expected", cli=True)
+@_case("nbrdf-h5-empty", "nbrdf-h5", _H, "expected")
 def _(folder):
     (folder / _H).write_bytes(b"")
     return str(folder / _H)
@@ -792,7 +792,7 @@ def _(folder):
     return _h5_with(folder, dataset=_flip_h5_dataset(make))
 
 
-@_case("nbrdf-h5-virtual-dataset", "nbrdf-h5", _H, "virtual", cli=True)
+@_case("nbrdf-h5-virtual-dataset", "nbrdf-h5", _H, "virtual")
 def _(folder):
     """The kernel is a virtual dataset (VDS) mapping another file by absolute path."""
     import h5py
@@ -927,7 +927,7 @@ def _(folder):
     return _zip_spec(folder)
 
 
-@_case("nbrdf-zip-not-a-zip", "nbrdf-zip", _Z, "expected", cli=True)
+@_case("nbrdf-zip-not-a-zip", "nbrdf-zip", _Z, "expected")
 def _(folder):
     (folder / _Z).write_bytes(b"PK\x03\x04" + b"\x01" * 500)
     return _zip_spec(folder)
@@ -1028,7 +1028,7 @@ def _(folder):
     return _zip_spec(folder, "evil\n\x1b[2J")
 
 
-@_case("nbrdf-zip-duplicate-members", "nbrdf-zip", _Z, "one member", cli=True)
+@_case("nbrdf-zip-duplicate-members", "nbrdf-zip", _Z, "one member")
 def _(folder):
     """Two members with the same name and different networks (which one is read?)."""
     write_collection(folder / _Z, [("coll/gold.h5", network_h5_bytes(random_weights(1))),
@@ -1036,7 +1036,7 @@ def _(folder):
     return _zip_spec(folder)
 
 
-@_case("nbrdf-zip-external-storage", "nbrdf-zip", _Z, "external", cli=True)
+@_case("nbrdf-zip-external-storage", "nbrdf-zip", _Z, "external")
 def _(folder):
     """A network inside the zip whose kernel is external storage in a host file."""
     host = _host_file(folder)
@@ -1086,7 +1086,7 @@ def _(folder):
 
 
 # == load specs ==============================================================================
-@_case("spec-zip-dotdot-path", "spec", "coll.zip", "no 'passwd'", cli=True)
+@_case("spec-zip-dotdot-path", "spec", "coll.zip", "no 'passwd'")
 def _(folder):
     """``coll.zip:../../../../etc/passwd`` must not read anything outside the archive."""
     write_collection(folder / "coll.zip", _good_members())
