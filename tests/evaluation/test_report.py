@@ -96,7 +96,7 @@ def test_index_rebuilt_when_a_material_is_added(report_dir, tmp_path):
     C.compare(other, {"lambert": Lambert([0.5, 0.5, 0.5])}, out, renderer=standin_render, spp=4,
               resolution=16, noise_floor=False, brdf_metric_samples=1 << 8)
     text = (out / "index.html").read_text()
-    assert "second/index.html" in text and "glossy-test-material/index.html" in text
+    assert "second/index.html" in text and f"{R.slugify('glossy test/material')}/index.html" in text
     summ = json.loads((out / "summary.json").read_text())
     assert summ["n_materials"] == 2 and summ["per_model"]["lambert"]["n"] == 2
     assert R.missing_links(out / "index.html") == []
@@ -137,9 +137,9 @@ def test_cli_compare(tmp_path, monkeypatch, capsys):
     assert rc == 0
     out = capsys.readouterr().out
     assert "lam" in out and "mf" in out and "index.html" in out
-    page = tmp_path / "glossy-test-material" / "index.html"
+    page = tmp_path / R.slugify("glossy test/material") / "index.html"
     assert page.is_file() and R.missing_links(page) == []
-    res = json.loads((tmp_path / "glossy-test-material" / "result.json").read_text())
+    res = json.loads((tmp_path / R.slugify("glossy test/material") / "result.json").read_text())
     assert res["scene"]["spp"] == 4 and res["scene"]["resolution"] == 16
     assert [m["fit_time"] is not None for m in res["models"]] == [True, True]
     assert seen == [0.7]  # --fit-options reached the fitter
