@@ -338,7 +338,7 @@ def _(folder):
     return _merl_with(folder, valid_merl_bytes()[:7])
 
 
-@_case("merl-truncated-data", "merl", _M, "truncated", cli=True)
+@_case("merl-truncated-data", "merl", _M, "truncated")
 def _(folder):
     """A valid file cut in the middle of the table."""
     return _merl_with(folder, valid_merl_bytes()[:5_000_000])
@@ -420,7 +420,7 @@ def _(folder):
     return str(folder / _M)
 
 
-@_case("merl-fifo", "merl", "pipe.binary", "fifo")
+@_case("merl-fifo", "merl", "pipe.binary", "fifo", cli=True)
 def _(folder):
     """A named pipe: opening it would block forever."""
     os.mkfifo(folder / "pipe.binary")
@@ -463,7 +463,7 @@ def _(folder):
     return _utia_with(folder, valid_utia_bytes() + b"\0")
 
 
-@_case("utia-nan", "utia", _U, "nan", cli=True)
+@_case("utia-nan", "utia", _U, "nan")
 def _(folder):
     raw = bytearray(valid_utia_bytes())
     struct.pack_into("<d", raw, 8 * 777, float("nan"))
@@ -477,7 +477,7 @@ def _(folder):
     return _utia_with(folder, bytes(raw))
 
 
-@_case("utia-big-endian", "utia", _U, "byte")
+@_case("utia-big-endian", "utia", _U, "byte", cli=True)
 def _(folder):
     """The whole table byte-swapped (UTIA files have no header to tell)."""
     return _utia_with(folder, np.frombuffer(valid_utia_bytes(), "<f8").byteswap().tobytes())
@@ -590,7 +590,7 @@ def _(folder):
     return _rgl_with(folder, _rgl_patched("vndf", shape=(1, 4, 0, 8)))
 
 
-@_case("rgl-24tib-field", "rgl", _R, "rgb", "inside the file", cli=True)
+@_case("rgl-24tib-field", "rgl", _R, "rgb", "inside the file")
 def _(folder):
     """A field declaring 24 TiB of float32."""
     return _rgl_with(folder, _rgl_patched("rgb", shape=(1, 4, 3, 2**20, 2**19)))
@@ -663,7 +663,7 @@ def _(folder):
     return _rgl_with(folder, _tensor_bytes(fields))
 
 
-@_case("rgl-huge-file", "rgl", _R, "at most")
+@_case("rgl-huge-file", "rgl", _R, "at most", cli=True)
 def _(folder):
     """A sparse 8 GiB file (no disk used) with a valid header: never read whole."""
     p = Path(_rgl_with(folder, valid_rgl_bytes()))
@@ -708,7 +708,7 @@ def _(folder):
                                          chunks=(6, 1 << 14), compression="gzip")))
 
 
-@_case("nbrdf-h5-24tib-dataset", "nbrdf-h5", _H, "kernel", "at most")
+@_case("nbrdf-h5-24tib-dataset", "nbrdf-h5", _H, "kernel", "at most", cli=True)
 def _(folder):
     """A kernel declaring 6 x 2^40 float32 = 24 TiB."""
     return _h5_with(folder, dataset=_flip_h5_dataset(
