@@ -33,11 +33,12 @@ a Lambertian lobe is exact to 1e-15).
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 
-__all__ = ["albedo_quadrature", "albedo_sampled", "estimator_values", "check", "FurnaceResult",
-           "furnace"]
+__all__ = ["albedo_quadrature", "albedo_sampled", "estimator_values", "stratified_uniforms",
+           "check", "FurnaceResult", "furnace", "model_zoo"]
 
 
 def _incident(theta_i: float) -> np.ndarray:
@@ -90,22 +91,43 @@ def albedo_quadrature(f, theta_i: float, *, theta_min: float = 1e-6, panel: floa
     return out
 
 
+def stratified_uniforms(rng, n: int, dim: int) -> np.ndarray:
+    """``side**dim ≤ n`` jittered-grid points in ``[0, 1)^dim`` (one uniform point per cell
+    of a regular grid, ``side = ⌊n^(1/dim)⌋``), in random order."""
+    side = max(int(np.floor(n ** (1.0 / dim) + 1e-9)), 1)
+    g = np.stack(np.meshgrid(*([np.arange(side)] * dim), indexing="ij"), -1).reshape(-1, dim)
+    return rng.permutation((g + rng.random(g.shape)) / side)
+
+
 def albedo_sampled(brdf, theta_i: float, n: int = 1 << 18, seed: int = 0,
-                   batch: int = 1 << 18) -> tuple[np.ndarray, np.ndarray]:
+                   batch: int = 1 << 18, stratified: bool = False,
+                   batches: int = 16) -> tuple[np.ndarray, np.ndarray]:
     """Importance-sampled albedo of a library BRDF with its own ``sample``/``eval``:
-    ``(mean, standard error)``, both RGB. Samples with pdf 0 (invalid) contribute 0."""
+    ``(mean, standard error)``, both RGB. Samples with pdf 0 (invalid) contribute 0.
+
+    ``stratified``: ``batches`` independent batches of jittered-grid uniforms
+    (:func:`stratified_uniforms`, ``n/batches`` each); the standard error is that of the
+    batch means (honest, and 4-8× smaller than i.i.d. sampling for the same ``n``)."""
     rng = np.random.default_rng(seed)
     wi1 = _incident(float(theta_i))
+
+    def values(u):
+        wi = np.broadcast_to(wi1, (len(u), 3))
+        wo, pdf = brdf.sample(wi, u)
+        wo = np.asarray(wo, np.float64)
+        return estimator_values(np.asarray(brdf.eval(wi, wo), np.float64), wo,
+                                np.asarray(pdf, np.float64))
+
+    if stratified:
+        u = np.stack([stratified_uniforms(rng, n // batches, 2) for _ in range(batches)])
+        means = values(u.reshape(-1, 2)).reshape(batches, -1, 3).mean(1)
+        return means.mean(0), means.std(0, ddof=1) / np.sqrt(batches)
     s1 = np.zeros(3)
     s2 = np.zeros(3)
     done = 0
     while done < n:
         m = min(batch, n - done)
-        wi = np.broadcast_to(wi1, (m, 3))
-        wo, pdf = brdf.sample(wi, rng.random((m, 2)))
-        wo = np.asarray(wo, np.float64)
-        pdf = np.asarray(pdf, np.float64)
-        val = estimator_values(np.asarray(brdf.eval(wi, wo), np.float64), wo, pdf)
+        val = values(rng.random((m, 2)))
         s1 += val.sum(0)
         s2 += (val * val).sum(0)
         done += m
@@ -166,11 +188,12 @@ def check(estimate, se, quadrature, tol: float = 0.01, k: float = 4.0) -> bool:
 
 
 def furnace(brdf, thetas_deg=(0.0, 40.0, 80.0), n: int = 1 << 18, seed: int = 0,
-            tol: float = 0.01, k: float = 4.0, **quad_kw) -> list[FurnaceResult]:
+            tol: float = 0.01, k: float = 4.0, stratified: bool = False,
+            **quad_kw) -> list[FurnaceResult]:
     """Furnace test of a library BRDF's ``sample``/``pdf`` at incidences ``thetas_deg``."""
     out = []
     for j, t in enumerate(np.radians(np.atleast_1d(thetas_deg))):
-        est, se = albedo_sampled(brdf, t, n=n, seed=seed + j)
+        est, se = albedo_sampled(brdf, t, n=n, seed=seed + j, stratified=stratified)
         q = albedo_quadrature(brdf.eval, t, **quad_kw)
         out.append(FurnaceResult(float(t), est, se, q, tol, k))
     return out
@@ -195,6 +218,21 @@ def _ggx_slope_table_2d(n: int = 40, n_phi: int = 40, ay: float = 0.5) -> np.nda
     return 1.0 / (np.pi * ay * (1.0 + q) ** 2)
 
 
+@functools.lru_cache(maxsize=1)
+def _unit_tables():
+    """The unit-roughness tabulated distributions of the zoo (shared by every α, so that
+    their lazily built sampling tables are built once; the 2D table's visible-normal
+    normaliser is built here, before ``with_roughness`` copies share it)."""
+    from ..microfacet.tabulated import TabulatedSlopeDistribution
+
+    iso = TabulatedSlopeDistribution(_ggx_slope_table())
+    aniso = TabulatedSlopeDistribution(_ggx_slope_table_2d())
+    n = np.array([0.0, 0.0, 1.0])
+    iso.pdf_visible(n, n)         # builds the sampler's normaliser tables
+    aniso.pdf_visible(n, n)
+    return iso, aniso
+
+
 def model_zoo(alpha: float) -> dict:
     """The library's BRDF models with (main) lobe roughness ``alpha``, one per render
     translator / sampler: name → BRDF.
@@ -217,12 +255,11 @@ def model_zoo(alpha: float) -> dict:
     from ..microfacet.npf_model import (D_THETA_H, F_THETA_D, G_THETA, NPFBivariateBRDF,
                                         NPFMicrofacetBRDF, NPFNaiveBRDF, H_PHI_D)
     from ..microfacet.sgd import SGD
-    from ..microfacet.tabulated import TabulatedSlopeDistribution
 
     a = float(alpha)
     a2 = min(2.0 * a, 1.0)
     widths = (a, 0.05, 0.5)
-    tab = TabulatedSlopeDistribution(_ggx_slope_table())
+    tab, tab2d = _unit_tables()
     gold = ConductorFresnel([0.143, 0.374, 1.442], [3.983, 2.386, 1.603])
     out = {
         "ggx": MicrofacetBRDF(GGX(a), SchlickFresnel([0.9, 0.6, 0.3]), diffuse=[0.1, 0.1, 0.2]),
@@ -239,7 +276,7 @@ def model_zoo(alpha: float) -> dict:
             [dict(distribution=SGD(w, 0.84), rho_d=d, rho_s=0.05, F0=1.0, F1=-0.3)
              for w, d in zip(widths, (0.2, 0.04, 0.03))]),
         "tabulated-aniso": MicrofacetBRDF(
-            TabulatedSlopeDistribution(_ggx_slope_table_2d()).with_roughness(a), None,
+            tab2d.with_roughness(a), None,
             diffuse=0.05),
         "per-channel-tabulated": PerChannelBRDF(
             [MicrofacetBRDF(tab.with_roughness(w), SchlickFresnel(0.8), diffuse=0.05)

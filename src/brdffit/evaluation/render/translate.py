@@ -317,26 +317,37 @@ def evaluate_drjit(evaluator, wi, wo, alpha_scale=1.0) -> np.ndarray:
 
 
 def albedo_drjit(evaluator, theta_i: float, n: int = 1 << 20, seed: int = 0,
-                 alpha_scale=1.0, batch: int = 1 << 20) -> tuple[np.ndarray, np.ndarray]:
+                 alpha_scale=1.0, batch: int = 1 << 20, stratified: bool = False,
+                 batches: int = 16) -> tuple[np.ndarray, np.ndarray]:
     """Importance-sampled directional albedo of a Dr.Jit evaluator, as a renderer estimates
     it: ``mean(f cos θo / pdf)`` over ``wo`` drawn by ``evaluator.sample`` (``wi`` at polar
     angle ``theta_i``, φi = 0), with the pdf ``sample`` returns; samples with pdf 0 count as
-    0. Returns ``(mean, standard error)``, RGB (:mod:`brdffit.testing.furnace`)."""
-    from ...testing.furnace import estimator_values
+    0. Returns ``(mean, standard error)``, RGB (:mod:`brdffit.testing.furnace`).
+    ``stratified``: ``batches`` independent batches of jittered-grid uniforms in
+    ``[0, 1)³`` (lobe choice ``u1`` and direction ``u2``), standard error of the batch means."""
+    from ...testing.furnace import estimator_values, stratified_uniforms
 
     dj = _dj()
     mi = dj.mi
     rng = np.random.default_rng(seed)
     wi1 = np.array([np.sin(theta_i), 0.0, np.cos(theta_i)])
-    s1, s2, done = np.zeros(3), np.zeros(3), 0
-    while done < n:
-        m = min(batch, n - done)
-        wi = dj.to_vec3(np.broadcast_to(wi1, (m, 3)))
-        u = rng.random((m, 3)).astype(np.float32)
+
+    def values(u):
+        u = np.minimum(u, 1.0 - 2.0**-24).astype(np.float32)   # float32 rounding to 1.0
+        wi = dj.to_vec3(np.broadcast_to(wi1, (len(u), 3)))
         wo, pdf = evaluator.sample(wi, mi.Float(u[:, 0]), mi.Point2f(u[:, 1], u[:, 2]),
                                    alpha_scale, True)
         f = dj.to_numpy(evaluator.eval(wi, wo, alpha_scale, True))
-        val = estimator_values(f, dj.to_numpy(wo), dj.to_numpy(pdf))
+        return estimator_values(f, dj.to_numpy(wo), dj.to_numpy(pdf))
+
+    if stratified:
+        u = np.stack([stratified_uniforms(rng, n // batches, 3) for _ in range(batches)])
+        means = values(u.reshape(-1, 3)).reshape(batches, -1, 3).mean(1)   # one kernel launch
+        return means.mean(0), means.std(0, ddof=1) / np.sqrt(batches)
+    s1, s2, done = np.zeros(3), np.zeros(3), 0
+    while done < n:
+        m = min(batch, n - done)
+        val = values(rng.random((m, 3)))
         s1 += val.sum(0)
         s2 += (val * val).sum(0)
         done += m
@@ -345,7 +356,8 @@ def albedo_drjit(evaluator, theta_i: float, n: int = 1 << 20, seed: int = 0,
 
 
 def furnace_drjit(evaluator, thetas_deg=(0.0, 40.0, 80.0), n: int = 1 << 20, seed: int = 0,
-                  alpha_scale=1.0, tol: float = 0.01, k: float = 4.0, **quad_kw):
+                  alpha_scale=1.0, tol: float = 0.01, k: float = 4.0,
+                  stratified: bool = False, **quad_kw):
     """Furnace test of a Dr.Jit evaluator: :func:`albedo_drjit` against the quadrature of
     the evaluator's own ``eval`` (:func:`brdffit.testing.furnace.albedo_quadrature`), one
     :class:`~brdffit.testing.furnace.FurnaceResult` per incidence."""
@@ -353,7 +365,8 @@ def furnace_drjit(evaluator, thetas_deg=(0.0, 40.0, 80.0), n: int = 1 << 20, see
 
     out = []
     for j, t in enumerate(np.radians(np.atleast_1d(thetas_deg))):
-        est, se = albedo_drjit(evaluator, float(t), n=n, seed=seed + j, alpha_scale=alpha_scale)
+        est, se = albedo_drjit(evaluator, float(t), n=n, seed=seed + j, alpha_scale=alpha_scale,
+                               stratified=stratified)
         q = albedo_quadrature(lambda a, b: evaluate_drjit(evaluator, a, b, alpha_scale),
                               float(t), **quad_kw)
         out.append(FurnaceResult(float(t), est, se, q, tol, k))
