@@ -187,3 +187,39 @@ def test_real_gold_metallic_paint_is_plausible():
     assert f[0, 0] > f[0, 2]       # gold: red above blue
     alb = b.albedo(np.radians([0.0, 45.0]), n_samples=16384)
     assert np.all((alb > 0.01) & (alb < 1.0))
+
+
+# -- chunked/filtered weights: decoded by brdffit (capped), must equal what h5py reads -------
+def test_filtered_chunked_weights_decode_like_hdf5(tmp_path):
+    """gzip + shuffle + fletcher32, chunks with partial edges, big-endian / float16 / float64
+    types and never-written chunks (fill value): the capped chunk decoder of
+    ``brdffit.io._limits`` must give exactly h5py's values."""
+    w = _random_weights(7)
+    path = tmp_path / "chunked.h5"
+    specs = {
+        "dense_1/kernel:0": dict(dtype=">f4", chunks=(4, 8), compression="gzip", shuffle=True,
+                                 fletcher32=True),
+        "dense_1/bias:0": dict(dtype="<f2", chunks=(5,), compression="gzip"),
+        "dense_2/kernel:0": dict(dtype="<f8", chunks=(8, 8), shuffle=True, fillvalue=0.25),
+        "dense_2/bias:0": dict(dtype=">f8", chunks=(21,), fletcher32=True),
+        "dense_3/kernel:0": dict(dtype="<f4", chunks=(21, 3), compression="gzip",
+                                 compression_opts=9),
+    }
+    with h5py.File(path, "w") as f:
+        for k, (kern, bias) in enumerate(w):
+            name = f"dense_{k + 1}"
+            for wname, data in ((f"{name}/kernel:0", kern), (f"{name}/bias:0", bias)):
+                opts = specs.get(wname, {})
+                ds = f.create_dataset(f"{name}/{wname}", shape=data.shape,
+                                      dtype=opts.pop("dtype", data.dtype), **opts)
+                if wname == "dense_2/kernel:0":
+                    ds[:16, :8] = data[:16, :8]  # the other chunks are never written
+                else:
+                    ds[...] = data
+        expected = [(f[f"dense_{k}/dense_{k}/kernel:0"][()].astype(np.float64),
+                     f[f"dense_{k}/dense_{k}/bias:0"][()].astype(np.float64)) for k in (1, 2, 3)]
+    assert np.count_nonzero(expected[1][0] == 0.25) == 21 * 21 - 16 * 8
+    got = read_nbrdf(path, precision="float64")
+    for (k, b, _), (ek, eb) in zip(got.layers, expected):
+        np.testing.assert_array_equal(k, ek)
+        np.testing.assert_array_equal(b, eb)

@@ -17,6 +17,13 @@ reciprocal (for ``merl_nbrdf.zip`` the median relative difference between φd an
 symmetrisation is applied.
 
 Collections (``merl_nbrdf.zip``…) are read in memory, never extracted to disk.
+
+Files are untrusted (:mod:`brdffit.io._limits`): files and zip members are capped in size
+(also while inflating), member names that are absolute, contain ``..`` or control characters
+are never used, a material stored twice is refused, and the HDF5 weights are parsed in an
+isolated child process (:mod:`brdffit.io._h5sandbox`: libhdf5 can crash on a hostile file)
+that accepts only datasets stored in the file (no external storage, virtual datasets, external
+or soft links), of float type and bounded shape, checked before anything is read.
 """
 
 from __future__ import annotations
@@ -306,11 +313,6 @@ def _index(zf: zipfile.ZipFile):
         else:
             unsafe.setdefault(p.stem, (info, reason))
     return materials, unsafe
-
-
-def _members(zf: zipfile.ZipFile) -> dict[str, str]:
-    """Material name -> member name (safe, unambiguous members only)."""
-    return {k: v[0].filename for k, v in _index(zf)[0].items() if len(v) == 1}
 
 
 def list_materials(zip_path) -> list[str]:

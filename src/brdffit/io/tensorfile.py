@@ -74,8 +74,11 @@ class TensorField:
 
 
 def is_tensor_file(path) -> bool:
-    """True when ``path`` starts with the tensor-file magic (cheap check, no validation)."""
+    """True when ``path`` is a regular file starting with the tensor-file magic (cheap check,
+    no validation; a FIFO or device is never opened)."""
     try:
+        if not Path(path).is_file():
+            return False
         with open(path, "rb") as fh:
             return fh.read(12) == MAGIC
     except OSError:
