@@ -730,4 +730,9 @@ def read_rgl(path, name: str | None = None) -> RGLBRDF:
     fields = read_tensor_file(path)
     nphi = fields["phi_i"].size if isinstance(fields.get("phi_i"), np.ndarray) else 0
     cls = IsotropicRGLBRDF if 1 <= nphi <= 2 else RGLBRDF
-    return cls(fields, source=path, name=name)
+    try:
+        return cls(fields, source=path, name=name)
+    except MemoryError:  # tables within the file-size cap but too large for this machine
+        raise BRDFFormatError(path, f"expected tables that fit in memory, found "
+                                    f"{sum(getattr(v, 'nbytes', 0) for v in fields.values())} "
+                                    f"bytes of fields whose warps do not (out of memory)") from None

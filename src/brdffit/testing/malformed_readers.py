@@ -427,6 +427,13 @@ def _(folder):
     return str(folder / "pipe.binary")
 
 
+@_case("merl-symlink-to-device", "merl", _M, "character device")
+def _(folder):
+    """``bad.binary`` is a symbolic link to ``/dev/zero`` (endless zeros)."""
+    os.symlink("/dev/zero", folder / _M)
+    return str(folder / _M)
+
+
 @_case("merl-newline-name", "merl", "bad\\nname.binary", "header", cli=True)
 def _(folder):
     """A file name with a newline and an escape sequence must not break the one-line error."""
