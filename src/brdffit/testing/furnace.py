@@ -27,7 +27,15 @@ boundary, where it vanishes with cos θo). ``θh`` is integrated with composite 
 in ``ln θh`` from ``θ_min = 10⁻⁶`` (the cap below adds a one-node term): a lobe of any width
 α is a bump of width O(1) in ``ln θh`` centred near ``ln α``, so one grid serves α from 10⁻³
 to 1 alike (GGX α = 0.001 at θi = 80°: the default grid and a 2.5× finer one agree to 2e-8;
-a Lambertian lobe is exact to 1e-15).
+a Lambertian lobe is exact to 1e-15; ``∫ D cos θh`` of GGX over the visible cone matches
+``1/(1 + α²)`` to 1e-7 for α = 0.001 … 1). Piecewise-linear tables (NPF, MERL grid) have
+kinks between their nodes, where the rule converges only as h²: ≤ 5e-4 relative at the
+defaults.
+
+Importance sampling can use i.i.d. uniforms or, with ``stratified=True``, 16 independent
+batches of jittered-grid uniforms whose standard error is that of the batch means (4-8×
+smaller for the same number of samples; the tests use it to keep se below 0.25 % cheaply).
+:func:`model_zoo` builds one model per sampler/translator at a given roughness.
 """
 
 from __future__ import annotations

@@ -23,9 +23,14 @@ of a proxy lobe whose α is fitted to the table's θd = 0 slice
 (:func:`.drjit_eval.fit_ggx_proxy`); mixture pdf exact.
 
 Every translated (non-table) evaluator is *verified* against ``brdf.eval`` at random
-directions (cosine-weighted relative error, :func:`resampling_error`); above
+directions (cosine-weighted relative error, :func:`resampling_error`, with ``wo`` drawn half
+from the cosine and half from the BRDF's own sampler so that sharp lobes are seen); above
 ``verify_tol`` it is rejected with a warning and the generic table is used instead, so a
-convention mismatch cannot silently render the wrong material. ``mode="table"`` forces the
+convention mismatch cannot silently render the wrong material.
+
+:func:`albedo_drjit` / :func:`furnace_drjit` measure what a renderer estimates: the
+importance-sampled directional albedo of an evaluator, to be compared with its quadrature
+(furnace test, :mod:`brdffit.testing.furnace`; ``bench/bench_furnace.py``). ``mode="table"`` forces the
 table, ``mode="closed"`` forbids the fall-back (raises instead).
 """
 
