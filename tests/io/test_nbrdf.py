@@ -223,3 +223,23 @@ def test_filtered_chunked_weights_decode_like_hdf5(tmp_path):
     for (k, b, _), (ek, eb) in zip(got.layers, expected):
         np.testing.assert_array_equal(k, ek)
         np.testing.assert_array_equal(b, eb)
+
+
+def test_collection_member_names_windows_separators_and_unsafe_ones(tmp_path):
+    """Backslashes separate folders (zips written on Windows); absolute, ``..`` and
+    control-character names are never listed nor read."""
+    from brdffit.testing.malformed_readers import network_h5_bytes, write_collection
+
+    w = _random_weights(5)
+    net = network_h5_bytes(w)
+    z = write_collection(tmp_path / "c.zip", [
+        ("coll\\gold.h5", net), ("coll\\gold.json", _keras_json().encode()),
+        ("../../evil.h5", net), ("/abs/root.h5", net), ("coll/bad\nname.h5", net),
+        ("coll/...h5", net)])
+    assert list_materials(z) == ["gold"]
+    th, td, pd = _angles(300)
+    got = read_nbrdf_collection(z, "gold", precision="float64").eval_hd(th, td, pd)
+    np.testing.assert_allclose(got, _reference(w, th, td, pd), rtol=1e-12, atol=1e-14)
+    for name in ("evil", "root", ".."):
+        with pytest.raises(BRDFFormatError, match="unsafe member"):
+            read_nbrdf_collection(z, name)

@@ -129,18 +129,18 @@ def open_zip(path, what: str = "a .zip collection") -> zipfile.ZipFile:
 def unsafe_member_reason(name: str) -> str | None:
     """Why a zip member name must not be used (``None`` when it is safe).
 
-    Unsafe: empty, absolute (``/x``, ``C:``, ``\\\\x``), any ``..`` component, a backslash,
-    a control character (it would break a one-line message).
+    Unsafe: empty, absolute (``/x``, ``\\\\x``, ``C:x``), any ``..`` component (backslashes count
+    as separators, as in zips written on Windows), a control character (it would break a
+    one-line message).
     """
     if not name:
         return "an empty name"
     if any(not c.isprintable() for c in name):
         return "a control character in its name"
-    if "\\" in name:
-        return "a backslash in its name"
-    if name.startswith("/") or (len(name) > 1 and name[1] == ":"):
+    posix = name.replace("\\", "/")
+    if posix.startswith("/") or (len(name) > 1 and name[1] == ":"):
         return "an absolute path"
-    if ".." in PurePosixPath(name).parts:
+    if ".." in PurePosixPath(posix).parts:
         return "a '..' component"
     return None
 

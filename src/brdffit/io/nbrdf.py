@@ -302,7 +302,7 @@ def _index(zf: zipfile.ZipFile):
     materials: dict[str, list[zipfile.ZipInfo]] = {}
     unsafe: dict[str, tuple[zipfile.ZipInfo, str]] = {}
     for info in zf.infolist():
-        p = PurePosixPath(info.filename)
+        p = PurePosixPath(info.filename.replace("\\", "/"))
         if p.suffix != ".h5" or info.is_dir() or "__MACOSX" in p.parts:
             continue
         reason = unsafe_member_reason(info.filename)
