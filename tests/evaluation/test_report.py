@@ -67,11 +67,35 @@ def test_compare_result_and_metrics(report_dir):
     # same scene and seed: the reference itself renders identically
     assert by["exact"]["psnr"] == np.inf and by["exact"]["mean_de2000"] == 0.0
     assert by["exact"]["brdf"]["cos_rel_error"] == 0.0
+    assert by["exact"]["psnr_se"] == 0.0
     assert by["microfacet"]["psnr"] > by["lambert"]["psnr"]
     assert by["lambert"]["mean_de2000"] > 0
-    assert np.isfinite(res["noise_floor_psnr"]) and res["noise_floor_psnr"] > by["lambert"]["psnr"]
+    assert "noise_floor_psnr" not in res  # replaced by the standard errors
     saved = json.loads((out / res["slug"] / "result.json").read_text())
     assert saved["models"][2]["psnr"] == "inf"  # non-finite floats stay valid JSON
+
+
+def test_result_json_has_psnr_se_and_scenes(report_dir):
+    """Public interface (issue 13): per model psnr (mean over scenes), psnr_se and per-scene
+    PSNR ± se; a top-level scenes list (the paper suite, or its procedural fallback)."""
+    from brdffit.evaluation.render.scenes import scene_suite
+
+    out, res = report_dir
+    saved = json.loads((out / res["slug"] / "result.json").read_text())
+    names = [s.name for s in scene_suite("paper")[0]]
+    assert [s["name"] for s in saved["scenes"]] == names and len(names) in (2, 4)
+    for s in saved["scenes"]:
+        assert s["reference"]["png"] and s["reference"]["peak"] > 0 and len(s["seeds"]) == 8
+        assert (out / res["slug"] / s["reference"]["png"]).is_file()
+    lam = next(m for m in saved["models"] if m["name"] == "lambert")
+    assert [e["scene"] for e in lam["scenes"]] == names
+    per = [e["psnr"] for e in lam["scenes"]]
+    assert lam["psnr"] == pytest.approx(np.mean(per))
+    ses = np.array([e["psnr_se"] for e in lam["scenes"]])
+    assert np.all(ses > 0) and lam["psnr_se"] == pytest.approx(np.sqrt(np.sum(ses**2)) / len(ses))
+    assert 0 < lam["psnr_se"] < 1.0
+    for e in lam["scenes"]:
+        assert (out / res["slug"] / e["png"]).is_file() and (out / res["slug"] / e["de_png"]).is_file()
 
 
 def test_pages_contain_every_model_and_links_resolve(report_dir):
@@ -83,7 +107,13 @@ def test_pages_contain_every_model_and_links_resolve(report_dir):
         assert name in text
     assert R.missing_links(page) == [] and R.missing_links(idx) == []
     links = R.local_links(page)
-    assert "reference.png" in links and "lambert_de2000.png" in links and "lobes.png" in links
+    for sc in res["scenes"]:   # every scene's reference, renderings and dE maps
+        assert sc["reference"]["png"] in links and f"Scene {sc['name']}" in text
+        assert f"{sc['name']}-lambert.png" in links and f"{sc['name']}-lambert_de2000.png" in links
+    assert "lobes.png" in links
+    lam = next(m for m in res["models"] if m["name"] == "lambert")
+    shown = R._pm(lam["psnr"], lam["psnr_se"])
+    assert " ± " in shown and shown in text and shown in idx.read_text()  # PSNR ± se
     assert "factors.png" in links and "slices.png" in links
     assert "http" not in idx.read_text() and "<script src" not in idx.read_text()
     assert "microfacet" in idx.read_text()
@@ -100,6 +130,27 @@ def test_index_rebuilt_when_a_material_is_added(report_dir, tmp_path):
     summ = json.loads((out / "summary.json").read_text())
     assert summ["n_materials"] == 2 and summ["per_model"]["lambert"]["n"] == 2
     assert R.missing_links(out / "index.html") == []
+
+
+def test_index_reads_old_results_with_a_noise_floor(tmp_path):
+    """result.json files of earlier versions (one scene, noise floor, no psnr_se) still make
+    the index and their page; the noise-floor column only appears for them."""
+    old = {"material": "old", "slug": "old", "scene": {"scene": "sphere-env", "spp": 64},
+           "noise_floor_psnr": 35.5, "reference": {},
+           "models": [{"name": "ggx", "status": "ok", "psnr": 30.25, "mean_de2000": 1.5}]}
+    R.write_result(tmp_path / "old", old)
+    R.write_material_page(tmp_path, old)
+    text = R.write_index(tmp_path).read_text()
+    assert "noise floor PSNR" in text and "35.50" in text and "30.25" in text
+    assert "30.25" in (tmp_path / "old" / "index.html").read_text()
+    new = {"material": "new", "slug": "new", "scenes": [{"name": "sphere-env"}], "reference": {},
+           "models": [{"name": "ggx", "status": "ok", "psnr": 31.0, "psnr_se": 0.125,
+                       "scenes": [{"scene": "sphere-env", "psnr": 31.0, "psnr_se": 0.125}]}]}
+    R.write_result(tmp_path / "new", new)
+    R.write_material_page(tmp_path, new)
+    assert "31.00 ± 0.12" in (tmp_path / "new" / "index.html").read_text()
+    assert "31.00 ± 0.12" in R.write_index(tmp_path).read_text()
+    assert R.summarize(R.read_results(tmp_path))["per_model"]["ggx"]["median_psnr_se"] == 0.125
 
 
 def test_missing_links_detects_problems(tmp_path):
@@ -133,14 +184,15 @@ def test_cli_compare(tmp_path, monkeypatch, capsys):
         monkeypatch.setitem(registry.FITTERS, name, registry.Fitter(name, fn))
     rc = main(["compare", "whatever.h5", "--models", "lam,mf", "--out", str(tmp_path),
                "--spp", "4", "--resolution", "16", "--no-noise-floor", "-q",
-               "--fit-options", '{"lam": {"albedo": 0.7}}'])
+               "--scenes", "sphere-env", "--fit-options", '{"lam": {"albedo": 0.7}}'])
     assert rc == 0
     out = capsys.readouterr().out
-    assert "lam" in out and "mf" in out and "index.html" in out
+    assert "lam" in out and "mf" in out and "index.html" in out and " ± " in out
     page = tmp_path / R.slugify("glossy test/material") / "index.html"
     assert page.is_file() and R.missing_links(page) == []
     res = json.loads((tmp_path / R.slugify("glossy test/material") / "result.json").read_text())
     assert res["scene"]["spp"] == 4 and res["scene"]["resolution"] == 16
+    assert res["scene"]["batches"] == 4 and [s["name"] for s in res["scenes"]] == ["sphere-env"]
     assert [m["fit_time"] is not None for m in res["models"]] == [True, True]
     assert seen == [0.7]  # --fit-options reached the fitter
     assert main(["compare", "x.h5", "--models", "lam", "--out", str(tmp_path),

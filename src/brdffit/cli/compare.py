@@ -1,8 +1,10 @@
 """``brdffit compare INPUT[:MATERIAL] --models tabulated,ggx,... --out DIR``.
 
 Fits the requested models (or loads saved fit files given as ``NAME=fit.npz`` or ``fit.npz``),
-renders the reference and every model with the same scene and seed, measures rendered PSNR
-(Bagher et al. 2016 §5), dE2000 and the BRDF-space metrics, and writes the static HTML
+renders the reference and every model on the paper's scene suite (``--scenes paper``: a sphere
+under three environment maps and the knot mesh, Bagher et al. 2016 §5) with common random
+numbers in independent batches, measures rendered PSNR ± standard error per scene and its
+mean over scenes, dE2000 and the BRDF-space metrics, and writes the static HTML
 report (:mod:`brdffit.evaluation.report`): ``DIR/<material>/index.html`` and the index
 ``DIR/index.html``, rebuilt from every material already in ``DIR``. A Neural-BRDF collection
 without ``:MATERIAL`` compares all its materials (``--limit`` keeps the first N).
@@ -43,20 +45,31 @@ def register(app: typer.Typer) -> None:
                                    help="Comma-separated model names to fit, and/or saved fits "
                                         "as NAME=fit.npz or fit.npz."),
         out: Path = typer.Option(Path("report"), "--out", "-o", help="Report directory."),
-        scene: str = typer.Option("sphere-env", "--scene",
-                                  help="Renderer scene: sphere-env, sphere-point, sphere-distant, "
-                                       "knot, sphere-svrough."),
-        spp: int = typer.Option(64, "--spp", min=1, help="Samples per pixel."),
-        resolution: int = typer.Option(128, "--resolution", min=8, help="Image side in pixels."),
+        scenes: str = typer.Option("paper", "--scenes",
+                                   help="Scene suite 'paper' (sphere-courtyard, sphere-studio, "
+                                        "sphere-sunrise, knot-courtyard) or scene names, comma-"
+                                        "separated: sphere-<map>, knot-<map>, sphere-env, knot, "
+                                        "sphere-point, sphere-distant, sphere-svrough."),
+        scene: str = typer.Option(None, "--scene", hidden=True,
+                                  help="One scene (former option; same as --scenes NAME)."),
+        spp: int = typer.Option(64, "--spp", min=1,
+                                help="Samples per pixel per scene, all batches together."),
+        batches: int = typer.Option(8, "--batches", min=1,
+                                    help="Independent batches per scene (≥ 3 for standard "
+                                         "errors)."),
+        resolution: int = typer.Option(256, "--resolution", min=8, help="Image side in pixels."),
         seed: int = typer.Option(0, "--seed", help="Seed of the sample streams (all models)."),
-        exposure: str = typer.Option("auto", "--exposure",
-                                     help="Tone-mapping exposure, or 'auto' (from the reference)."),
-        gamma: float = typer.Option(2.2, "--gamma", help="Tone-mapping gamma."),
-        noise_floor: bool = typer.Option(True, "--noise-floor/--no-noise-floor",
-                                         help="Render the reference twice to measure MC noise."),
+        exposure: str = typer.Option("scene", "--exposure",
+                                     help="Tone-mapping exposure: 'scene' (fixed per scene), "
+                                          "'auto' (from each scene's reference) or a number."),
+        gamma: float = typer.Option(None, "--gamma", help="Tone-mapping gamma (default: the "
+                                                          "scene's, 2.2)."),
+        noise_floor: bool = typer.Option(True, "--noise-floor/--no-noise-floor", hidden=True,
+                                         help="Ignored: standard errors replace the noise floor."),
         envmap: str = typer.Option(None, "--envmap",
-                                   help="Environment map of the -env/knot scenes: a name of "
-                                        "../shared/data/envmaps or an EXR (default procedural)."),
+                                   help="Environment map of the plain sphere-env/knot scenes: a "
+                                        "name of ../shared/data/envmaps or an EXR (default "
+                                        "procedural)."),
         limit: int = typer.Option(None, "--limit", min=1,
                                   help="With a collection: only its first N materials."),
         fit_options: str = typer.Option(None, "--fit-options",
@@ -74,7 +87,7 @@ def register(app: typer.Typer) -> None:
         from . import check_models  # model names (not saved fits) must be known: exit 2
 
         check_models([m for m in model_list if "=" not in m and not m.endswith(".npz")])
-        exp = exposure if exposure == "auto" else float(exposure)
+        exp = exposure if exposure in ("auto", "scene") else float(exposure)
         try:
             fopts = json.loads(fit_options) if fit_options else None
         except json.JSONDecodeError as exc:
@@ -85,8 +98,8 @@ def register(app: typer.Typer) -> None:
                              f"found {fit_options!r}")
         ropts = {"envmap": envmap} if envmap else {}
         say = (lambda msg: None) if quiet else (lambda msg: typer.echo(msg, err=True))
-        kw = dict(scene=scene, spp=spp, resolution=resolution, seed=seed, exposure=exp,
-                  gamma=gamma, noise_floor=noise_floor, render_options=ropts, progress=say,
+        kw = dict(scenes=scene or scenes, spp=spp, batches=batches, resolution=resolution,
+                  seed=seed, exposure=exp, gamma=gamma, render_options=ropts, progress=say,
                   fit_options=fopts)
         specs = _materials(spec, limit)
         if len(specs) == 1:
@@ -102,7 +115,10 @@ def register(app: typer.Typer) -> None:
             cells = []
             for m in r["models"]:
                 if m.get("status") == "ok":
-                    cells.append(f"{m['name']} {m['psnr']:.2f} dB / dE {m['mean_de2000']:.2f}")
+                    se = m.get("psnr_se")
+                    pm = (f"≥ {m['psnr']:.2f}" if m.get("psnr_bound") == "lower" else
+                          f"{m['psnr']:.2f}" + (f" ± {se:.2f}" if se is not None and se == se else ""))
+                    cells.append(f"{m['name']} {pm} dB / dE {m['mean_de2000']:.2f}")
                 else:
                     cells.append(f"{m['name']} failed")
             typer.echo(f"{r['material']}: " + "; ".join(cells))

@@ -44,7 +44,7 @@ import numpy as np
 
 __all__ = [
     "DELTA_E_VMAX", "DELTA_E_CMAP", "npf_tonemap", "foreground_mask", "rendered_psnr",
-    "crn_psnr", "combine_psnr", "psnr_from_mse",
+    "crn_psnr", "combine_psnr", "psnr_from_mse", "DeltaE2000",
     "to_lab", "delta_e2000_image", "mean_delta_e2000", "colorize_delta_e",
     "cosine_weighted_relative_error", "count_wins", "brdf_metrics", "BRDFMetrics",
     "normalized_l2", "compressive_objective",
@@ -309,12 +309,35 @@ def delta_e2000_image(reference, test, mask=None, exposure: float = 0.02, gamma:
     Both images go through :func:`to_lab`. Background pixels (outside ``mask``) are NaN.
     Symmetric in its two image arguments.
     """
-    import colour
-
     ref, tst, m = _check_pair(reference, test, mask)
-    de = colour.delta_E(to_lab(ref, exposure, gamma, tonemap), to_lab(tst, exposure, gamma, tonemap),
-                        method="CIE 2000")
-    return np.where(m, de, np.nan)
+    return DeltaE2000(ref, m, exposure, gamma, tonemap).image(tst)
+
+
+class DeltaE2000:
+    """:func:`delta_e2000_image` against one reference, its L*a*b* computed once and only the
+    foreground pixels converted (a comparison measures many models on the same reference)."""
+
+    def __init__(self, reference, mask=None, exposure: float = 0.02, gamma: float = 2.2,
+                 tonemap=None):
+        ref = np.asarray(reference, dtype=np.float64)
+        self.mask = (np.ones(ref.shape[:2], bool) if mask is None
+                     else np.asarray(mask).astype(bool).reshape(ref.shape[:2]))
+        self.shape = ref.shape
+        self.kw = (exposure, gamma, tonemap)
+        self.ref_lab = to_lab(ref[self.mask][None], *self.kw)[0]
+
+    def image(self, test) -> np.ndarray:
+        import colour
+
+        tst = np.asarray(test, dtype=np.float64)
+        if tst.shape != self.shape:
+            raise ValueError(f"test image: expected shape {self.shape} (as the reference), "
+                             f"found {tst.shape}")
+        de = colour.delta_E(self.ref_lab, to_lab(tst[self.mask][None], *self.kw)[0],
+                            method="CIE 2000")
+        out = np.full(self.shape[:2], np.nan)
+        out[self.mask] = de
+        return out
 
 
 def mean_delta_e2000(reference, test, mask=None, **kw) -> float:

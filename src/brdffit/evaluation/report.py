@@ -221,6 +221,42 @@ def _ok(m) -> bool:
     return m.get("status", "ok") == "ok"
 
 
+def _pm(value, se=None, bound=None, digits: int = 2) -> str:
+    """``psnr ± se`` (``≥ psnr`` for a lower bound, the value alone without a finite se)."""
+    v = _num(value)
+    if v is None:
+        return "–"
+    if bound == "lower":
+        return "≥ " + _fmt(v, digits)
+    e = _num(se)
+    if e is None or math.isnan(e) or math.isinf(v):
+        return _fmt(v, digits)
+    return f"{_fmt(v, digits)} ± {_fmt(e, digits)}"
+
+
+def _td_pm(m, cls="") -> str:
+    """A table cell ``PSNR ± se`` of a model (or one of its scenes), sortable by the PSNR."""
+    if not isinstance(m, dict) or _num(m.get("psnr")) is None:
+        return '<td data-sort="">–</td>'
+    c = f' class="{cls}"' if cls else ""
+    return (f'<td{c} data-sort="{_e(_sortkey(m.get("psnr")))}">'
+            f'{_e(_pm(m.get("psnr"), m.get("psnr_se"), m.get("psnr_bound", m.get("bound"))))}</td>')
+
+
+def _scenes(result) -> list[dict]:
+    """The result's scene list (new results), ``[]`` for single-scene results of old versions."""
+    sc = result.get("scenes")
+    return [s for s in sc if isinstance(s, dict)] if isinstance(sc, list) else []
+
+
+def _model_scene(m, name) -> dict:
+    sc = m.get("scenes")
+    for e in sc if isinstance(sc, list) else []:
+        if isinstance(e, dict) and e.get("scene") == name:
+            return e
+    return {}
+
+
 # ------------------------------------------------------------------------------------------
 # material page
 # ------------------------------------------------------------------------------------------
@@ -240,69 +276,34 @@ def write_material_page(out_dir, result: dict, colorbar: str | None = "../assets
     parts = [f"<p><a href=\"../index.html\">← all materials</a></p><h1>{_e(name)}</h1>"]
     src = result.get("source")
     scene = result.get("scene") or {}
+    scenes = _scenes(result)
+    if scenes:
+        tone = ("Tone mapping (Bagher et al. 2016 §5), one fixed exposure per scene for every "
+                "image: " + _e("; ".join(f"{sc.get('name')}: exposure {_fmt(sc.get('exposure'), 4)}, "
+                                         f"gamma {_fmt(sc.get('gamma'), 1)}" for sc in scenes)) + ". ")
+    else:
+        tone = (f"Tone mapping (Bagher et al. 2016 §5): exposure {_e(_fmt(result.get('exposure'), 4))},"
+                f" gamma {_e(result.get('gamma', 2.2))}, the same for every image. ")
     parts.append('<p class="note">' + (f"Source: <code>{_e(src)}</code>. " if src else "")
-                 + "Scene: " + _e(", ".join(f"{k}={v}" for k, v in scene.items()))
-                 + f". Tone mapping (Bagher et al. 2016 §5): exposure {_e(_fmt(result.get('exposure'), 4))},"
-                 f" gamma {_e(result.get('gamma', 2.2))}, the same for every image. "
+                 + "Settings: " + _e(", ".join(f"{k}={v}" for k, v in scene.items()))
+                 + ". " + tone
+                 + ("PSNR ± standard error: each scene is rendered in independent batches with "
+                    "common random numbers (reference and models along the same paths); the "
+                    "PSNR of a scene is estimated from the batches without their noise bias, "
+                    "± its standard error, and a model's PSNR is the mean over the scenes. "
+                    if scenes else "")
                  + (f"Monte Carlo noise floor (reference rendered with two seeds): "
                     f"PSNR {_e(_fmt(result.get('noise_floor_psnr')))} dB, dE2000 "
                     f"{_e(_fmt(result.get('noise_floor_de2000')))}."
                     if result.get("noise_floor_psnr") is not None else "")
                  + "</p>")
 
-    # renderings and dE maps
-    cells = []
-    if ref.get("png"):
-        cells.append(f'<div class="cell">{_img(ref["png"], "reference rendering", width=disp)}'
-                     f"<b>Reference</b><br>&nbsp;</div>")
-    for m in models:
-        label = _e(m.get("name"))
-        if _ok(m) and m.get("png"):
-            cells.append(f'<div class="cell">{_img(m["png"], str(m.get("name")) + " rendering", width=disp)}'
-                         f"<b>{label}</b><br>PSNR {_e(_fmt(m.get('psnr')))} dB</div>")
-        else:
-            cells.append(f'<div class="cell fail" style="width:{disp}px"><b>{label}</b><br>'
-                         f"{_e(m.get('status', 'failed'))}: {_e(m.get('error', 'no image'))}</div>")
-    parts.append('<h2>Renderings</h2><div class="grid">' + "".join(cells) + "</div>")
-    cells = []
-    for m in models:
-        if _ok(m) and m.get("de_png"):
-            cells.append(f'<div class="cell">{_img(m["de_png"], str(m.get("name")) + " dE2000 map", width=disp)}'
-                         f"<b>{_e(m.get('name'))}</b><br>mean dE {_e(_fmt(m.get('mean_de2000')))}</div>")
-    if cells:
-        if colorbar:
-            cells.append(f'<div class="cell">{_img(colorbar, "dE2000 colour scale")}</div>')
-        parts.append('<h2>CIE dE2000 difference to the reference</h2><div class="grid">'
-                     + "".join(cells) + "</div>")
-
-    # metrics table
-    rows = []
-    for m in models:
-        b = m.get("brdf") or {}
-        cls = "best" if best is not None and _num(m.get("psnr")) == best else ""
-        if not _ok(m):
-            rows.append(f'<tr class="fail"><td class="l">{_e(m.get("name"))}</td>'
-                        f'<td class="l" colspan="8">{_e(m.get("status", "failed"))}: {_e(m.get("error"))}</td></tr>')
-            continue
-        rows.append(f'<tr class="{cls}"><td class="l">{_e(m.get("name"))}</td>'
-                    + _td(m.get("psnr")) + _td(m.get("mean_de2000"))
-                    + _td(b.get("cos_rel_error"), 4) + _td(b.get("normalized_l2"), 4)
-                    + _td(b.get("compressive_objective"), 4)
-                    + _td(m.get("fit_time"), 2, unit=" s") + _td(m.get("render_time"), 2, unit=" s")
-                    + _td(m.get("table_bytes"), 0) + "</tr>")
-    parts.append(
-        "<h2>Metrics</h2><table class=\"sortable\" id=\"metrics\"><thead><tr>"
-        "<th class=\"l\">model</th><th>PSNR (dB)</th><th>mean dE2000</th>"
-        "<th>cos-weighted rel. error</th><th>normalised L2</th><th>compressive objective</th>"
-        "<th>fit time</th><th>render time</th><th>table bytes</th></tr></thead><tbody>"
-        + "".join(rows) + "</tbody></table>"
-        '<p class="note">PSNR: linear values, foreground pixels, peak = max RGB component of '
-        "the reference foreground (Bagher et al. 2016 §5). dE2000 on the tone-mapped images "
-        "read as sRGB (D65). Cosine-weighted relative error: "
-        "Σ∫∫|f−f<sub>ref</sub>| cosθ<sub>i</sub> cosθ<sub>o</sub> / Σ∫∫|f<sub>ref</sub>| "
-        "cosθ<sub>i</sub> cosθ<sub>o</sub>. Normalised L2: Bagher et al. 2012 §6.3. "
-        "Compressive objective: Bagher et al. 2016 Eq. 7–12 divided by that of the all-zero "
-        "model. – = not available.</p>")
+    # renderings and dE maps, metrics
+    if scenes:
+        parts += _scene_sections(scenes, models, disp, colorbar)
+    else:
+        parts += _single_scene_sections(ref, models, disp, colorbar)
+    parts.append(_metrics_table(models, scenes, best))
 
     # plots
     plots = result.get("plots") or {}
@@ -335,11 +336,127 @@ def write_material_page(out_dir, result: dict, colorbar: str | None = "../assets
     return path
 
 
+def _cell(src, alt, disp, caption) -> str:
+    return f'<div class="cell">{_img(src, alt, width=disp)}{caption}</div>'
+
+
+def _fail_cell(m, disp, error=None) -> str:
+    return (f'<div class="cell fail" style="width:{disp}px"><b>{_e(m.get("name"))}</b><br>'
+            f"{_e(m.get('status', 'failed') if error is None else 'failed')}: "
+            f"{_e(error if error is not None else m.get('error', 'no image'))}</div>")
+
+
+def _scene_sections(scenes, models, disp, colorbar) -> list[str]:
+    """Per scene: the reference and every model (PSNR ± se), then the dE2000 maps."""
+    parts = []
+    for sc in scenes:
+        name = str(sc.get("name"))
+        ref = sc.get("reference") if isinstance(sc.get("reference"), dict) else {}
+        head = (f"<h2>Scene {_e(name)}</h2><p class=\"note\">"
+                + _e("; ".join(str(x) for x in (sc.get("note"), f"map {sc.get('envmap')}"
+                                                if sc.get("envmap") else None,
+                                                f"peak {_fmt(ref.get('peak'), 4)}"
+                                                if ref.get("peak") is not None else None) if x))
+                + "</p>")
+        if sc.get("error"):
+            parts.append(head + f'<p class="fail">not rendered: {_e(sc.get("error"))}</p>')
+            continue
+        cells = []
+        if ref.get("png"):
+            cells.append(_cell(ref["png"], f"reference rendering, {name}", disp,
+                               "<b>Reference</b><br>&nbsp;"))
+        de_cells = []
+        for m in models:
+            e = _model_scene(m, name)
+            if _ok(m) and e.get("png"):
+                cells.append(_cell(e["png"], f"{m.get('name')} rendering, {name}", disp,
+                                   f"<b>{_e(m.get('name'))}</b><br>PSNR "
+                                   f"{_e(_pm(e.get('psnr'), e.get('psnr_se'), e.get('bound')))} dB"))
+                if e.get("de_png"):
+                    de_cells.append(_cell(e["de_png"], f"{m.get('name')} dE2000 map, {name}", disp,
+                                          f"<b>{_e(m.get('name'))}</b><br>mean dE "
+                                          f"{_e(_fmt(e.get('mean_de2000')))}"))
+            else:
+                cells.append(_fail_cell(m, disp, e.get("error") if _ok(m) else None))
+        parts.append(head + '<div class="grid">' + "".join(cells) + "</div>")
+        if de_cells:
+            if colorbar:
+                de_cells.append(f'<div class="cell">{_img(colorbar, "dE2000 colour scale")}</div>')
+            parts.append(f"<h3>CIE dE2000 difference to the reference, {_e(name)}</h3>"
+                         '<div class="grid">' + "".join(de_cells) + "</div>")
+    return parts
+
+
+def _single_scene_sections(ref, models, disp, colorbar) -> list[str]:
+    """Results of versions without a scene suite: one rendering per model."""
+    parts = []
+    cells = []
+    if ref.get("png"):
+        cells.append(_cell(ref["png"], "reference rendering", disp, "<b>Reference</b><br>&nbsp;"))
+    for m in models:
+        if _ok(m) and m.get("png"):
+            cells.append(_cell(m["png"], str(m.get("name")) + " rendering", disp,
+                               f"<b>{_e(m.get('name'))}</b><br>PSNR "
+                               f"{_e(_pm(m.get('psnr'), m.get('psnr_se')))} dB"))
+        else:
+            cells.append(_fail_cell(m, disp))
+    parts.append('<h2>Renderings</h2><div class="grid">' + "".join(cells) + "</div>")
+    cells = []
+    for m in models:
+        if _ok(m) and m.get("de_png"):
+            cells.append(_cell(m["de_png"], str(m.get("name")) + " dE2000 map", disp,
+                               f"<b>{_e(m.get('name'))}</b><br>mean dE {_e(_fmt(m.get('mean_de2000')))}"))
+    if cells:
+        if colorbar:
+            cells.append(f'<div class="cell">{_img(colorbar, "dE2000 colour scale")}</div>')
+        parts.append('<h2>CIE dE2000 difference to the reference</h2><div class="grid">'
+                     + "".join(cells) + "</div>")
+    return parts
+
+
+def _metrics_table(models, scenes, best) -> str:
+    names = [str(sc.get("name")) for sc in scenes]
+    rows = []
+    ncol = 7 + len(names)
+    for m in models:
+        b = m.get("brdf") if isinstance(m.get("brdf"), dict) else {}
+        cls = "best" if best is not None and _num(m.get("psnr")) == best else ""
+        if not _ok(m):
+            rows.append(f'<tr class="fail"><td class="l">{_e(m.get("name"))}</td>'
+                        f'<td class="l" colspan="{ncol}">{_e(m.get("status", "failed"))}: '
+                        f'{_e(m.get("error"))}</td></tr>')
+            continue
+        rows.append(f'<tr class="{cls}"><td class="l">{_e(m.get("name"))}</td>'
+                    + _td_pm(m) + "".join(_td_pm(_model_scene(m, n)) for n in names)
+                    + _td(m.get("mean_de2000"))
+                    + _td(b.get("cos_rel_error"), 4) + _td(b.get("normalized_l2"), 4)
+                    + _td(b.get("compressive_objective"), 4)
+                    + _td(m.get("fit_time"), 2, unit=" s") + _td(m.get("table_bytes"), 0) + "</tr>")
+    scene_heads = "".join(f"<th>{_e(n)} PSNR</th>" for n in names)
+    return ("<h2>Metrics</h2><table class=\"sortable\" id=\"metrics\"><thead><tr>"
+            "<th class=\"l\">model</th><th>PSNR (dB)"
+            + (", mean over scenes" if names else "") + "</th>" + scene_heads
+            + "<th>mean dE2000</th><th>cos-weighted rel. error</th><th>normalised L2</th>"
+            "<th>compressive objective</th><th>fit time</th><th>table bytes</th></tr></thead><tbody>"
+            + "".join(rows) + "</tbody></table>"
+            '<p class="note">PSNR: linear values, foreground pixels, peak = max RGB component of '
+            "the (converged) reference foreground (Bagher et al. 2016 §5); ± one standard error "
+            "(batches rendered with common random numbers: U-statistic MSE, jackknife, delta "
+            "method; it includes the reference peak's residual uncertainty); ≥ = a lower bound "
+            "when the difference is below its own noise. dE2000 on the tone-mapped images read "
+            "as sRGB (D65), mean over scenes. Cosine-weighted relative error: "
+            "Σ∫∫|f−f<sub>ref</sub>| cosθ<sub>i</sub> cosθ<sub>o</sub> / Σ∫∫|f<sub>ref</sub>| "
+            "cosθ<sub>i</sub> cosθ<sub>o</sub>. Normalised L2: Bagher et al. 2012 §6.3. "
+            "Compressive objective: Bagher et al. 2016 Eq. 7–12 divided by that of the all-zero "
+            "model. – = not available.</p>")
+
+
 # ------------------------------------------------------------------------------------------
 # index
 # ------------------------------------------------------------------------------------------
 def summarize(results: Iterable[dict], tie_db: float = 2.0) -> dict:
-    """Per-model mean/median PSNR and dE2000 and pairwise wins/ties over materials.
+    """Per-model mean/median PSNR and dE2000 and pairwise wins/ties over materials, and the
+    median standard error of the models' PSNR (results with ``psnr_se``).
 
     Returns ``{"models": [...], "per_model": {name: {...}}, "wins": count_wins(...)}``.
     Materials where a model failed count as missing (NaN) for that model.
@@ -354,22 +471,26 @@ def summarize(results: Iterable[dict], tie_db: float = 2.0) -> dict:
                 names.append(m.get("name"))
     psnr = {n: np.full(len(results), np.nan) for n in names}
     de = {n: np.full(len(results), np.nan) for n in names}
+    se = {n: np.full(len(results), np.nan) for n in names}
     for i, r in enumerate(results):
         for m in _models(r):
             if _ok(m):
-                p, d = _num(m.get("psnr")), _num(m.get("mean_de2000"))
+                p, d, e = _num(m.get("psnr")), _num(m.get("mean_de2000")), _num(m.get("psnr_se"))
                 psnr[m["name"]][i] = np.nan if p is None else p
                 de[m["name"]][i] = np.nan if d is None else d
+                se[m["name"]][i] = np.nan if e is None else e
     per = {}
     for n in names:
         p, d = psnr[n], de[n]
         pf = p[~np.isnan(p)]  # +inf (an exact match) is kept: the mean is then +inf
         df = d[np.isfinite(d)]
+        ef = se[n][np.isfinite(se[n]) & np.isfinite(p)]
         per[n] = {"n": int(pf.size),
                   "mean_psnr": float(np.mean(pf)) if pf.size else None,
                   "median_psnr": float(np.median(pf)) if pf.size else None,
                   "mean_de2000": float(np.mean(df)) if df.size else None,
-                  "median_de2000": float(np.median(df)) if df.size else None}
+                  "median_de2000": float(np.median(df)) if df.size else None,
+                  "median_psnr_se": float(np.median(ef)) if ef.size else None}
     return {"models": names, "per_model": per, "wins": count_wins(psnr, tie_db) if names else {},
             "n_materials": len(results), "tie_db": tie_db}
 
@@ -382,18 +503,20 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
     names = summ["models"]
     parts = [f"<h1>{_e(title)}</h1>",
              f'<p class="note">{len(results)} material(s). Click a column header to sort. '
-             "PSNR (Bagher et al. 2016 §5) in dB, higher is better; dE2000 (mean over the "
-             "foreground), lower is better.</p>"]
+             "PSNR (Bagher et al. 2016 §5) in dB, higher is better (± its standard error, "
+             "when the comparison measured it); dE2000 (mean over the foreground), lower is "
+             "better.</p>"]
     # per-model summary
     rows = []
     for n in names:
         s = summ["per_model"][n]
         rows.append(f'<tr><td class="l">{_e(n)}</td>' + _td(s["n"], 0) + _td(s["mean_psnr"])
-                    + _td(s["median_psnr"]) + _td(s["mean_de2000"]) + _td(s["median_de2000"])
-                    + "</tr>")
+                    + _td(s["median_psnr"]) + _td(s.get("median_psnr_se"), 3)
+                    + _td(s["mean_de2000"]) + _td(s["median_de2000"]) + "</tr>")
     parts.append("<h2>Per model</h2><table class=\"sortable\" id=\"summary\"><thead><tr>"
                  "<th class=\"l\">model</th><th>materials</th><th>mean PSNR</th>"
-                 "<th>median PSNR</th><th>mean dE2000</th><th>median dE2000</th></tr></thead>"
+                 "<th>median PSNR</th><th>median standard error</th>"
+                 "<th>mean dE2000</th><th>median dE2000</th></tr></thead>"
                  "<tbody>" + "".join(rows) + "</tbody></table>")
     # wins/ties matrix
     if len(names) > 1:
@@ -413,7 +536,8 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
                      f"{summ['tie_db']:g} dB)</h2><table class=\"sortable\" id=\"wins\"><thead>"
                      f"<tr><th class=\"l\">model</th>{head}</tr></thead><tbody>"
                      + "".join(rows) + "</tbody></table>")
-    # per material
+    # per material (results of older versions may carry a noise floor instead of errors)
+    legacy_floor = any(_num(r.get("noise_floor_psnr")) is not None for r in results)
     head = "".join(f"<th>{_e(n)} PSNR</th><th>{_e(n)} dE</th>" for n in names)
     rows = []
     for r in results:
@@ -431,13 +555,15 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
                 cells.append('<td class="fail" data-sort="">' + (_e(m.get("status", "failed")) if m else "–") + "</td><td></td>")
                 continue
             cls = "best" if best is not None and _num(m.get("psnr")) == best else ""
-            cells.append(_td(m.get("psnr"), cls=cls) + _td(m.get("mean_de2000")))
+            cells.append(_td_pm(m, cls=cls) + _td(m.get("mean_de2000")))
         rows.append(f'<tr><td class="l">{thumb}</td><td class="l" data-sort="{_e(str(r.get("material", slug)).lower())}">'
                     + (f'<a href="{_e(_url(slug))}/index.html">{_e(r.get("material", slug))}</a></td>'
                        if _url(slug) else f'{_e(r.get("material", slug))}</td>')
-                    + _td(r.get("noise_floor_psnr")) + "".join(cells) + "</tr>")
+                    + (_td(r.get("noise_floor_psnr")) if legacy_floor else "")
+                    + "".join(cells) + "</tr>")
     parts.append("<h2>Materials</h2><table class=\"sortable\" id=\"materials\"><thead><tr>"
-                 "<th class=\"l\">reference</th><th class=\"l\">material</th><th>noise floor PSNR</th>"
+                 "<th class=\"l\">reference</th><th class=\"l\">material</th>"
+                 + ("<th>noise floor PSNR (old results)</th>" if legacy_floor else "")
                  + head + "</tr></thead><tbody>" + "".join(rows) + "</tbody></table>")
     path = out_dir / "index.html"
     with atomic_write(path, "w") as fh:

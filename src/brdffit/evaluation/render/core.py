@@ -365,11 +365,23 @@ class MultiRenderer:
         alpha_tex = roughness_texture() if self.spec.base == "sphere-svrough" else None
         self.integrator = crn_integrator([evs[k] for k in self.labels], proposal,
                                          self.spec.max_depth, alpha_tex)
+        self._sensors: dict = {}
         self.setup_seconds = time.perf_counter() - t0
 
-    def render(self, seed: int = 0, spp: int = 16) -> MultiRenderResult:
+    def render(self, seed: int = 0, spp: int = 16, crop=None) -> MultiRenderResult:
+        """Render every model in one pass; ``crop=(x0, y0, width, height)`` renders only that
+        window of the image (same pixels, e.g. to converge the reference's peak)."""
         t0, c0 = time.perf_counter(), time.process_time()
-        img = self.mi.render(self.scene, integrator=self.integrator, seed=int(seed), spp=int(spp))
+        kw = {}
+        if crop is not None:
+            from .scenes import _camera
+
+            crop = tuple(int(v) for v in crop)
+            if crop not in self._sensors:
+                self._sensors[crop] = self.mi.load_dict(_camera(self.resolution, 4, crop=crop))
+            kw["sensor"] = self._sensors[crop]
+        img = self.mi.render(self.scene, integrator=self.integrator, seed=int(seed), spp=int(spp),
+                             **kw)
         arr = np.array(img, dtype=np.float32)
         seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
         n = len(self.labels)
@@ -381,7 +393,7 @@ class MultiRenderer:
         info = {"scene": self.spec.name, "base": self.spec.base,
                 "envmap": self.spec.envmap if isinstance(self.spec.envmap, (str, type(None))) else "array",
                 "spp": int(spp), "seed": int(seed), "resolution": self.resolution,
-                "max_depth": self.spec.max_depth, "proposal": self.proposal.describe(),
+                "crop": crop, "max_depth": self.spec.max_depth, "proposal": self.proposal.describe(),
                 "evaluators": {k: describe_evaluator(self.evaluators[k]) for k in self.labels}}
         return MultiRenderResult(images, alpha, foreground_mask(alpha), seconds, cpu, info)
 

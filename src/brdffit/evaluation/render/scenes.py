@@ -203,15 +203,20 @@ def _read_envmap(spec: str) -> np.ndarray:
     return read_exr(path)
 
 
-def _camera(resolution: int, spp: int, distance: float = 4.2, fov: float = 30.0):
+def _camera(resolution: int, spp: int, distance: float = 4.2, fov: float = 30.0, crop=None):
+    """The scenes' camera; ``crop=(x0, y0, width, height)`` renders only that window of the
+    same film (same pixels and camera rays)."""
     mi, _ = _load()
+    film = {"type": "hdrfilm", "width": int(resolution), "height": int(resolution),
+            "rfilter": {"type": "box"}, "pixel_format": "rgba", "component_format": "float32"}
+    if crop is not None:
+        x0, y0, w, h = (int(v) for v in crop)
+        film |= {"crop_offset_x": x0, "crop_offset_y": y0, "crop_width": w, "crop_height": h}
     return {
         "type": "perspective", "fov": fov,
         "to_world": mi.ScalarTransform4f().look_at(origin=[0.0, 0.0, distance],
                                                    target=[0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0]),
-        "film": {"type": "hdrfilm", "width": int(resolution), "height": int(resolution),
-                 "rfilter": {"type": "box"}, "pixel_format": "rgba",
-                 "component_format": "float32"},
+        "film": film,
         "sampler": {"type": "independent", "sample_count": int(spp)},
     }
 
