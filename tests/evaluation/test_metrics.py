@@ -134,3 +134,98 @@ def test_prepared_brdf_metrics_match_direct_and_report_missing():
     assert bm.evaluate(ref)["cos_rel_error"] == 0.0
     # these stand-ins have no eval_hd: the grid objective is unavailable, and says why
     assert out["compressive_objective"] is None and "compressive_objective" in out["errors"]
+
+
+# ------------------------------------------------------------------------------------------
+# PSNR with standard error from batches rendered with common random numbers (issue 13)
+# ------------------------------------------------------------------------------------------
+class ToyRenderer:
+    """A NumPy stand-in for a CRN renderer: each "pixel" integrates ``f(x) L(x)`` over
+    x ∈ [0, 1] (a 1D direction) by importance sampling from a model-independent proposal
+    (uniform + a Gaussian around the pixel's lobe), the same samples for the reference lobe
+    (width 0.1) and the model (width ``w``); ``L`` has a narrow bright spot per pixel, so the
+    estimates are genuinely noisy. ``truth`` gives the converged images by quadrature."""
+
+    def __init__(self, pixels=64, w_model=0.105):
+        pix = np.random.default_rng(0)
+        self.mu = pix.uniform(0.2, 0.8, pixels)
+        self.c = pix.uniform(0.0, 1.0, pixels)
+        self.w = (0.1, w_model)
+
+    def f(self, x, w):
+        return np.exp(-((x - self.mu[:, None]) / w) ** 2) / (w * np.sqrt(np.pi)) + 0.2
+
+    def L(self, x):
+        return 1.0 + 20.0 * np.exp(-((x - self.c[:, None]) / 0.02) ** 2)
+
+    def pdf(self, x):
+        g = np.exp(-0.5 * ((x - self.mu[:, None]) / 0.1) ** 2) / (0.1 * np.sqrt(2 * np.pi))
+        return 0.3 * ((x >= 0) & (x <= 1)) + 0.7 * g
+
+    def render(self, seed, batches, n):
+        """``(reference, model)`` stacks ``(batches, P, 1, 3)``."""
+        rng = np.random.default_rng(seed)
+        P = self.mu.size
+        u = rng.random((P, batches * n))
+        x = np.where(rng.random((P, batches * n)) < 0.3, u,
+                     self.mu[:, None] + 0.1 * rng.standard_normal((P, batches * n)))
+        inside = (x >= 0) & (x <= 1)
+        out = []
+        for w in self.w:
+            v = np.where(inside, self.f(x, w) * self.L(x) / self.pdf(x), 0.0)
+            out.append(np.repeat(v.reshape(P, batches, n).mean(-1).T[:, :, None, None], 3, -1))
+        return out
+
+    def truth(self):
+        xs = np.linspace(0.0, 1.0, 20001)[None]
+        return [np.trapezoid(self.f(xs, w) * self.L(xs), xs, axis=-1) for w in self.w]
+
+
+def test_crn_psnr_standard_error_is_calibrated():
+    """Over independent repeats, the spread of the estimated PSNR matches the reported
+    standard error, and the estimate is unbiased (truth from quadrature, same peak)."""
+    toy = ToyRenderer()
+    tr, tm = toy.truth()
+    true = M.psnr_from_mse(tr.max(), np.mean((tm - tr) ** 2))
+    ps, ses, plain = [], [], []
+    for rep in range(300):
+        R, T = toy.render(rep + 1, batches=8, n=16)
+        r = M.crn_psnr(R, T, peak=tr.max())
+        ps.append(r["psnr"])
+        ses.append(r["psnr_se"])
+        plain.append(r["psnr_plain"])
+    ps = np.array(ps)
+    ratio = ps.std() / np.mean(ses)
+    assert 0.75 < ratio < 1.33, (ps.std(), np.mean(ses))
+    assert abs(ps.mean() - true) < 0.15 + 2 * ps.std() / np.sqrt(ps.size), (ps.mean(), true)
+    # the plain MSE of the batch means is biased (noise added): lower PSNR on average
+    assert np.mean(plain) < ps.mean() - 0.2
+
+
+def test_crn_psnr_edge_cases(rng):
+    ref = rng.random((4, 6, 6, 3)) + 0.5
+    r = M.crn_psnr(ref, ref.copy())
+    assert r["psnr"] == np.inf and r["psnr_se"] == 0.0 and r["bound"] is None
+    # a difference far below its own noise: not resolved → a lower bound
+    noise = rng.normal(0, 1e-3, ref.shape)
+    r = M.crn_psnr(ref, ref + noise)
+    assert r["bound"] == "lower" or not r["resolved"]
+    # one batch: PSNR of the single difference, no standard error
+    one = M.crn_psnr(ref[:1], ref[:1] + 0.01)
+    assert one["psnr_se"] != one["psnr_se"] and one["psnr"] == pytest.approx(
+        M.rendered_psnr(ref[0], ref[0] + 0.01), rel=1e-9)
+    # a constant offset: exact MSE, zero standard error
+    c = M.crn_psnr(ref, ref + 0.02, peak=2.0)
+    assert c["mse"] == pytest.approx(4e-4) and c["mse_se"] == pytest.approx(0.0, abs=1e-12)
+    assert c["psnr"] == pytest.approx(10 * np.log10(4.0 / 4e-4))
+    with pytest.raises(ValueError, match="shape"):
+        M.crn_psnr(ref, ref[:, :5])
+
+
+def test_combine_psnr_over_scenes():
+    c = M.combine_psnr([{"psnr": 30.0, "psnr_se": 0.3}, {"psnr": 40.0, "psnr_se": 0.4}])
+    assert c["psnr"] == 35.0 and c["psnr_se"] == pytest.approx(0.25) and c["bound"] is None
+    inf = M.combine_psnr([{"psnr": np.inf, "psnr_se": 0.0}] * 2)
+    assert inf["psnr"] == np.inf and inf["psnr_se"] == 0.0
+    low = M.combine_psnr([{"psnr": 30.0, "psnr_se": 0.3}, {"psnr": 50.0, "bound": "lower"}])
+    assert low["bound"] == "lower" and low["psnr"] == 40.0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from brdffit.evaluation.render.scenes import procedural_envmap, roughness_texture, torus_knot
 
@@ -39,3 +40,37 @@ def test_torus_knot_is_a_closed_outward_mesh():
 def test_roughness_texture_range():
     t = roughness_texture(64)
     assert t.shape == (64, 64) and t.min() > 0.2 and t.max() < 2.6 and t.max() / t.min() > 5
+
+
+def test_paper_scene_suite(shared_data):
+    """Bagher 2016 §5's four scenes: a sphere under three maps of increasing dynamic range
+    (measured here) and the knot mesh; exposures fixed per scene."""
+    from brdffit.evaluation.render.scenes import envmap_stats, scene_suite
+
+    shared_data("envmaps", "sunrise.exr")
+    specs, notes = scene_suite("paper")
+    assert [s.name for s in specs] == ["sphere-courtyard", "sphere-studio", "sphere-sunrise",
+                                       "knot-courtyard"] and notes == []
+    assert [s.base for s in specs] == ["sphere-env"] * 3 + ["knot"]
+    assert [s.max_depth for s in specs] == [2, 2, 2, 4]
+    stats = [envmap_stats(m) for m in ("courtyard", "studio", "sunrise")]
+    dec = [s["decades"] for s in stats]
+    assert dec[0] < dec[1] < dec[2] and dec[0] < 4.5 and dec[2] > 6.0
+    assert stats[0]["top_energy"] < 0.1 < 0.4 < stats[2]["top_energy"]
+    for s, st in zip(specs, stats):
+        assert s.exposure == pytest.approx(1.0 / st["mean"])
+
+
+def test_scene_suite_falls_back_without_envmaps(tmp_path, monkeypatch):
+    from brdffit.evaluation.render import scenes as S
+
+    monkeypatch.setattr(S, "ENVMAP_DIR", tmp_path)
+    specs, notes = S.scene_suite("paper")
+    assert [s.name for s in specs] == ["sphere-env", "knot"] and all(s.envmap is None for s in specs)
+    assert len(notes) == 1 and "procedural" in notes[0] and str(tmp_path) in notes[0]
+    one, _ = S.scene_suite("sphere-point,knot")
+    assert [s.name for s in one] == ["sphere-point", "knot"] and one[0].envmap is None
+    with pytest.raises(ValueError, match="no environment map"):
+        S.scene_spec("sphere-studio")
+    with pytest.raises(ValueError, match="unknown scene"):
+        S.scene_spec("teapot")

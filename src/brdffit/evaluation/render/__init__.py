@@ -3,6 +3,10 @@
 Public API (Mitsuba is imported lazily, on first use):
 
 * :func:`render` / :func:`render_ex` / :class:`Renderer` – image of any BRDF in a scene;
+* :class:`MultiRenderer` / :func:`render_models` – the reference and several models in one
+  pass with common random numbers (one model-independent :class:`Proposal` fitted to the
+  reference, :func:`proposal_for`), for comparisons with standard errors (issue 13);
+* :data:`SUITES`, :func:`scene_suite` – the paper's four-scene suite (Bagher 2016 §5);
 * :func:`noise_floor` – PSNR between two seeds (Monte Carlo noise level);
 * :func:`psnr`, :func:`foreground_mask` – Bagher 2016 §5 rendered PSNR;
 * :func:`to_evaluator`, :func:`register_translator` – BRDF → Dr.Jit translation layer;
@@ -35,7 +39,9 @@ __all__ = ["render", "render_ex", "Renderer", "RenderResult", "noise_floor", "ps
            "foreground_mask", "to_evaluator", "register_translator", "resampling_error",
            "make_bsdf", "BRDFBSDF", "scene_dict", "SCENES", "procedural_envmap", "load_envmap",
            "torus_knot", "roughness_texture", "envmap_names", "available", "MitsubaUnavailable",
-           "is_reciprocal", "describe_evaluator"]
+           "is_reciprocal", "describe_evaluator", "MultiRenderer", "MultiRenderResult",
+           "render_models", "Proposal", "proposal_for", "SUITES", "scene_suite",
+           "envmap_stats"]
 
 _LAZY = {
     "render": ".core", "render_ex": ".core", "Renderer": ".core", "RenderResult": ".core",
@@ -46,7 +52,10 @@ _LAZY = {
     "make_bsdf": ".plugin", "BRDFBSDF": ".plugin",
     "scene_dict": ".scenes", "SCENES": ".scenes", "procedural_envmap": ".scenes",
     "load_envmap": ".scenes", "torus_knot": ".scenes", "roughness_texture": ".scenes",
-    "envmap_names": ".scenes",
+    "envmap_names": ".scenes", "SUITES": ".scenes", "scene_suite": ".scenes",
+    "envmap_stats": ".scenes",
+    "MultiRenderer": ".core", "MultiRenderResult": ".core", "render_models": ".core",
+    "Proposal": ".proposal", "proposal_for": ".proposal",
 }
 
 
