@@ -15,6 +15,17 @@ Figures (per model, 256×256 sphere at 256 spp under an environment map, target 
   weighted relative L1 / L2 / albedo error of the Dr.Jit evaluator vs ``brdf.eval``);
 * for fits: ``psnr_vs_reference`` (same seed as the reference's first render).
 
+``--crn`` (issue 13) measures instead, and writes ``bench/results/render_crn.json``:
+
+* the dynamic range of the eight CC0 environment maps (:func:`envmap_stats`: max/median,
+  decades between the max and the 1st percentile, energy share of the brightest 0.1 %), which
+  justifies the paper suite's choice of courtyard / studio / sunrise;
+* on ``synthetic:gold-ggx``, the tabulated and GGX fits (``brdffit.fit_tabulated`` /
+  ``fit_ggx``, fit time excluded) compared on the paper's four scenes at 256² with common
+  random numbers: PSNR ± standard error per scene and mean (target ≥ 55 dB, se ≤ 0.5 dB);
+  and, for contrast, the former protocol (each model with its own sampler, same seed,
+  sphere under the studio map, 256 spp).
+
 Timings depend on machine load (shared 2-core machine during development): re-run to update.
 """
 
@@ -98,6 +109,110 @@ def _scene_timings(args):
     return out
 
 
+def _crn_figures(args) -> dict:
+    """Issue 13 figures: envmap dynamic range; gold-ggx tabulated / GGX fits, PSNR ± se."""
+    import tempfile
+
+    import brdffit
+    from brdffit.evaluation.compare import compare
+    from brdffit.evaluation.render import Renderer, envmap_names, envmap_stats, psnr
+
+    out = {"machine": {"cpus": os.cpu_count(), "platform": platform.platform(),
+                       "load_avg_start": os.getloadavg()},
+           "settings": {"resolution": args.resolution, "spp": args.crn_spp,
+                        "batches": args.crn_batches, "scenes": "paper"}}
+    out["envmaps"] = {n: envmap_stats(n) for n in envmap_names()}
+    for n, st in out["envmaps"].items():
+        print(f"  {n:<10} max {st['max']:9.1f}  max/median {st['max_over_median']:9.0f}  "
+              f"decades {st['decades']:.2f}  top-0.1% energy {st['top_energy']:.2f}")
+    ref = brdffit.load("synthetic:gold-ggx")
+    fits = {}
+    for name, fn in (("tabulated", brdffit.fit_tabulated), ("ggx", brdffit.fit_ggx)):
+        t0 = time.perf_counter()
+        fits[name] = fn(ref)
+        out.setdefault("fit_seconds", {})[name] = time.perf_counter() - t0
+    with tempfile.TemporaryDirectory() as tmp:
+        t0, c0 = time.perf_counter(), time.process_time()
+        res = compare(ref, fits, tmp, spp=args.crn_spp, batches=args.crn_batches,
+                      resolution=args.resolution, brdf_metrics=("cos_rel_error",),
+                      progress=lambda m: print(f"  [{time.perf_counter() - t0:6.1f} s] {m}",
+                                               flush=True))
+        out["compare_seconds"], out["compare_cpu_seconds"] = (time.perf_counter() - t0,
+                                                              time.process_time() - c0)
+    out["scenes"] = [{k: s.get(k) for k in ("name", "envmap", "exposure", "render_seconds",
+                                            "render_cpu_seconds")}
+                     | {"peak": s["reference"]["peak"],
+                        "peak_psnr_se": s["reference"].get("peak_psnr_se"),
+                        "peak_batches_only": s["reference"].get("peak_batches_only")}
+                     for s in res["scenes"]]
+    out["gold_ggx"] = {}
+    for m in res["models"]:
+        rec = {k: m.get(k) for k in ("psnr", "psnr_se", "psnr_se_mse", "mean_de2000")}
+        rec["cos_rel_error"] = (m.get("brdf") or {}).get("cos_rel_error")
+        rec["scenes"] = [{k: e.get(k) for k in ("scene", "psnr", "psnr_se", "psnr_se_mse",
+                                                "noise_mse", "mse", "resolved")}
+                         for e in m["scenes"]]
+        rec["meets_target"] = bool(m["psnr"] >= 55.0 and m["psnr_se"] <= 0.5)
+        out["gold_ggx"][m["name"]] = rec
+        print(f"  gold-ggx {m['name']:<10} PSNR {m['psnr']:7.2f} ± {m['psnr_se']:.3f} dB  ("
+              + ", ".join(f"{e['scene']} {e['psnr']:.2f} ± {e['psnr_se']:.3f}" for e in m["scenes"])
+              + ")")
+    # the former protocol: own sampling, same seed, one scene
+    env = "studio" if "studio" in envmap_names() else None
+    a = Renderer(ref, scene="sphere-env", envmap=env, spp=256, resolution=args.resolution).render(0)
+    out["former_protocol"] = {"scene": "sphere-env", "envmap": env, "spp": 256,
+                              "note": "each model with its own importance sampling, same seed "
+                                      "(PSNR limited by the Monte Carlo noise unless the "
+                                      "samplers coincide)"}
+    for name, model in fits.items():
+        b = Renderer(model, scene="sphere-env", envmap=env, spp=256,
+                     resolution=args.resolution).render(0)
+        out["former_protocol"][name] = psnr(a.image, b.image, a.mask)
+        print(f"  former protocol {name:<10} {out['former_protocol'][name]:.2f} dB")
+    out["validation"] = _crn_validation()
+    out["machine"]["load_avg_end"] = os.getloadavg()
+    return out
+
+
+def _crn_validation(resolution: int = 96, batches: int = 8, spp: int = 32) -> list:
+    """Unbiasedness check of the CRN estimate: the same U-statistic MSE computed from the
+    models rendered with *independent* seeds (no common random numbers: unbiased too, only
+    much noisier) must agree within the combined standard error. Fits of a Neural-BRDF
+    material made here (GGX, NPF bivariate), sphere-studio and knot-courtyard."""
+    import brdffit
+    from brdffit.evaluation.metrics import crn_psnr
+    from brdffit.evaluation.render import MultiRenderer, envmap_names
+    from brdffit.fit.registry import fit_model
+
+    if not NBRDF.exists() or "studio" not in envmap_names():
+        return []
+    ref = brdffit.load(f"{NBRDF}:gold-metallic-paint")
+    models = {"ref": ref}
+    for name in ("ggx", "npf-bivariate"):
+        models[name], _ = fit_model(name, ref, None)
+    rows = []
+    for scene in ("sphere-studio", "knot-courtyard"):
+        mr = MultiRenderer(models, scene=scene, resolution=resolution, reference=ref)
+        A = [mr.render(1000 + k, spp) for k in range(batches)]
+        B = [mr.render(5000 + k, spp) for k in range(batches)]
+        mask = np.mean([r.alpha for r in A], 0) >= 0.999
+        R = np.stack([r.images["ref"] for r in A])
+        peak = float(R.mean(0)[mask].max())
+        for k in models:
+            if k == "ref":
+                continue
+            crn = crn_psnr(R, np.stack([r.images[k] for r in A]), mask, peak=peak)
+            ind = crn_psnr(R, np.stack([r.images[k] for r in B]), mask, peak=peak)
+            z = (crn["psnr"] - ind["psnr"]) / np.hypot(crn["psnr_se"], ind["psnr_se"])
+            rows.append({"scene": scene, "model": k, "crn": [crn["psnr"], crn["psnr_se"]],
+                         "independent": [ind["psnr"], ind["psnr_se"]],
+                         "independent_plain": ind["psnr_plain"], "z": z})
+            print(f"  validation {scene:<15} {k:<14} CRN {crn['psnr']:.2f} ± {crn['psnr_se']:.3f}"
+                  f" | independent seeds {ind['psnr']:.2f} ± {ind['psnr_se']:.3f} (noise-biased "
+                  f"{ind['psnr_plain']:.2f}) z {z:+.2f}", flush=True)
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--materials", nargs="*", default=None)
@@ -113,8 +228,14 @@ def main(argv=None) -> int:
                     help="time every scene of SCENES with this BRDF ('' to skip)")
     ap.add_argument("--only-scenes", action="store_true",
                     help="only the per-scene timings (merged into an existing --out file)")
-    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "render.json"))
+    ap.add_argument("--out", default=None)
+    ap.add_argument("--crn", action="store_true",
+                    help="issue 13 figures (envmaps, gold-ggx PSNR ± se) → render_crn.json")
+    ap.add_argument("--crn-spp", type=int, default=64)
+    ap.add_argument("--crn-batches", type=int, default=8)
     args = ap.parse_args(argv)
+    if args.out is None:
+        args.out = str(ROOT / "bench" / "results" / ("render_crn.json" if args.crn else "render.json"))
     if args.quick:
         args.spp, args.resolution = 32, 64
     from brdffit.evaluation.render import available, envmap_names
@@ -122,6 +243,15 @@ def main(argv=None) -> int:
     if not available():
         print("Mitsuba 3 LLVM back-end unavailable: nothing to benchmark", file=sys.stderr)
         return 1
+    if args.crn:
+        results = _crn_figures(args)
+        from brdffit._atomic import atomic_write
+        from brdffit.evaluation.report import _clean
+
+        with atomic_write(args.out, "w") as fh:
+            json.dump(_clean(results), fh, indent=1, default=float)
+        print(f"wrote {args.out}")
+        return 0
     if args.envmap not in envmap_names() and not Path(args.envmap).is_file():
         print(f"envmap {args.envmap!r} not found; using the procedural environment")
         args.envmap = None

@@ -26,6 +26,14 @@ than the 2 dB tie margin are listed):
 
     .venv/bin/python bench/bench_report.py --from-batch runs/merl-full,runs/rgl-full
 
+``--crn-speed`` (issue 13): time of the four-scene comparison (the paper suite, 256², common
+random numbers, default spp and batches) of one material with all eight models, *fits
+excluded*: the fits are loaded from ``--fits-dir`` (made there first, untimed, when missing).
+Wall and CPU time (the machine is shared) and the load average; per-phase timings; the PSNR
+± standard error of every model. Writes ``bench/results/report_crn.json``.
+
+    .venv/bin/python bench/bench_report.py --crn-speed [--material merl_nbrdf.zip:gold-metallic-paint]
+
 Timings on a shared machine are pessimistic; re-run to update the figures.
 """
 
@@ -128,6 +136,77 @@ def bench_single(args) -> dict:
               f"  dE {r['mean_de2000'] if r['mean_de2000'] is not None else float('nan'):5.2f}"
               + (f"  ({r['error']})" if r.get("error") else ""))
     write_json(RESULTS / "report.json", fig)
+    return fig
+
+
+ALL_MODELS = ["tabulated", "ggx", "beckmann", "sgd", "npf", "npf-g-from-d", "npf-naive",
+              "npf-bivariate"]
+
+
+def bench_crn_speed(args) -> dict:
+    from brdffit.evaluation.compare import compare, resolve_reference
+    from brdffit.evaluation.report import slugify
+    from brdffit.fit.registry import fit_model
+    from brdffit.io.fitfile import save_fit
+
+    models = args.models.split(",") if args.models else ALL_MODELS
+    spec = args.material if Path(args.material.split(":")[0]).exists() else \
+        str(SHARED / "nbrdf" / args.material)
+    ref = resolve_reference(spec)
+    fdir = Path(args.fits_dir) / slugify(ref.name)
+    fdir.mkdir(parents=True, exist_ok=True)
+    fit_seconds = {}
+    for m in models:
+        path = fdir / f"{m}.npz"
+        if not path.is_file():
+            print(f"  fitting {m} (not timed)", flush=True)
+            t0 = time.perf_counter()
+            model, _ = fit_model(m, ref, None)
+            save_fit(model, path)
+            fit_seconds[m] = time.perf_counter() - t0
+    out = Path(args.out or "/tmp/brdffit-bench-crn")
+    spp = args.spp
+    runs = []
+    for rep in range(args.repeats):
+        ref = resolve_reference(spec)   # a fresh object: nothing cached from the last run
+        la0 = os.getloadavg()
+        t0, c0 = time.perf_counter(), time.process_time()
+        res = compare(ref, {m: str(fdir / f"{m}.npz") for m in models}, out,
+                      resolution=args.resolution, spp=spp, batches=args.batches,
+                      progress=lambda msg: print(f"  [{time.perf_counter() - t0:6.1f} s] {msg}",
+                                                 flush=True))
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        runs.append({"wall_seconds": wall, "cpu_seconds": cpu, "load_avg_before": la0,
+                     "load_avg_after": os.getloadavg(), "timing": res["timing"],
+                     "scenes": [{k: s.get(k) for k in ("name", "render_seconds",
+                                                       "render_cpu_seconds", "peak_seconds",
+                                                       "peak_cpu_seconds")}
+                                for s in res["scenes"]]})
+        print(f"run {rep + 1}: {wall:.1f} s wall, {cpu:.1f} s CPU (load {la0[0]:.1f} → "
+              f"{os.getloadavg()[0]:.1f}); renders {res['timing']['render_seconds']:.1f} s wall, "
+              f"{res['timing']['render_cpu_seconds']:.1f} s CPU", flush=True)
+    rows = []
+    for m in res["models"]:
+        rows.append({"name": m["name"], "status": m["status"], "psnr": m.get("psnr"),
+                     "psnr_se": m.get("psnr_se"), "psnr_se_mse": m.get("psnr_se_mse"),
+                     "mean_de2000": m.get("mean_de2000"),
+                     "scenes": [{k: e.get(k) for k in ("scene", "psnr", "psnr_se")}
+                                for e in m.get("scenes", [])]})
+        if m["status"] == "ok":
+            print(f"  {m['name']:>14}: {m['psnr']:6.2f} ± {m['psnr_se']:.3f} dB  "
+                  + "  ".join(f"{e['scene']} {e['psnr']:.2f}" for e in m["scenes"]))
+    best = min(runs, key=lambda r: r["wall_seconds"])
+    fig = {"benchmark": "four-scene CRN comparison, 8 models, fits loaded (excluded)",
+           "material": spec, "models": models, "resolution": args.resolution, "spp": spp,
+           "batches": args.batches, "scenes": [s["name"] for s in res["scenes"]],
+           "runs": runs, "target_seconds": 120.0,
+           "meets_target_wall": best["wall_seconds"] <= 120.0,
+           "cpu_seconds_best": min(r["cpu_seconds"] for r in runs),
+           "note": "cpu_seconds is the process CPU time of all threads (the machine is shared "
+                   "by several sessions: wall time depends on the load average recorded)",
+           "fit_seconds_untimed": fit_seconds, "per_model": rows,
+           "report": str(out / "index.html"), "machine": machine()}
+    write_json(RESULTS / "report_crn.json", fig)
     return fig
 
 
@@ -292,9 +371,18 @@ def main(argv=None) -> int:
     ap.add_argument("--limit", type=int, default=None)
     ap.add_argument("--noise-floor", action=argparse.BooleanOptionalAction, default=False)
     ap.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True)
+    ap.add_argument("--crn-speed", action="store_true",
+                    help="time the 8-model four-scene comparison with fits loaded")
+    ap.add_argument("--fits-dir", default="/tmp/brdffit-bench-fits")
+    ap.add_argument("--batches", type=int, default=8)
+    ap.add_argument("--repeats", type=int, default=2)
     args = ap.parse_args(argv)
     RESULTS.mkdir(parents=True, exist_ok=True)
-    if args.from_batch:
+    if args.crn_speed:
+        if args.resolution == 128:
+            args.resolution = 256
+        bench_crn_speed(args)
+    elif args.from_batch:
         bench_from_batch(args)
     else:
         (bench_database if args.database else bench_single)(args)
