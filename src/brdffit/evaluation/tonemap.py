@@ -14,6 +14,13 @@ same point of the curve as the paper's typical pixel (``x·exposure = 1``, i.e. 
 0.5^(1/2.2) ≈ 0.73 before quantisation). Use one exposure per scene (computed on the
 reference) for all models so that images stay comparable. Deviation documented here:
 ``exposure="auto"`` is a brdffit convenience, not part of the paper.
+
+Comparisons (:func:`brdffit.evaluation.compare.compare`, issue 13) use the paper's *fixed*
+operator by default: one exposure per *scene*, independent of the material, as the paper
+fixes 0.02 (1 for its dark Ennis map) for all its renderings. Ours is
+:func:`brdffit.evaluation.render.scenes.scene_exposure`, ``1 / mean radiance`` of the scene's
+environment map (the same normalisation as above: a grey Lambertian of albedo ρ maps to
+``x·exposure ≈ ρ``), with γ = 2.2; darker materials therefore look darker, as in the paper.
 """
 
 from __future__ import annotations

@@ -84,7 +84,7 @@ class Renderer:
 
         self.mi, self.dr = load()
         from .plugin import make_bsdf
-        from .scenes import roughness_texture, scene_dict
+        from .scenes import SCENES, roughness_texture, scene_dict
         from .translate import to_evaluator
 
         t0 = time.perf_counter()
@@ -110,6 +110,10 @@ class Renderer:
         self.bsdf = make_bsdf(evaluator, alpha_texture=alpha_texture, proposal=proposal)
         self.scene_name, self.spp, self.resolution = scene, int(spp), int(resolution)
         self.envmap = envmap
+        if envmap is None and scene not in SCENES:  # a suite name carries its map
+            from .scenes import scene_spec
+
+            self.envmap = scene_spec(scene).envmap
         self.scene = self.mi.load_dict(scene_dict(self.bsdf, scene, envmap, spp, resolution))
         self.setup_seconds = time.perf_counter() - t0
 
