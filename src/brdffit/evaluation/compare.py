@@ -203,10 +203,12 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
         compute (:class:`.metrics.BRDFMetrics`; the reference is prepared once).
 
     Returns the result dict that is also written to ``out_dir/<slug>/result.json``: per model
-    ``psnr`` (mean over scenes, dB), ``psnr_se`` (its standard error, dB), ``scenes`` (per
+    ``psnr`` (mean over scenes, dB), ``psnr_se`` (its standard error, dB, including the
+    reference peak's residual uncertainty; ``psnr_se_mse`` without it), ``scenes`` (per
     scene: ``psnr``, ``psnr_se``, ``mse``, ``mse_se``, … of :func:`.metrics.crn_psnr`, mean
     dE2000 and the pictures), and a top-level ``scenes`` list (name, map, exposure, reference
-    picture, render times).
+    picture and converged peak, render times); ``proposal`` (the sampling mixture fitted to
+    the reference) and ``timing``.
     """
     from .render.scenes import scene_suite
 
@@ -303,6 +305,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
         result["proposal"] = engine.proposal.as_dict()
     else:
         engine = _CallbackEngine(renderer, reference, {k: fitted[k] for k in ok_labels}, ropts)
+    ok_labels = list(engine.labels)   # without the models whose translation failed
     result["scenes"] = []
     per_model_scenes: dict[str, list] = {k: [] for k in ok_labels}
     write_all_exr = write_exr is True
@@ -394,7 +397,10 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
     result["estimator"] = ("crn-u-statistic-jackknife: per scene, MSE of (model − reference) "
                            "from batches rendered with common random numbers, unbiased "
                            "U-statistic over pairs of batches, jackknife standard error, delta "
-                           "method to dB; psnr = mean over scenes, psnr_se = sqrt(Σ se²)/S")
+                           "method to dB, plus the converged reference peak's residual "
+                           "uncertainty (psnr_se_mse: without it, the part that separates two "
+                           "models of this comparison); psnr = mean over scenes, "
+                           "psnr_se = sqrt(Σ se²)/S")
 
     # ---- per-model summary over scenes, BRDF-space metrics ---------------------------
     bm = None
