@@ -136,15 +136,16 @@ class Task:
 
 @dataclasses.dataclass(frozen=True)
 class RenderSettings:
-    """The render stage of a batch: scene, samples per pixel, image size, seed, and whether
-    to render the reference twice to measure the Monte Carlo noise floor (as
-    :func:`brdffit.evaluation.compare.compare`, whose defaults are the report's settings)."""
+    """The render stage of a batch: the scenes (a suite name such as ``"paper"``, one scene
+    name or a comma-separated list), samples per pixel per scene (all batches together), the
+    number of independent batches (for the standard error), image size and seed — as
+    :func:`brdffit.evaluation.compare.compare`, whose defaults these are."""
 
-    scene: str = "sphere-env"
+    scenes: str = "paper"
     spp: int = 64
-    resolution: int = 128
+    resolution: int = 256
     seed: int = 0
-    noise_floor: bool = True
+    batches: int = 8
 
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -467,8 +468,9 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
         record["missing_fits"] = missing
         st = task.settings
         result = compare(load(task.spec), models, out / "report", name=task.material,
-                         scene=st.scene, spp=st.spp, resolution=st.resolution, seed=st.seed,
-                         noise_floor=st.noise_floor, save_fits=False, update_index=False,
+                         scenes=st.scenes, spp=st.spp, batches=st.batches,
+                         resolution=st.resolution, seed=st.seed, save_fits=False,
+                         update_index=False,
                          brdf_metrics=() if len(fit_metrics) == len(models) else BRDFMetrics.ALL)
         if len(fit_metrics) == len(models):  # the fit tasks measured them already: reuse
             for m in result["models"]:
@@ -476,9 +478,11 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
             write_result(out / "report" / result["slug"], result)
             write_material_page(out / "report", result)
         record["report_page"] = f"report/{result['slug']}/index.html"
-        record["noise_floor_psnr"] = result.get("noise_floor_psnr")
+        record["scenes"] = [sc.get("name", sc) if isinstance(sc, dict) else sc
+                            for sc in result.get("scenes", [])]
         record["models"] = {m["name"]: {k: m.get(k) for k in ("status", "error", "psnr",
-                                                                "mean_de2000", "render_time")}
+                                                                "psnr_se", "mean_de2000",
+                                                                "render_time")}
                             for m in result["models"]}
         failed = [n for n, m in record["models"].items() if m["status"] != "ok"]
         record["status"] = "failed" if failed else "ok"

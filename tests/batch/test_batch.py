@@ -56,7 +56,7 @@ def test_render_stage_writes_a_report_and_resumes(tmp_path):
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "brdffit", "batch", "synthetic:gold-ggx,plastic-beckmann",
            "--out", str(out), "--workers", "2", "--quiet", "--render", "--spp", "4",
-           "--resolution", "24", "--no-noise-floor"]
+           "--batches", "4", "--resolution", "24", "--scenes", "sphere-env,knot"]
     log = subprocess.run(cmd + ["--models", "ggx"], check=True, timeout=300,
                          capture_output=True, text=True)
     assert "2 fit + 2 render tasks: 4 run (0 failed)" in log.stdout
@@ -65,7 +65,8 @@ def test_render_stage_writes_a_report_and_resumes(tmp_path):
     for rec in renders.values():
         assert rec["status"] == "ok" and rec["missing_fits"] == []
         assert np.isfinite(rec["models"]["ggx"]["psnr"])
-    # the GGX fit of a GGX material renders like its reference (same sample streams)
+        assert rec["models"]["ggx"]["psnr_se"] >= 0 and rec["scenes"] == ["sphere-env", "knot"]
+    # the GGX fit of a GGX material renders like its reference (common random numbers)
     assert renders["gold-ggx"]["models"]["ggx"]["psnr"] > 40
     index = out / "report" / "index.html"
     assert index.is_file() and missing_links(index) == []

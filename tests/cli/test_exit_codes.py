@@ -52,7 +52,7 @@ def test_bad_values_are_usage_errors(tmp_path, capsys):
     assert main(["batch", "synthetic:gold-ggx", "--models", "ggx", "--out", str(tmp_path / "o"),
                  "--memory-limit", "lots"]) == 2
     assert main(["batch", "synthetic:gold-ggx", "--models", "ggx", "--out", str(tmp_path / "o"),
-                 "--render", "--scene", "nope"]) == 2
+                 "--render", "--scenes", "nope"]) == 2
     assert main(["render", "synthetic:gold-ggx", "-o", str(tmp_path / "x.jpg")]) == 2
     assert main(["convert", "synthetic:gold-ggx", str(tmp_path / "x.png")]) == 2
     assert not any(tmp_path.iterdir())

@@ -38,12 +38,16 @@ def register(app: typer.Typer) -> None:
         render: bool = typer.Option(False, "--render",
                                     help="Also render every material and its fits (Mitsuba 3) "
                                          "and write the HTML report to OUT/report/."),
-        scene: str = typer.Option("sphere-env", "--scene", help="--render: scene."),
-        spp: int = typer.Option(64, "--spp", min=1, help="--render: samples per pixel."),
-        resolution: int = typer.Option(128, "--resolution", min=8, help="--render: image size."),
-        noise_floor: bool = typer.Option(True, "--noise-floor/--no-noise-floor",
-                                         help="--render: render the reference twice to "
-                                              "measure the Monte Carlo noise floor."),
+        scenes: str = typer.Option("paper", "--scenes",
+                                   help="--render: the scene suite 'paper' (Bagher 2016 §5: a "
+                                        "sphere under three environment maps and a knot), one "
+                                        "scene or a comma-separated list."),
+        spp: int = typer.Option(64, "--spp", min=1,
+                                help="--render: samples per pixel per scene, all batches."),
+        batches: int = typer.Option(8, "--batches", min=1,
+                                    help="--render: independent batches per scene (the PSNR "
+                                         "standard error needs ≥ 3)."),
+        resolution: int = typer.Option(256, "--resolution", min=8, help="--render: image size."),
         retry_failed: bool = typer.Option(False, "--retry-failed",
                                           help="Redo tasks recorded as failed."),
         wait_lock: bool = typer.Option(False, "--wait-lock",
@@ -75,18 +79,19 @@ def register(app: typer.Typer) -> None:
                 raise usage_error("--memory-limit", f"expected a size such as 8GiB, found "
                                                     f"{memory_limit!r}") from None
         if render:
-            from ..evaluation.render.scenes import SCENES
+            from ..evaluation.render.scenes import scene_suite
 
-            if scene not in SCENES:
-                raise usage_error("--scene", f"expected one of {', '.join(SCENES)}, "
-                                             f"found {scene!r}")
+            try:
+                scene_suite(scenes)
+            except (ValueError, KeyError) as exc:
+                raise usage_error("--scenes", str(exc).strip("'\"")) from None
         materials = enumerate_materials(source, only=[s for s in only.split(",") if s] or None,
                                         limit=limit or None)
         tasks = make_tasks(materials, model_list)
         try:
             result = run_batch(tasks, out, scheduler=scheduler or None, workers=workers,
                                memory_limit=memory_limit or None, metrics=not no_metrics,
-                               render=RenderSettings(scene, spp, resolution, 0, noise_floor)
+                               render=RenderSettings(scenes, spp, resolution, 0, batches)
                                if render else None, retry_failed=retry_failed,
                                progress=not quiet, retries=retries, wait_lock=wait_lock)
         except OutputLocked as exc:
