@@ -98,7 +98,8 @@ def run(alphas, thetas, n_drjit, n_python, python_side=True, stratified=True, lo
                 if q is None:
                     q = albedo_quadrature(brdf.eval, t)
                 r = FurnaceResult(t, est, se, q)
-                rows.append({"side": "python", "translator": f"python:{type(brdf).__name__}",
+                rows.append({"side": "python", "translator": f"python:{name}",
+                             "class": type(brdf).__name__,
                              "model": name, "alpha": a, "theta_i": deg,
                              "estimate": est.tolist(), "se": se.tolist(),
                              "quadrature": q.tolist(), "rel_error": float(r.rel_error.max()),
