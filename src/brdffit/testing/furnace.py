@@ -135,22 +135,28 @@ def albedo_sampled(brdf, theta_i: float, n: int = 1 << 18, seed: int = 0,
         return estimator_values(np.asarray(brdf.eval(wi, wo), np.float64), wo,
                                 np.asarray(pdf, np.float64))
 
+    return sample_mean(values, rng, n, 2, batch=batch, stratified=stratified, batches=batches)
+
+
+def sample_mean(values, rng, n: int, dims: int, *, batch: int = 1 << 18,
+                stratified: bool = False, batches: int = 16) -> tuple[np.ndarray, np.ndarray]:
+    """Mean and standard error (RGB) of ``values(u)`` over ``n`` uniforms ``u`` in
+    ``[0, 1)^dims``: i.i.d. in chunks of ``batch``, or ``batches`` independent batches of
+    jittered-grid uniforms (:func:`stratified_uniforms`) with the standard error of the batch
+    means. Shared by the Python and the Dr.Jit furnace estimators."""
     if stratified:
-        u = np.stack([stratified_uniforms(rng, n // batches, 2) for _ in range(batches)])
-        means = values(u.reshape(-1, 2)).reshape(batches, -1, 3).mean(1)
+        u = np.stack([stratified_uniforms(rng, n // batches, dims) for _ in range(batches)])
+        means = values(u.reshape(-1, dims)).reshape(batches, -1, 3).mean(1)  # one launch
         return means.mean(0), means.std(0, ddof=1) / np.sqrt(batches)
-    s1 = np.zeros(3)
-    s2 = np.zeros(3)
-    done = 0
+    s1, s2, done = np.zeros(3), np.zeros(3), 0
     while done < n:
         m = min(batch, n - done)
-        val = values(rng.random((m, 2)))
+        val = values(rng.random((m, dims)))
         s1 += val.sum(0)
         s2 += (val * val).sum(0)
         done += m
     mean = s1 / n
-    var = np.maximum(s2 / n - mean**2, 0.0)
-    return mean, np.sqrt(var / max(n - 1, 1))
+    return mean, np.sqrt(np.maximum(s2 / n - mean**2, 0.0) / max(n - 1, 1))
 
 
 def estimator_values(f, wo, pdf) -> np.ndarray:

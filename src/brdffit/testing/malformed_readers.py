@@ -802,6 +802,11 @@ def _(folder):
 @_case("nbrdf-h5-virtual-dataset", "nbrdf-h5", _H, "virtual")
 def _(folder):
     """The kernel is a virtual dataset (VDS) mapping another file by absolute path."""
+    return _h5_with(folder, dataset=_flip_h5_dataset(_virtual_kernel(folder)))
+
+
+def _virtual_kernel(folder: Path):
+    """A dataset maker whose kernel is a VDS mapping ``folder/other.h5`` by absolute path."""
     import h5py
 
     other = folder / "other.h5"
@@ -812,7 +817,7 @@ def _(folder):
         layout = h5py.VirtualLayout(shape=d.shape, dtype=d.dtype)
         layout[:] = h5py.VirtualSource(str(other), "k", shape=d.shape)
         g.create_virtual_dataset(n, layout)
-    return _h5_with(folder, dataset=_flip_h5_dataset(make))
+    return make
 
 
 @_case("nbrdf-h5-unknown-filter", "nbrdf-h5", _H, "filter")
@@ -1056,18 +1061,8 @@ def _(folder):
 
 @_case("nbrdf-zip-virtual-dataset", "nbrdf-zip", _Z, "virtual")
 def _(folder):
-    import h5py
-
-    other = folder / "other.h5"
-    with h5py.File(other, "w") as f:
-        f["k"] = np.full((6, 21), 0.25, np.float32)
-
-    def make(g, n, d):
-        layout = h5py.VirtualLayout(shape=d.shape, dtype=d.dtype)
-        layout[:] = h5py.VirtualSource(str(other), "k", shape=d.shape)
-        g.create_virtual_dataset(n, layout)
     write_collection(folder / _Z, [("coll/gold.h5", network_h5_bytes(
-        dataset=_flip_h5_dataset(make)))])
+        dataset=_flip_h5_dataset(_virtual_kernel(folder))))])
     return _zip_spec(folder)
 
 

@@ -330,7 +330,7 @@ def albedo_drjit(evaluator, theta_i: float, n: int = 1 << 20, seed: int = 0,
     0. Returns ``(mean, standard error)``, RGB (:mod:`brdffit.testing.furnace`).
     ``stratified``: ``batches`` independent batches of jittered-grid uniforms in
     ``[0, 1)³`` (lobe choice ``u1`` and direction ``u2``), standard error of the batch means."""
-    from ...testing.furnace import estimator_values, stratified_uniforms
+    from ...testing.furnace import estimator_values, sample_mean
 
     dj = _dj()
     mi = dj.mi
@@ -345,19 +345,7 @@ def albedo_drjit(evaluator, theta_i: float, n: int = 1 << 20, seed: int = 0,
         f = dj.to_numpy(evaluator.eval(wi, wo, alpha_scale, True))
         return estimator_values(f, dj.to_numpy(wo), dj.to_numpy(pdf))
 
-    if stratified:
-        u = np.stack([stratified_uniforms(rng, n // batches, 3) for _ in range(batches)])
-        means = values(u.reshape(-1, 3)).reshape(batches, -1, 3).mean(1)   # one kernel launch
-        return means.mean(0), means.std(0, ddof=1) / np.sqrt(batches)
-    s1, s2, done = np.zeros(3), np.zeros(3), 0
-    while done < n:
-        m = min(batch, n - done)
-        val = values(rng.random((m, 3)))
-        s1 += val.sum(0)
-        s2 += (val * val).sum(0)
-        done += m
-    mean = s1 / n
-    return mean, np.sqrt(np.maximum(s2 / n - mean**2, 0.0) / max(n - 1, 1))
+    return sample_mean(values, rng, n, 3, batch=batch, stratified=stratified, batches=batches)
 
 
 def furnace_drjit(evaluator, thetas_deg=(0.0, 40.0, 80.0), n: int = 1 << 20, seed: int = 0,
