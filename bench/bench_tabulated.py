@@ -10,6 +10,10 @@ Sections (all re-runnable; timings depend on the machine's load):
 * ``round_trip``: synthetic GGX/Beckmann microfacet BRDFs (height-correlated G2) → fit →
   Appendix C conversion. ``hotspot="G2"`` (consistent with the synthetic) and the paper's
   ``"G1"`` are both reported.
+* ``defaults`` (issue 15): the same round trip through the public ``fit_ggx``/``fit_beckmann``
+  with NO option (converged by default) next to the paper's ``iterations=4``, and CPU times
+  (``time.process_time``) of the default and paper-mode fits on MERL-grid data (a Neural-BRDF
+  material tabulated once on the MERL grid) and of anisotropic 90×90 fits, side by side.
 * ``fresnel``: max |F_fit − F_Schlick| for θd ≤ 80° (isotropic and anisotropic inputs).
 * ``speed``: median wall time of complete fits (P, σ/G1, Fresnel, sampling tables):
   isotropic on MERL-grid input (a table with ``merl_table``, N = 90, file reading excluded),
@@ -18,7 +22,7 @@ Sections (all re-runnable; timings depend on the machine's load):
   P ≥ 0, ∫P (interpolant), iterations needed for tol 1e-4 / 1e-6, and for RGL the
   difference between the fitted NDF and the file's stored ``ndf`` table.
 
-Usage: ``.venv/bin/python bench/bench_tabulated.py [--real] [--quick]``
+Usage: ``.venv/bin/python bench/bench_tabulated.py [--real] [--sections defaults]``
 """
 
 from __future__ import annotations
@@ -103,6 +107,95 @@ def round_trip():
                              "abs_error_rho": fr - rho, "iterations": len(ch),
                              "time_s": time.perf_counter() - t0})
     return rows
+
+
+def defaults(repeats=7):
+    """Issue 15: round trip and speed at the product's defaults vs the paper's 4 iterations."""
+    import os
+
+    from brdffit.fit.tabulated import fit_beckmann, fit_ggx
+
+    out = {"load_average_start": os.getloadavg(), "round_trip": [], "speed": {}}
+    cases = [(c, (a,)) for c in ("beckmann", "ggx") for a in (0.05, 0.1, 0.2, 0.4, 0.5, 0.6, 0.8)]
+    cases += [(c, p) for c in ("beckmann", "ggx")
+              for p in ((0.2, 0.45, 0.0), (0.3, 0.12, 0.5), (0.15, 0.25, -0.35), (0.06, 0.3, 0.45))]
+    for kind, params in cases:
+        cls, fit = (Beckmann, fit_beckmann) if kind == "beckmann" else (GGX, fit_ggx)
+        brdf = MicrofacetBRDF(cls(*params), SchlickFresnel([0.9, 0.6, 0.3]))
+        ax, ay, rho = (params[0], params[0], 0.0) if len(params) == 1 else params
+        for mode, kw in (("default", {}), ("paper (iterations=4)", {"iterations": 4})):
+            t0 = time.process_time()
+            m = fit(brdf, **kw)
+            cpu = time.process_time() - t0
+            d, info = m.distribution, m.fit_info
+            out["round_trip"].append({
+                "distribution": kind, "alpha": [ax, ay, rho], "anisotropic": len(params) > 1,
+                "mode": mode, "fitted": [d.alpha_x, d.alpha_y, d.rho],
+                "rel_error_x": d.alpha_x / ax - 1, "rel_error_y": d.alpha_y / ay - 1,
+                "abs_error_rho": d.rho - rho, "iterations": info["iterations"],
+                "final_relative_change": info["final_relative_change"],
+                "converged": info["converged"], "cpu_s": cpu})
+    summ = {}
+    for mode in ("default", "paper (iterations=4)"):
+        for aniso in (False, True):
+            rows = [r for r in out["round_trip"] if r["mode"] == mode and r["anisotropic"] == aniso]
+            summ[f"{mode} {'aniso' if aniso else 'iso'}"] = {
+                "max_rel_alpha_error": max(max(abs(r["rel_error_x"]), abs(r["rel_error_y"]))
+                                           for r in rows),
+                "max_abs_rho_error": max(abs(r["abs_error_rho"]) for r in rows),
+                "target": 0.01 if aniso else 0.005,
+                "iterations": [min(r["iterations"] for r in rows),
+                               max(r["iterations"] for r in rows)]}
+    out["round_trip_summary"] = summ
+    z = SHARED / "nbrdf" / "merl_nbrdf.zip"
+    inputs = []
+    if z.exists():
+        from brdffit.io import load
+
+        for name in ("gold-metallic-paint", "blue-acrylic", "specular-black-phenolic"):
+            inputs.append((name, load(f"{z}:{name}")))
+    else:
+        inputs.append(("synthetic beckmann+diffuse", MicrofacetBRDF(
+            Beckmann(0.2), SchlickFresnel([0.9, 0.6, 0.3]), diffuse=0.1)))
+    for name, brdf in inputs:
+        grid = _MerlGridInput(brdf, name)  # tabulated once on the MERL grid (excluded)
+        fit_tabulated(grid)  # warm-up (caches)
+        row = {}
+        for mode, kw in (("default", {}), ("paper (iterations=4)", {"iterations": 4})):
+            ts = []
+            for _ in range(repeats):  # interleaved modes would not change much: tiny fits
+                t0 = time.process_time()
+                m = fit_tabulated(grid, **kw)
+                ts.append(time.process_time() - t0)
+            row[f"isotropic MERL grid, {mode}"] = {
+                "median_cpu_s": statistics.median(ts), "all_cpu_s": ts, "target_s": 0.1,
+                "iterations": m.fit_info["iterations"],
+                "final_relative_change": m.fit_info["final_relative_change"]}
+        for mode, kw in (("default", {}), ("paper (iterations=4)", {"iterations": 4})):
+            ts = []
+            for _ in range(3):
+                t0 = time.process_time()
+                m = fit_tabulated(brdf, anisotropic=True, n=90, n_phi=90, **kw)
+                ts.append(time.process_time() - t0)
+            row[f"anisotropic 90x90 of the network, {mode}"] = {
+                "median_cpu_s": statistics.median(ts), "all_cpu_s": ts, "target_s": 1.0,
+                "iterations": m.fit_info["iterations"],
+                "final_relative_change": m.fit_info["final_relative_change"],
+                "breakdown_last": {k: m.fit_info[k] for k in (
+                    "time_backscatter", "time_power_iteration", "time_fresnel")}}
+        out["speed"][name] = row
+    aniso = MicrofacetBRDF(GGX(0.06, 0.3, 0.45), SchlickFresnel(0.9))
+    ts = []
+    for _ in range(3):
+        t0 = time.process_time()
+        m = fit_tabulated(aniso)
+        ts.append(time.process_time() - t0)
+    out["speed"]["analytic anisotropic GGX (0.06, 0.3, 0.45), default 90x90"] = {
+        "median_cpu_s": statistics.median(ts), "all_cpu_s": ts, "target_s": 1.0,
+        "iterations": m.fit_info["iterations"]}
+    out["load_average_end"] = os.getloadavg()
+    out["command"] = ".venv/bin/python bench/bench_tabulated.py --sections defaults"
+    return out
 
 
 def fresnel():
@@ -221,6 +314,8 @@ def _iterations_needed(brdf, model, tols=(1e-4, 1e-6)):
     for tol in tols:
         _, _, ch = solve_slope_pdf(b, rule=d.rule, tol=tol, max_iterations=500)
         out[f"{tol:g}"] = len(ch) if ch[-1] <= tol else None
+    _, _, ch = solve_slope_pdf(b, rule=d.rule, iterations=4)
+    out["change_after_4"] = ch[-1]
     return out
 
 
@@ -232,6 +327,8 @@ def _check(model):
             "P_nonnegative": bool(np.all(d.table >= 0)),
             "P_integral": _interpolant_integral(d),
             "last_relative_change": model.fit_info["relative_change"][-1],
+            "iterations_default": model.fit_info["iterations"],
+            "converged_default": model.fit_info["converged"],
             "F0": F[0].tolist(), "time_s": model.fit_info["time"]}
 
 
@@ -293,7 +390,10 @@ def real_data(limit=None):
                                  max((r["P_integral"] for r in ok), default=None)],
             "iterations_tol_1e-4": _stats([i["0.0001"] for i in its]),
             "iterations_tol_1e-6": _stats([i["1e-06"] for i in its]),
-            "last_change_after_4_iterations": _stats([r["last_relative_change"] for r in ok]),
+            "last_change_after_4_iterations": _stats([i["change_after_4"] for i in its]),
+            "default_fit_iterations": _stats([r["iterations_default"] for r in ok]),
+            "default_fit_not_converged": sum(not r["converged_default"] for r in ok),
+            "default_fit_last_change": _stats([r["last_relative_change"] for r in ok]),
         }
     return res
 
@@ -311,7 +411,7 @@ def main(argv=None):
     ap.add_argument("--real", action="store_true", help="also fit the real materials")
     ap.add_argument("--limit", type=int, default=None, help="first N real materials only")
     ap.add_argument("--only-real", action="store_true", help="skip the synthetic sections")
-    ap.add_argument("--sections", default="table1,round_trip,fresnel,speed",
+    ap.add_argument("--sections", default="table1,round_trip,defaults,fresnel,speed",
                     help="comma-separated synthetic sections to (re)run")
     args = ap.parse_args(argv)
     results = {}
@@ -336,6 +436,18 @@ def main(argv=None):
             if r["mode"] == "tol 1e-10":
                 print(f"  {r['distribution']:8s} {r['alpha']} {r['hotspot']} -> "
                       f"{np.round(r['fitted'], 4).tolist()}")
+    if "defaults" in sections:
+        results["defaults"] = defaults()
+        print(json.dumps(results["defaults"]["round_trip_summary"], indent=1))
+        for name, row in results["defaults"]["speed"].items():
+            if "median_cpu_s" in row:
+                print(f"  {name}: {row['median_cpu_s']:.3f} s CPU")
+                continue
+            for k, v in row.items():
+                print(f"  {name} / {k}: {v['median_cpu_s']:.3f} s CPU, {v['iterations']} it., "
+                      f"change {v['final_relative_change']:.1e}")
+        print("  load average", results["defaults"]["load_average_start"],
+              results["defaults"]["load_average_end"], flush=True)
     if "fresnel" in sections:
         results["fresnel"] = fresnel()
         for r in results["fresnel"]:
