@@ -5,17 +5,21 @@
 * :mod:`.sgd` – Bagher, Soler, Holzschuch 2012, Shifted Gamma Distribution (``fit_sgd``) and
   the two-slice / full-data analytic fits
 * :mod:`.npf` – Bagher, Snyder, Nowrouzezahrai 2016, non-parametric factor model (``fit_npf``)
+* :mod:`.analytic` – GGX/Beckmann + Lambert with Schlick F0 fitted on the whole data with the
+  compressive objective of Bagher 2016 (``fit_ggx_diffuse``, ``fit_beckmann_diffuse``)
 """
 
 from __future__ import annotations
 
 from importlib import import_module
 
-_MODULES = ("tabulated", "sgd", "npf")
+_MODULES = ("tabulated", "sgd", "npf", "analytic")
 _EXPORTS = {
     "fit_tabulated": "tabulated", "fit_ggx": "tabulated", "fit_beckmann": "tabulated",
     "fit_sgd": "sgd", "fit_beckmann_two_slice": "sgd", "fit_ggx_two_slice": "sgd",
     "fit_cook_torrance": "sgd", "fit_npf": "npf",
+    "fit_ggx_diffuse": "analytic", "fit_beckmann_diffuse": "analytic",
+    "fit_analytic_diffuse": "analytic",
 }
 
 

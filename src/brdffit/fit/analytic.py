@@ -1,0 +1,609 @@
+"""Analytic microfacet fits with a Lambertian lobe, on the whole measured data (issue 14).
+
+Models ``ggx-diffuse`` and ``beckmann-diffuse`` (:func:`fit_ggx_diffuse`,
+:func:`fit_beckmann_diffuse`), both a :class:`~brdffit.microfacet.MicrofacetBRDF`::
+
+    f_r(i, o) = ρd/π + F(θd) D(h) G(i, o) / (4 cos θi cos θo)           (Dupuy 2015 Eq. 1)
+
+* ρd: Lambertian albedo per RGB channel (the term is ρd/π);
+* D: GGX or Beckmann with slope scales (αx, αy, ρ) (Dupuy 2015 App. C) when the input is
+  anisotropic, isotropic α when it is isotropic (``anisotropic=None`` follows
+  ``brdf.isotropic``); α ∈ [``ALPHA_MIN``, 1] (glTF's roughness = √α ≤ 1);
+* G: the height-correlated Smith term (Dupuy Eq. 2) of the distribution;
+* F: Schlick ``F0 + (1 − F0)(1 − cos θd)⁵`` with F0 ∈ [0, 1] per channel
+  (:class:`~brdffit.microfacet.SchlickFresnel`). ``f90="free"`` fits a per-channel specular
+  scale ``ks`` as well (``specular=ks``: ``F = ks·Schlick(F0)``, ``F(90°) = ks``).
+
+**Why Schlick and not a conductor (η, k)** (the default and only Fresnel here): (1) it is
+what the engine formats carry exactly — glTF's metal and dielectric Fresnel and OpenPBR's
+metal with ``specular_color`` = white are Schlick curves (see :mod:`brdffit.export.gltf`,
+:mod:`brdffit.export.materialx`), so the exported material loses nothing on F; (2) the
+model is *linear* in (ρd, F0) for a fixed distribution, which makes the fit exact and
+robust (below); a conductor fit would add six nonlinear, weakly determined parameters
+(η and k trade off against each other for F0 ≳ 0.5) for a curve that differs from Schlick
+by a few % of F0 (at most near θd ≈ 80°), below the noise of measured data there.
+
+Objective
+---------
+The compressive-weighted least squares of Bagher, Snyder & Nowrouzezahrai 2016 **Eq. 7-12**
+(:mod:`brdffit.losses.objective`): ``E = Σ_c Σ_j w_cj (f_c(j) − ρ*_cj)²`` with
+``w = wV · wI · wC`` (volume form, ``cos θi cos θo``, compressive weight with p = 1.4,
+α = log 2 and ρ̄ the ``wV wI``-weighted median per channel), samples with θi or θo > 89°
+excluded — so highlights and dark regions both count. Isotropic input: the MERL
+(θh, θd, φd) grid, all 90 θh nodes, every ``theta_d_stride``-th θd node below 72° and every
+node above (grazing rows vary fast), every ``phi_d_stride``-th φd node (≈ 70 000 samples
+with the defaults; the weights of :func:`brdffit.losses.objective.volume_form_weight` scaled
+by the nodes each sample stands for). **Deviation**: a subsample instead of all 1.1 M
+samples, for speed; the objective reported by ``bench/bench_analytic.py`` is the full-grid
+one (:func:`brdffit.losses.objective.compressive_objective`). Anisotropic input: the same
+weights on a 4D grid (θh, φh, θd, φd) with the 4D volume form
+``dωi dωo = 4 cos θd sin θd sin θh dθh dφh dθd dφd`` in place of Eq. 9 (the isotropic
+Eq. 9 is that form integrated over φh) — an extension, the paper has no anisotropic data.
+
+Minimisation (variable projection)
+----------------------------------
+For a fixed distribution the model is linear in (ρd_c, F0_c) per channel:
+``f_c = ρd_c·(1/π) + F0_c·S(1 − x⁵) + S x⁵`` with ``S = D G/(4 cos θi cos θo)`` and
+``x = 1 − cos θd`` (``f90="free"``: ``f_c = ρd_c/π + A_c S + C_c S x⁵``, ``A = ks F0``,
+``C = ks(1 − F0)``). Those are solved *exactly* with their bounds (ρd ∈ [0, ALBEDO_MAX],
+F0 ∈ [0, 1]; A, C ≥ 0) by enumerating the active sets of the tiny box-constrained
+quadratic problem, so only the distribution parameters are searched:
+
+* isotropic: ln α over a 32-node scan of [ALPHA_MIN, 1] (multi-start: the ``starts`` best
+  local minima of the scan plus the Dupuy slope-moment α of :func:`fit_ggx` /
+  :func:`fit_beckmann` — the paper's conversion, Dupuy 2015 App. C), each refined by a
+  bounded Brent search between its neighbouring nodes;
+* anisotropic: (ln αx, ln αy, ρ) by bounded trust-region least squares
+  (``scipy.optimize.least_squares``, TRF) from the slope-moment (αx, αy, ρ), the best
+  isotropic α and its 3 best scan minima (ρ = 0, αx = αy).
+
+All parameters are bounded; a candidate with a non-finite error is discarded; the result is
+never NaN (:class:`~brdffit.errors.FitError` when no finite candidate exists or the data has
+no valid sample). ``fit_info`` holds the parameters, the subsample objective (also
+normalised by the all-zero model's), the starts and the time.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+from scipy import optimize
+
+from ..errors import FitError
+from ..geometry import half_diff_to_io
+from ..grid import N_PHI_D, N_THETA_D, N_THETA_H, merl_phi_d, merl_theta_d, merl_theta_h
+from ..schema import ALBEDO_MAX
+
+__all__ = ["fit_analytic_diffuse", "fit_ggx_diffuse", "fit_beckmann_diffuse", "sample_set",
+           "ALPHA_MIN", "ALPHA_MAX_FIT", "summary"]
+
+#: roughness bounds of the fits (α ≤ 1: glTF's roughness √α ≤ 1 keeps the export exact)
+ALPHA_MIN, ALPHA_MAX_FIT = 2e-3, 1.0
+#: θd rows from this MERL index on are all kept (grazing rows vary fast)
+GRAZING_ROW = 72
+RHO_MAX = 0.95
+#: bounds of the dielectric index η and of the specular scale ks
+ETA_BOUNDS = (1.001, 4.0)
+KS_MAX = 100.0
+_MAX_THETA_IO_DEG = 89.0
+_SCAN = 32
+
+
+# ------------------------------------------------------------------------------------------
+# the data: samples, weights (Bagher 2016 Eq. 8)
+# ------------------------------------------------------------------------------------------
+def _clean(values, valid=None):
+    v = np.asarray(values, dtype=np.float64)
+    ok = np.all(np.isfinite(v), axis=-1) & np.all(v >= 0, axis=-1)
+    if valid is not None:
+        ok &= np.asarray(valid, dtype=bool)
+    return np.where(ok[..., None], v, 0.0), ok
+
+
+def _merl_rows(stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """θd indices kept and the number of nodes each stands for."""
+    jd = np.union1d(np.arange(0, N_THETA_D, max(int(stride), 1)),
+                    np.arange(min(GRAZING_ROW, N_THETA_D), N_THETA_D))
+    return jd, np.diff(np.append(jd, N_THETA_D)).astype(np.float64)
+
+
+def _isotropic_samples(brdf, theta_d_stride: int, phi_d_stride: int):
+    from ..losses.objective import volume_form_weight
+
+    jd, width = _merl_rows(theta_d_stride)
+    sp = max(int(phi_d_stride), 1)
+    kp = np.arange(0, N_PHI_D, sp)
+    TH, TD, PD = np.meshgrid(merl_theta_h(), merl_theta_d()[jd], merl_phi_d()[kp], indexing="ij")
+    wv = volume_form_weight()[:, jd][:, :, kp] * width[None, :, None] * sp
+    table = getattr(brdf, "merl_table", None)
+    if table is not None:
+        values, valid = table() if callable(table) else table
+        v, ok = _clean(np.asarray(values)[:, jd][:, :, kp], np.asarray(valid)[:, jd][:, :, kp])
+    else:
+        v, ok = _clean(np.asarray(brdf.eval_hd(TH.ravel(), TD.ravel(), PD.ravel()),
+                                  dtype=np.float64).reshape(TH.shape + (3,)))
+    wi, wo = half_diff_to_io(TH, 0.0, TD, PD)
+    return wi.reshape(-1, 3), wo.reshape(-1, 3), v.reshape(-1, 3), ok.ravel(), wv.ravel()
+
+
+def _anisotropic_samples(brdf, theta_h_stride: int, n_phi_h: int, theta_d_stride: int,
+                         phi_d_stride: int):
+    ih = np.arange(0, N_THETA_H, max(int(theta_h_stride), 1))
+    th = merl_theta_h()[ih]
+    # θh = (u²)π/2 with u = i/90: dθh = π u du, du = stride/90
+    dth = np.pi * (ih / N_THETA_H) * (max(int(theta_h_stride), 1) / N_THETA_H)
+    dth[0] = np.pi / 2 * (0.5 * max(int(theta_h_stride), 1) / N_THETA_H) ** 2   # first cell
+    jd, width = _merl_rows(theta_d_stride)
+    td = merl_theta_d()[jd]
+    sp = max(int(phi_d_stride), 1)
+    pd = merl_phi_d()[::sp]
+    ph = (np.arange(n_phi_h) + 0.5) * (2 * np.pi / n_phi_h)
+    TH, PH, TD, PD = np.meshgrid(th, ph, td, pd, indexing="ij")
+    cell = (dth[:, None, None, None] * (2 * np.pi / n_phi_h) * (np.pi / 2 / N_THETA_D)
+            * width[None, None, :, None] * (np.pi / N_PHI_D) * sp)
+    # 4D volume form of (θh, φh, θd, φd) -> (i, o); sin θd at the θd cell centre so the
+    # θd = 0 row keeps a weight (as the isotropic objective does, see its docstring)
+    tdc = td + 0.5 * np.pi / 2 / N_THETA_D
+    wv = 4.0 * np.cos(TD) * np.sin(tdc)[None, None, :, None] * np.sin(np.maximum(TH, 1e-3)) * cell
+    wi, wo = half_diff_to_io(TH, PH, TD, PD)
+    wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
+    v, ok = _clean(np.asarray(brdf.eval(wi, wo), dtype=np.float64))
+    return wi, wo, v, ok, wv.ravel()
+
+
+def sample_set(brdf, anisotropic: bool, *, theta_d_stride: int = 3, phi_d_stride: int = 10,
+               theta_h_stride: int = 2, n_phi_h: int = 16, options=None) -> dict:
+    """The fitting samples of ``brdf`` with the weights of Bagher 2016 Eq. 8 (module doc).
+
+    Returns ``wi, wo`` ``(N, 3)``, ``z`` ``(N, 3)`` (measurements clamped at 0), ``w``
+    ``(N, 3)`` (``wV wI wC`` per channel, 0 for invalid samples) and ``rho_bar`` ``(3,)``.
+    """
+    from ..losses.objective import ObjectiveOptions, compressive_weight, weighted_median
+
+    opts = options or ObjectiveOptions()
+    if anisotropic:
+        wi, wo, z, ok, wv = _anisotropic_samples(brdf, theta_h_stride, n_phi_h, theta_d_stride,
+                                                 phi_d_stride)
+    else:
+        wi, wo, z, ok, wv = _isotropic_samples(brdf, theta_d_stride, phi_d_stride)
+    lim = math.cos(math.radians(opts.max_theta_io_deg))
+    keep = ok & (wi[:, 2] >= lim - 1e-12) & (wo[:, 2] >= lim - 1e-12) & (wi[:, 2] > 0) \
+        & (wo[:, 2] > 0) & (wv > 0)
+    if opts.restrict_deg is not None:
+        cr = math.cos(math.radians(opts.restrict_deg))
+        keep &= (wi[:, 2] >= cr - 1e-12) & (wo[:, 2] >= cr - 1e-12)
+    label = getattr(brdf, "name", None) or "input"
+    if np.count_nonzero(keep) < 16:
+        raise FitError(f"{label}: expected valid samples with θi, θo ≤ {opts.max_theta_io_deg}°, "
+                       f"found {int(np.count_nonzero(keep))}")
+    wi, wo, z, wv = wi[keep], wo[keep], z[keep], wv[keep]
+    wvi = wv * wi[:, 2] * wo[:, 2]
+    rho_bar = np.empty(3)
+    w = np.empty_like(z)
+    for c in range(3):
+        rb = weighted_median(z[:, c], wvi)
+        if not rb > 0:
+            mean = float(np.sum(z[:, c] * wvi) / np.sum(wvi))
+            rb = mean if mean > 0 else 1.0
+        rho_bar[c] = rb
+        w[:, c] = wvi * (compressive_weight(z[:, c], rb, opts.p, opts.alpha)
+                         if opts.compressive else 1.0)
+    h = wi + wo
+    h /= np.linalg.norm(h, axis=-1, keepdims=True)
+    cos_d = np.clip(np.sum(wi * h, -1), 0.0, 1.0)
+    x5 = (1.0 - cos_d) ** 5
+    return {"wi": wi, "wo": wo, "h": h, "cos_d": cos_d, "x5": x5, "z": z, "w": w, "rho_bar": rho_bar,
+            "n": int(z.shape[0]), "anisotropic": bool(anisotropic),
+            "ref_energy": float(np.sum(w * z * z))}
+
+
+# ------------------------------------------------------------------------------------------
+# the linear part: exact box-constrained least squares per channel
+# ------------------------------------------------------------------------------------------
+def _distribution(kind: str, ax: float, ay: float | None = None, rho: float = 0.0):
+    from ..microfacet import GGX, Beckmann
+
+    cls = GGX if kind == "ggx" else Beckmann
+    return cls(ax, ax if ay is None else ay, rho)
+
+
+def _spec_shape(dist, data) -> np.ndarray:
+    """``S = D(h) G2(i, o) / (4 cos θi cos θo)`` (height-correlated Smith, Dupuy Eq. 2)."""
+    wi, wo = data["wi"], data["wo"]
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore", under="ignore"):
+        G = 1.0 / (1.0 + dist.Lambda(wi) + dist.Lambda(wo))
+        S = dist.D(data["h"]) * G / (4.0 * wi[:, 2] * wo[:, 2])
+    return np.where(np.isfinite(S), S, 0.0)
+
+
+def _box_qp(H, g, lo, hi):
+    """``argmin ½xᵀHx − gᵀx`` on the box ``lo ≤ x ≤ hi`` (1 to 3 variables) by enumerating
+    the active sets (each variable free, at ``lo`` or at ``hi``): exact for the convex case.
+    Returns ``(x, value)`` (``(None, inf)`` when nothing is finite)."""
+    k = len(g)
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    best, best_v = None, np.inf
+    for code in range(3 ** k):
+        state = [(code // 3 ** i) % 3 for i in range(k)]        # 0 free, 1 lo, 2 hi
+        if any(s == 2 and not np.isfinite(hi[i]) for i, s in enumerate(state)):
+            continue
+        x = np.array([lo[i] if s == 1 else hi[i] if s == 2 else 0.0 for i, s in enumerate(state)])
+        free = [i for i, s in enumerate(state) if s == 0]
+        if free:
+            fixed = [i for i in range(k) if i not in free]
+            rhs = g[free] - H[np.ix_(free, fixed)] @ x[fixed]
+            Hf = H[np.ix_(free, free)]
+            try:
+                xf = np.linalg.solve(Hf, rhs)
+            except np.linalg.LinAlgError:
+                xf = np.linalg.lstsq(Hf, rhs, rcond=None)[0]
+            if np.any(xf < lo[free] - 1e-12) or np.any(xf > hi[free] + 1e-12):
+                continue
+            x[free] = np.clip(xf, lo[free], hi[free])
+        v = 0.5 * x @ H @ x - g @ x
+        if np.isfinite(v) and v < best_v:
+            best, best_v = x, v
+    return best, best_v
+
+
+def _fresnel_values(fresnel: str, eta, data) -> np.ndarray | None:
+    """Exact dielectric F(θd; η) at the samples (``None`` for Schlick): Walter et al. 2007
+    Eq. 22, the formula of :class:`~brdffit.microfacet.DielectricFresnel` for one index."""
+    if fresnel != "dielectric":
+        return None
+    c = data["cos_d"]
+    g = np.sqrt(np.maximum(float(eta) ** 2 - 1.0 + c * c, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = (g - c) / (g + c)
+        b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+        F = 0.5 * a * a * (1.0 + b * b)
+    return np.clip(np.where(np.isfinite(F), F, 1.0), 0.0, 1.0)
+
+
+def _linear(S, data, fresnel: str, f90: str, Fd=None):
+    """Per channel the exact optimum of the linear parameters for the shape ``S``.
+
+    Schlick, ``f90="free"``: ``f = ρd/π + A S + C S x⁵`` (A = ks F0, C = ks (1 − F0) ≥ 0);
+    ``f90="one"``: ``f = ρd/π + F0 S (1 − x⁵) + S x⁵``. Dielectric: ``f = ρd/π + ks S F(η)``
+    (``f90="one"``: ks = 1). Returns ``{"rho_d", "F0", "ks", "E"}`` or ``None``."""
+    w, z, x5 = data["w"], data["z"], data["x5"]
+    diff = np.full_like(S, 1.0 / np.pi)
+    if fresnel == "schlick" and f90 == "one":
+        cols, offset = [diff, S * (1.0 - x5)], S * x5
+        lo, hi = [0.0, 0.0], [ALBEDO_MAX, 1.0]
+    elif fresnel == "schlick":
+        cols, offset = [diff, S, S * x5], 0.0
+        lo, hi = [0.0, 0.0, 0.0], [ALBEDO_MAX, np.inf, np.inf]
+    elif f90 == "one":
+        cols, offset = [diff], S * Fd
+        lo, hi = [0.0], [ALBEDO_MAX]
+    else:
+        cols, offset = [diff, S * Fd], 0.0
+        lo, hi = [0.0, 0.0], [ALBEDO_MAX, KS_MAX]
+    M = np.stack(cols, -1)                                   # (N, k)
+    rho_d, F0, ks, E = np.zeros(3), np.zeros(3), np.ones(3), 0.0
+    for c in range(3):
+        y = z[:, c] - offset
+        Mw = M * w[:, c:c + 1]
+        x, v = _box_qp(M.T @ Mw, Mw.T @ y, lo, hi)
+        if x is None:
+            return None
+        E += max(float(np.sum(w[:, c] * y * y) + 2.0 * v), 0.0)
+        rho_d[c] = x[0]
+        if fresnel == "schlick" and f90 == "one":
+            F0[c] = x[1]
+        elif fresnel == "schlick":
+            ks[c] = x[1] + x[2]
+            F0[c] = x[1] / ks[c] if ks[c] > 0 else 0.0
+        elif f90 != "one":
+            ks[c] = x[1]
+    if not np.isfinite(E):
+        return None
+    return {"rho_d": rho_d, "F0": np.clip(F0, 0.0, 1.0),
+            "ks": None if f90 == "one" else np.clip(ks, 0.0, KS_MAX), "E": E}
+
+
+def _evaluate(kind, params, data, fresnel, f90):
+    """``(E, linear part)`` of ``params = (αx, αy, ρ, η)``; ``(inf, None)`` if invalid."""
+    ax, ay, rho, eta = params
+    try:
+        dist = _distribution(kind, ax, ay, rho)
+    except ValueError:
+        return np.inf, None
+    S = _spec_shape(dist, data)
+    Fd = _fresnel_values(fresnel, eta, data)
+    lin = _linear(S, data, fresnel, f90, Fd)
+    if lin is None:
+        return np.inf, None
+    lin["S"], lin["Fd"] = S, Fd
+    return lin["E"], lin
+
+
+def _prediction(lin, data, fresnel, eta) -> np.ndarray:
+    """Model values ``(N, 3)`` of a solved linear part."""
+    S = lin["S"][:, None]
+    ks = 1.0 if lin["ks"] is None else lin["ks"]
+    if fresnel == "schlick":
+        F = ks * (lin["F0"] + (1.0 - lin["F0"]) * data["x5"][:, None])
+    else:
+        F = ks * lin["Fd"][:, None]
+    return lin["rho_d"] / np.pi + S * F
+
+
+# ------------------------------------------------------------------------------------------
+# the search over the distribution (and η) parameters
+# ------------------------------------------------------------------------------------------
+def _local_minima(E: np.ndarray) -> list[int]:
+    idx = [i for i in range(len(E)) if np.isfinite(E[i])
+           and (i == 0 or E[i] <= E[i - 1]) and (i == len(E) - 1 or E[i] <= E[i + 1])]
+    return sorted(idx, key=lambda i: E[i])
+
+
+def _scan_isotropic(kind, data, fresnel, f90, moment_alpha, starts, eta=1.5):
+    """ln α scan and bounded Brent refinements: ``(best, tried)``, best = (E, params, lin)."""
+    la = np.linspace(np.log(ALPHA_MIN), np.log(ALPHA_MAX_FIT), _SCAN)
+    E = np.array([_evaluate(kind, (float(np.exp(a)), None, 0.0, eta), data, fresnel, f90)[0]
+                  for a in la])
+    step = la[1] - la[0]
+    cands = [("scan", la[i]) for i in _local_minima(E)[:max(int(starts), 1)]]
+    if moment_alpha is not None and np.isfinite(moment_alpha) and moment_alpha > 0:
+        cands.append(("moments", float(np.clip(np.log(moment_alpha), la[0], la[-1]))))
+    if not cands:
+        raise FitError("no finite objective at any roughness of the scan")
+
+    def cost(q):
+        return _evaluate(kind, (float(np.exp(q)), None, 0.0, eta), data, fresnel, f90)[0]
+
+    tried, best = [], None
+    for src, l0 in cands:
+        res = optimize.minimize_scalar(cost, bounds=(max(l0 - step, la[0]),
+                                                     min(l0 + step, la[-1])),
+                                       method="bounded", options={"xatol": 1e-5})
+        alpha = float(np.exp(res.x if np.isfinite(res.fun) else l0))
+        e, lin = _evaluate(kind, (alpha, alpha, 0.0, eta), data, fresnel, f90)
+        tried.append({"fresnel": fresnel, "start": src, "alpha_start": float(np.exp(l0)),
+                      "alpha": alpha, "objective": e})
+        if lin is not None and np.isfinite(e) and (best is None or e < best[0]):
+            best = (e, (alpha, alpha, 0.0, eta), lin)
+    return best, tried
+
+
+def _least_squares(kind, data, fresnel, f90, starts, anisotropic: bool):
+    """Bounded TRF on (ln αx[, ln αy, ρ][, η]) from each start ``(label, (αx, αy, ρ, η))``."""
+    sw = np.sqrt(data["w"])
+    use_eta = fresnel == "dielectric"
+
+    def pack(p):
+        q = [np.log(p[0])] + ([np.log(p[1]), p[2]] if anisotropic else [])
+        return np.array(q + ([p[3]] if use_eta else []))
+
+    def unpack(q):
+        ax = float(np.exp(q[0]))
+        ay, rho = (float(np.exp(q[1])), float(q[2])) if anisotropic else (ax, 0.0)
+        return ax, ay, rho, float(q[-1]) if use_eta else 1.5
+
+    lo = [np.log(ALPHA_MIN)] + ([np.log(ALPHA_MIN), -RHO_MAX] if anisotropic else []) \
+        + ([ETA_BOUNDS[0]] if use_eta else [])
+    hi = [np.log(ALPHA_MAX_FIT)] + ([np.log(ALPHA_MAX_FIT), RHO_MAX] if anisotropic else []) \
+        + ([ETA_BOUNDS[1]] if use_eta else [])
+    lo, hi = np.array(lo), np.array(hi)
+    bad = np.full(sw.size, 1e3)
+
+    def resid(q):
+        p = unpack(q)
+        e, lin = _evaluate(kind, p, data, fresnel, f90)
+        if lin is None:
+            return bad
+        r = ((_prediction(lin, data, fresnel, p[3]) - data["z"]) * sw).ravel()
+        return np.where(np.isfinite(r), r, 1e3)
+
+    tried, best = [], None
+    for src, p0 in starts:
+        q0 = np.clip(pack(p0), lo + 1e-9, hi - 1e-9)
+        try:
+            q = optimize.least_squares(resid, q0, bounds=(lo, hi), method="trf",
+                                       diff_step=1e-3, xtol=1e-8, ftol=1e-10,
+                                       max_nfev=60).x
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+            q = q0
+        p = unpack(q)
+        e, lin = _evaluate(kind, p, data, fresnel, f90)
+        tried.append({"fresnel": fresnel, "start": src, "params_start": list(unpack(q0)),
+                      "params": list(p), "objective": e})
+        if lin is not None and np.isfinite(e) and (best is None or e < best[0]):
+            best = (e, p, lin)
+    return best, tried
+
+
+def _eta_of_f0(f0) -> float:
+    s = float(np.sqrt(np.clip(np.mean(f0), 0.0, 0.5)))
+    return float(np.clip((1.0 + s) / (1.0 - s), *ETA_BOUNDS))
+
+
+def _search(kind, data, fresnel, f90, mom, starts, anisotropic):
+    """Schlick first (scan, moment start, anisotropic refinement), then the dielectric
+    Fresnel from the Schlick optimum; returns ``(best per Fresnel, tried)``."""
+    results, tried = {}, []
+    best, t = _scan_isotropic(kind, data, "schlick", f90,
+                              None if (mom is None or anisotropic) else float(mom[0]), starts)
+    tried += t
+    if anisotropic:
+        st = [("isotropic", best[1])]
+        if mom is not None and all(np.isfinite(mom)):
+            st.insert(0, ("moments", (max(mom[0], ALPHA_MIN), max(mom[1], ALPHA_MIN),
+                                      float(np.clip(mom[2], -RHO_MAX, RHO_MAX)), 1.5)))
+        b2, t = _least_squares(kind, data, "schlick", f90, st, True)
+        tried += t
+        if b2 is not None and b2[0] < best[0]:
+            best = b2
+    results["schlick"] = best
+    if fresnel in ("auto", "dielectric"):
+        ax, ay, rho, _ = best[1]
+        f0 = best[2]["F0"] * (1.0 if best[2]["ks"] is None else best[2]["ks"])
+        st = [("schlick optimum", (ax, ay, rho, _eta_of_f0(f0))), ("eta 1.5", (ax, ay, rho, 1.5))]
+        b3, t = _least_squares(kind, data, "dielectric", f90, st, anisotropic)
+        tried += t
+        if b3 is not None:
+            results["dielectric"] = b3
+    if fresnel == "schlick":
+        results.pop("dielectric", None)
+    elif fresnel == "dielectric" and "dielectric" in results:
+        results.pop("schlick")
+    return results, tried
+
+
+def _moment_start(brdf, kind: str, anisotropic: bool):
+    """The Dupuy 2015 slope-moment conversion (App. C) of the tabulated NDF: (αx, αy, ρ).
+
+    Isotropic input: only the NDF of :func:`~brdffit.fit.tabulated.fit_tabulated` is needed
+    (backscattering at a 90-node Gauss rule, 4 power iterations, Eq. 14-18 / Alg. 3), not its
+    Fresnel table; anisotropic input: the full tabulated fit."""
+    from ..microfacet.tabulated import TabulatedSlopeDistribution, radial_rule
+    from .tabulated import (backscatter, beckmann_parameters, fit_tabulated, ggx_parameters,
+                            luminance, solve_slope_pdf)
+
+    conv = ggx_parameters if kind == "ggx" else beckmann_parameters
+    try:
+        with np.errstate(all="ignore"):
+            if anisotropic:
+                return conv(fit_tabulated(brdf, anisotropic=True).distribution)
+            _, theta, _, _ = radial_rule(N_THETA_H, "gauss")
+            rgb, ok = backscatter(brdf, theta)
+            b = luminance(np.where(np.isfinite(rgb), rgb, 0.0))
+            b = np.where(ok & np.isfinite(b), np.maximum(b, 0.0), 0.0)
+            if not np.any(b > 0):
+                return None
+            p, _, _ = solve_slope_pdf(b, rule="gauss", iterations=4)
+            out = conv(TabulatedSlopeDistribution(p, rule="gauss"))
+        return out if all(np.isfinite(out)) else None
+    except (FitError, ValueError, FloatingPointError, np.linalg.LinAlgError):
+        return None
+
+
+def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool | None = None,
+                         fresnel: str = "auto", f90: str = "free", starts: int = 3,
+                         moments: bool = True, theta_d_stride: int = 3, phi_d_stride: int = 10,
+                         theta_h_stride: int = 2, n_phi_h: int = 16, objective=None,
+                         name: str | None = None):
+    """Fit ``ρd/π + ks F D G/(4 cos θi cos θo)`` to ``brdf`` (see the module docstring).
+
+    Parameters
+    ----------
+    distribution:
+        ``"ggx"`` or ``"beckmann"``.
+    anisotropic:
+        Fit (αx, αy, ρ); default: when ``brdf.isotropic`` is false.
+    fresnel:
+        ``"schlick"`` (per-channel F0), ``"dielectric"`` (exact dielectric Fresnel of one
+        index η, Walter 2007 Eq. 22) or ``"auto"`` (default: both, the lower objective wins).
+    f90:
+        ``"free"`` (default): a per-channel specular scale ks, i.e. F(90°) = ks
+        (``MicrofacetBRDF(specular=ks)``); ``"one"``: ks = 1 (textbook Schlick/dielectric).
+    starts:
+        Number of local minima of the roughness scan refined (besides the moment start).
+    moments:
+        Also start from the Dupuy 2015 slope-moment conversion (costs one tabulated fit).
+    theta_d_stride, phi_d_stride, theta_h_stride, n_phi_h:
+        Density of the fitting samples (``theta_h_stride``, ``n_phi_h``: anisotropic only).
+    objective:
+        :class:`~brdffit.losses.objective.ObjectiveOptions` (default: the paper's).
+    """
+    from ..microfacet import DielectricFresnel, MicrofacetBRDF, SchlickFresnel
+
+    t0 = time.perf_counter()
+    kind = str(distribution).lower()
+    if kind not in ("ggx", "beckmann"):
+        raise ValueError(f"distribution must be 'ggx' or 'beckmann', found {distribution!r}")
+    if fresnel not in ("auto", "schlick", "dielectric"):
+        raise ValueError(f"fresnel must be 'auto', 'schlick' or 'dielectric', found {fresnel!r}")
+    if f90 not in ("one", "free"):
+        raise ValueError(f"f90 must be 'one' or 'free', found {f90!r}")
+    if anisotropic is None:
+        anisotropic = not bool(getattr(brdf, "isotropic", False))
+    label = getattr(brdf, "name", None) or "brdf"
+    if not anisotropic and not getattr(brdf, "isotropic", False):
+        raise FitError(f"{label}: an isotropic fit needs an isotropic BRDF (eval_hd); "
+                       "use anisotropic=True")
+    data = sample_set(brdf, bool(anisotropic), theta_d_stride=theta_d_stride,
+                      phi_d_stride=phi_d_stride, theta_h_stride=theta_h_stride,
+                      n_phi_h=n_phi_h, options=objective)
+    t1 = time.perf_counter()
+    mom = _moment_start(brdf, kind, bool(anisotropic)) if moments else None
+    t2 = time.perf_counter()
+    try:
+        results, tried = _search(kind, data, fresnel, f90, mom, starts, bool(anisotropic))
+    except FitError as exc:
+        raise FitError(f"{label}: {kind}-diffuse fit: {exc}") from None
+    finite = {k: v for k, v in results.items() if v is not None and np.isfinite(v[0])}
+    if not finite:
+        raise FitError(f"{label}: {kind}-diffuse fit found no finite solution")
+    chosen = min(finite, key=lambda k: finite[k][0])
+    E, (ax, ay, rho, eta), lin = finite[chosen]
+    if not anisotropic:
+        ay, rho = ax, 0.0
+    rho_d, ks = lin["rho_d"], lin["ks"]
+    if chosen == "schlick":
+        F = SchlickFresnel(lin["F0"])
+        f0_eff = lin["F0"] * (1.0 if ks is None else ks)
+    else:
+        F = DielectricFresnel(eta)
+        f0_eff = F.eval(1.0) * (1.0 if ks is None else ks)
+    values = [ax, ay, rho, eta, *rho_d, *f0_eff, *(ks if ks is not None else [])]
+    if not all(np.isfinite(values)):
+        raise FitError(f"{label}: {kind}-diffuse fit produced non-finite parameters")
+    model = MicrofacetBRDF(_distribution(kind, ax, ay, rho), F, diffuse=rho_d, specular=ks,
+                           correlated=True, name=name or f"{label}-{kind}-diffuse",
+                           source=getattr(brdf, "source", None))
+    model.fit_info = {
+        "method": f"{kind} + Lambert, {chosen} Fresnel, compressive objective (Bagher 2016 "
+                  "Eq. 7-12), variable projection",
+        "fresnel": chosen, "alpha_x": ax, "alpha_y": ay, "rho": rho,
+        "eta": eta if chosen == "dielectric" else None, "rho_d": rho_d.tolist(),
+        "F0": f0_eff.tolist(), "ks": None if ks is None else ks.tolist(), "objective": float(E),
+        "objective_normalised": float(E / data["ref_energy"]) if data["ref_energy"] > 0 else None,
+        "objective_by_fresnel": {k: float(v[0]) for k, v in finite.items()},
+        "n_samples": data["n"], "anisotropic": bool(anisotropic),
+        "moment_start": None if mom is None else [float(m) for m in mom],
+        "starts": tried, "time_samples": t1 - t0, "time_moments": t2 - t1,
+        "time": time.perf_counter() - t0}
+    model.fit_options = {"model": f"{kind}-diffuse", "distribution": kind,
+                         "anisotropic": bool(anisotropic), "fresnel": fresnel, "f90": f90,
+                         "starts": int(starts), "moments": bool(moments),
+                         "theta_d_stride": int(theta_d_stride), "phi_d_stride": int(phi_d_stride)}
+    return model
+
+
+def fit_ggx_diffuse(brdf, **kwargs):
+    """GGX + Lambert (ρd/π), Schlick F0 per channel, fitted with the compressive objective."""
+    return fit_analytic_diffuse(brdf, "ggx", **kwargs)
+
+
+def fit_beckmann_diffuse(brdf, **kwargs):
+    """Beckmann + Lambert (ρd/π), Schlick F0 per channel, fitted with the compressive objective."""
+    return fit_analytic_diffuse(brdf, "beckmann", **kwargs)
+
+
+def summary(model) -> dict:
+    """The fitted parameters and time (what ``brdffit fit`` prints)."""
+    info = dict(getattr(model, "fit_info", None) or {})
+    return {"model": (getattr(model, "fit_options", None) or {}).get("model"),
+            "alpha": [info.get("alpha_x"), info.get("alpha_y"), info.get("rho")],
+            "fresnel": info.get("fresnel"), "eta": info.get("eta"),
+            "rho_d": info.get("rho_d"), "F0": info.get("F0"), "ks": info.get("ks"),
+            "objective_normalised": info.get("objective_normalised"),
+            "time_s": info.get("time")}
+
+
+def _register_fitters() -> None:
+    from .registry import register_fitter
+
+    register_fitter("ggx-diffuse", fit_ggx_diffuse, summary,
+                    "GGX + Lambert, Schlick F0 per channel, compressive objective (Bagher 2016)")
+    register_fitter("beckmann-diffuse", fit_beckmann_diffuse, summary,
+                    "Beckmann + Lambert, Schlick F0 per channel, compressive objective "
+                    "(Bagher 2016)")
+
+
+_register_fitters()
