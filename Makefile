@@ -4,14 +4,18 @@ PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
+# the Khronos glTF-Validator (npm), used by the glTF export test; project-local, not global
+NPM_PREFIX := .npm
+GLTF_VALIDATOR := $(NPM_PREFIX)/node_modules/gltf-validator/package.json
+GLTF_VALIDATOR_VERSION := 2.0.0-dev.3.10
 DEBIAN_PACKAGES := libllvm19 chromium glslang-tools
 
-.PHONY: demo test bench sysdeps install clean
+.PHONY: demo test bench sysdeps npmdeps install clean
 
 demo: $(STAMP)
 	$(VENV)/bin/brdffit demo
 
-test: $(STAMP)
+test: $(STAMP) npmdeps
 	$(PY) -m pytest -q
 
 bench: $(STAMP)
@@ -24,6 +28,7 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -e '.[dev]'
+	@$(MAKE) --no-print-directory npmdeps
 	@touch $(STAMP)
 
 # libllvm19: Mitsuba 3's LLVM back-end (the machine's default LLVM crashes it).
@@ -36,5 +41,17 @@ sysdeps:
 		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
 	else echo "NOTE: not root, skipping Debian packages:$$missing (rendering and report tests will be skipped)"; fi
 
+# gltf-validator into .npm/ (needs node and npm: present in the machine image; when npm is
+# missing and we are root, Debian's nodejs + npm are installed first).
+npmdeps:
+	@if [ -f $(GLTF_VALIDATOR) ]; then echo "gltf-validator present in $(NPM_PREFIX)/"; \
+	else if ! command -v npm >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
+		echo "Installing Debian packages: nodejs npm"; apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq nodejs npm >/dev/null; fi; \
+	if command -v npm >/dev/null 2>&1; then echo "Installing gltf-validator@$(GLTF_VALIDATOR_VERSION) into $(NPM_PREFIX)/"; \
+		npm install --prefix $(NPM_PREFIX) --no-audit --no-fund --no-save --silent \
+			gltf-validator@$(GLTF_VALIDATOR_VERSION) || echo "NOTE: npm install gltf-validator failed (the glTF validation test will be skipped)"; \
+	else echo "NOTE: npm not found, skipping gltf-validator (the glTF validation test will be skipped)"; fi; fi
+
 clean:
-	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache
+	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache $(NPM_PREFIX)

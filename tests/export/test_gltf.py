@@ -62,9 +62,16 @@ def test_dielectric_rule_and_file(tmp_path):
 def test_gold_is_metal_and_non_ggx_raises():
     p = gltf_parameters(brdffit.synthetic("gold-ggx"))
     assert p["metallicFactor"] == 1.0
-    for name in ("plastic-beckmann", "two-lobe-ggx"):
+    for name in ("sgd-paint", "two-lobe-ggx"):
         with pytest.raises(ExportError, match="glTF"):
             gltf_parameters(brdffit.synthetic(name))
+
+
+def test_beckmann_becomes_ggx_of_the_same_alpha():
+    p = gltf_parameters(brdffit.synthetic("plastic-beckmann"))     # Beckmann α = 0.18, η = 1.5
+    assert p["roughnessFactor"] == pytest.approx(np.sqrt(0.18), rel=1e-12)
+    assert p["metallicFactor"] == 0.0
+    assert any("Beckmann" in n for n in p["notes"])
 
 
 def test_anisotropy_extension_is_exact_for_correlated_ggx(tmp_path):
@@ -98,3 +105,126 @@ def test_optimize_does_not_increase_error():
     after = gltf_fidelity(model, 4096, ("cos_rel_error",), optimize=True)["cos_rel_error"]
     assert after <= before + 1e-12
     assert "optimis" in q["notes"][-1]
+
+
+# -- KHR_materials_specular / KHR_materials_ior --------------------------------------------
+def test_gltf_brdf_extensions_match_the_spec_formula():
+    """GLTFBRDF with specular/ior vs the extension's implementation formula written with
+    library components: F_d = f90 Schlick(f0/f90), f0 = min(F0(ior) color, 1) f90."""
+    wi, wo = _pairs(3000, 3)
+    base, r, sf, sc, ior = np.array([0.3, 0.5, 0.2]), 0.4, 0.7, np.array([1.0, 0.6, 0.3]), 1.8
+    f0 = np.minimum(((ior - 1) / (ior + 1)) ** 2 * sc, 1.0) * sf
+    spec = MicrofacetBRDF(GGX(r * r), SchlickFresnel(f0 / sf),
+                          specular=sf, correlated=False).eval(wi, wo)
+    h = wi + wo
+    h /= np.linalg.norm(h, axis=-1, keepdims=True)
+    F = sf * SchlickFresnel(f0 / sf).eval(np.abs(np.sum(wo * h, -1)))
+    ok = ((wi[:, 2] > 0) & (wo[:, 2] > 0))[:, None]
+    expected = np.where(ok, (1 - F) * base / np.pi + spec, 0.0)
+    got = GLTFBRDF(base, 0.0, r, specular_factor=sf, specular_color=sc, ior=ior).eval(wi, wo)
+    np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("fresnel, ks", [(SchlickFresnel([0.06, 0.035, 0.02]), 0.65),
+                                         (SchlickFresnel([0.05, 0.05, 0.05]), [0.9, 0.8, 0.7])])
+def test_dielectric_f0_and_f90_go_through_the_extensions(fresnel, ks):
+    from brdffit.microfacet import DielectricFresnel
+
+    model = MicrofacetBRDF(GGX(0.15), fresnel, diffuse=[0.4, 0.3, 0.2], specular=ks)
+    p = gltf_parameters(model)
+    eq = _gltf_brdf(p)
+    f0_d, f90_d = eq.dielectric_f0_f90()
+    F0 = np.asarray(ks) * fresnel.eval(1.0)
+    np.testing.assert_allclose(f0_d, F0, rtol=1e-9)              # F0 exact, every channel
+    assert f90_d == pytest.approx(np.max(ks))                     # F90: the largest channel
+    assert np.all(np.asarray(p["specular"]["specularColorFactor"]) <= 1 + 1e-12)
+    with_ext = gltf_fidelity(model, 4096, ("cos_rel_error",))["cos_rel_error"]
+    core = gltf_fidelity(model, 4096, ("cos_rel_error",), specular=False)["cos_rel_error"]
+    assert with_ext < core                                        # the extensions help
+    # a dielectric fit of index η and grey ks gives back ior = η and specularFactor = ks
+    d = MicrofacetBRDF(GGX(0.15), DielectricFresnel(1.7), diffuse=0.3, specular=0.8)
+    q = gltf_parameters(d)["specular"]
+    assert q["ior"] == pytest.approx(1.7, rel=1e-9) and q["specularFactor"] == pytest.approx(0.8)
+
+
+def _gltf_brdf(p):
+    from brdffit.export.gltf import _brdf_of
+
+    return _brdf_of(p)
+
+
+# -- the Khronos glTF-Validator ------------------------------------------------------------
+_VALIDATE_JS = r"""
+const fs = require('fs');
+const validator = require(process.argv[2]);
+const data = new Uint8Array(fs.readFileSync(process.argv[3]));
+validator.validateBytes(data, {uri: process.argv[3], maxIssues: 1000})
+  .then((report) => { process.stdout.write(JSON.stringify(report)); })
+  .catch((err) => { process.stderr.write(String(err)); process.exit(2); });
+"""
+
+
+def _validator(tmp_path):
+    """``validate(path) -> report`` with the project's gltf-validator (make npmdeps)."""
+    import shutil
+    import subprocess
+    from pathlib import Path
+
+    node = shutil.which("node")
+    if node is None:
+        pytest.skip("node is not installed: the Khronos glTF-Validator (npm gltf-validator) "
+                    "cannot run")
+    pkg = Path(__file__).resolve().parents[2] / ".npm" / "node_modules" / "gltf-validator"
+    if not (pkg / "package.json").is_file():
+        if shutil.which("npm") is None:
+            pytest.skip("npm is not installed: gltf-validator cannot be installed")
+        pytest.fail(f"gltf-validator is missing from {pkg.parent}: run `make npmdeps` "
+                    "(make install / make test do it)")
+    script = tmp_path / "validate.js"
+    script.write_text(_VALIDATE_JS)
+
+    def validate(path):
+        r = subprocess.run([node, str(script), str(pkg), str(path)], capture_output=True,
+                           text=True, timeout=120)
+        assert r.returncode == 0, r.stderr
+        return json.loads(r.stdout)
+
+    return validate
+
+
+def _errors(report):
+    return [(m["code"], m.get("pointer"), m["message"]) for m in report["issues"]["messages"]
+            if m["severity"] == 0]
+
+
+def test_exports_pass_the_khronos_validator(tmp_path):
+    from brdffit.microfacet import DielectricFresnel
+
+    validate = _validator(tmp_path)
+    models = {
+        "metal": brdffit.synthetic("gold-ggx"),
+        "aniso-metal": brdffit.synthetic("aniso-ggx"),
+        "beckmann-plastic": brdffit.synthetic("plastic-beckmann"),
+        # anisotropic dielectric: KHR_materials_anisotropy + specular + ior at once
+        "aniso-dielectric": MicrofacetBRDF(GGX(0.05, 0.2, 0.3), DielectricFresnel(1.8),
+                                           diffuse=[0.5, 0.2, 0.1], specular=[0.9, 0.7, 0.6],
+                                           name='evil "name" </script>\u0000 \U0001F600'),
+        "black": MicrofacetBRDF(GGX(0.3), SchlickFresnel(0.0), diffuse=0.0),
+    }
+    seen = set()
+    for key, model in models.items():
+        out = tmp_path / f"{key}.gltf"
+        info = export(model, "gltf", out, fidelity=False)
+        seen.update(info["extensions"])
+        report = validate(out)
+        assert report["issues"]["numErrors"] == 0, (key, _errors(report))
+        assert report["issues"]["numWarnings"] == 0, (key, report["issues"]["messages"])
+    assert seen == {"KHR_materials_anisotropy", "KHR_materials_specular", "KHR_materials_ior"}
+    # the check can fail: the validator reports an out-of-range factor and an undeclared
+    # extension as errors
+    doc = json.loads((tmp_path / "aniso-dielectric.gltf").read_text())
+    doc["materials"][0]["pbrMetallicRoughness"]["roughnessFactor"] = 2.0
+    doc["extensionsUsed"].remove("KHR_materials_ior")
+    (tmp_path / "bad.gltf").write_text(json.dumps(doc))
+    codes = {c for c, _, _ in _errors(validate(tmp_path / "bad.gltf"))}
+    assert "VALUE_NOT_IN_RANGE" in codes and "UNDECLARED_EXTENSION" in codes, codes

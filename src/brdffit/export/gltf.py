@@ -1,36 +1,57 @@
-"""glTF 2.0 metallic-roughness materials of GGX fits, and the glTF BRDF as a library BRDF.
+"""glTF 2.0 metallic-roughness materials of microfacet fits, and the glTF BRDF as a library BRDF.
 
 :class:`GLTFBRDF` is the BRDF of the glTF 2.0 specification, **Appendix B** ("BRDF
-Implementation"), with the default ``ior`` 1.5:
+Implementation"), with the ``KHR_materials_specular``, ``KHR_materials_ior`` and
+``KHR_materials_anisotropy`` extensions:
 
 * ``α = roughness²`` — glTF's ``roughnessFactor`` is the *perceptual* roughness ``r``; our
   (and Mitsuba's) α is the GGX slope scale, so **glTF roughness = √α**;
 * ``D = α² χ⁺(N·H) / (π ((N·H)² (α² − 1) + 1)²)`` (isotropic GGX / Trowbridge-Reitz);
 * ``V = χ⁺(H·L) χ⁺(H·V) / ((|N·L| + √(α² + (1 − α²)(N·L)²)) (|N·V| + √(α² + (1 − α²)(N·V)²)))``
   (separable Smith, ``V = G / (4 |N·L| |N·V|)``);
-* ``F = f0 + (1 − f0)(1 − |V·H|)⁵`` (Schlick) with ``f0 = mix(0.04, baseColor, metallic)``;
-* ``f = (1 − F) c_diff / π + F D V`` with ``c_diff = mix(baseColor, 0, metallic)``.
+* Fresnel (Schlick) of the dielectric part, with the extensions' implementation formulas
+  (``KHR_materials_ior``, ``KHR_materials_specular`` "Implementation"):
+  ``f0_d = min(((ior − 1)/(ior + 1))² · specularColorFactor, 1) · specularFactor``,
+  ``f90_d = specularFactor``, ``F_d = f0_d + (f90_d − f0_d)(1 − |V·H|)⁵`` (the core spec:
+  ior 1.5, both factors 1, i.e. ``f0 = 0.04``, ``f90 = 1``); of the metal:
+  ``F_m = baseColor + (1 − baseColor)(1 − |V·H|)⁵``;
+* ``f = (1 − metallic) ((1 − F_d) baseColor/π + F_d D V) + metallic F_m D V``.
 
-Mapping of a fit (:func:`gltf_material`) — a single GGX lobe
-(``MicrofacetBRDF(GGX, ...)``; tabulated fits are first converted with
-:func:`brdffit.fit.tabulated.to_ggx`, Dupuy 2015 App. C):
+Mapping of a fit (:func:`gltf_material`) — one specular lobe (``MicrofacetBRDF``) with a
+GGX or Beckmann distribution (``fit_ggx``, ``fit_ggx_diffuse``, ``fit_beckmann_diffuse``...;
+tabulated fits are first converted with :func:`brdffit.fit.tabulated.to_ggx`, Dupuy 2015
+App. C; a Beckmann α becomes the GGX α of the same value — same D(0) = 1/(πα²), heavier
+GGX tails; the loss is measured):
 
-* roughness: ``roughnessFactor = √α``. Anisotropic / correlated GGX: with the
+* roughness: ``roughnessFactor = √α``. Anisotropic / correlated: with the
   ``KHR_materials_anisotropy`` extension (default) the slope matrix is diagonalised, the
   smoother principal α is the material's, the rougher one ``αt = mix(α, 1, s²)`` gives the
   strength s and its axis the rotation (exact D, correlation included; needs αt ≤ 1);
   without it ``α = √(αx αy)`` (geometric mean, anisotropy dropped and reported);
-* **metallic rule**: with ``F0 = ks · F(θd = 0)`` clipped to [0, 1], the material is a metal
-  (``metallic = 1``, ``baseColorFactor = F0``, the fit's diffuse term dropped) when the
-  luminance of F0 is ≥ 0.08 (``MATERIAL_METAL_F0``: common dielectrics, η ≤ 1.8, have
-  F0 ≤ 0.08) and exceeds the luminance of the fit's ρd; otherwise a dielectric
-  (``metallic = 0``, ``baseColorFactor = ρd`` clipped to [0, 1], glTF's fixed F0 = 0.04).
-  A fit without a diffuse term (tabulated fits: their Fresnel table absorbs the diffuse
-  part) is always a metal with ``baseColorFactor = F0`` (a dielectric would be black).
-* optionally (``optimize=True``, CLI ``--option optimize=true``) the rule's parameters are
-  refined by least squares in BRDF space (:func:`optimize_parameters`);
+* reflectances of the fit: ``F0 = ks · F(θd = 0)`` and ``F90 = ks · F(θd = 90°)`` (ks the
+  fit's specular scale, F its Fresnel), clipped to [0, 1];
+* **metallic rule**: a metal (``metallic = 1``, ``baseColorFactor = F0``, the fit's diffuse
+  term dropped, F90 = 1) when the luminance of F0 is ≥ 0.08 (``MATERIAL_METAL_F0``: common
+  dielectrics, η ≤ 1.8, have F0 ≤ 0.08) and exceeds the luminance of the fit's ρd, or when
+  the fit has no diffuse term at all (tabulated fits: their Fresnel table absorbs the
+  diffuse part; a dielectric would be black);
+* otherwise a **dielectric Lambert + Schlick F0**: ``metallic = 0``, ``baseColorFactor = ρd``
+  (clipped to [0, 1]), and with ``specular=True`` (default) the extensions carry F0 and F90:
+  ``specularFactor = min(1, max(max F90, max F0))`` (f90 of the dielectric: exact when the
+  fit's F90 is grey), ``r = F0 / specularFactor``, ``ior = (1 + √max r)/(1 − √max r)``
+  (``KHR_materials_ior``; F0 of the ior = the largest channel of r) and
+  ``specularColorFactor = r / max r`` ≤ 1, so ``f0_d = F0`` exactly. A dielectric fit of
+  index η and grey ks gives back ``ior = η`` and ``specularFactor = ks``. The extensions are
+  written only when they differ from the defaults (ior 1.5, factors 1). With
+  ``specular=False`` the core's fixed f0 = 0.04, f90 = 1 are used (lossy, reported);
+* what stays lossy (measured): glTF weights the diffuse term by ``(1 − F_d)`` (the fit adds
+  ρd/π unweighted), its Fresnel curve is Schlick's (a dielectric fit's exact curve is
+  replaced), and its Smith V is separable (core) or the extension's height-correlated form;
+* optionally (``optimize=True``, CLI ``--option optimize=true``) baseColor, metallic and
+  roughness are refined by least squares in BRDF space (:func:`optimize_parameters`);
 * the loss of fidelity is measured by :func:`gltf_fidelity` (BRDF-space metrics of
-  :class:`GLTFBRDF` vs the fit; rendered PSNR in ``bench/bench_export.py``).
+  :class:`GLTFBRDF` vs the fit; rendered PSNR in ``bench/bench_export.py``); the exported
+  file passes the Khronos glTF-Validator (``tests/export/test_gltf.py``).
 
 Colours are the fit's linear RGB, written unchanged (glTF factors are linear).
 """
@@ -45,8 +66,8 @@ from .._atomic import atomic_write
 from ..brdf import IsotropicBRDF, _as_dirs
 from ._common import LUMA, check_output_path, fail, is_elliptical, shown, writing
 
-__all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material", "gltf_equivalent", "gltf_fidelity",
-           "write_gltf", "MATERIAL_METAL_F0"]
+__all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material",
+           "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0"]
 
 MATERIAL_METAL_F0 = 0.08
 
@@ -55,7 +76,9 @@ class GLTFBRDF(IsotropicBRDF):
     """The glTF 2.0 metallic-roughness BRDF (specification Appendix B, see module doc).
 
     Parameters: ``base_color`` (linear RGB), ``metallic`` and ``roughness`` (perceptual,
-    α = roughness²) in [0, 1]; optional ``anisotropy_strength`` s and
+    α = roughness²) in [0, 1]; ``specular_factor`` (in [0, 1]), ``specular_color`` (RGB ≥ 0)
+    of ``KHR_materials_specular`` and ``ior`` (≥ 1) of ``KHR_materials_ior`` (defaults: the
+    core spec's 1, white, 1.5); optional ``anisotropy_strength`` s and
     ``anisotropy_rotation`` φ (radians, counter-clockwise from the tangent) of the
     ``KHR_materials_anisotropy`` extension: ``αt = mix(α, 1, s²)`` along ``t = (cos φ,
     sin φ, 0)``, ``αb = α`` along ``b = n × t``, the extension's anisotropic GGX D and its
@@ -65,8 +88,20 @@ class GLTFBRDF(IsotropicBRDF):
     """
 
     def __init__(self, base_color, metallic: float, roughness: float, name: str = "gltf",
-                 anisotropy_strength: float = 0.0, anisotropy_rotation: float = 0.0):
+                 anisotropy_strength: float = 0.0, anisotropy_rotation: float = 0.0,
+                 specular_factor: float = 1.0, specular_color=(1.0, 1.0, 1.0),
+                 ior: float = 1.5):
         self.base_color = np.broadcast_to(np.asarray(base_color, float), (3,)).copy()
+        self.specular_factor = float(specular_factor)
+        self.specular_color = np.broadcast_to(np.asarray(specular_color, float), (3,)).copy()
+        self.ior = float(ior)
+        if not 0.0 <= self.specular_factor <= 1.0:
+            raise ValueError(f"GLTFBRDF: specular_factor must be in [0, 1], got {specular_factor}")
+        if not (np.all(np.isfinite(self.specular_color)) and np.all(self.specular_color >= 0)):
+            raise ValueError(f"GLTFBRDF: specular_color must be finite and >= 0, got "
+                             f"{self.specular_color.tolist()}")
+        if not (np.isfinite(self.ior) and self.ior >= 1.0):
+            raise ValueError(f"GLTFBRDF: ior must be >= 1, got {ior}")
         self.metallic = float(metallic)
         self.roughness = float(roughness)
         self.anisotropy_strength = float(anisotropy_strength)
@@ -110,18 +145,27 @@ class GLTFBRDF(IsotropicBRDF):
             V = 0.5 / (ggxv + ggxl)          # (the sample code's clamp to [0, 1] omitted)
             return np.nan_to_num(D * V)
 
+    def dielectric_f0_f90(self) -> tuple[np.ndarray, float]:
+        """``(f0_d, f90_d)`` of the dielectric part (KHR_materials_ior/specular)."""
+        f0_ior = ((self.ior - 1.0) / (self.ior + 1.0)) ** 2
+        f0 = np.minimum(f0_ior * self.specular_color, 1.0) * self.specular_factor
+        return f0, self.specular_factor
+
     def eval(self, wi, wo) -> np.ndarray:
-        """``f_r`` of Appendix B: ``(1 − F) c_diff/π + F D V`` (L = wi, V = wo)."""
+        """``f_r`` of Appendix B with the extensions: ``(1 − m)((1 − F_d) c/π + F_d D V)
+        + m F_m D V`` (L = wi, V = wo; see the module docstring)."""
         wi, wo = _as_dirs(wi, wo)
         ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
         h = wi + wo
         h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
         vh = np.abs(np.sum(wo * h, -1))
-        dv = self._specular_dv(wi, wo, h)
-        f0 = 0.04 * (1.0 - self.metallic) + self.base_color * self.metallic
-        c_diff = self.base_color * (1.0 - self.metallic)
-        F = f0 + (1.0 - f0) * ((1.0 - vh) ** 5)[..., None]
-        f = (1.0 - F) * c_diff / np.pi + F * dv[..., None]
+        dv = self._specular_dv(wi, wo, h)[..., None]
+        x5 = ((1.0 - vh) ** 5)[..., None]
+        f0_d, f90_d = self.dielectric_f0_f90()
+        F_d = f0_d + (f90_d - f0_d) * x5
+        F_m = self.base_color + (1.0 - self.base_color) * x5
+        m = self.metallic
+        f = (1.0 - m) * ((1.0 - F_d) * self.base_color / np.pi + F_d * dv) + m * F_m * dv
         return np.where(ok[..., None], f, 0.0)
 
     def as_microfacet(self):
@@ -139,7 +183,9 @@ class GLTFBRDF(IsotropicBRDF):
         d = super().describe()
         d.update(base_color=self.base_color.tolist(), metallic=self.metallic,
                  roughness=self.roughness, anisotropy_strength=self.anisotropy_strength,
-                 anisotropy_rotation=self.anisotropy_rotation)
+                 anisotropy_rotation=self.anisotropy_rotation,
+                 specular_factor=self.specular_factor,
+                 specular_color=self.specular_color.tolist(), ior=self.ior)
         return d
 
 
@@ -155,10 +201,20 @@ def _ggx_model(model):
 
         model = to_ggx(model)
         notes.append("tabulated NDF converted to GGX by Dupuy 2015 App. C (first moments)")
+    if isinstance(model, MicrofacetBRDF) and is_elliptical(model.distribution, ("beckmann",)):
+        from ..microfacet import GGX
+
+        d = model.distribution
+        name, source = model.name, model.source
+        model = MicrofacetBRDF(GGX(d.alpha_x, d.alpha_y, d.rho), model.fresnel, model.diffuse,
+                               specular=model.specular, correlated=model.correlated,
+                               name=name, source=source)
+        notes.append("Beckmann distribution replaced by GGX of the same (alpha_x, alpha_y, rho) "
+                     "(same D at the normal, heavier tails)")
     if not (isinstance(model, MicrofacetBRDF) and is_elliptical(model.distribution, ("ggx",))):
-        fail(model, "glTF 2.0", "glTF's metallic-roughness model is a single isotropic GGX lobe; "
-             "expected a MicrofacetBRDF with a GGX (or tabulated) distribution, e.g. from "
-             "fit_ggx")
+        fail(model, "glTF 2.0", "glTF's metallic-roughness model is a single GGX lobe; "
+             "expected a MicrofacetBRDF with a GGX, Beckmann or tabulated distribution, e.g. "
+             "from fit_ggx_diffuse (for other models use --to mitsuba or --to json)")
     return model, notes
 
 
@@ -179,11 +235,39 @@ def _anisotropy(d):
     return ab, float(np.sqrt((at - ab) / (1.0 - ab))), rot
 
 
-def gltf_parameters(model, anisotropy: bool = True) -> dict:
-    """``{"baseColorFactor", "metallicFactor", "roughnessFactor", "alpha", "notes", ...}`` of
-    a GGX fit by the rules of the module docstring; with ``anisotropy`` an anisotropic or
-    correlated GGX uses ``KHR_materials_anisotropy`` (``"anisotropy"`` entry: strength and
-    rotation; exact D, rotation included), else α = √(αx αy)."""
+def _specular_extension(F0, F90) -> dict:
+    """KHR_materials_specular / KHR_materials_ior parameters whose dielectric ``f0_d`` is
+    ``F0`` exactly and ``f90_d`` the largest channel of F90 (see the module docstring)."""
+    F0 = np.clip(np.asarray(F0, float), 0.0, 1.0)
+    F90 = np.clip(np.asarray(F90, float), 0.0, 1.0)
+    sf = float(min(1.0, max(float(F90.max()), float(F0.max()))))
+    if sf <= 0.0:
+        return {"specularFactor": 0.0, "specularColorFactor": [1.0, 1.0, 1.0], "ior": 1.5}
+    r = F0 / sf
+    rmax = float(r.max())
+    if rmax <= 0.0:
+        return {"specularFactor": sf, "specularColorFactor": [0.0, 0.0, 0.0], "ior": 1.5}
+    q = float(np.sqrt(min(rmax, 1.0 - 1e-9)))
+    ior = (1.0 + q) / (1.0 - q)
+    f0_ior = ((ior - 1.0) / (ior + 1.0)) ** 2
+    color = np.clip(r / f0_ior, 0.0, None)
+    return {"specularFactor": sf, "specularColorFactor": [float(c) for c in color],
+            "ior": float(ior)}
+
+
+def _is_default_specular(ext) -> bool:
+    return (abs(ext["specularFactor"] - 1.0) < 1e-12 and abs(ext["ior"] - 1.5) < 1e-9
+            and all(abs(c - 1.0) < 1e-12 for c in ext["specularColorFactor"]))
+
+
+def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> dict:
+    """``{"baseColorFactor", "metallicFactor", "roughnessFactor", "alpha", "notes",
+    "anisotropy", "specular", ...}`` of a fit by the rules of the module docstring; with
+    ``anisotropy`` an anisotropic or correlated GGX uses ``KHR_materials_anisotropy``
+    (``"anisotropy"`` entry: strength and rotation; exact D, rotation included), else
+    α = √(αx αy); with ``specular`` a dielectric carries its F0/F90 in
+    ``KHR_materials_specular`` + ``KHR_materials_ior`` (``"specular"`` entry, ``None`` when
+    the core's defaults are exact or for a metal)."""
     m, notes = _ggx_model(model)
     d = m.distribution
     alpha = float(np.sqrt(d.alpha_x * d.alpha_y))
@@ -197,33 +281,60 @@ def gltf_parameters(model, anisotropy: bool = True) -> dict:
             alpha = aniso[0]
             notes.append(f"anisotropy via KHR_materials_anisotropy: strength={aniso[1]:.4g}, "
                          f"rotation={aniso[2]:.4g} rad (principal axes of the slope matrix)")
+    if alpha > 1.0:
+        notes.append(f"alpha={alpha:.4g} > 1 clipped to glTF's largest roughness 1")
     ks = np.ones(3) if m.specular is None else np.asarray(m.specular, float)
     F0 = ks * (np.ones(3) if m.fresnel is None else np.asarray(m.fresnel.eval(1.0), float))
+    F90 = ks * (np.ones(3) if m.fresnel is None else np.asarray(m.fresnel.eval(0.0), float))
     F0c = np.clip(F0, 0.0, 1.0)
     rd = np.zeros(3) if m.diffuse is None else np.asarray(m.diffuse, float)
     lum = float(LUMA @ F0c)
     metal = (m.diffuse is None and lum > 0) or (lum >= MATERIAL_METAL_F0
                                                  and float(LUMA @ rd) < lum)
+    spec = None
     if metal:
         base = F0c
         if m.diffuse is not None:
             notes.append("metal: the fit's diffuse term is dropped")
+        notes.append("metal: Schlick with F0 = baseColor and F90 = 1 (fit's F90: "
+                     f"{np.round(F90, 4).tolist()})")
     else:
         base = np.clip(rd, 0.0, 1.0)
-        notes.append(f"dielectric: specular F0 fixed by glTF to 0.04 (fit: "
-                     f"{np.round(F0, 4).tolist()}), diffuse weighted by (1 - F)")
+        if specular:
+            spec = _specular_extension(F0, F90)
+            notes.append(f"dielectric: F0 {np.round(F0c, 4).tolist()} via KHR_materials_specular"
+                         f" + KHR_materials_ior (ior={spec['ior']:.4g}), F90 = specularFactor "
+                         f"{spec['specularFactor']:.4g} (fit: {np.round(F90, 4).tolist()}); "
+                         "diffuse weighted by (1 - F)")
+            if _is_default_specular(spec):
+                spec = None
+        else:
+            notes.append(f"dielectric: specular F0 fixed by glTF to 0.04 (fit: "
+                         f"{np.round(F0, 4).tolist()}), diffuse weighted by (1 - F)")
     if m.correlated and aniso is None:
         notes.append("height-correlated Smith G of the fit replaced by glTF's separable Smith")
     if not m.correlated and aniso is not None:
         notes.append("uncorrelated Smith G of the fit replaced by the extension's "
                      "height-correlated V")
-    notes.append("Fresnel curve replaced by Schlick with F0 = baseColor (metal) / 0.04")
+    notes.append("Fresnel curve replaced by Schlick's with the F0/F90 above")
     return {"baseColorFactor": [float(x) for x in base] + [1.0],
             "metallicFactor": 1.0 if metal else 0.0,
             "roughnessFactor": float(np.sqrt(min(alpha, 1.0))), "alpha": alpha,
             "anisotropy": None if aniso is None else {"anisotropyStrength": aniso[1],
                                                       "anisotropyRotation": aniso[2]},
-            "F0": F0.tolist(), "rho_d": rd.tolist(), "notes": notes}
+            "specular": spec, "F0": F0.tolist(), "F90": F90.tolist(), "rho_d": rd.tolist(),
+            "notes": notes}
+
+
+def _brdf_of(p: dict, name: str = "gltf") -> "GLTFBRDF":
+    a = p.get("anisotropy") or {"anisotropyStrength": 0.0, "anisotropyRotation": 0.0}
+    sp = p.get("specular") or {"specularFactor": 1.0, "specularColorFactor": [1.0] * 3,
+                               "ior": 1.5}
+    return GLTFBRDF(p["baseColorFactor"][:3], p["metallicFactor"], p["roughnessFactor"],
+                    name=name, anisotropy_strength=a["anisotropyStrength"],
+                    anisotropy_rotation=a["anisotropyRotation"],
+                    specular_factor=sp["specularFactor"],
+                    specular_color=sp["specularColorFactor"], ior=sp["ior"])
 
 
 def optimize_parameters(model, p: dict, n: int = 8192, seed: int = 0) -> dict:
@@ -247,9 +358,9 @@ def optimize_parameters(model, p: dict, n: int = 8192, seed: int = 0) -> dict:
     a = p["anisotropy"] or {"anisotropyStrength": 0.0, "anisotropyRotation": 0.0}
 
     def make(q):
-        return GLTFBRDF(np.clip(q[:3], 0, 1), float(np.clip(q[3], 0, 1)),
-                        float(np.clip(q[4], 0.01, 1)), anisotropy_strength=a["anisotropyStrength"],
-                        anisotropy_rotation=a["anisotropyRotation"])
+        return _brdf_of(dict(p, baseColorFactor=list(np.clip(q[:3], 0, 1)),
+                             metallicFactor=float(np.clip(q[3], 0, 1)),
+                             roughnessFactor=float(np.clip(q[4], 0.01, 1))))
 
     def resid(q):
         return ((make(q).eval(wi, wo) * wo[:, 2:3] - ref) / scale).ravel()
@@ -278,60 +389,70 @@ def optimize_parameters(model, p: dict, n: int = 8192, seed: int = 0) -> dict:
     return out
 
 
-def gltf_equivalent(model, anisotropy: bool = True, optimize: bool = False) -> GLTFBRDF:
+def gltf_equivalent(model, anisotropy: bool = True, optimize: bool = False,
+                    specular: bool = True) -> GLTFBRDF:
     """The :class:`GLTFBRDF` a glTF viewer renders for the exported material."""
-    p = gltf_parameters(model, anisotropy)
+    p = gltf_parameters(model, anisotropy, specular)
     if optimize:
         p = optimize_parameters(model, p)
-    a = p["anisotropy"] or {"anisotropyStrength": 0.0, "anisotropyRotation": 0.0}
-    return GLTFBRDF(p["baseColorFactor"][:3], p["metallicFactor"], p["roughnessFactor"],
-                    name=f"{getattr(model, 'name', 'model')}-gltf",
-                    anisotropy_strength=a["anisotropyStrength"],
-                    anisotropy_rotation=a["anisotropyRotation"])
+    return _brdf_of(p, name=f"{getattr(model, 'name', 'model')}-gltf")
 
 
 def gltf_fidelity(model, n_samples: int = 1 << 15,
                   metrics=("cos_rel_error", "normalized_l2"), anisotropy: bool = True,
-                  optimize: bool = False) -> dict:
+                  optimize: bool = False, specular: bool = True) -> dict:
     """BRDF-space loss of fidelity of the glTF material vs the fit
     (:func:`brdffit.evaluation.metrics.brdf_metrics`, the fit as reference)."""
     from ..evaluation.metrics import brdf_metrics
 
-    r = brdf_metrics(model, gltf_equivalent(model, anisotropy, optimize), n_samples,
+    r = brdf_metrics(model, gltf_equivalent(model, anisotropy, optimize, specular), n_samples,
                      metrics=metrics)
     return {k: r.get(k) for k in metrics}
 
 
 def gltf_material(model, name: str | None = None, fidelity: bool = True,
-                  anisotropy: bool = True, optimize: bool = False) -> dict:
+                  anisotropy: bool = True, optimize: bool = False, specular: bool = True) -> dict:
     """The glTF 2.0 ``material`` object (``pbrMetallicRoughness`` + ``extras.brdffit`` with
     α, conventions, approximations and the measured BRDF-space fidelity; the
-    ``KHR_materials_anisotropy`` extension for anisotropic fits when ``anisotropy``)."""
-    p = gltf_parameters(model, anisotropy)
+    ``KHR_materials_anisotropy`` extension for anisotropic fits when ``anisotropy``,
+    ``KHR_materials_specular`` and ``KHR_materials_ior`` for dielectrics when ``specular``)."""
+    p = gltf_parameters(model, anisotropy, specular)
     if optimize:
         p = optimize_parameters(model, p)
-    extras = {"alpha": p["alpha"], "F0_fit": p["F0"], "rho_d_fit": p["rho_d"],
-              "notes": p["notes"],
+    extras = {"alpha": p["alpha"], "F0_fit": p["F0"], "F90_fit": p["F90"],
+              "rho_d_fit": p["rho_d"], "notes": p["notes"],
               "conventions": "roughnessFactor = sqrt(alpha), alpha = GGX slope scale; "
                              "linear RGB of the source data; glTF Appendix B BRDF"}
     if fidelity:
-        extras["fidelity"] = gltf_fidelity(model, anisotropy=anisotropy, optimize=optimize)
+        extras["fidelity"] = gltf_fidelity(model, anisotropy=anisotropy, optimize=optimize,
+                                           specular=specular)
     mat = {"name": str(name or getattr(model, "name", None) or "material"),
            "pbrMetallicRoughness": {"baseColorFactor": p["baseColorFactor"],
                                     "metallicFactor": p["metallicFactor"],
                                     "roughnessFactor": p["roughnessFactor"]},
            "extras": {"brdffit": extras}}
+    ext = {}
     if p["anisotropy"]:
-        mat["extensions"] = {"KHR_materials_anisotropy": p["anisotropy"]}
+        ext["KHR_materials_anisotropy"] = p["anisotropy"]
+    sp = p.get("specular")
+    if sp:
+        ext["KHR_materials_specular"] = {"specularFactor": sp["specularFactor"],
+                                         "specularColorFactor": sp["specularColorFactor"]}
+        if abs(sp["ior"] - 1.5) > 1e-9:
+            ext["KHR_materials_ior"] = {"ior": sp["ior"]}
+    if ext:
+        mat["extensions"] = ext
     return mat
 
 
 def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
-               optimize: bool = False, **_ignored) -> dict:
+               optimize: bool = False, specular: bool = True, **_ignored) -> dict:
     """Write a minimal valid glTF 2.0 JSON (``asset`` + one ``material``), atomically;
-    ``optimize`` refines the rule-based parameters (:func:`optimize_parameters`)."""
+    ``optimize`` refines the rule-based parameters (:func:`optimize_parameters`),
+    ``specular=False`` leaves the dielectric extensions out (core glTF only)."""
     check_output_path(path)
-    mat = gltf_material(model, fidelity=fidelity, anisotropy=anisotropy, optimize=optimize)
+    mat = gltf_material(model, fidelity=fidelity, anisotropy=anisotropy, optimize=optimize,
+                        specular=specular)
     doc = {"asset": {"version": "2.0", "generator": "brdffit export"}, "materials": [mat]}
     if "extensions" in mat:
         doc["extensionsUsed"] = list(mat["extensions"])
@@ -347,5 +468,6 @@ def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
     with writing(path), atomic_write(path, "wb") as fh:
         fh.write(data)
     return {"files": [str(path)], "target": "gltf", "material": mat["pbrMetallicRoughness"],
+            "extensions": sorted(mat.get("extensions", {})),
             "notes": mat["extras"]["brdffit"]["notes"],
             "fidelity": mat["extras"]["brdffit"].get("fidelity")}
