@@ -282,6 +282,38 @@ def _nnls2(b: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.
     return best, best_cost
 
 
+def _nnls2_costs(B: np.ndarray, y: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """:func:`_nnls2` costs ``(G, C)`` for ``G`` basis functions ``B`` ``(G, n)`` at once
+    (same closed form, vectorised over the basis functions)."""
+    c1 = np.full(B.shape[1], 1.0 / np.pi)[:, None] * w          # (n, C)
+    c2 = B[:, :, None] * w[None]                                # (G, n, C)
+    yw = y * w
+    s11 = np.sum(c1 * c1, 0)                                    # (C,)
+    s22 = np.sum(c2 * c2, 1)                                    # (G, C)
+    s12 = np.einsum("nc,gnc->gc", c1, c2)
+    t1 = np.sum(c1 * yw, 0)
+    t2 = np.einsum("gnc,nc->gc", c2, yw)
+    yy = np.sum(yw * yw, 0)
+    det = s11 * s22 - s12 * s12
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = (s22 * t1 - s12 * t2) / det
+        f = (s11 * t2 - s12 * t1) / det
+        a_only = np.broadcast_to(np.maximum(t1 / s11, 0.0), s22.shape)
+        f_only = np.where(s22 > 0, np.maximum(t2 / np.where(s22 > 0, s22, 1.0), 0.0), 0.0)
+    best = None
+    for k, (ca, cf) in enumerate(((a, f), (a_only, 0.0 * a), (0.0 * f, f_only))):
+        ok = np.isfinite(ca) & np.isfinite(cf)
+        if k == 0:
+            ok &= (ca >= 0) & (cf >= 0)
+        ca, cf = np.where(np.isfinite(ca), ca, 0.0), np.where(np.isfinite(cf), cf, 0.0)
+        # ‖yw − ca c1 − cf c2‖² from the sums (exact expansion of the residual)
+        cost = (yy - 2 * ca * t1 - 2 * cf * t2 + ca * ca * s11 + 2 * ca * cf * s12
+                + cf * cf * s22)
+        cost = np.where(ok, np.maximum(cost, 0.0), np.inf)
+        best = cost if best is None else np.minimum(best, cost)
+    return best
+
+
 def _fresnel_nnls(c: np.ndarray, y: np.ndarray, rho_d: float | None = None,
                   rows: np.ndarray | None = None) -> tuple[float, float, float]:
     """Fit ``ρs F = A(1−c) + B(1−c)⁵ + E c`` (Eq. 11 reparametrised), A, B, E ≥ 0.
@@ -509,13 +541,40 @@ def _weights(kind_w: str, theta: np.ndarray, m: np.ndarray, valid: np.ndarray) -
     return np.where(valid, w, 0.0)
 
 
-def _basis_h(kind, theta, alpha, p):
-    """``D G1² / (π cos²θh)`` of Eq. 7 (the Fr/π factor's function)."""
+def _basis_h(kind, theta, alpha, p, g1=None):
+    """``D G1² / (π cos²θh)`` of Eq. 7 (the Fr/π factor's function); ``g1``: precomputed
+    ``G1(theta)`` (:func:`_grid_g1`)."""
     ln = _sgd_log_norm(alpha, p) if kind == "sgd" else None
+    if g1 is None:
+        g1 = _G1_theta(kind, theta, alpha, p, ln)
     with np.errstate(over="ignore", under="ignore", invalid="ignore"):
-        b = _D_theta(kind, theta, alpha, p, ln) * _G1_theta(kind, theta, alpha, p, ln) ** 2 \
-            / (np.pi * np.cos(theta) ** 2)
+        b = _D_theta(kind, theta, alpha, p, ln) * g1 ** 2 / (np.pi * np.cos(theta) ** 2)
     return np.where(np.isfinite(b), b, 0.0)
+
+
+#: G1 tables of the fixed (α, p) nodes of the step-1 grid / grid scan (:func:`_grid_axes`),
+#: at the MERL θh nodes and at :data:`_G1_SCAN_NODES`. Pure functions of constants, so they
+#: are kept for the process (≤ 216 entries of 283 floats): a batch computes them once.
+_GRID_G1: dict = {}
+
+
+def clear_caches() -> None:
+    """Forget the memoised grid G1 tables (benchmarks time fits from a cold start)."""
+    _GRID_G1.clear()
+
+
+def _grid_g1(kind: str, alpha: float, p: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """``(G1 at merl_theta_h(), G1 at _G1_SCAN_NODES)`` of a grid node, memoised."""
+    key = (kind, float(alpha), None if p is None else float(p))
+    hit = _GRID_G1.get(key)
+    if hit is None:
+        th = merl_theta_h()
+        ln = _sgd_log_norm(alpha, p) if kind == "sgd" else None
+        g = _G1_theta(kind, np.concatenate([th, _G1_SCAN_NODES]), alpha, p, ln)
+        hit = (g[:len(th)], g[len(th):])
+        if len(_GRID_G1) < 4096:
+            _GRID_G1[key] = hit
+    return hit
 
 
 def _grid_starts(cost: np.ndarray) -> np.ndarray:
@@ -540,14 +599,12 @@ def _step1(kind: str, theta, m, w, n_grid: tuple[int, int], starts: int):
     """Fit (ρd, Fr, α[, p]) per channel to the θd = 0 slice (Eq. 7, 12)."""
     a_lo, a_hi = ALPHA_BOUNDS[kind]
     la, ps = _grid_axes(kind, n_grid)
-    grid, costs = [], []
-    for lga in la:
-        for p in ps:
-            b = _basis_h(kind, theta, np.exp(lga), p)
-            _, cost = _nnls2(b, m, w)
-            grid.append((lga, p))
-            costs.append(cost)
-    costs = np.array(costs)                                   # (G, 3)
+    grid = [(lga, p) for lga in la for p in ps]
+    merl_nodes = theta.shape == merl_theta_h().shape and np.array_equal(theta, merl_theta_h())
+    B = np.stack([_basis_h(kind, theta, np.exp(lga), p,
+                           _grid_g1(kind, float(np.exp(lga)), p)[0] if merl_nodes else None)
+                  for lga, p in grid])
+    costs = _nnls2_costs(B, m, w)                             # (G, 3)
     results = []
     for c in range(m.shape[1]):
         wc, mc = w[:, c:c + 1], m[:, c:c + 1]
@@ -628,6 +685,24 @@ MAX_THETA_IO = np.radians(89.0)
 GRAZING_DENSE = 76                     # θd node index (degrees) from which every node is used        # as the objective of Bagher et al. 2016 §4.1
 # G1 nodes for the selection grid: dense near the horizon, where G1 falls to 0
 _G1_NODES = np.pi / 2 * (1.0 - (1.0 - np.linspace(0.0, 1.0, 768)) ** 2)
+# every 4th node for the grid scan (which only ranks the (α, p) nodes): G1 interpolation
+# error ≤ 4e-5 absolute over θ ≤ 89° on the whole scan grid (768 nodes: ≤ 2.3e-6), 4× cheaper
+_G1_SCAN_NODES = _G1_NODES[::4] if (len(_G1_NODES) - 1) % 4 == 0 else \
+    np.append(_G1_NODES[::4], _G1_NODES[-1])
+
+
+def _g1_nodes(kind: str, alpha: float, p: float | None, nodes: np.ndarray,
+              cache: dict | None = None) -> np.ndarray:
+    """``G1`` (Eq. 6) of one (α, p) at ``nodes``, memoised in ``cache`` (one fit's dict: the
+    candidates' selection shapes and albedo rows need the same tables)."""
+    key = (kind, float(alpha), None if p is None else float(p), id(nodes))
+    if cache is not None and key in cache:
+        return cache[key]
+    ln = _sgd_log_norm(alpha, p) if kind == "sgd" else None
+    g = _G1_theta(kind, nodes, alpha, p, ln)
+    if cache is not None:
+        cache[key] = g
+    return g
 
 
 def _fresnel_columns(cos_d: np.ndarray) -> np.ndarray:
@@ -686,7 +761,8 @@ _ALBEDO_THETA = np.radians([0.0, 30.0, 50.0, 65.0, 75.0, 82.0, 86.0, 89.0])
 _ALBEDO_N = 48                         # stratified 48 × 48 microfacet normals per direction
 
 
-def _albedo_rows(kind: str, alpha: float, p: float | None) -> np.ndarray:
+def _albedo_rows(kind: str, alpha: float, p: float | None, cache: dict | None = None
+                 ) -> np.ndarray:
     """Directional albedo of ``ρd = 1`` and of each Fresnel column, rows ``(n_θi, 4)``.
 
     ``a(θi) = ∫ ρs F(i·h) D(h) G1(θi) G1(θo) 4 (i·h) / (π cos θi) dωh`` (Eq. 1 integrated
@@ -700,8 +776,7 @@ def _albedo_rows(kind: str, alpha: float, p: float | None) -> np.ndarray:
     k = (np.arange(n) + 0.5) / n
     u = np.stack(np.meshgrid(k, k, indexing="ij"), -1).reshape(-1, 2)
     m = slope_to_normal(dist.sample(u))
-    ln = _sgd_log_norm(alpha, p) if kind == "sgd" else None
-    g = _G1_theta(kind, _G1_NODES, alpha, p, ln)
+    g = _g1_nodes(kind, alpha, p, _G1_NODES, cache)
     rows = []
     for t in _ALBEDO_THETA:
         wi = np.array([np.sin(t), 0.0, np.cos(t)])
@@ -771,18 +846,117 @@ def _selection_data(brdf, theta_d_stride: int, phi_stride: int) -> dict:
     d["theta_i"] = np.arccos(np.clip(d["ci"], -1.0, 1.0))
     d["theta_o"] = np.arccos(np.clip(d["co"], -1.0, 1.0))
     d["fres"] = _fresnel_columns(d["cos_d"])
+    # precomputed lookups of _spec_shape: the θh node of each sample (D is evaluated on the
+    # 90 nodes only), linear-interpolation cells of θi, θo in the G1 nodes, 1/(π ci co)
+    d["ih"] = np.broadcast_to(np.arange(len(th))[:, None, None], TH.shape)[keep]
+    for tag, nodes in (("", _G1_NODES), ("scan_", _G1_SCAN_NODES)):
+        for key in ("i", "o"):
+            t = d["theta_" + key]
+            j = np.clip(np.searchsorted(nodes, t, side="right") - 1, 0, len(nodes) - 2)
+            d[f"{tag}g1_cell_{key}"] = j
+            d[f"{tag}g1_frac_{key}"] = (t - nodes[j]) / (nodes[j + 1] - nodes[j])
+    with np.errstate(divide="ignore"):
+        d["inv_cc"] = 1.0 / (np.pi * d["ci"] * d["co"])
+    d["g1_cache"] = {}
     return d
 
 
-def _spec_shape(kind: str, alpha: float, p: float | None, data: dict) -> np.ndarray:
-    """``D G1 G1 / (π cos θi cos θo)`` on the selection grid (G1 interpolated, Eq. 6)."""
+def _interp_cells(g: np.ndarray, cell: np.ndarray, frac: np.ndarray) -> np.ndarray:
+    """Linear interpolation of the node values ``g`` at precomputed cells (= ``np.interp``)."""
+    g0 = g[cell]
+    return g0 + (g[cell + 1] - g0) * frac
+
+
+def _spec_shape(kind: str, alpha: float, p: float | None, data: dict,
+                scan: bool = False) -> np.ndarray:
+    """``D G1 G1 / (π cos θi cos θo)`` on the selection grid (G1 interpolated, Eq. 6).
+
+    ``scan=True``: G1 from the coarser :data:`_G1_SCAN_NODES` (the grid scan only ranks
+    nodes; the candidates are then evaluated with the full table)."""
     ln = _sgd_log_norm(alpha, p) if kind == "sgd" else None
-    g = _G1_theta(kind, _G1_NODES, alpha, p, ln)
-    gi = np.interp(data["theta_i"], _G1_NODES, g)
-    go = np.interp(data["theta_o"], _G1_NODES, g)
+    if scan:
+        g = _grid_g1(kind, alpha, p)[1]
+    else:
+        g = _g1_nodes(kind, alpha, p, _G1_NODES, data.get("g1_cache"))
+    tag = "scan_" if scan else ""
+    gi = _interp_cells(g, data[tag + "g1_cell_i"], data[tag + "g1_frac_i"])
+    go = _interp_cells(g, data[tag + "g1_cell_o"], data[tag + "g1_frac_o"])
     with np.errstate(over="ignore", invalid="ignore", under="ignore"):
-        s = _D_theta(kind, data["theta_h"], alpha, p, ln) * gi * go / (np.pi * data["ci"] * data["co"])
+        dh = _D_theta(kind, merl_theta_h(), alpha, p, ln)
+        s = dh[data["ih"]] * gi * go * data["inv_cc"]
     return np.where(np.isfinite(s), s, 0.0)
+
+
+_PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
+
+
+def _gram_data(data: dict) -> dict:
+    """Sample sums that give the normal equations of :func:`_linear_full` for any shape ``s``
+    with two matrix-vector products (``s @ lin``, ``s² @ quad``), all channels at once.
+
+    With ``X = (1/π, s f0, s f1, s f2)`` (f the Eq. 11 columns) and ``W = sw²``:
+    ``XᵀWX``, ``XᵀW m`` and ``mᵀW m`` per channel.
+    """
+    if "gram" in data:
+        return data["gram"]
+    W = data["sw"] ** 2                                   # (n, C)
+    m, f = data["m"], data["fres"]
+    C = m.shape[1]
+    lin = np.concatenate([W[:, c:c + 1] * f for c in range(C)]
+                         + [(W[:, c] * m[:, c])[:, None] * f for c in range(C)], 1)
+    quad = np.concatenate([np.stack([W[:, c] * f[:, k] * f[:, l] for k, l in _PAIRS], 1)
+                           for c in range(C)], 1)
+    g = {"lin": np.ascontiguousarray(lin.T), "quad": np.ascontiguousarray(quad.T),
+         "sW": W.sum(0), "sWm": (W * m).sum(0), "sWmm": (W * m * m).sum(0), "C": C}
+    data["gram"] = g
+    return g
+
+
+def _scan_linear(data: dict, shapes: np.ndarray) -> np.ndarray:
+    """Costs ``(N, C)`` of the unbounded non-negative least squares of :func:`_linear_full`
+    (same minimiser) for ``N`` shapes at once — the weighted squared error :func:`_score` of
+    its solution — from the normal equations of :func:`_gram_data` (two matrix products over
+    the samples for all shapes and channels). Each 4 × 4 problem is solved by NNLS on the
+    square root of its column-scaled Gram matrix.
+    """
+    g = _gram_data(data)
+    C = g["C"]
+    shapes = np.atleast_2d(shapes)
+    N = shapes.shape[0]
+    v1 = shapes @ g["lin"].T                               # (N, 6 C)
+    v2 = (shapes * shapes) @ g["quad"].T                   # (N, 6 C)
+    G = np.empty((N, C, 4, 4))
+    b = np.empty((N, C, 4))
+    for c in range(C):
+        wf = v1[:, 3 * c:3 * c + 3]
+        G[:, c, 0, 0] = g["sW"][c] / np.pi**2
+        G[:, c, 0, 1:] = G[:, c, 1:, 0] = wf / np.pi
+        for (k, l), j in zip(_PAIRS, range(6 * c, 6 * c + 6)):
+            G[:, c, 1 + k, 1 + l] = G[:, c, 1 + l, 1 + k] = v2[:, j]
+        b[:, c, 0] = g["sWm"][c] / np.pi
+        b[:, c, 1:] = v1[:, 3 * C + 3 * c:3 * C + 3 * c + 3]
+    yy = np.asarray(g["sWmm"], dtype=np.float64)
+    finite = np.all(np.isfinite(G), axis=(2, 3)) & np.all(np.isfinite(b), axis=2)
+    G = np.where(finite[..., None, None], G, 0.0)
+    b = np.where(finite[..., None], b, 0.0)
+    scale = np.sqrt(np.maximum(np.diagonal(G, axis1=2, axis2=3), 0.0))
+    scale = np.where(scale > 0, scale, 1.0)                # (N, C, 4)
+    Gs = G / (scale[..., :, None] * scale[..., None, :])
+    lam, V = np.linalg.eigh(Gs)
+    big = lam > 1e-13 * np.maximum(lam[..., -1:], 1e-300)
+    sq = np.sqrt(np.where(big, lam, 0.0))
+    R = sq[..., :, None] * np.swapaxes(V, -1, -2)          # RᵀR = Gs (on its range)
+    z = np.where(big, np.einsum("...ji,...j->...i", V, b / scale) / np.where(big, sq, 1.0), 0.0)
+    cost = np.full((N, C), np.inf)
+    for i in range(N):
+        for c in range(C):
+            if not finite[i, c]:
+                continue
+            x, _ = optimize.nnls(R[i, c], z[i, c], maxiter=200)
+            x = x / scale[i, c]
+            v = yy[c] - 2.0 * float(b[i, c] @ x) + float(x @ G[i, c] @ x)
+            cost[i, c] = max(v, 0.0) if np.isfinite(v) else np.inf
+    return cost
 
 
 def _score(data: dict, c: int, shape: np.ndarray, rho_d: float, abe) -> float:
@@ -817,14 +991,10 @@ def _full_scan(kind: str, data: dict, n_grid: tuple[int, int], starts: int
     local minima as candidates ``{"alpha", "p"}`` (shape computed once for the 3 channels;
     linear part without the albedo bound, which is applied to the candidates only)."""
     la, ps = _grid_axes(kind, n_grid)
-    nodes, costs = [], []
-    for lga in la:
-        for p in ps:
-            shape = _spec_shape(kind, float(np.exp(lga)), p, data)
-            nodes.append((float(lga), p))
-            costs.append([_score(data, c, shape, *_linear_full(data, c, shape))
-                          for c in range(data["m"].shape[1])])
-    costs = np.array(costs)
+    nodes = [(float(lga), p) for lga in la for p in ps]
+    shapes = np.stack([_spec_shape(kind, float(np.exp(lga)), p, data, scan=True)
+                       for lga, p in nodes])
+    costs = _scan_linear(data, shapes)
     out = []
     for c in range(costs.shape[1]):
         order = _grid_starts(costs[:, c].reshape(len(la), len(ps)))[:starts]
@@ -915,7 +1085,8 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
         if bounded:
             key = (cand["alpha"], cand["p"])
             if key not in row_cache:
-                row_cache[key] = _albedo_rows(distribution, cand["alpha"], cand["p"])
+                row_cache[key] = _albedo_rows(distribution, cand["alpha"], cand["p"],
+                                              None if data is None else data["g1_cache"])
             rows = row_cache[key]
         if linear == "slice":
             abe = _step2(distribution, sl["theta_d"], m_d[:, c], valid_d[:, c], cand, rows)
