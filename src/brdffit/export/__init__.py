@@ -11,6 +11,8 @@ One module per target (conventions of every target in ``docs/conventions.md``):
 * :mod:`.gltf` – glTF 2.0 metallic-roughness material of GGX fits, and :class:`GLTFBRDF`,
   the glTF BRDF of the specification's Appendix B as a BRDF of the library (to measure
   the loss of fidelity);
+* :mod:`.materialx` – MaterialX ``open_pbr_surface`` documents (``.mtlx``, validated by
+  MaterialX itself) and :class:`~.materialx.OpenPBRBRDF` to measure their loss;
 * :mod:`.glsl` – GLSL functions (GGX/Beckmann/SGD with the Eq. 9 G1, tabulated and NPF
   models from textures), the NPF "uber-texture" (Bagher 2016 Fig. 16), and the NumPy
   translation of the same code (:mod:`.glsl_cpu`);
@@ -44,6 +46,7 @@ TARGETS = {
     "mitsuba": (".mitsuba", "write_mitsuba_python"),
     "mitsuba-xml": (".mitsuba", "write_mitsuba_xml"),
     "gltf": (".gltf", "write_gltf"),
+    "materialx": (".materialx", "write_materialx"),
     "glsl": (".glsl", "write_glsl"),
     "merl": (".merl", "export_merl"),
     "rgl": (".rgl", "export_rgl"),

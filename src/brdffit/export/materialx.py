@@ -1,0 +1,369 @@
+"""MaterialX documents (OpenPBR Surface) of microfacet fits, and the OpenPBR BRDF as a library BRDF.
+
+:func:`write_materialx` writes, with the official MaterialX Python bindings (``materialx`` on
+PyPI), one ``open_pbr_surface`` shader node (OpenPBR Surface 1.1, MaterialX ≥ 1.39) and its
+``surfacematerial`` per fit; the document is checked by MaterialX's own ``validate()`` after
+importing the standard data libraries (``mx.loadLibraries``) before it is written. Element
+names come from ``Document.createValidChildName`` (a hostile fit name cannot break the XML
+or collide); nothing else the user controls is written.
+
+Mapping of a fit (a ``MicrofacetBRDF`` with a GGX, Beckmann or tabulated distribution: the
+same inputs as :mod:`brdffit.export.gltf`, whose conversions it shares — tabulated → GGX by
+Dupuy 2015 App. C, Beckmann → GGX of the same α)::
+
+    specular_roughness = (α_t · √((1 + (1 − a)²)/2))^½, specular_roughness_anisotropy = a,
+    a = 1 − α_b/α_t
+
+the inverse of OpenPBR's ``open_pbr_anisotropy`` node (``α_t = r² √(2/(1 + (1 − a)²))``,
+``α_b = (1 − a) α_t``), with α_t ≥ α_b the principal roughnesses of (αx, αy, ρ) (Dupuy 2015
+App. C); the rougher axis must lie along the tangent: a rotation of the principal axes
+relative to the tangent frame (ρ ≠ 0, or αy > αx) is reported (``tangent_rotation_deg``)
+and, since ``geometry_tangent`` is the mesh's, not applied (part of the measured loss).
+``F0 = ks·F(0°)``, ``F90 = ks·F(90°)`` and ``ρd`` as for glTF, and the same metallic rule
+(``brdffit.export.gltf.MATERIAL_METAL_F0``):
+
+* **dielectric** (``base_metalness = 0``): ``base_color = ρd`` (Lambert: ``base_weight = 1``,
+  ``base_diffuse_roughness = 0``), ``specular_weight = 1``,
+  ``specular_ior = (1 + √f)/(1 − √f)`` with ``f`` the mean over channels of ``F0/F90`` (the
+  Fresnel's own normal reflectance), ``specular_color = F90`` (OpenPBR's dielectric tint
+  multiplies the whole Fresnel curve). A dielectric fit of index η gives back ``specular_ior
+  = η`` and ``specular_color = ks``: exact Fresnel; a Schlick fit gets the exact dielectric
+  curve of the same F0 (lossy, measured);
+* **metal** (``base_metalness = 1``): OpenPBR's metal is ``specular_weight ·
+  F_Schlick(base_color, F90 = 1)`` (``specular_color`` = F82 tint, white = plain Schlick):
+  ``specular_weight = max F90`` (≤ 1 unless F0 exceeds it), ``base_color = F0 /
+  specular_weight`` — exact for a Schlick fit with a grey ks.
+
+What stays lossy (measured by :func:`materialx_fidelity` against :class:`OpenPBRBRDF`):
+MaterialX's GLSL (``mx_dielectric_bsdf``, ``mx_generalized_schlick_bsdf``, ``mx_layer``)
+multiplies the specular lobe by the energy compensation ``1 + F (1 − E)/E`` (E the GGX
+directional albedo, its rational fit ``mx_ggx_dir_albedo_analytic``), uses the isotropic
+height-correlated G2 of the average α = √(αx αy), and attenuates the diffuse base by
+``1 − E_F(θo)·comp`` (the dielectric's directional albedo) — the fit adds ρd/π unchanged.
+
+:class:`OpenPBRBRDF` re-implements that GLSL evaluation (reflection only: no coat, fuzz,
+thin film, transmission or subsurface; Lambert base) as a :class:`~brdffit.brdf.BRDF`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._atomic import atomic_write
+from ..brdf import IsotropicBRDF, _as_dirs
+from ._common import LUMA, check_output_path, principal_axes, shown, writing
+
+__all__ = ["OpenPBRBRDF", "openpbr_parameters", "openpbr_equivalent", "materialx_fidelity",
+           "materialx_document", "write_materialx", "validate_document"]
+
+
+# ------------------------------------------------------------------------------------------
+# the OpenPBR BRDF as MaterialX's GLSL evaluates it
+# ------------------------------------------------------------------------------------------
+def _dir_albedo_ab(n_dot_v, alpha):
+    """``(A, B)`` of ``mx_ggx_dir_albedo_analytic`` (MaterialX's rational fit of the GGX
+    directional albedo: ``E(F0, F90) = F0 A + F90 B``)."""
+    x, y = np.asarray(n_dot_v, float), float(alpha)
+    x2, y2 = x * x, y * y
+    c = np.array([[0.1003, 0.9345, 1.0, 1.0], [-0.6303, -2.323, -1.765, 0.2281],
+                  [9.748, 2.229, 8.263, 15.94], [-2.038, -3.748, 11.53, -55.83],
+                  [29.34, 1.424, 28.96, 13.08], [-8.245, -0.7684, -7.507, 41.26],
+                  [-26.44, 1.436, -36.11, 54.9], [19.99, 0.2913, 15.86, 300.2],
+                  [-5.448, 0.6286, 33.37, -285.1]])
+    terms = [np.ones_like(x), x, np.full_like(x, y), x * y, x2, np.full_like(x, y2), x2 * y,
+             x * y2, x2 * y2]
+    r = sum(t[..., None] * c[k] for k, t in enumerate(terms))
+    return np.clip(r[..., 0] / r[..., 2], 0.0, 1.0), np.clip(r[..., 1] / r[..., 3], 0.0, 1.0)
+
+
+def _fresnel_dielectric(c, ior):
+    """``mx_fresnel_dielectric`` (exact, unpolarised; 1 under total internal reflection)."""
+    g2 = ior * ior + c * c - 1.0
+    g = np.sqrt(np.maximum(g2, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        F = 0.5 * ((g - c) / (g + c)) ** 2 * (1.0 + (((g + c) * c - 1.0) / ((g - c) * c + 1.0)) ** 2)
+    return np.where(g2 < 0, 1.0, np.nan_to_num(F, nan=1.0))
+
+
+class OpenPBRBRDF(IsotropicBRDF):
+    """OpenPBR Surface (``open_pbr_surface``) reflection as MaterialX's GLSL evaluates it.
+
+    Parameters: ``base_color`` (RGB), ``base_metalness``, ``specular_weight``,
+    ``specular_color`` (RGB), ``specular_roughness``, ``specular_roughness_anisotropy``,
+    ``specular_ior`` (the other OpenPBR inputs at their defaults: base_weight 1, no coat,
+    fuzz, thin film, transmission, subsurface; base_diffuse_roughness 0 = Lambert). The
+    anisotropy's rougher axis is the tangent, at ``tangent_rotation`` (radians,
+    counter-clockwise about the normal) from the local x axis (``geometry_tangent``
+    connected to the rotated mesh tangent). ``wi`` = L (light), ``wo`` = V (viewer).
+    """
+
+    def __init__(self, base_color, base_metalness: float, specular_roughness: float,
+                 specular_ior: float = 1.5, specular_color=(1.0, 1.0, 1.0),
+                 specular_weight: float = 1.0, specular_roughness_anisotropy: float = 0.0,
+                 tangent_rotation: float = 0.0, name: str = "openpbr"):
+        self.tangent_rotation = float(tangent_rotation)
+        self.base_color = np.broadcast_to(np.asarray(base_color, float), (3,)).copy()
+        self.base_metalness = float(base_metalness)
+        self.specular_roughness = float(specular_roughness)
+        self.specular_ior = float(specular_ior)
+        self.specular_color = np.broadcast_to(np.asarray(specular_color, float), (3,)).copy()
+        self.specular_weight = float(specular_weight)
+        self.specular_roughness_anisotropy = float(specular_roughness_anisotropy)
+        a = self.specular_roughness_anisotropy
+        r2 = self.specular_roughness ** 2
+        ax = r2 * np.sqrt(2.0 / (1.0 + (1.0 - a) ** 2))            # open_pbr_anisotropy
+        self.alpha = (float(np.clip(ax, 1e-6, 1.0)), float(np.clip((1.0 - a) * ax, 1e-6, 1.0)))
+        self.isotropic = a == 0.0
+        self.name = name
+        self.source = None
+
+    def _ior(self) -> float:
+        """The specular_weight-modulated index of the node graph (``modulated_eta_s``)."""
+        eta = self.specular_ior
+        f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
+        s = np.sign(eta - 1.0) * np.sqrt(np.clip(self.specular_weight * f0, 0.0, 0.99999))
+        return float((1.0 + s) / (1.0 - s))
+
+    def eval(self, wi, wo) -> np.ndarray:
+        wi, wo = _as_dirs(wi, wo)
+        ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+        nl = np.clip(wi[..., 2], 1e-6, 1.0)
+        nv = np.clip(wo[..., 2], 1e-6, 1.0)
+        h = wi + wo
+        h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+        vh = np.clip(np.sum(wo * h, -1), 1e-6, 1.0)
+        ax, ay = self.alpha
+        c, s = np.cos(self.tangent_rotation), np.sin(self.tangent_rotation)
+        hx, hy = c * h[..., 0] + s * h[..., 1], -s * h[..., 0] + c * h[..., 1]
+        he = np.stack([hx / ax, hy / ay], -1)
+        D = 1.0 / (np.pi * ax * ay * (np.sum(he * he, -1) + h[..., 2] ** 2) ** 2)
+        avg = float(np.sqrt(ax * ay))
+        a2 = avg * avg
+        G = 2.0 * nl * nv / (np.sqrt(a2 + (1 - a2) * nl * nl) * nv
+                             + np.sqrt(a2 + (1 - a2) * nv * nv) * nl)
+        A, B = _dir_albedo_ab(nv, avg)
+        Ess = (A + B)[..., None]
+        lobe = (D * G / (4.0 * nl * nv))[..., None]
+        # dielectric: tint · F_dielectric, layered over the Lambert base
+        eta = self._ior()
+        Fd = _fresnel_dielectric(vh, eta)[..., None]
+        comp_d = 1.0 + Fd * (1.0 - Ess) / Ess
+        f0_eta = ((eta - 1.0) / (eta + 1.0)) ** 2
+        dir_alb = (f0_eta * A + B)[..., None] * comp_d
+        diel = lobe * Fd * comp_d * np.maximum(self.specular_color, 0.0) \
+            + (1.0 - dir_alb) * np.maximum(self.base_color, 0.0) / np.pi
+        # metal: specular_weight · Schlick(base_color, 1) (F82 tint = specular_color)
+        c0 = np.maximum(self.base_color, 0.0)
+        Fm = _schlick_f82(vh, c0, np.maximum(self.specular_color, 0.0))
+        comp_m = 1.0 + Fm * (1.0 - Ess) / Ess
+        metal = self.specular_weight * lobe * Fm * comp_m
+        m = self.base_metalness
+        f = (1.0 - m) * diel + m * metal
+        return np.where(ok[..., None], np.nan_to_num(f), 0.0)
+
+    def describe(self) -> dict:
+        d = super().describe()
+        d.update(base_color=self.base_color.tolist(), base_metalness=self.base_metalness,
+                 specular_roughness=self.specular_roughness, specular_ior=self.specular_ior,
+                 specular_color=self.specular_color.tolist(),
+                 specular_weight=self.specular_weight,
+                 specular_roughness_anisotropy=self.specular_roughness_anisotropy,
+                 tangent_rotation=self.tangent_rotation)
+        return d
+
+
+def _schlick_f82(cos_t, f0, f82_tint):
+    """``mx_fresnel_hoffman_schlick`` with F90 = 1, exponent 5 (Hoffman 2023 F82 tint):
+    ``Schlick(F0, 1) − a cos θ (1 − cos θ)⁶`` with ``a`` giving ``F(82°) = tint·Schlick(82°)``
+    (``a = 0`` for a white tint)."""
+    c = np.asarray(cos_t, float)[..., None]
+    cb = 1.0 / 7.0
+    x = 1.0 - c
+    schlick = f0 + (1.0 - f0) * x ** 5
+    sb = f0 + (1.0 - f0) * (1.0 - cb) ** 5
+    a = sb * (1.0 - f82_tint) / (cb * (1.0 - cb) ** 6)
+    return np.clip(schlick - a * c * x ** 6, 0.0, None)
+
+
+# ------------------------------------------------------------------------------------------
+# mapping
+# ------------------------------------------------------------------------------------------
+def openpbr_parameters(model) -> dict:
+    """OpenPBR inputs of a fit by the rules of the module docstring, with ``notes``,
+    ``tangent_rotation_deg`` and the fit's ``F0``, ``F90``, ``rho_d``."""
+    from .gltf import MATERIAL_METAL_F0, _ggx_model
+
+    m, notes = _ggx_model(model)
+    d = m.distribution
+    au, av, phi = principal_axes(d.alpha_x, d.alpha_y, d.rho)
+    if au >= av:
+        at, ab, rot = au, av, phi
+    else:
+        at, ab, rot = av, au, phi + 0.5 * np.pi
+    rot = float(np.angle(np.exp(1j * rot)))
+    if at > 1.0:
+        notes.append(f"alpha {at:.4g} > 1 clipped to OpenPBR's largest roughness")
+        at, ab = 1.0, min(ab, 1.0)
+    a = 1.0 - ab / at if at > 0 else 0.0
+    r = float(np.sqrt(at * np.sqrt((1.0 + (1.0 - a) ** 2) / 2.0)))
+    if a <= 0:
+        rot = 0.0
+    elif abs(rot) > 1e-12:
+        notes.append(f"anisotropy: geometry_tangent = the mesh tangent rotated by "
+                     f"{np.degrees(rot):.6g} deg about the normal (rotate3d), the rougher "
+                     "principal axis of the fit")
+    ks = np.ones(3) if m.specular is None else np.asarray(m.specular, float)
+    F0 = ks * (np.ones(3) if m.fresnel is None else np.asarray(m.fresnel.eval(1.0), float))
+    F90 = ks * (np.ones(3) if m.fresnel is None else np.asarray(m.fresnel.eval(0.0), float))
+    F0c, F90c = np.clip(F0, 0.0, 1.0), np.clip(F90, 0.0, 1.0)
+    rd = np.zeros(3) if m.diffuse is None else np.asarray(m.diffuse, float)
+    lum = float(LUMA @ F0c)
+    metal = (m.diffuse is None and lum > 0) or (lum >= MATERIAL_METAL_F0
+                                                 and float(LUMA @ rd) < lum)
+    p = {"specular_roughness": r, "specular_roughness_anisotropy": float(a),
+         "base_weight": 1.0, "base_diffuse_roughness": 0.0}
+    if metal:
+        sw = float(max(F90c.max(), F0c.max(), 1e-12))
+        p.update(base_metalness=1.0, base_color=np.clip(F0c / sw, 0, 1).tolist(),
+                 specular_weight=sw, specular_color=[1.0, 1.0, 1.0], specular_ior=1.5)
+        notes.append(f"metal: specular_weight {sw:.4g} x Schlick(base_color, 1) (fit F90: "
+                     f"{np.round(F90, 4).tolist()})")
+        if m.diffuse is not None:
+            notes.append("metal: the fit's diffuse term is dropped")
+    else:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(F90c > 0, F0c / np.where(F90c > 0, F90c, 1.0), 0.0)
+        f = float(np.clip(np.mean(ratio), 0.0, 0.95))
+        ior = float((1.0 + np.sqrt(f)) / (1.0 - np.sqrt(f)))
+        p.update(base_metalness=0.0, base_color=np.clip(rd, 0, 1).tolist(), specular_weight=1.0,
+                 specular_color=F90c.tolist(), specular_ior=ior)
+        notes.append(f"dielectric: specular_ior {ior:.4g} (exact dielectric Fresnel of F0 "
+                     f"{f:.4g}), specular_color = F90 {np.round(F90c, 4).tolist()}; base "
+                     "attenuated by the specular albedo")
+    notes.append("MaterialX GLSL: energy compensation and average-alpha G2 on the specular lobe")
+    p.update(notes=notes, tangent_rotation_deg=float(np.degrees(rot)), F0=F0.tolist(),
+             F90=F90.tolist(), rho_d=rd.tolist())
+    return p
+
+
+def openpbr_equivalent(model) -> OpenPBRBRDF:
+    """The :class:`OpenPBRBRDF` of the exported ``open_pbr_surface``."""
+    p = openpbr_parameters(model)
+    return OpenPBRBRDF(p["base_color"], p["base_metalness"], p["specular_roughness"],
+                       specular_ior=p["specular_ior"], specular_color=p["specular_color"],
+                       specular_weight=p["specular_weight"],
+                       specular_roughness_anisotropy=p["specular_roughness_anisotropy"],
+                       tangent_rotation=np.radians(p["tangent_rotation_deg"]),
+                       name=f"{getattr(model, 'name', 'model')}-openpbr")
+
+
+def materialx_fidelity(model, n_samples: int = 1 << 15,
+                       metrics=("cos_rel_error", "normalized_l2")) -> dict:
+    """BRDF-space loss of the OpenPBR material vs the fit
+    (:func:`brdffit.evaluation.metrics.brdf_metrics`, the fit as reference)."""
+    from ..evaluation.metrics import brdf_metrics
+
+    r = brdf_metrics(model, openpbr_equivalent(model), n_samples, metrics=metrics)
+    return {k: r.get(k) for k in metrics}
+
+
+# ------------------------------------------------------------------------------------------
+# the document
+# ------------------------------------------------------------------------------------------
+_LIBRARY = None
+
+
+def _mx():
+    try:
+        import MaterialX as mx
+    except ImportError as exc:  # pragma: no cover - a declared dependency
+        from ..errors import ExportError
+
+        raise ExportError(f"the MaterialX export needs the 'materialx' package ({exc})") from None
+    return mx
+
+
+def _library():
+    """The standard data libraries (loaded once)."""
+    global _LIBRARY
+    mx = _mx()
+    if _LIBRARY is None:
+        lib = mx.createDocument()
+        mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), lib)
+        _LIBRARY = lib
+    return _LIBRARY
+
+
+def validate_document(doc) -> tuple[bool, str]:
+    """``doc.validate()`` with the standard libraries imported (on a copy of ``doc``)."""
+    mx = _mx()
+    check = mx.createDocument()
+    check.copyContentFrom(doc)
+    check.importLibrary(_library())
+    ok, msg = check.validate()
+    return bool(ok), str(msg)
+
+
+def materialx_document(model, name: str | None = None):
+    """``(document, parameters)``: an ``open_pbr_surface`` node and its ``surfacematerial``."""
+    mx = _mx()
+    p = openpbr_parameters(model)
+    doc = mx.createDocument()
+    base = str(name or getattr(model, "name", None) or "material")
+    mat_name = doc.createValidChildName(base if base.strip() else "material")
+    shader = doc.addNode("open_pbr_surface", doc.createValidChildName(f"{mat_name}_openpbr"),
+                         "surfaceshader")
+    for key in ("base_weight", "base_metalness", "base_diffuse_roughness", "specular_weight",
+                "specular_roughness", "specular_roughness_anisotropy", "specular_ior"):
+        shader.addInput(key, "float").setValueString(_num(p[key]))
+    for key in ("base_color", "specular_color"):
+        shader.addInput(key, "color3").setValueString(", ".join(_num(v) for v in p[key]))
+    if p["tangent_rotation_deg"] != 0.0:
+        # MaterialX's rotate3d turns v into v cos + (v × axis) sin + ...: clockwise about the
+        # axis for a positive amount, hence the minus sign
+        tangent = doc.addNode("tangent", doc.createValidChildName(f"{mat_name}_tangent"), "vector3")
+        tangent.addInput("space", "string").setValueString("world")
+        normal = doc.addNode("normal", doc.createValidChildName(f"{mat_name}_normal"), "vector3")
+        normal.addInput("space", "string").setValueString("world")
+        rot = doc.addNode("rotate3d", doc.createValidChildName(f"{mat_name}_rotated_tangent"),
+                          "vector3")
+        rot.addInput("in", "vector3").setConnectedNode(tangent)
+        rot.addInput("amount", "float").setValueString(_num(-p["tangent_rotation_deg"]))
+        rot.addInput("axis", "vector3").setConnectedNode(normal)
+        shader.addInput("geometry_tangent", "vector3").setConnectedNode(rot)
+    doc.addMaterialNode(mat_name, shader)
+    return doc, p
+
+
+def _num(v) -> str:
+    return f"{float(v):.9g}"
+
+
+def write_materialx(model, path, fidelity: bool = True, **_ignored) -> dict:
+    """Write the ``.mtlx`` document of ``model`` atomically (validated first)."""
+    from ..errors import ExportError
+
+    mx = _mx()
+    path = check_output_path(path)
+    doc, p = materialx_document(model)
+    values = [p[k] for k in ("specular_roughness", "specular_ior", "specular_weight",
+                             "specular_roughness_anisotropy", "base_metalness")]
+    values += list(p["base_color"]) + list(p["specular_color"])
+    if not all(np.isfinite(values)):
+        raise ExportError(f"cannot export {type(model).__name__} {getattr(model, 'name', '')!r} "
+                          f"to {shown(path)}: expected finite parameters, found NaN or infinity")
+    ok, msg = validate_document(doc)
+    if not ok:
+        raise ExportError(f"cannot export to {shown(path)}: MaterialX validate() rejected the "
+                          f"document ({' '.join(msg.split())[:300]})")
+    data = mx.writeToXmlString(doc).encode("utf-8")
+    with writing(path), atomic_write(path, "wb") as fh:
+        fh.write(data)
+    out = {"files": [str(path)], "target": "materialx", "shader": "open_pbr_surface",
+           "parameters": {k: p[k] for k in ("base_color", "base_metalness", "specular_weight",
+                                            "specular_color", "specular_roughness",
+                                            "specular_roughness_anisotropy", "specular_ior")},
+           "tangent_rotation_deg": p["tangent_rotation_deg"], "notes": p["notes"]}
+    if fidelity:
+        out["fidelity"] = materialx_fidelity(model)
+    return out

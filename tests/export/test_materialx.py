@@ -1,0 +1,129 @@
+"""MaterialX export: open_pbr_surface documents accepted by MaterialX's validate(), the
+mapping back to a BRDF (OpenPBRBRDF), hostile names."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit.export import TARGETS, export
+from brdffit.microfacet import GGX, DielectricFresnel, MicrofacetBRDF, SchlickFresnel
+
+mx = pytest.importorskip("MaterialX")
+
+from brdffit.export.materialx import (OpenPBRBRDF, materialx_document,  # noqa: E402
+                                      materialx_fidelity, openpbr_parameters, validate_document)
+
+
+def _read(path):
+    doc = mx.createDocument()
+    mx.readFromXmlFile(doc, str(path))
+    return doc
+
+
+def _inputs(doc):
+    (shader,) = doc.getNodes("open_pbr_surface")
+    out = {}
+    for i in shader.getInputs():
+        out[i.getName()] = i.getNodeName() if i.getNodeName() else i.getValue()
+    return shader, out
+
+
+def test_target_registered_and_documents_validate(tmp_path):
+    assert "materialx" in TARGETS
+    models = {"metal": brdffit.synthetic("gold-ggx"), "aniso": brdffit.synthetic("aniso-ggx"),
+              "plastic": brdffit.synthetic("plastic-beckmann"),
+              "diel": MicrofacetBRDF(GGX(0.1), DielectricFresnel(1.7), diffuse=[0.4, 0.2, 0.1],
+                                     specular=[0.9, 0.8, 0.7])}
+    for key, model in models.items():
+        info = export(model, "materialx", tmp_path / f"{key}.mtlx", fidelity=False)
+        doc = _read(tmp_path / f"{key}.mtlx")
+        ok, msg = validate_document(doc)
+        assert ok, (key, msg)
+        assert len(doc.getMaterialNodes()) == 1
+        shader, inp = _inputs(doc)
+        assert shader.getType() == "surfaceshader"
+        assert inp["specular_ior"] == pytest.approx(info["parameters"]["specular_ior"], rel=1e-6)
+    # the dielectric fit's index and tint come back exactly
+    _, inp = _inputs(_read(tmp_path / "diel.mtlx"))
+    assert inp["specular_ior"] == pytest.approx(1.7, rel=1e-6)            # (float32 in files)
+    np.testing.assert_allclose(list(inp["specular_color"]), [0.9, 0.8, 0.7], rtol=1e-6)
+    np.testing.assert_allclose(list(inp["base_color"]), [0.4, 0.2, 0.1], rtol=1e-6)
+    assert inp["base_metalness"] == 0.0
+    # the correlated anisotropic metal connects a rotated tangent
+    _, inp = _inputs(_read(tmp_path / "aniso.mtlx"))
+    assert inp["geometry_tangent"] and inp["specular_roughness_anisotropy"] > 0.5
+
+
+def test_validate_can_fail():
+    doc, _ = materialx_document(brdffit.synthetic("gold-ggx"))
+    (shader,) = doc.getNodes("open_pbr_surface")
+    shader.addInput("geometry_normal", "vector3").setNodeName("no_such_node")
+    ok, msg = validate_document(doc)
+    assert not ok and "no_such_node" in msg
+
+
+def test_roughness_mapping_inverts_open_pbr_anisotropy():
+    for ax, ay, rho in ((0.2, 0.2, 0.0), (0.3, 0.06, 0.0), (0.06, 0.3, 0.45)):
+        model = MicrofacetBRDF(GGX(ax, ay, rho), SchlickFresnel(0.9))
+        p = openpbr_parameters(model)
+        eq = OpenPBRBRDF(p["base_color"], p["base_metalness"], p["specular_roughness"],
+                         specular_roughness_anisotropy=p["specular_roughness_anisotropy"],
+                         tangent_rotation=np.radians(p["tangent_rotation_deg"]))
+        S = np.array([[ax * ax, rho * ax * ay], [rho * ax * ay, ay * ay]])
+        lam = np.sqrt(np.linalg.eigvalsh(S))
+        np.testing.assert_allclose(sorted(eq.alpha), sorted(lam), rtol=1e-9)
+    # applying the tangent rotation is what makes a correlated lobe right
+    model = brdffit.synthetic("aniso-ggx")
+    good = materialx_fidelity(model, 8192, ("cos_rel_error",))["cos_rel_error"]
+    p = openpbr_parameters(model)
+    unrotated = OpenPBRBRDF(p["base_color"], 1.0, p["specular_roughness"],
+                            specular_roughness_anisotropy=p["specular_roughness_anisotropy"])
+    from brdffit.evaluation.metrics import brdf_metrics
+
+    bad = brdf_metrics(model, unrotated, 8192, metrics=("cos_rel_error",))["cos_rel_error"]
+    assert good < 0.2 < bad
+
+
+def test_openpbr_base_is_lambert_times_view_throughput():
+    """specular_color 0: only the base is left, ``base/π`` times the specular layer's
+    throughput ``1 − E(θo)·comp`` (MaterialX's layer), which depends on the viewer (and
+    slightly on the light, through the Fresnel in the energy compensation ``comp``)."""
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(2000, 3))
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    v[:, 2] = np.abs(v[:, 2]) + 1e-3
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    base = np.array([0.5, 0.3, 0.1])
+    brdf = OpenPBRBRDF(base, 0.0, 0.5, specular_ior=1.5, specular_color=0.0)
+    for wo in ([0.0, 0.0, 1.0], [0.8, 0.0, 0.6]):
+        t = brdf.eval(v, np.broadcast_to(wo, v.shape)) / (base / np.pi)
+        np.testing.assert_allclose(t, t[0, 0], rtol=1e-3)              # ~ same for every wi
+        assert 0.8 < t[0, 0] < 1.0
+
+
+@pytest.mark.parametrize("name", ['a<b>&"c\'', "\x00\x1b[2J", "", "   ", "../../etc/passwd",
+                                  "\U0001F600" * 40, "1abc", "mat", "mat_openpbr"])
+def test_hostile_names(tmp_path, name):
+    model = MicrofacetBRDF(GGX(0.2), DielectricFresnel(1.5), diffuse=0.3, name=name)
+    export(model, "materialx", tmp_path / "m.mtlx", fidelity=False)
+    assert [p.name for p in tmp_path.iterdir()] == ["m.mtlx"]
+    doc = _read(tmp_path / "m.mtlx")
+    ok, msg = validate_document(doc)
+    assert ok, msg
+    names = [e.getName() for e in doc.getChildren()]
+    assert len(set(names)) == len(names) and all(mx.isValidName(n) for n in names)
+
+
+def test_fitted_plastic_round_trip(tmp_path):
+    """ggx-diffuse on synthetic:plastic-beckmann → .mtlx: ior 1.5, base = ρd, and a bounded
+    loss against the fit (Beckmann → GGX lobe and MaterialX's energy compensation)."""
+    from brdffit.fit.analytic import fit_beckmann_diffuse
+
+    fit = fit_beckmann_diffuse(brdffit.synthetic("plastic-beckmann"), moments=False)
+    info = export(fit, "materialx", tmp_path / "p.mtlx")
+    _, inp = _inputs(_read(tmp_path / "p.mtlx"))
+    assert inp["specular_ior"] == pytest.approx(1.5, rel=1e-4)
+    np.testing.assert_allclose(list(inp["base_color"]), [0.45, 0.06, 0.04], rtol=1e-3)
+    assert 0 < info["fidelity"]["cos_rel_error"] < 0.3
