@@ -99,7 +99,7 @@ def test_openpbr_base_is_lambert_times_view_throughput():
     brdf = OpenPBRBRDF(base, 0.0, 0.5, specular_ior=1.5, specular_color=0.0)
     for wo in ([0.0, 0.0, 1.0], [0.8, 0.0, 0.6]):
         t = brdf.eval(v, np.broadcast_to(wo, v.shape)) / (base / np.pi)
-        np.testing.assert_allclose(t, t[0, 0], rtol=1e-3)              # ~ same for every wi
+        np.testing.assert_allclose(t, t[0, 0], rtol=5e-3)              # ~ same for every wi
         assert 0.8 < t[0, 0] < 1.0
 
 
