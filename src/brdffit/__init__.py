@@ -9,7 +9,8 @@ The public API is deliberately small; everything else lives in the subpackages:
 * :mod:`brdffit.evaluation` – rendering, metrics, plots and the HTML report
 """
 
-from .brdf import BRDF, IsotropicBRDF
+# Nothing here imports NumPy: `import brdffit` (and `brdffit --help`) stay instant; the
+# public names below are imported on first use by __getattr__.
 from .errors import BRDFError, BRDFFormatError, ExportError, FitError
 from .synthetic import list_synthetic, synthetic  # eager: the function shadows the module name
 
@@ -27,6 +28,7 @@ def __getattr__(name):  # lazy public API: keeps `import brdffit` fast and cycle
     from importlib import import_module
 
     lazy = {
+        "BRDF": ".brdf", "IsotropicBRDF": ".brdf",
         "load": ".io", "resample_to_merl": ".io.merl", "write_merl": ".io.merl",
         "MicrofacetBRDF": ".microfacet", "Beckmann": ".microfacet", "GGX": ".microfacet",
         "SGD": ".microfacet", "SchlickFresnel": ".microfacet",
@@ -36,5 +38,7 @@ def __getattr__(name):  # lazy public API: keeps `import brdffit` fast and cycle
         "fit_npf": ".fit", "save_fit": ".io.fitfile", "load_fit": ".io.fitfile",
     }
     if name in lazy:
-        return getattr(import_module(lazy[name], __name__), name)
+        value = getattr(import_module(lazy[name], __name__), name)
+        globals()[name] = value  # cached: later lookups do not come back here
+        return value
     raise AttributeError(f"module 'brdffit' has no attribute {name!r}")

@@ -22,21 +22,27 @@ from __future__ import annotations
 import importlib
 import sys
 
-import click
+# Start-up cost (issue 15.4): importing this package loads Typer (with its vendored Click)
+# and the command modules, nothing else -- no NumPy, SciPy, Numba, Mitsuba, Dask, matplotlib
+# or colour-science (tests/cli/test_startup.py). Commands import what they use when they run.
 import typer
 
 try:  # recent Typer vendors its own copy of Click; older ones use Click itself
-    from typer._click import exceptions as _typer_click
+    from typer import _click as click
+    from typer._click import exceptions as _click_exceptions
 except ImportError:  # pragma: no cover
-    _typer_click = click.exceptions
+    import click
 
-_EXIT = tuple({click.exceptions.Exit, typer.Exit})
-_ABORT = tuple({click.exceptions.Abort, typer.Abort})
-_USAGE = tuple({click.ClickException, _typer_click.ClickException})
+    _click_exceptions = click.exceptions
+
+_EXIT = tuple({typer.Exit, getattr(_click_exceptions, "Exit", typer.Exit)})
+_ABORT = tuple({typer.Abort, getattr(_click_exceptions, "Abort", typer.Abort)})
+_USAGE = (_click_exceptions.ClickException,)
 
 from ..errors import BRDFError
 
-_COMMAND_MODULES = ["info", "convert", "fit", "render", "compare", "batch", "export", "demo"]
+_COMMAND_MODULES = ["info", "convert", "fit", "models", "render", "compare", "batch", "export",
+                    "demo"]
 
 #: Exit status of ``brdffit`` (module docstring).
 EXIT_OK, EXIT_ERROR, EXIT_USAGE, EXIT_FAILED_TASKS = 0, 1, 2, 3
@@ -45,26 +51,45 @@ EXIT_CODES = {EXIT_OK: "all done", EXIT_ERROR: "error", EXIT_USAGE: "usage error
               EXIT_FAILED_TASKS: "some tasks failed (the rest is done)"}
 
 
-def usage_error(option: str, message: str) -> click.BadParameter:
+def usage_error(option: str, message: str):
     """A bad command-line value: ``raise usage_error("--model", "...")`` exits with status 2."""
-    return click.BadParameter(message, param_hint=option)
+    return typer.BadParameter(message, param_hint=option)
 
 
 def check_models(names, option: str = "--models") -> list[str]:
-    """``names`` if every one is a registered model, else a usage error listing the known
-    (an empty list passes: callers that need a model say so)."""
+    """``names`` if every one is a known model, else a usage error listing the known ones
+    (an empty list passes: callers that need a model say so).
+
+    Reads the registry's declared names (:func:`brdffit.fit.registry.known_names`) without
+    importing any fitting module (only a fitting module that declares none of its models
+    would be imported, to find its names)."""
     from ..fit import registry
 
-    unknown = []
-    for name in names:
-        try:
-            registry.get(name)
-        except KeyError:
-            unknown.append(name)
+    names = list(names)
+    unknown = [name for name in names if name not in set(registry.known_names())]
+    if unknown:
+        registry.load_undeclared_modules()
+        unknown = [name for name in unknown if name not in set(registry.known_names())]
     if unknown:
         raise usage_error(option, f"unknown model(s) {', '.join(map(repr, unknown))}; known "
-                                  f"models: {', '.join(registry.list_fitters())}")
-    return list(names)
+                                  f"models: {', '.join(registry.known_names())} (brdffit "
+                                  f"models describes them)")
+    return names
+
+
+def models_help(title: str = "Models") -> str:
+    """The model list of ``--help`` texts: one line per declared model with its description
+    (kept as is by Click: the block starts with ``\\b``), 80 columns wide."""
+    from ..fit import registry
+
+    lines = ["\b", f"{title} (iso: isotropic inputs only; `brdffit models` for sizes and "
+                    "times):"]
+    for name in registry.known_names():
+        info = registry.MODELS.get(name)
+        desc = info.description if info is not None else ""
+        iso = " (iso)" if info is not None and info.isotropic_only else ""
+        lines.append(f"  {name:<17}{desc}{iso}")
+    return "\n".join(lines)
 
 
 app = typer.Typer(
@@ -72,9 +97,12 @@ app = typer.Typer(
     help="Fit compact microfacet models to measured BRDFs (MERL, RGL, UTIA, Neural-BRDF).\n\n"
          "Exit status: 0 all done, 1 error, 2 usage (unknown model, bad option or value, "
          "output folder locked), 3 some tasks failed (the rest is done).",
+    epilog=models_help(),
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,  # plain Click help: no Rich import (~80 ms), 80-column friendly
+    context_settings={"help_option_names": ["-h", "--help"]},
 )
 
 
@@ -97,6 +125,154 @@ def _load_commands() -> None:
 _load_commands()
 
 
+# -- the Click command, tuned ----------------------------------------------------------------
+_TYPE_NAMES = {str: "TEXT", int: "INTEGER", float: "NUMBER", bool: "BOOLEAN"}
+
+
+def _plain_type(param, ctx=None) -> str:
+    """The value placeholder ``--help`` shows for an option: its metavar, else the plain
+    type name (``TEXT``, ``INTEGER``, ``PATH``); nothing for an argument (its name is the
+    placeholder). Replaces Typer's ``<str>``/``<bool>``/``<list[str]>`` labels."""
+    if getattr(param, "param_type_name", "") == "argument":
+        return ""
+    if param.metavar:
+        return param.metavar
+    desc = getattr(param, "type_descriptor", None)
+    ann = getattr(desc, "annotation", None)
+    args = getattr(ann, "__args__", None)
+    if args and len(args) == 1:  # list[X]
+        ann = args[0]
+    from pathlib import Path
+
+    if isinstance(ann, type) and issubclass(ann, Path):
+        return "PATH"
+    return _TYPE_NAMES.get(ann, "VALUE")
+
+
+def _fast_runtime_param(param):
+    """A coercion of ``param``'s values without Pydantic, for the plain types this CLI uses
+    (``str``, ``int``, ``float``, ``bool``, ``Path``, ``list`` of those; ``min``/``max``
+    checked as Typer does), or ``None`` to keep Typer's own.
+
+    Typer >= 0.2x validates every value with a Pydantic ``TypeAdapter``: importing Pydantic
+    and building the adapters cost ~0.14 s of CPU per command, as much as the C++ tool takes
+    for a whole tabulated fit. The behaviour is Typer's: the same accepted values, ranges and
+    path checks (Typer's ``coerce_cli_path``), a ``BadParameter`` (exit status 2) otherwise.
+    """
+    try:
+        from typer._coercion import RuntimeParam
+        from typer._param_types import coerce_cli_path
+    except ImportError:  # pragma: no cover - another Typer: keep its coercion
+        return None
+    desc = getattr(param, "type_descriptor", None)
+    info = getattr(desc, "parameter_info", None)
+    if desc is None or info is None or not hasattr(param, "_runtime_param"):
+        return None
+    try:
+        if desc.is_choice or desc.is_file or desc.is_tuple or desc.is_datetime:
+            return None
+    except Exception:  # noqa: BLE001 - an unknown descriptor: keep Typer's
+        return None
+    if getattr(info, "parser", None) is not None or getattr(info, "click_type", None) is not None \
+            or getattr(info, "clamp", False):
+        return None
+    from pathlib import Path
+
+    ann = desc.annotation
+    is_list = getattr(ann, "__origin__", None) is list
+    leaf = ann.__args__[0] if is_list else ann
+    if leaf not in (str, int, float, bool, Path):
+        return None
+    BadParameter = typer.BadParameter
+    lo, hi = info.min, info.max
+
+    def one(value, param, ctx):
+        if leaf is str:
+            if isinstance(value, bytes):
+                value = value.decode("utf-8", "replace")
+            return str(value)
+        if leaf is Path:
+            return Path(coerce_cli_path(value, info, path_type=None, param=param, ctx=ctx))
+        if leaf is bool:
+            if isinstance(value, bool):
+                return value
+            text = str(value).strip().lower()
+            if text in ("1", "true", "t", "yes", "y", "on"):
+                return True
+            if text in ("", "0", "false", "f", "no", "n", "off"):
+                return False
+            raise BadParameter(f"{value!r} is not a valid boolean.", ctx=ctx, param=param)
+        try:
+            number = leaf(value) if not isinstance(value, leaf) else value
+        except (TypeError, ValueError):
+            kind = "an integer" if leaf is int else "a number"
+            raise BadParameter(f"{value!r} is not {kind}.", ctx=ctx, param=param) from None
+        if leaf is float and number != number:
+            raise BadParameter(f"{value!r} is not a number.", ctx=ctx, param=param)
+        if (lo is not None and number < lo) or (hi is not None and number > hi):
+            rng = " and ".join(x for x in (f">= {lo}" if lo is not None else "",
+                                           f"<= {hi}" if hi is not None else "") if x)
+            raise BadParameter(f"{value!r} is not in the range {rng}.", ctx=ctx, param=param)
+        return number
+
+    class _Plain(RuntimeParam):
+        def _coerce_value(self, value, param, ctx):
+            if is_list or param.multiple or param.nargs == -1:
+                return [one(v, param, ctx) for v in value]
+            return one(value, param, ctx)
+
+    return _Plain(parameter_info=info, annotation=ann)
+
+
+def _tune_param(param) -> None:
+    import types
+
+    if hasattr(param, "display_type"):
+        param.display_type = types.MethodType(_plain_type, param)
+    if getattr(param, "_runtime_param", True) is None:
+        fast = _fast_runtime_param(param)
+        if fast is not None:
+            param._runtime_param = fast
+
+
+def _tune(command) -> None:
+    """Plain type labels in ``--help`` and Pydantic-free value coercion for every parameter
+    of ``command`` and its sub-commands (the help option too: Click makes it on demand)."""
+    stack = [command]
+    while stack:
+        cmd = stack.pop()
+        stack.extend(getattr(cmd, "commands", {}).values())
+        for param in cmd.params:
+            _tune_param(param)
+        make_help = getattr(cmd, "get_help_option", None)
+        if make_help is not None:
+            def get_help_option(ctx, _make=make_help):
+                option = _make(ctx)
+                if option is not None:
+                    _tune_param(option)
+                return option
+
+            cmd.get_help_option = get_help_option
+
+
+def command():
+    """The Click command of the ``brdffit`` app (:func:`_tune`-d)."""
+    from typer.main import get_command
+
+    cmd = get_command(app)
+    _tune(cmd)
+    return cmd
+
+
+def _click_usage_error(exc: BaseException) -> bool:
+    """True for a usage error of Typer's Click or, when some command module imported it,
+    of the real Click (not imported here: it is not needed to start)."""
+    if isinstance(exc, _USAGE):
+        return True
+    real = sys.modules.get("click")
+    return real is not None and isinstance(exc, real.ClickException)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Console-script entry point: runs the command and returns its exit status (module
     docstring). With ``standalone_mode=False`` Click *returns* the code of ``typer.Exit``
@@ -104,27 +280,29 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in argv
     try:
-        code = app(args=argv, prog_name="brdffit", standalone_mode=False)
+        code = command().main(args=argv, prog_name="brdffit", standalone_mode=False)
     except _EXIT as exc:
         return exc.exit_code
     except _ABORT:
         print("brdffit: aborted", file=sys.stderr)
         return 130
-    except _USAGE as exc:
-        if debug:
-            raise
-        exc.show()
-        return exc.exit_code
-    except (BRDFError, OSError, ValueError) as exc:
-        if debug:
-            raise
-        print(f"brdffit: error: {exc}", file=sys.stderr)
-        return EXIT_ERROR
     except Exception as exc:  # noqa: BLE001 – a bug or an unforeseen input: still one line
         if debug:
             raise
-        print(f"brdffit: error: {type(exc).__name__}: {exc} (--debug shows the traceback)",
-              file=sys.stderr)
+        if _click_usage_error(exc):
+            exc.show()
+            return exc.exit_code
+        real = sys.modules.get("click")
+        if real is not None and isinstance(exc, real.exceptions.Exit):
+            return exc.exit_code
+        if real is not None and isinstance(exc, real.exceptions.Abort):
+            print("brdffit: aborted", file=sys.stderr)
+            return 130
+        if isinstance(exc, (BRDFError, OSError, ValueError)):
+            print(f"brdffit: error: {exc}", file=sys.stderr)
+        else:
+            print(f"brdffit: error: {type(exc).__name__}: {exc} (--debug shows the traceback)",
+                  file=sys.stderr)
         return EXIT_ERROR
     return code if isinstance(code, int) else EXIT_OK
 

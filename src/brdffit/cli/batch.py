@@ -11,26 +11,29 @@ import typer
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("batch")
+    from . import models_help
+
+    @app.command("batch", epilog=models_help())
     def batch(
-        source: str = typer.Argument(..., help="Folder of measured files, a Neural-BRDF .zip "
+        source: str = typer.Argument(..., metavar="SOURCE", help="Folder of measured files, a Neural-BRDF .zip "
                                                "collection, a list file, or synthetic:[a,b]."),
-        models: str = typer.Option("tabulated,ggx,beckmann", "--models", "-m",
-                                   help="Comma-separated model names (see `brdffit fit --help`)."),
-        out: str = typer.Option(..., "--out", "-o", help="Output folder (created; re-runs resume)."),
-        only: str = typer.Option("", "--only", help="Comma-separated material names to keep."),
-        limit: int = typer.Option(0, "--limit", min=0,
+        models: str = typer.Option("tabulated,ggx,beckmann", "--models", "-m", metavar="A,B",
+                                   help="Comma-separated model names (list below)."),
+        out: str = typer.Option(..., "--out", "-o", metavar="DIR",
+                                help="Output folder (created; re-runs resume)."),
+        only: str = typer.Option("", "--only", metavar="A,B", help="Comma-separated material names to keep."),
+        limit: int = typer.Option(0, "--limit", min=0, metavar="N",
                                   help="Keep only the first N materials (0: all)."),
-        scheduler: str = typer.Option("", "--scheduler",
+        scheduler: str = typer.Option("", "--scheduler", metavar="ADDRESS",
                                       help="Address of an existing Dask scheduler, e.g. "
                                            "tcp://host:8786 (default: a local cluster). Its "
                                            "workers must share OUT and the data at the same "
                                            "paths and run the same brdffit version."),
-        workers: int = typer.Option(2, "--workers", min=1,
+        workers: int = typer.Option(2, "--workers", min=1, metavar="N",
                                     help="Local cluster: worker processes."),
-        memory_limit: str = typer.Option("", "--memory-limit",
+        memory_limit: str = typer.Option("", "--memory-limit", metavar="SIZE",
                                          help="Local cluster: memory per worker, e.g. 8GiB."),
-        retries: int = typer.Option(2, "--retries", min=0,
+        retries: int = typer.Option(2, "--retries", min=0, metavar="N",
                                     help="Local cluster: how many more times a task that kills "
                                          "its worker (out of memory...) is tried before it is "
                                          "recorded as failed."),
@@ -38,16 +41,16 @@ def register(app: typer.Typer) -> None:
         render: bool = typer.Option(False, "--render",
                                     help="Also render every material and its fits (Mitsuba 3) "
                                          "and write the HTML report to OUT/report/."),
-        scenes: str = typer.Option("paper", "--scenes",
+        scenes: str = typer.Option("paper", "--scenes", metavar="SCENES",
                                    help="--render: the scene suite 'paper' (Bagher 2016 §5: a "
                                         "sphere under three environment maps and a knot), one "
                                         "scene or a comma-separated list."),
-        spp: int = typer.Option(64, "--spp", min=1,
+        spp: int = typer.Option(64, "--spp", min=1, metavar="N",
                                 help="--render: samples per pixel per scene, all batches."),
-        batches: int = typer.Option(8, "--batches", min=1,
+        batches: int = typer.Option(8, "--batches", min=1, metavar="N",
                                     help="--render: independent batches per scene (the PSNR "
                                          "standard error needs ≥ 3)."),
-        resolution: int = typer.Option(256, "--resolution", min=8, help="--render: image size."),
+        resolution: int = typer.Option(256, "--resolution", min=8, metavar="PX", help="--render: image size."),
         retry_failed: bool = typer.Option(False, "--retry-failed",
                                           help="Redo tasks recorded as failed."),
         wait_lock: bool = typer.Option(False, "--wait-lock",
@@ -55,9 +58,15 @@ def register(app: typer.Typer) -> None:
                                             "(default: exit with status 2)."),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
     ):
-        """Fit every material of SOURCE with every model; write fits, records and a summary.
+        """Fit every material of SOURCE with every model (Dask, resumable).
 
-        Example: brdffit batch merl_nbrdf.zip --models tabulated,ggx --limit 10 --out runs/merl
+        Writes OUT/fits/, OUT/records/ and OUT/summary.csv (one row per material and
+        model: α and glTF roughness, F0, ρd, errors, PSNR ± se and dE2000 when rendered,
+        time, status, fit file, and the recommended model of each material).
+
+        \b
+        Example:
+          brdffit batch merl_nbrdf.zip -m tabulated,ggx --limit 10 --out runs/merl
 
         With --render, each material is also rendered once its fits are done, and
         OUT/report/index.html compares every model over the database. Exit status: 0 all

@@ -36,48 +36,50 @@ def _materials(spec: str, limit: int | None) -> list[str]:
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("compare")
+    from . import models_help
+
+    @app.command("compare", epilog=models_help())
     def compare_cmd(
         spec: str = typer.Argument(..., metavar="INPUT[:MATERIAL]",
                                    help="Reference BRDF: a file, collection.zip[:material], "
                                         "synthetic:NAME or a fit file."),
-        models: str = typer.Option("tabulated,ggx,beckmann", "--models", "-m",
-                                   help="Comma-separated model names to fit, and/or saved fits "
-                                        "as NAME=fit.npz or fit.npz."),
-        out: Path = typer.Option(Path("report"), "--out", "-o", help="Report directory."),
-        scenes: str = typer.Option("paper", "--scenes",
+        models: str = typer.Option("tabulated,ggx,beckmann", "--models", "-m", metavar="A,B",
+                                   help="Comma-separated model names to fit (list below), "
+                                        "and/or saved fits as NAME=fit.npz or fit.npz."),
+        out: Path = typer.Option(Path("report"), "--out", "-o", metavar="DIR", help="Report directory."),
+        scenes: str = typer.Option("paper", "--scenes", metavar="SCENES",
                                    help="Scene suite 'paper' (sphere-courtyard, sphere-studio, "
                                         "sphere-sunrise, knot-courtyard) or scene names, comma-"
                                         "separated: sphere-<map>, knot-<map>, sphere-env, knot, "
                                         "sphere-point, sphere-distant, sphere-svrough."),
         scene: str = typer.Option(None, "--scene", hidden=True,
                                   help="One scene (former option; same as --scenes NAME)."),
-        spp: int = typer.Option(64, "--spp", min=1,
+        spp: int = typer.Option(64, "--spp", min=1, metavar="N",
                                 help="Samples per pixel per scene, all batches together."),
-        batches: int = typer.Option(8, "--batches", min=1,
+        batches: int = typer.Option(8, "--batches", min=1, metavar="N",
                                     help="Independent batches per scene (≥ 3 for standard "
                                          "errors)."),
-        resolution: int = typer.Option(256, "--resolution", min=8, help="Image side in pixels."),
-        seed: int = typer.Option(0, "--seed", help="Seed of the sample streams (all models)."),
-        exposure: str = typer.Option("scene", "--exposure",
+        resolution: int = typer.Option(256, "--resolution", min=8, metavar="PX", help="Image side in pixels."),
+        seed: int = typer.Option(0, "--seed", metavar="N", help="Seed of the sample streams (all models)."),
+        exposure: str = typer.Option("scene", "--exposure", metavar="EV",
                                      help="Tone-mapping exposure: 'scene' (fixed per scene), "
                                           "'auto' (from each scene's reference) or a number."),
-        gamma: float = typer.Option(None, "--gamma", help="Tone-mapping gamma (default: the "
+        gamma: float = typer.Option(None, "--gamma", metavar="G", help="Tone-mapping gamma (default: the "
                                                           "scene's, 2.2)."),
         noise_floor: bool = typer.Option(True, "--noise-floor/--no-noise-floor", hidden=True,
                                          help="Ignored: standard errors replace the noise floor."),
-        envmap: str = typer.Option(None, "--envmap",
+        envmap: str = typer.Option(None, "--envmap", metavar="MAP",
                                    help="Environment map of the plain sphere-env/knot scenes: a "
                                         "name of ../shared/data/envmaps or an EXR (default "
                                         "procedural)."),
-        limit: int = typer.Option(None, "--limit", min=1,
+        limit: int = typer.Option(None, "--limit", min=1, metavar="N",
                                   help="With a collection: only its first N materials."),
-        fit_options: str = typer.Option(None, "--fit-options",
+        fit_options: str = typer.Option(None, "--fit-options", metavar="JSON",
                                         help='Fitter keyword arguments as JSON per model, e.g. '
                                              '\'{"npf": {"max_iter": 100}}\'.'),
         quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress messages."),
     ) -> None:
-        """Fit, render and measure models against a reference; write an HTML report."""
+        """Fit, render and measure models against a reference (HTML report)."""
         from ..evaluation.compare import compare, compare_many
         from ..evaluation.report import write_index
 

@@ -50,7 +50,7 @@ def register(app: typer.Typer) -> None:
         dst: Path = typer.Argument(..., metavar="OUT",
                                    help="Output file: .binary (MERL) or .bin (UTIA)."),
     ) -> None:
-        """Resample a BRDF onto the MERL (.binary) or UTIA (.bin) grid and write it."""
+        """Resample a BRDF to a MERL (.binary) or UTIA (.bin) file."""
         if dst.suffix.lower() not in _OUTPUTS:
             from . import usage_error
 

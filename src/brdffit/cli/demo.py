@@ -14,17 +14,20 @@ DEMO_FIT_OPTIONS = {"npf": {"starts": ("g-from-d",), "max_iter": 60, "start_max_
 
 
 def register(app: typer.Typer) -> None:
-    @app.command("demo")
+    from . import models_help
+
+    @app.command("demo", epilog=models_help())
     def demo(
-        out: str = typer.Option("demo-out", "--out", "-o", help="Report folder."),
-        data: str = typer.Option("", "--data", help="Run on real data instead: a folder, a "
+        out: str = typer.Option("demo-out", "--out", "-o", metavar="DIR", help="Report folder."),
+        data: str = typer.Option("", "--data", metavar="SOURCE", help="Run on real data instead: a folder, a "
                                                      "Neural-BRDF .zip collection or a list file."),
-        limit: int = typer.Option(0, "--limit", help="With --data: first N materials only."),
-        models: str = typer.Option(DEMO_MODELS, "--models", "-m", help="Models to fit."),
-        spp: int = typer.Option(64, "--spp", help="Samples per pixel of the renderings."),
-        resolution: int = typer.Option(128, "--resolution", help="Image size in pixels."),
+        limit: int = typer.Option(0, "--limit", metavar="N", help="With --data: first N materials only."),
+        models: str = typer.Option(DEMO_MODELS, "--models", "-m", metavar="A,B",
+                                   help="Models to fit (list below)."),
+        spp: int = typer.Option(64, "--spp", metavar="N", help="Samples per pixel of the renderings."),
+        resolution: int = typer.Option(128, "--resolution", metavar="PX", help="Image size in pixels."),
     ):
-        """Fit every model to built-in synthetic materials, render, and write the HTML report.
+        """Fit and render built-in synthetic materials; write a report.
 
         No external data or network is needed. Example: brdffit demo --out demo-out
         Exit status: 0 all done, 1 error, 2 usage, 3 some fits failed (the rest is written).

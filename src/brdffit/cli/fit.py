@@ -1,14 +1,18 @@
 """``brdffit fit INPUT[:MATERIAL] --model NAME [-o OUT] [--iterations N] [--json]``.
 
 Loads the input with :func:`brdffit.io.load`, fits it with the model registered under
-``NAME`` in :mod:`brdffit.fit.registry` (``tabulated``, ``ggx``, ``beckmann`` from Dupuy et
-al. 2015; other modules add theirs, e.g. ``sgd``, ``npf``), prints a short summary
-(eigenvalue, fitted α's, Fresnel at normal incidence, time; ``--json`` prints it as one JSON
-object) and, with ``-o``, writes the fit file (:func:`brdffit.io.fitfile.save_fit`).
+``NAME`` in :mod:`brdffit.fit.registry` (``brdffit models`` lists them) and prints a labelled
+summary: the slope scales (αx, αy, ρ) and glTF roughness √α, F0 and the Lambertian albedo ρd
+per channel (:func:`brdffit.fit.registry.figures`), the fit's error against its input
+(:func:`quick_error`), the time, the model's own figures (eigenvalue, iterations...), and
+where the fit file was written — or that it was *not* saved (no ``-o``). ``--json`` prints
+the same as one JSON object (``output`` is ``null`` when not saved).
+
 Extra fitting options go through ``--option key=value`` (values parsed as JSON when they
 can be, e.g. ``--option tol=1e-6 --option anisotropic=true``); an option the model's fitting
 function does not take is a usage error (exit status 2) listing the accepted ones
-(:func:`accepted_options`).
+(:func:`accepted_options`), checked before the input is read. Without options the input is
+read and validated *before* the fitting module is imported, so a rejected file fails fast.
 """
 
 from __future__ import annotations
@@ -19,19 +23,15 @@ from pathlib import Path
 
 import typer
 
-from .._json import json_default
-
 __all__ = ["register", "parse_options", "run_fit", "accepted_options", "check_options"]
 
 
 def parse_options(items: list[str] | None) -> dict:
     """``["k=v", ...]`` → dict, values parsed as JSON when possible (else strings)."""
     out: dict = {}
-    import click
-
     for item in items or []:
         if "=" not in item:
-            raise click.BadParameter(f"expected key=value, found {item!r}", param_hint="--option")
+            raise typer.BadParameter(f"expected key=value, found {item!r}", param_hint="--option")
         key, val = item.split("=", 1)
         try:
             out[key.strip()] = json.loads(val)
@@ -112,14 +112,161 @@ def _unexpected_option(exc: TypeError, options: dict) -> str | None:
     return m.group(1) if m and m.group(1) in options else None
 
 
-def run_fit(spec: str, model: str = "tabulated", out: Path | None = None,
-            options: dict | None = None) -> tuple[object, dict]:
-    """Load ``spec``, fit it with ``model`` and optionally save; returns ``(fit, summary)``."""
+#: Direction pairs of :func:`quick_error` (deterministic).
+QUICK_ERROR_PAIRS = 1 << 14
+
+
+def _r4_pairs(n: int):
+    """``n`` cosine-distributed direction pairs from the 4-D Kronecker (R4) sequence of the
+    generalised golden ratio (``g`` with ``g**5 = g + 1``): deterministic, low-discrepancy,
+    NumPy only (SciPy's Sobol generator costs ~0.3 s to import)."""
+    import numpy as np
+
+    g = 1.1673039782614187
+    alpha = 1.0 / g ** np.arange(1, 5)
+    u = (0.5 + np.arange(1, n + 1)[:, None] * alpha[None, :]) % 1.0
+    u = np.clip(u, 1e-12, 1 - 1e-12)
+
+    def cos_hemi(a, b):
+        r = np.sqrt(a)
+        phi = 2 * np.pi * b
+        return np.stack([r * np.cos(phi), r * np.sin(phi), np.sqrt(1 - a)], -1)
+
+    return cos_hemi(u[:, 0], u[:, 1]), cos_hemi(u[:, 2], u[:, 3])
+
+
+#: MERL-grid subsampling of :func:`quick_error` (every θh node, every 3rd θd, every 8th φd).
+QUICK_ERROR_GRID_STRIDE = (1, 3, 8)
+
+
+def _grid_error(values, valid, model) -> tuple[float, int]:
+    """``(error, nodes)``: the cosine-weighted relative L1 error on the valid nodes of a
+    MERL table (:data:`QUICK_ERROR_GRID_STRIDE`), each weighted by ``cos θi cos θo`` times
+    the measure of its cell, ``dωi dωo = 4 cos θd sin θd sin θh dθh dφh dθd dφd`` (φh
+    integrated out; θh = θ'h² π/2 so dθh = π θ'h dθ'h)."""
+    import numpy as np
+
+    from ..geometry import half_diff_to_io
+    from ..grid import N_PHI_D, N_THETA_D, N_THETA_H, merl_phi_d, merl_theta_d, merl_theta_h
+
+    si, sj, sk = QUICK_ERROR_GRID_STRIDE
+    th, td, pd = merl_theta_h()[::si], merl_theta_d()[::sj], merl_phi_d()[::sk]
+    tp = (np.arange(N_THETA_H)[::si] + 0.5) / N_THETA_H      # θ'h at the cell centres
+    dth = np.pi * tp / N_THETA_H * si
+    dtd, dpd = np.pi / 2 / N_THETA_D * sj, np.pi / N_PHI_D * sk
+    TH, TD, PD = np.meshgrid(th, td, pd, indexing="ij")
+    ok = np.asarray(valid)[::si, ::sj, ::sk]
+    ci = np.cos(TH) * np.cos(TD) - np.sin(TH) * np.sin(TD) * np.cos(PD)
+    co = np.cos(TH) * np.cos(TD) + np.sin(TH) * np.sin(TD) * np.cos(PD)
+    w = (np.clip(ci, 0, None) * np.clip(co, 0, None) * 4 * np.cos(TD) * np.sin(TD)
+         * np.sin(TH) * dth[:, None, None] * dtd * dpd)
+    keep = ok & (w > 0)
+    fr = np.asarray(values, dtype=np.float64)[::si, ::sj, ::sk][keep]
+    wi, wo = half_diff_to_io(TH[keep], 0.0, TD[keep], PD[keep])
+    ft = np.nan_to_num(np.asarray(model.eval(wi, wo), dtype=np.float64))
+    wk = w[keep][:, None]
+    den = float((np.abs(fr) * wk).sum())
+    if den <= 0:
+        raise ValueError("the input BRDF is 0 everywhere: no relative error")
+    return float((np.abs(ft - fr) * wk).sum() / den), int(keep.sum())
+
+
+def quick_error(reference, model, n_pairs: int = QUICK_ERROR_PAIRS) -> dict:
+    """Cosine-weighted relative L1 error of ``model`` against ``reference``, the quantity of
+    :func:`brdffit.evaluation.metrics.cosine_weighted_relative_error` (Σ over RGB of
+    ``∫∫ |f_model − f_ref| cos θi cos θo dωi dωo`` over Σ ``∫∫ |f_ref| cos θi cos θo``),
+    estimated quickly for the fit summary. 0 is a perfect fit, 1 an error as large as the
+    input. Returns ``{"cos_rel_error", "method", "samples"}``.
+
+    * A MERL table (``merl_table()``): quadrature on its own valid nodes (no interpolation of
+      the input; :func:`_grid_error`).
+    * Anything else: ``n_pairs`` fixed quasi-random direction pairs drawn ∝ cos θi cos θo
+      (:func:`_r4_pairs`) instead of the metric's 2^17 scrambled Sobol pairs (SciPy's
+      generator costs ~0.3 s to import).
+
+    Both agree with the full metric within a few % (tests/cli/test_fit_cli.py).
+    """
+    import numpy as np
+
+    table = getattr(reference, "merl_table", None)
+    if callable(table):
+        values, valid = table()
+        err, n = _grid_error(values, valid, model)
+        si, sj, sk = QUICK_ERROR_GRID_STRIDE
+        return {"cos_rel_error": err, "samples": n,
+                "method": f"{n} valid MERL nodes (every {si}/{sj}/{sk} θh/θd/φd)"}
+    wi, wo = _r4_pairs(n_pairs)
+    fr = np.nan_to_num(np.asarray(reference.eval(wi, wo), dtype=np.float64))
+    ft = np.nan_to_num(np.asarray(model.eval(wi, wo), dtype=np.float64))
+    den = float(np.abs(fr).sum())
+    if den <= 0:
+        raise ValueError("the input BRDF is 0 everywhere: no relative error")
+    return {"cos_rel_error": float(np.abs(ft - fr).sum() / den), "samples": n_pairs,
+            "method": f"{n_pairs} fixed direction pairs"}
+
+
+def _figures_summary(fitted) -> dict:
+    """The labelled figures of a fit (:func:`brdffit.fit.registry.figures`) with glTF
+    roughness √α next to α."""
+    import math
+
+    from ..fit.registry import figures
+
+    fig = figures(fitted)
+    out = {"alpha": None, "gltf_roughness": None, "alpha_kind": fig.get("alpha_kind"),
+           "alpha_rgb": fig.get("alpha_rgb"), "f0": fig.get("f0"), "rho_d": fig.get("rho_d"),
+           "table_bytes": fig.get("table_bytes")}
+    if fig.get("alpha"):
+        ax, ay, rho = fig["alpha"]
+        out["alpha"] = {"x": ax, "y": ay, "rho": rho}
+        out["gltf_roughness"] = [math.sqrt(max(ax, 0.0)), math.sqrt(max(ay, 0.0))]
+    elif fig.get("alpha_rgb"):
+        out["gltf_roughness"] = [math.sqrt(max(a, 0.0)) for a in fig["alpha_rgb"]]
+    return out
+
+
+def _entry(model: str):
+    """The registry entry of ``model``; an unknown name is a usage error."""
     from ..fit import registry
+    from . import usage_error
+
+    try:
+        return registry.get(model)
+    except KeyError as exc:
+        raise usage_error("--model", str(exc.args[0])) from None
+
+
+def check_usage(model: str, options: dict) -> None:
+    """Usage errors (exit 2) of a fit request, before any work: an unknown model (from the
+    registry's declared names: no fitting module imported) and, only when there are
+    options, an option the model's fitter does not take (imports its module)."""
+    from . import check_models
+
+    check_models([model], "--model")
+    if options:
+        _entry(model)
+        check_options(model, options)
+
+
+def run_fit(spec: str, model: str = "tabulated", out: Path | None = None,
+            options: dict | None = None, *, error: bool = True) -> tuple[object, dict]:
+    """Load ``spec``, fit it with ``model``, optionally save, and summarise; returns
+    ``(fit, summary)``.
+
+    The summary holds the labelled figures (``alpha`` {x, y, rho}, ``gltf_roughness``,
+    ``f0``, ``rho_d``, ``table_bytes``), ``error`` (:func:`quick_error`, unless
+    ``error=False``), ``time_s`` (the fit), ``timings_s`` (load, fit, save, error),
+    ``output`` (``None`` when not saved), and the model's own summary under ``details``.
+    """
     from ..io import load
 
-    entry = registry.get(model)
-    brdf = load(spec)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    brdf = load(spec)  # read and validated before the fitting stack is imported
+    timings["load"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    entry = _entry(model)
+    timings["import"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     try:
         fitted = entry.fit(brdf, **(options or {}))
@@ -133,22 +280,38 @@ def run_fit(spec: str, model: str = "tabulated", out: Path | None = None,
         raise usage_error("--option", f"model {model!r} has no option {bad!r}; accepted: "
                                       f"{', '.join(sorted(names)) or 'none'}") from None
     elapsed = time.perf_counter() - t0
-    summary = registry.summarize(model, fitted)
-    summary["model"] = model
-    summary["input"] = spec
-    summary.setdefault("time_s", elapsed)
-    if summary.get("time_s") is None:
-        summary["time_s"] = elapsed
+    timings["fit"] = elapsed
+    summary: dict = {"input": spec, "model": model, "output": None}
     if out is not None:
         from ..errors import ExportError
-        from ..io.fitfile import SerializableModel, save_fit
+        from ..serialization import SerializableModel
+        from ..io.fitfile import save_fit
 
         if not isinstance(fitted, SerializableModel) or not fitted.fit_kind:
             raise ExportError(f"{out}: expected a model that can be saved as a fit file, found "
                               f"{type(fitted).__name__} (e.g. per-channel fits are not saved)")
+        t0 = time.perf_counter()
         save_fit(fitted, out, source=spec,
                  options=dict(getattr(fitted, "fit_options", None) or options or {}, model=model))
+        timings["save"] = time.perf_counter() - t0
         summary["output"] = str(out)
+    from ..fit import registry
+
+    details = registry.summarize(model, fitted)
+    details.pop("model", None)
+    details.pop("time_s", None)
+    summary.update(_figures_summary(fitted))
+    summary["time_s"] = elapsed
+    summary["error"] = None
+    if error:
+        t0 = time.perf_counter()
+        try:
+            summary["error"] = quick_error(brdf, fitted)
+        except Exception as exc:  # noqa: BLE001 - the fit is done; say why there is no figure
+            summary["error"] = {"cos_rel_error": None, "why": f"{type(exc).__name__}: {exc}"}
+        timings["error"] = time.perf_counter() - t0
+    summary["timings_s"] = timings
+    summary["details"] = details
     return fitted, summary
 
 
@@ -160,49 +323,91 @@ def _fmt(v) -> str:
     return str(v)
 
 
+def _rgb(v) -> str:
+    return "  ".join(f"{c} {x:.4g}" for c, x in zip("RGB", v))
+
+
+#: Keys of a model's own summary that the labelled lines already show.
+_SHOWN = {"alpha", "fresnel_0", "F0", "rho_d", "model", "time_s"}
+
+
+def format_summary(s: dict) -> list[str]:
+    """The text ``brdffit fit`` prints for a :func:`run_fit` summary: one labelled line per
+    figure, 80 columns."""
+    import textwrap
+
+    out = [f"{s['input']}: {s['model']} fit in {s['time_s']:.3f} s"]
+
+    def row(label: str, text: str, wrap: bool = True) -> None:
+        if not wrap:  # a path: never broken
+            out.append(f"  {label:<19} {text}")
+            return
+        out.extend(textwrap.wrap(text, 79, initial_indent=f"  {label:<19} ",
+                                 subsequent_indent=" " * 22, break_on_hyphens=False)
+                   or [f"  {label}"])
+
+    kind = s.get("alpha_kind")
+    if s.get("alpha"):
+        a = s["alpha"]
+        label = "α (GGX-equivalent)" if kind == "ggx-equivalent" else \
+            f"α ({kind})" if kind else "α"
+        row(label, f"αx {a['x']:.4g}  αy {a['y']:.4g}  ρ {a['rho']:.3g}")
+        row("glTF roughness √α", ", ".join(f"{x:.4g}" for x in s["gltf_roughness"]))
+    elif s.get("alpha_rgb"):
+        row("α per channel", f"{_rgb(s['alpha_rgb'])}   ({kind})")
+        row("glTF roughness √α", _rgb(s["gltf_roughness"]))
+    else:
+        row("α", "none (no analytic distribution)")
+    row("F0 (ks·F at 0°)", _rgb(s["f0"]) if s.get("f0") else "undefined for this model")
+    row("ρd (Lambert)", _rgb(s["rho_d"]) if s.get("rho_d") else "n/a")
+    err = s.get("error")
+    if err and err.get("cos_rel_error") is not None:
+        row("error vs input", f"{100 * err['cos_rel_error']:.2f} % (cosine-weighted relative "
+                              f"L1 on {err['method']})")
+    elif err:
+        row("error vs input", f"not measured ({err.get('why')})")
+    if s.get("table_bytes") is not None:
+        row("tables", f"{s['table_bytes']} bytes")
+    details = {k: v for k, v in (s.get("details") or {}).items()
+               if v is not None and not isinstance(v, dict) and k not in _SHOWN}
+    if details:
+        row("model details", "; ".join(f"{k} {_fmt(v)}" for k, v in details.items()))
+    if s.get("output"):
+        row("saved to", str(s["output"]), wrap=False)
+    else:
+        row("NOT saved", "(no -o FILE.npz given)")
+    return out
+
+
 def register(app: typer.Typer) -> None:
-    @app.command("fit")
+    from . import models_help
+
+    @app.command("fit", epilog=models_help())
     def fit_cmd(
         spec: str = typer.Argument(..., metavar="INPUT[:MATERIAL]",
                                    help="A BRDF file, collection.zip:material or synthetic:NAME."),
-        model: str = typer.Option("tabulated", "--model", "-m",
-                                  help="Model to fit (see brdffit.fit.registry): tabulated, "
-                                       "ggx, beckmann, and those of other fitting modules."),
-        out: Path = typer.Option(None, "--output", "-o", help="Write the fit file (.npz) here."),
-        iterations: int = typer.Option(None, "--iterations", min=1,
-                                       help="Power iterations / optimiser iterations."),
-        option: list[str] = typer.Option(None, "--option", "-O",
-                                         help="Extra fitting option key=value (repeatable)."),
+        model: str = typer.Option("tabulated", "--model", "-m", metavar="NAME",
+                                  help="Model to fit (list below)."),
+        out: Path = typer.Option(None, "--output", "-o", metavar="FILE.npz",
+                                 help="Write the fit file here (default: not saved)."),
+        iterations: int = typer.Option(None, "--iterations", min=1, metavar="N",
+                                       help="Power / optimiser iterations (model's default)."),
+        option: list[str] = typer.Option(None, "--option", "-O", metavar="KEY=VALUE",
+                                         help="Extra fitting option (repeatable)."),
+        no_error: bool = typer.Option(False, "--no-error",
+                                      help="Skip the error against the input."),
         as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
     ):
-        """Fit a model to a measured BRDF and print a short summary."""
-        from ..fit import registry
-
-        import click  # the CLI entry point reports click's usage errors (exit status 2)
-
-        try:
-            entry = registry.get(model)
-        except KeyError as exc:
-            raise click.BadParameter(str(exc.args[0]), param_hint="--model") from None
+        """Fit a model to a measured BRDF; print its parameters and error."""
         opts = parse_options(option)
-        check_options(model, opts)
         if iterations is not None:
-            names, open_ended = accepted_options(entry.fit)
-            if "iterations" not in names and not open_ended:
-                raise click.BadParameter(f"model {model!r} has no 'iterations' option",
-                                         param_hint="--iterations")
             opts["iterations"] = iterations
-        _, summary = run_fit(spec, model, out, opts)
+        check_usage(model, opts)
+        _, summary = run_fit(spec, model, out, opts, error=not no_error)
         if as_json:
+            from .._json import json_default
+
             typer.echo(json.dumps(summary, default=json_default, sort_keys=True))
             return
-        typer.echo(f"{spec}: {model} fit in {summary.get('time_s', 0.0):.3f} s")
-        for key in ("eigenvalue", "iterations", "relative_change", "beckmann_alpha", "ggx_alpha",
-                    "alpha", "fresnel_0", "table", "rule", "output"):
-            if summary.get(key) is not None:
-                typer.echo(f"  {key:16s} {_fmt(summary[key])}")
-        shown = {"eigenvalue", "iterations", "relative_change", "beckmann_alpha", "ggx_alpha",
-                 "alpha", "fresnel_0", "table", "rule", "output", "model", "input", "time_s"}
-        for key, val in summary.items():
-            if key not in shown and val is not None and not isinstance(val, dict):
-                typer.echo(f"  {key:16s} {_fmt(val)}")
+        for line in format_summary(summary):
+            typer.echo(line)

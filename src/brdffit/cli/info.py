@@ -12,15 +12,18 @@ from __future__ import annotations
 import json
 import os
 
-import numpy as np
 import typer
+
+# NumPy and the readers are imported when the command runs (fast `brdffit --help`).
 
 __all__ = ["register", "summarize", "ALBEDO_ANGLES_DEG"]
 
 ALBEDO_ANGLES_DEG = (0.0, 30.0, 60.0, 75.0)
 
 
-def _range_of(values: np.ndarray, valid: np.ndarray | None) -> dict:
+def _range_of(values, valid) -> dict:
+    import numpy as np
+
     v = values.reshape(-1, values.shape[-1])
     if valid is not None:
         v = v[valid.reshape(-1)]
@@ -29,8 +32,11 @@ def _range_of(values: np.ndarray, valid: np.ndarray | None) -> dict:
     return {"min": v.min(axis=0).tolist(), "max": v.max(axis=0).tolist()}
 
 
-def _sampled_values(brdf) -> tuple[np.ndarray, str]:
-    """Evaluate a BRDF without a stored table on a fixed, deterministic set of configurations."""
+def _sampled_values(brdf):
+    """Evaluate a BRDF without a stored table on a fixed, deterministic set of configurations;
+    returns ``(values, how)``."""
+    import numpy as np
+
     if getattr(brdf, "isotropic", False):
         from ..grid import merl_phi_d, merl_theta_d, merl_theta_h
 
@@ -50,6 +56,8 @@ def _sampled_values(brdf) -> tuple[np.ndarray, str]:
 
 def summarize(brdf, spec=None, *, albedo_samples: int = 65536) -> dict:
     """A JSON-able summary of a BRDF (what ``brdffit info`` prints)."""
+    import numpy as np
+
     desc = {k: v for k, v in brdf.describe().items()}
     fmt = getattr(brdf, "format", None) or desc.get("format")
     if str(spec or "").startswith("synthetic:"):
@@ -147,10 +155,10 @@ def register(app: typer.Typer) -> None:
         spec: str = typer.Argument(..., metavar="FILE[:MATERIAL]",
                                    help="A BRDF file, collection.zip:material or synthetic:NAME."),
         as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
-        albedo_samples: int = typer.Option(65536, "--albedo-samples", min=16,
+        albedo_samples: int = typer.Option(65536, "--albedo-samples", min=16, metavar="N",
                                            help="Monte Carlo samples per albedo angle."),
     ) -> None:
-        """Format, isotropy, sample counts, value range and directional albedo of a BRDF."""
+        """Format, sample counts, value range and albedo of a BRDF file."""
         from ..io import load, resolve_spec
         from ..io.nbrdf import list_materials
 

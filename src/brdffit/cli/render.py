@@ -41,29 +41,29 @@ def register(app: typer.Typer) -> None:
     def render_cmd(
         spec: str = typer.Argument(..., metavar="INPUT_OR_FIT",
                                    help="BRDF file/spec (io.load) or a fit .npz."),
-        output: Path = typer.Option(..., "-o", "--output", help="Output image (.exr or .png)."),
-        scene: str = typer.Option("sphere-env", "--scene",
+        output: Path = typer.Option(..., "-o", "--output", metavar="IMAGE", help="Output image (.exr or .png)."),
+        scene: str = typer.Option("sphere-env", "--scene", metavar="SCENE",
                                   help="sphere-env, sphere-point, sphere-distant, knot, sphere-svrough."),
-        envmap: str = typer.Option(None, "--envmap",
+        envmap: str = typer.Option(None, "--envmap", metavar="MAP",
                                    help="Environment: a name of ../shared/data/envmaps "
                                         "(studio, city, ...), an EXR path, or 'procedural' (default)."),
-        spp: int = typer.Option(256, "--spp", min=1, help="Samples per pixel."),
-        resolution: int = typer.Option(256, "--resolution", min=8, help="Image width = height."),
-        seed: int = typer.Option(0, "--seed", help="Sampler seed."),
-        mode: str = typer.Option("auto", "--mode",
+        spp: int = typer.Option(256, "--spp", min=1, metavar="N", help="Samples per pixel."),
+        resolution: int = typer.Option(256, "--resolution", min=8, metavar="PX", help="Image width = height."),
+        seed: int = typer.Option(0, "--seed", metavar="N", help="Sampler seed."),
+        mode: str = typer.Option("auto", "--mode", metavar="MODE",
                                  help="auto (closed form when available), table, closed."),
-        exposure: str = typer.Option("auto", "--exposure",
+        exposure: str = typer.Option("auto", "--exposure", metavar="EV",
                                      help="PNG tone-mapping exposure (number or 'auto')."),
-        gamma: float = typer.Option(2.2, "--gamma", help="PNG tone-mapping gamma."),
+        gamma: float = typer.Option(2.2, "--gamma", metavar="G", help="PNG tone-mapping gamma."),
         roughness_texture: Path = typer.Option(
-            None, "--roughness-texture",
+            None, "--roughness-texture", metavar="IMAGE",
             help="Roughness-scale texture for microfacet models (Dupuy 2015 Eq. 9): an EXR "
                  "whose first channel is the α multiplier, or a PNG with multiplier "
                  "2·value/255 (mid-grey = 1). Default for --scene sphere-svrough: built-in."),
         report_error: bool = typer.Option(False, "--resampling-error",
                                           help="Also measure the Dr.Jit evaluator's error vs brdf.eval."),
     ):
-        """Render INPUT_OR_FIT with Mitsuba 3 to an EXR (linear) or PNG (tone-mapped)."""
+        """Render a BRDF or fit with Mitsuba 3 to an EXR or PNG image."""
         import numpy as np
 
         from ..errors import BRDFError

@@ -10,8 +10,20 @@ A fitting module registers its models when it is imported::
 * ``summary_fn(model) -> dict``: a short JSON-able summary of a fitted model (what the CLI
   prints); optional.
 
-Lookups import every fitting module first (:func:`brdffit.fit.import_all`), so a name is
-known as soon as its module exists.
+**Declared models.** :data:`MODELS` declares every built-in model *without importing its
+fitting module*: the module that registers it, a one-line description, the paper, whether it
+fits isotropic BRDFs only, and typical figures (fit-file size, fit time) measured by
+``bench/bench_cli.py --models`` (cited in :data:`TYPICAL_SOURCE`). The CLI's help, ``brdffit
+models`` and the model-name checks read it, so they do not import SciPy, Numba or the fitting
+stack; :func:`get` imports only the module of the model asked for (all modules for a name
+that is not declared). A new fitting module adds its models to :data:`MODELS` (a test checks
+that every registered model is declared with the same isotropy).
+
+**Figures of a fitted model.** :func:`figures` gives the numbers a user looks for, the same
+way for every model (``brdffit fit``'s summary and the batch ``summary.csv``): the slope
+scales (αx, αy, ρ) of its distribution, the Fresnel reflectance at normal incidence F0 per
+channel, the Lambertian albedo ρd per channel and the bytes of its fit-file tables
+(:func:`table_bytes`).
 """
 
 from __future__ import annotations
@@ -22,10 +34,91 @@ import time
 from collections.abc import Mapping
 from typing import Any, Callable
 
-import numpy as np
+# NumPy is imported inside the functions that need it: `brdffit --help` reads MODELS.
 
-__all__ = ["Fitter", "FITTERS", "register_fitter", "get_fitter", "get", "list_fitters",
-           "fit", "fit_model", "is_isotropic_only", "summarize", "model_params", "small_json"]
+__all__ = ["Fitter", "FITTERS", "ModelInfo", "MODELS", "PAPERS", "TYPICAL_SOURCE",
+           "register_fitter", "get_fitter", "get", "list_fitters", "known_names",
+           "load_undeclared_modules", "describe", "fit", "fit_model", "is_isotropic_only",
+           "summarize", "model_params", "small_json", "figures", "table_bytes"]
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelInfo:
+    """What is known about a model before its fitting module is imported.
+
+    ``typical_bytes``: size of its fit file (``.npz``) and ``typical_table_bytes``: bytes of
+    the tables (arrays) inside it, for a fit of an isotropic MERL material;
+    ``typical_time_s``: fit time of that material on the machine of the bench
+    (:data:`TYPICAL_SOURCE`); ``None`` when not measured.
+    """
+
+    name: str
+    module: str           # the brdffit.fit submodule that registers it
+    description: str      # one line (<= 58 characters: `--help` at 80 columns)
+    paper: str            # keys of PAPERS, comma-separated
+    isotropic_only: bool = False
+    typical_bytes: int | None = None
+    typical_table_bytes: int | None = None
+    typical_time_s: float | None = None
+
+
+#: Where the typical figures of :data:`MODELS` come from.
+TYPICAL_SOURCE = ("bench/bench_cli.py --models: one fit of the MERL file of "
+                  "gold-metallic-paint (bench/results/cli.json)")
+
+#: The papers of :data:`MODELS` (``ModelInfo.paper`` names them by first author and year).
+PAPERS = {
+    "Dupuy 2015": "J. Dupuy, E. Heitz, J.-C. Iehl, P. Poulin, V. Ostromoukhov: Extracting "
+                  "Microfacet-based BRDF Parameters from Arbitrary Materials with Power "
+                  "Iterations. Computer Graphics Forum 34(4), EGSR 2015",
+    "Bagher 2012": "M. M. Bagher, C. Soler, N. Holzschuch: Accurate fitting of measured "
+                   "reflectances using a Shifted Gamma micro-facet distribution. Computer "
+                   "Graphics Forum 31(4), 2012",
+    "Bagher 2016": "M. M. Bagher, J. Snyder, D. Nowrouzezahrai: A Non-Parametric Factor "
+                   "Microfacet Model for Isotropic BRDFs. ACM Transactions on Graphics, 2016",
+    "Cook 1982": "R. L. Cook, K. E. Torrance: A Reflectance Model for Computer Graphics. ACM "
+                 "Transactions on Graphics 1(1), 1982",
+}
+
+#: Every built-in model, in the order the CLI lists them.
+MODELS: dict[str, ModelInfo] = {m.name: m for m in (
+    ModelInfo("tabulated", "tabulated", "tabulated NDF + Fresnel by power iteration",
+              "Dupuy 2015"),
+    ModelInfo("ggx", "tabulated", "GGX from the tabulated fit's slope moments", "Dupuy 2015"),
+    ModelInfo("beckmann", "tabulated", "Beckmann from the tabulated fit's slope moments",
+              "Dupuy 2015"),
+    ModelInfo("ggx-diffuse", "analytic", "GGX + Lambert + Schlick F0, whole-data fit",
+              "Dupuy 2015, Bagher 2016"),
+    ModelInfo("beckmann-diffuse", "analytic", "Beckmann + Lambert + Schlick F0, whole-data fit",
+              "Dupuy 2015, Bagher 2016"),
+    ModelInfo("sgd", "sgd", "Shifted Gamma Distribution per channel", "Bagher 2012",
+              isotropic_only=True),
+    ModelInfo("beckmann-2s", "sgd", "Beckmann per channel, two-slice fit", "Bagher 2012",
+              isotropic_only=True),
+    ModelInfo("ggx-2s", "sgd", "GGX per channel, two-slice fit", "Bagher 2012",
+              isotropic_only=True),
+    ModelInfo("beckmann-ct", "sgd", "Cook-Torrance Beckmann per channel, least squares",
+              "Cook 1982, Bagher 2012", isotropic_only=True),
+    ModelInfo("ggx-ct", "sgd", "Cook-Torrance GGX per channel, least squares",
+              "Cook 1982, Bagher 2012", isotropic_only=True),
+    ModelInfo("npf", "npf", "non-parametric factors D, F, G (independent G)", "Bagher 2016",
+              isotropic_only=True),
+    ModelInfo("npf-g-from-d", "npf", "non-parametric factors, G derived from D", "Bagher 2016",
+              isotropic_only=True),
+    ModelInfo("npf-naive", "npf", "non-parametric factors D, F, H (no shadowing)",
+              "Bagher 2016", isotropic_only=True),
+    ModelInfo("npf-bivariate", "npf", "non-parametric bivariate D(θh, θd) and F", "Bagher 2016",
+              isotropic_only=True),
+)}
+
+
+def _module_exists(module: str) -> bool:
+    from importlib.util import find_spec
+
+    try:
+        return find_spec(f"{__package__}.{module}") is not None
+    except (ImportError, ValueError):  # pragma: no cover
+        return False
 
 
 @dataclasses.dataclass(frozen=True)
@@ -59,7 +152,9 @@ def register_fitter(name: str, fn: Callable[..., Any], summary_fn: Callable | No
     if summary_fn is not None and not callable(summary_fn):
         raise TypeError(f"register_fitter({name!r}): summary_fn must be callable")
     doc = description if description is not None else (inspect.getdoc(fn) or "").split("\n")[0]
-    entry = Fitter(str(name), fn, summary_fn, doc, bool(isotropic_only))
+    declared = MODELS.get(str(name))  # the declaration may say "isotropic only" for the module
+    iso = bool(isotropic_only) or bool(declared is not None and declared.isotropic_only)
+    entry = Fitter(str(name), fn, summary_fn, doc, iso)
     FITTERS[entry.name] = entry
     return entry
 
@@ -70,14 +165,63 @@ def _ensure_loaded() -> None:
     import_all()
 
 
-def get(name: str) -> Fitter:
-    """The :class:`Fitter` registered under ``name``; ``KeyError`` lists the known names."""
+def _load_module_of(name: str) -> None:
+    """Import the fitting module that declares ``name`` (every module when undeclared)."""
+    info = MODELS.get(name)
+    if info is not None:
+        from importlib import import_module
+
+        try:
+            import_module(f"{__package__}.{info.module}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"{__package__}.{info.module}":
+                raise
     if name not in FITTERS:
         _ensure_loaded()
+
+
+def get(name: str) -> Fitter:
+    """The :class:`Fitter` registered under ``name``; ``KeyError`` lists the known names.
+
+    Imports only the fitting module :data:`MODELS` declares for ``name`` (every fitting
+    module for an undeclared name)."""
+    if name not in FITTERS:
+        _load_module_of(name)
     try:
         return FITTERS[name]
     except KeyError:
         raise KeyError(f"unknown model {name!r}; known: {sorted(FITTERS)}") from None
+
+
+def known_names() -> list[str]:
+    """Model names a command line may use, *without importing any fitting module*: the
+    declared models whose module exists, and every model registered so far (in
+    :data:`MODELS` order, then sorted). An unlisted name may still be registered by a module
+    that is not declared: :func:`list_fitters` imports them all."""
+    names = [n for n, m in MODELS.items() if n in FITTERS or _module_exists(m.module)]
+    return names + sorted(set(FITTERS) - set(names))
+
+
+def load_undeclared_modules() -> None:
+    """Import the fitting modules (:data:`brdffit.fit._MODULES`) that declare no model in
+    :data:`MODELS`, so that :func:`known_names` includes what they register."""
+    from importlib import import_module
+
+    from . import _MODULES
+
+    declared = {m.module for m in MODELS.values()}
+    for module in _MODULES:
+        if module not in declared and _module_exists(module):
+            import_module(f"{__package__}.{module}")
+
+
+def describe(name: str) -> ModelInfo:
+    """The :class:`ModelInfo` of ``name``: declared, or built from its registration."""
+    if name in MODELS:
+        return MODELS[name]
+    entry = get(name)
+    return ModelInfo(name, getattr(entry.fit, "__module__", "?").rsplit(".", 1)[-1],
+                     entry.description, "", entry.isotropic_only)
 
 
 def get_fitter(name: str) -> Callable[..., Any]:
@@ -107,7 +251,10 @@ def summarize(name: str, model) -> dict:
 
 # -- fitting orchestration (used by compare and batch) --------------------------------------
 def model_params(model) -> dict:
-    """JSON-friendly parameters of a fitted model for the report (small arrays only)."""
+    """JSON-friendly parameters of a fitted model for the report (small arrays only), with
+    its :func:`figures` under ``"figures"``."""
+    import numpy as np
+
     out: dict[str, Any] = {}
     to_state = getattr(model, "to_state", None)
     if callable(to_state):
@@ -126,12 +273,18 @@ def model_params(model) -> dict:
                 pass
     if not out and callable(getattr(model, "describe", None)):
         out = model.describe()
+    try:
+        out["figures"] = figures(model)
+    except Exception:  # noqa: BLE001 - figures are a convenience, never a failure
+        pass
     return small_json(out)
 
 
 def small_json(obj, limit: int = 24):
     """``obj`` with NumPy scalars as Python numbers and arrays above ``limit`` elements
     replaced by a ``"<array shape [...]>"`` note (what reports and records keep)."""
+    import numpy as np
+
     if isinstance(obj, Mapping):
         return {str(k): small_json(v, limit) for k, v in obj.items()}
     if isinstance(obj, (list, tuple, np.ndarray)):
@@ -146,6 +299,8 @@ def small_json(obj, limit: int = 24):
 
 def is_isotropic_only(name: str) -> bool:
     """True when model ``name`` fits isotropic BRDFs only (False for unknown names)."""
+    if name in MODELS and name not in FITTERS:
+        return MODELS[name].isotropic_only
     try:
         return get(name).isotropic_only
     except KeyError:
@@ -158,3 +313,99 @@ def fit_model(name: str, reference, options: Mapping | None = None):
     t0 = time.perf_counter()
     model = fitter(reference, **dict(options or {}))
     return model, time.perf_counter() - t0
+
+
+# -- figures of a fitted model ---------------------------------------------------------------
+def table_bytes(model) -> int | None:
+    """Bytes of the arrays (tables) ``model`` saves in its fit file (``to_state``), ``None``
+    for a model that cannot be saved. Scalars stored in the file's JSON header are not
+    counted (a few dozen bytes per model)."""
+    import numpy as np
+
+    to_state = getattr(model, "to_state", None)
+    if not callable(to_state):
+        return None
+    _, arrays = to_state()
+    return int(sum(np.asarray(v).nbytes for v in (arrays or {}).values()))
+
+
+def _rgb(value):
+    import numpy as np
+
+    a = np.broadcast_to(np.asarray(value, dtype=np.float64), (3,))
+    return [float(x) for x in a]
+
+
+def _lobe_figures(lobe) -> dict:
+    """(α, F0, ρd) of one :class:`~brdffit.microfacet.MicrofacetBRDF`-like lobe."""
+    import numpy as np
+
+    out: dict[str, Any] = {}
+    dist = getattr(lobe, "distribution", None)
+    if dist is not None:
+        kind = getattr(dist, "kind", None) or type(dist).__name__.lower()
+        if hasattr(dist, "table") and hasattr(dist, "slope_moments"):
+            from .tabulated import ggx_parameters  # a tabulated NDF: its GGX equivalent
+
+            out["alpha"] = [float(x) for x in ggx_parameters(dist)]
+            out["alpha_kind"] = "ggx-equivalent"
+        elif hasattr(dist, "alpha_x"):
+            out["alpha"] = [float(dist.alpha_x), float(getattr(dist, "alpha_y", dist.alpha_x)),
+                            float(getattr(dist, "rho", 0.0) or 0.0)]
+            out["alpha_kind"] = kind
+        elif hasattr(dist, "alpha") and np.isscalar(dist.alpha):
+            out["alpha"] = [float(dist.alpha), float(dist.alpha), 0.0]
+            out["alpha_kind"] = kind
+    fres = getattr(lobe, "fresnel", None)
+    f0 = np.ones(3) if fres is None else np.asarray(fres.eval(np.array(1.0)), dtype=np.float64)
+    ks = getattr(lobe, "specular", None)
+    out["f0"] = _rgb(f0 * (1.0 if ks is None else np.asarray(ks, dtype=np.float64)))
+    rd = getattr(lobe, "diffuse", None)
+    out["rho_d"] = _rgb(0.0 if rd is None else rd)
+    return out
+
+
+def figures(model) -> dict:
+    """The figures users look for in a fitted ``model``, the same way for every model.
+
+    * ``alpha``: ``[αx, αy, ρ]``, the slope scales and correlation of the distribution
+      (Walter 2007 / Dupuy 2015 α, not "roughness"; glTF's roughness is √α for GGX);
+      ``alpha_kind`` names the distribution (``ggx``, ``beckmann``, ``sgd``...). A tabulated
+      NDF gives its GGX equivalent by slope moments (Dupuy 2015 App. C,
+      ``alpha_kind = "ggx-equivalent"``). Per-channel models (SGD, two-slice, Cook-Torrance)
+      give ``alpha_rgb`` (one isotropic α per channel) instead. ``None`` when the model has no
+      such parameter (NPF).
+    * ``f0``: per channel, the Fresnel factor of the specular term at normal incidence times
+      the term's specular scale (``ks·F(θd = 0)``; for SGD ``(4ρs/π)·F0`` of Bagher 2012
+      Eq. 1): the reflectance a renderer's F0 means for a normalised distribution. May exceed
+      1 when a fit puts energy in the scale. ``None`` for NPF (its factors are defined up to
+      a scale, Bagher 2016 §4.3).
+    * ``rho_d``: per channel, the Lambertian albedo (the term is ρd/π); 0 without a diffuse
+      term.
+    * ``table_bytes``: :func:`table_bytes`.
+    """
+    import numpy as np
+
+    out: dict[str, Any] = {"alpha": None, "alpha_kind": None, "alpha_rgb": None, "f0": None,
+                           "rho_d": None}
+    lobes = getattr(model, "lobes", None)
+    members = getattr(model, "models", None)
+    per_channel = lobes if isinstance(lobes, (list, tuple)) and len(lobes) == 3 else (
+        members if isinstance(members, (list, tuple)) and len(members) == 3 else None)
+    if per_channel is not None:  # channel c of the model is channel c of lobe c
+        rows = [_lobe_figures(lobe) for lobe in per_channel]
+        if all(r.get("alpha") for r in rows):
+            out["alpha_rgb"] = [float(r["alpha"][0]) for r in rows]
+            kinds = {r.get("alpha_kind") for r in rows}
+            out["alpha_kind"] = kinds.pop() if len(kinds) == 1 else "mixed"
+        out["f0"] = [r["f0"][c] for c, r in enumerate(rows)]
+        out["rho_d"] = [r["rho_d"][c] for c, r in enumerate(rows)]
+    elif getattr(model, "distribution", None) is not None:
+        out.update(_lobe_figures(model))
+    elif getattr(model, "fit_kind", "").startswith("npf") and hasattr(model, "rho_d"):
+        out["rho_d"] = _rgb(np.pi * np.asarray(model.rho_d, dtype=np.float64))  # f = ρd + ...
+    try:
+        out["table_bytes"] = table_bytes(model)
+    except Exception:  # noqa: BLE001 - a model that cannot describe its state
+        out["table_bytes"] = None
+    return out

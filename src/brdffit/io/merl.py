@@ -62,10 +62,11 @@ def _gather_interp(packed: np.ndarray, indices, weights) -> np.ndarray:
     return np.where(ok, acc[..., :-1] / np.where(ok, wsum, 1.0), 0.0)
 
 
-try:  # a compiled kernel makes the trilinear lookup ~10x faster; NumPy is the fall-back
-    import numba as _numba
-except ImportError:  # pragma: no cover
-    _numba = None
+# a compiled kernel makes the trilinear lookup ~10x faster; NumPy is the fall-back. Numba is
+# imported on the first compiled call (brdffit._jit): reading a file does not need it.
+from .._jit import lazy_numba
+
+_numba = lazy_numba()
 
 
 def _merl_trilinear_numpy(table, u, v, w):

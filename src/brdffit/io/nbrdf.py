@@ -45,10 +45,9 @@ __all__ = ["NBRDF", "read_nbrdf", "read_nbrdf_collection", "list_materials"]
 
 _ACTIVATIONS = ("relu", "linear")
 
-try:
-    import numba as _numba
-except ImportError:  # pragma: no cover
-    _numba = None
+from .._jit import lazy_numba
+
+_numba = lazy_numba()  # Numba imported on the first compiled call (brdffit._jit)
 
 
 def _dense_t(w, b, x, relu):  # pragma: no cover  (compiled by numba)

@@ -19,9 +19,21 @@ the perceptual roughness ``√α``.
 from __future__ import annotations
 
 import numpy as np
-from scipy import special
 
 from .shadowing import EllipticalSlopeDistribution
+
+
+class _LazySpecial:
+    """``scipy.special``, imported on first use (~0.2 s of CPU): importing the microfacet
+    package, e.g. for a tabulated fit, does not need it (issue 15.4)."""
+
+    def __getattr__(self, name):
+        from scipy import special as _special
+
+        return getattr(_special, name)
+
+
+special = _LazySpecial()
 
 __all__ = ["Beckmann"]
 

@@ -42,7 +42,6 @@ Derived quantities:
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import CubicSpline, PchipInterpolator
 
 from ..geometry import slope_to_normal
 from ..schema import (ALPHA_MAX, FRESNEL_MAX, TABLE_MAX, Array, Bool, Choice, Integer, Numbers,
@@ -96,6 +95,48 @@ def azimuthal_clamped_cosine_integral(s) -> np.ndarray:
     return np.where(s <= 1.0, 2.0 * np.pi, 2.0 * (phi0 + s * np.sin(phi0)))
 
 
+def _spline_slopes(x, y):
+    """Node derivatives of the not-a-knot cubic spline through ``(x, y)`` (along axis 0):
+    ``scipy.interpolate.CubicSpline(x, y, axis=0).derivative()(x)`` in NumPy -- the same
+    tridiagonal system and end conditions (de Boor), solved by the Thomas algorithm (its
+    pivots are > 0 for increasing ``x``). Avoids importing scipy.interpolate (~0.45 s of CPU)
+    in every fit, and a multi-threaded LAPACK solve that stalls on a busy machine (issue
+    15.4); agrees with SciPy to ~1e-15 (tests/cli/test_startup.py)."""
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
+    n = x.shape[0]
+    h = np.diff(x)
+    shape = (-1,) + (1,) * (y.ndim - 1)
+    delta = np.diff(y, axis=0) / h.reshape(shape)
+    if n == 2:
+        return np.repeat(delta, 2, axis=0)
+    if n == 3:  # not-a-knot on three nodes: the parabola through them
+        c = (delta[1] - delta[0]) / (x[2] - x[0])
+        return np.stack([delta[0] - c * h[0], delta[0] + c * h[0], delta[1] + c * h[1]])
+    lower = np.zeros(n)   # A[i, i-1]
+    diag = np.empty(n)    # A[i, i]
+    upper = np.zeros(n)   # A[i, i+1]
+    b = np.empty((n,) + y.shape[1:])
+    lower[1:-1], diag[1:-1], upper[1:-1] = h[1:], 2.0 * (h[:-1] + h[1:]), h[:-1]
+    b[1:-1] = 3.0 * (h[1:].reshape(shape) * delta[:-1] + h[:-1].reshape(shape) * delta[1:])
+    d = x[2] - x[0]
+    diag[0], upper[0] = h[1], d
+    b[0] = ((h[0] + 2.0 * d) * h[1] * delta[0] + h[0] ** 2 * delta[1]) / d
+    d = x[-1] - x[-3]
+    lower[-1], diag[-1] = d, h[-2]
+    b[-1] = (h[-1] ** 2 * delta[-2] + (2.0 * d + h[-1]) * h[-2] * delta[-1]) / d
+    cp = np.empty(n)
+    bp = np.empty_like(b)
+    cp[0], bp[0] = upper[0] / diag[0], b[0] / diag[0]
+    for i in range(1, n):  # forward sweep (n ≲ 200: a Python loop over rows is ~1 ms)
+        den = diag[i] - lower[i] * cp[i - 1]
+        cp[i] = upper[i] / den
+        bp[i] = (b[i] - lower[i] * bp[i - 1]) / den
+    for i in range(n - 2, -1, -1):
+        bp[i] -= cp[i] * bp[i + 1]
+    return bp
+
+
 def _pchip_slopes(x, y, kind: str = "hyman"):
     """Node derivatives for cubic Hermite interpolation of ``y`` (along axis 0) at ``x``.
 
@@ -104,8 +145,10 @@ def _pchip_slopes(x, y, kind: str = "hyman"):
     smooth data, no overshoot on noisy or clipped data. ``"spline"`` or ``"pchip"`` as named.
     """
     if kind == "pchip":
+        from scipy.interpolate import PchipInterpolator
+
         return PchipInterpolator(x, y, axis=0).derivative()(x)
-    d = CubicSpline(x, y, axis=0).derivative()(x)
+    d = _spline_slopes(x, y)
     if kind == "spline":
         return d
     h = np.diff(x).reshape((-1,) + (1,) * (y.ndim - 1))

@@ -1,0 +1,83 @@
+"""Numba, imported and compiled on first use (issue 15.4: a CLI that starts at once).
+
+Importing Numba costs ~0.2 s of CPU and loading a cached kernel another ~0.3 s, so modules
+that merely *define* compiled kernels must not import it: ``brdffit fit x.binary`` reads a
+MERL file through :mod:`brdffit.io.merl` without ever calling its kernels. A module writes::
+
+    from .._jit import lazy_numba
+    _numba = lazy_numba()          # None when Numba is not installed (NumPy fall-backs)
+    ...
+    if _numba is not None:
+        kernel = _numba.njit(cache=True, nogil=True)(kernel)
+
+and ``_numba.njit(...)(fn)`` returns a :class:`LazyDispatcher` that imports Numba and compiles
+``fn`` (from the on-disk cache with ``cache=True``) the first time it is called; every other
+attribute of ``_numba`` is the real module's (imported then).
+"""
+
+from __future__ import annotations
+
+import threading
+from importlib.util import find_spec
+
+__all__ = ["lazy_numba", "LazyDispatcher", "LazyNumba"]
+
+
+class LazyDispatcher:
+    """``numba.njit(**options)(fn)``, made on the first call (thread-safe)."""
+
+    def __init__(self, fn, options: dict):
+        self.py_func = fn
+        self._options = dict(options)
+        self._dispatcher = None
+        self._lock = threading.Lock()
+        self.__name__ = getattr(fn, "__name__", "kernel")
+        self.__doc__ = getattr(fn, "__doc__", None)
+        self.__wrapped__ = fn
+
+    def compiled(self):
+        """The Numba dispatcher (imports Numba and compiles or loads ``fn`` if needed)."""
+        if self._dispatcher is None:
+            with self._lock:
+                if self._dispatcher is None:
+                    import numba
+
+                    self._dispatcher = numba.njit(**self._options)(self.py_func)
+        return self._dispatcher
+
+    def __call__(self, *args, **kwargs):
+        return (self._dispatcher or self.compiled())(*args, **kwargs)
+
+    def __getattr__(self, name):  # signatures, inspect_types, ... of the real dispatcher
+        if name.startswith("_"):
+            raise AttributeError(name)
+        return getattr(self.compiled(), name)
+
+
+class LazyNumba:
+    """Stands for the ``numba`` module: ``njit`` is lazy, the rest imports Numba."""
+
+    @staticmethod
+    def njit(*args, **options):
+        if args and callable(args[0]) and len(args) == 1 and not options:  # @njit bare
+            return LazyDispatcher(args[0], {})
+        if args:
+            raise TypeError("lazy njit: pass options as keywords (cache=True, nogil=True...)")
+        return lambda fn: LazyDispatcher(fn, options)
+
+    def __getattr__(self, name):
+        import numba
+
+        return getattr(numba, name)
+
+
+_LAZY = LazyNumba()
+
+
+def lazy_numba() -> LazyNumba | None:
+    """A lazy stand-in for ``numba`` when it is installed (found without importing it), else
+    ``None``."""
+    try:
+        return _LAZY if find_spec("numba") is not None else None
+    except (ImportError, ValueError):  # pragma: no cover
+        return None

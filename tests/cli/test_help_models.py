@@ -1,0 +1,112 @@
+"""A CLI that explains itself (issue 16.1): every --help at 80 columns, the model list with
+descriptions from the registry, defaults, `brdffit models`; the registry's declared models
+match what the fitting modules register."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from brdffit.cli import main
+from brdffit.fit import registry
+
+COMMANDS = ["info", "convert", "fit", "models", "render", "compare", "batch", "export", "demo"]
+WITH_MODELS = ["fit", "compare", "batch", "demo"]
+
+
+def _help(argv, monkeypatch, capsys) -> list[str]:
+    monkeypatch.setenv("COLUMNS", "80")
+    assert main(argv + ["--help"]) == 0
+    return capsys.readouterr().out.splitlines()
+
+
+@pytest.mark.parametrize("command", [[]] + [[c] for c in COMMANDS])
+def test_help_reads_well_at_80_columns(command, monkeypatch, capsys):
+    lines = _help(command, monkeypatch, capsys)
+    text = "\n".join(lines)
+    assert lines and all(len(line) <= 80 for line in lines), \
+        [ln for ln in lines if len(ln) > 80]
+    for noise in ("<bool>", "<str>", "<int", "<path>", "<list", "<float>"):
+        assert noise not in text, noise
+    assert "..." not in "".join(ln for ln in lines if ln.startswith("  ") and
+                                ln.strip().split(" ")[0] in COMMANDS)  # no cut summaries
+
+
+@pytest.mark.parametrize("command", [[]] + [[c] for c in WITH_MODELS])
+def test_help_lists_every_model_with_its_description(command, monkeypatch, capsys):
+    text = "\n".join(_help(command, monkeypatch, capsys))
+    for name in registry.known_names():
+        info = registry.MODELS[name]
+        assert f"  {name}" in text and info.description in text, name
+
+
+def test_help_shows_defaults(monkeypatch, capsys):
+    text = " ".join(" ".join(_help(["fit"], monkeypatch, capsys)).split())
+    assert "[default: tabulated]" in text
+    text = " ".join(" ".join(_help(["batch"], monkeypatch, capsys)).split())
+    assert "[default: tabulated,ggx,beckmann]" in text and "[default: 2; x>=1]" in text
+
+
+def test_batch_help_does_not_send_to_fit_help(monkeypatch, capsys):
+    text = "\n".join(_help(["batch"], monkeypatch, capsys))
+    assert "fit --help" not in text and "summary.csv" in text
+
+
+def test_models_table(monkeypatch, capsys):
+    monkeypatch.setenv("COLUMNS", "80")
+    assert main(["models"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert all(len(line) <= 80 for line in lines), [ln for ln in lines if len(ln) > 80]
+    text = "\n".join(lines)
+    for name, info in registry.MODELS.items():
+        assert f"\n{name:<17}{'yes' if info.isotropic_only else 'no':<4}" in text, name
+    assert "Dupuy 2015:" in text and "Bagher 2016:" in text  # references under the table
+    assert registry.TYPICAL_SOURCE.split(":")[0] in " ".join(text.split())
+
+
+def test_models_json_rows_come_from_the_registry(capsys):
+    assert main(["models", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    rows = {r["name"]: r for r in data["models"]}
+    assert list(rows) == registry.known_names()
+    for name, r in rows.items():
+        info = registry.MODELS[name]
+        assert (r["isotropic_only"], r["fit_file_bytes"], r["fit_time_s"]) == (
+            info.isotropic_only, info.typical_bytes, info.typical_time_s)
+        assert r["references"] and r["figures"] == "declared"
+
+
+def test_models_measure(capsys):
+    assert main(["models", "--measure", "--models", "ggx,sgd", "--json"]) == 0
+    rows = {r["name"]: r for r in json.loads(capsys.readouterr().out)["models"]}
+    assert set(rows) == {"ggx", "sgd"}
+    for r in rows.values():
+        assert r["figures"] == "measured on synthetic:gold-ggx"
+        assert r["fit_time_s"] > 0 and r["fit_file_bytes"] > r["table_bytes"] >= 0
+        assert 0 <= r["cos_rel_error"] < 0.5
+    assert rows["ggx"]["cos_rel_error"] < 0.01  # gold-ggx is a GGX material
+
+
+def test_models_measure_says_when_a_model_does_not_apply(capsys):
+    assert main(["models", "--measure", "-m", "sgd", "--on", "synthetic:aniso-ggx",
+                 "--json"]) == 0
+    (row,) = json.loads(capsys.readouterr().out)["models"]
+    assert "isotropic inputs only" in row["error"] and row["fit_time_s"] is None
+
+
+def test_models_with_an_unknown_name_is_a_usage_error(capsys):
+    assert main(["models", "-m", "nope"]) == 2
+    assert "nope" in capsys.readouterr().err
+
+
+def test_every_registered_model_is_declared_with_its_isotropy():
+    registry.list_fitters()  # imports every fitting module
+    for name, fitter in registry.FITTERS.items():
+        assert name in registry.MODELS, f"{name}: add it to brdffit.fit.registry.MODELS"
+        info = registry.MODELS[name]
+        assert info.isotropic_only == fitter.isotropic_only, name
+        assert fitter.fit.__module__.startswith(f"brdffit.fit.{info.module}"), name
+    for info in registry.MODELS.values():
+        assert len(info.description) <= 58 and "\n" not in info.description
+        assert all(k.strip() in registry.PAPERS for k in info.paper.split(","))

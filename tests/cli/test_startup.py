@@ -1,0 +1,131 @@
+"""A CLI that starts at once (issue 15.4): what `import brdffit`, `brdffit --help` and a
+tabulated fit import, in fresh interpreters; rejected inputs fail before the fitting stack
+is imported; the NumPy spline that replaced scipy.interpolate in the tabulated NDF."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+#: Never imported by `import brdffit` or `brdffit --help` (issue 15.4).
+HEAVY = ("mitsuba", "drjit", "dask", "distributed", "matplotlib", "colour", "numba",
+         "llvmlite", "scipy", "h5py", "pydantic", "rich", "PIL")
+
+_RUN = """
+import json, sys
+code = None
+{body}
+mods = sorted({{m.split('.')[0] for m in sys.modules}} | {{m for m in sys.modules
+                                                        if m.startswith('brdffit')}})
+print("\\n@@" + json.dumps({{"code": code, "modules": mods}}))
+"""
+
+
+def _modules_after(body: str, cwd=None) -> tuple[int | None, set[str]]:
+    proc = subprocess.run([sys.executable, "-c", _RUN.format(body=body)], capture_output=True,
+                          text=True, timeout=300, cwd=cwd)
+    assert proc.returncode == 0, proc.stderr
+    out = json.loads(proc.stdout.rsplit("\n@@", 1)[1])
+    return out["code"], set(out["modules"])
+
+
+def _cli(argv) -> str:
+    return f"from brdffit.cli import main\ncode = main({argv!r})"
+
+
+def test_import_brdffit_is_light():
+    _, mods = _modules_after("import brdffit")
+    assert not mods & set(HEAVY), mods & set(HEAVY)
+    assert "numpy" not in mods
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["fit", "--help"], ["batch", "--help"],
+                                  ["models"]])
+def test_help_and_models_are_light(argv):
+    code, mods = _modules_after(_cli(argv))
+    assert code == 0
+    assert not mods & set(HEAVY), mods & set(HEAVY)
+    assert "numpy" not in mods
+    assert not any(m.startswith("brdffit.fit.") and m != "brdffit.fit.registry" for m in mods)
+
+
+@pytest.fixture(scope="module")
+def merl_file(tmp_path_factory):
+    from brdffit import synthetic
+    from brdffit.io.merl import resample_to_merl
+
+    path = tmp_path_factory.mktemp("merl") / "gold.binary"
+    resample_to_merl(synthetic("gold-ggx"), path)
+    return path
+
+
+def test_tabulated_fit_of_a_merl_file_imports_no_scipy_numba_or_pydantic(merl_file, tmp_path):
+    out = tmp_path / "f.npz"
+    code, mods = _modules_after(_cli(["fit", str(merl_file), "--model", "tabulated",
+                                      "-o", str(out)]))
+    assert code == 0 and out.is_file()
+    assert not mods & set(HEAVY), mods & set(HEAVY)
+    assert "brdffit.fit.npf" not in mods and "brdffit.fit.sgd" not in mods
+
+
+def test_a_rejected_input_fails_before_the_fitting_stack_is_imported(merl_file, tmp_path):
+    bad = tmp_path / "bad.binary"
+    bad.write_bytes(merl_file.read_bytes()[:1000])  # truncated
+    for argv in (["fit", str(bad), "--model", "tabulated"], ["info", str(bad)]):
+        code, mods = _modules_after(_cli(argv))
+        assert code == 1, argv
+        assert "brdffit.fit.tabulated" not in mods and "brdffit.microfacet" not in mods
+        assert not mods & set(HEAVY), mods & set(HEAVY)
+
+
+def test_an_unknown_model_is_a_usage_error_without_importing_fitters():
+    code, mods = _modules_after(_cli(["fit", "synthetic:gold-ggx", "--model", "nope"]))
+    assert code == 2
+    assert not any(m.startswith("brdffit.fit.") and m != "brdffit.fit.registry" for m in mods)
+
+
+def test_options_are_checked_before_the_input_is_read(tmp_path, capsys):
+    from brdffit.cli import main
+
+    # the input does not exist: a bad option is still reported as a usage error (exit 2)
+    assert main(["fit", str(tmp_path / "missing.binary"), "-m", "ggx", "-O", "bogus=1"]) == 2
+    assert "bogus" in capsys.readouterr().err
+
+
+def test_numpy_spline_slopes_match_scipy():
+    from scipy.interpolate import CubicSpline
+
+    from brdffit.microfacet.tabulated import _spline_slopes
+
+    rng = np.random.default_rng(7)
+    for n in (2, 3, 4, 5, 17, 90, 179):
+        x = np.cumsum(rng.uniform(0.01, 1.0, n)) - 3.0
+        for shape in ((n,), (n, 3)):
+            y = rng.normal(size=shape)
+            want = CubicSpline(x, y, axis=0).derivative()(x)
+            assert np.allclose(_spline_slopes(x, y), want, rtol=1e-10, atol=1e-12), (n, shape)
+    # the mirrored quadratic-u grid of the tabulated NDF
+    u = (np.arange(90) / 90.0) ** 2
+    u = np.concatenate([-u[1:][::-1], u])
+    y = np.log1p(np.cos(3 * u)[:, None] * np.array([1.0, 2.0, 3.0]) + 2)
+    assert np.allclose(_spline_slopes(u, y), CubicSpline(u, y, axis=0).derivative()(u),
+                       rtol=1e-10, atol=1e-12)
+
+
+def test_lazy_numba_compiles_on_first_call():
+    code, mods = _modules_after(
+        "import numpy as np\n"
+        "from brdffit.io import merl\n"
+        "before = 'numba' in __import__('sys').modules\n"
+        "wi = np.array([[0.3, 0.1, np.sqrt(0.9)]]); wo = np.array([[-0.3, 0.2, np.sqrt(0.87)]])\n"
+        "th, td, pd, above = merl.fast_half_diff(wi, wo)\n"
+        "from brdffit.geometry import io_to_half_diff\n"
+        "ref = io_to_half_diff(wi, wo)\n"
+        "assert np.allclose(th, ref[0]) and np.allclose(td, ref[2])\n"
+        "code = int(before)")
+    assert code == 0  # numba was not imported by `import brdffit.io.merl`
+    assert "numba" in mods  # ... and was by the first compiled call
