@@ -325,3 +325,76 @@ def test_paper_slice_mode_is_still_available():
     assert model.fit_options["selection"] == "slice"
     with pytest.raises(ValueError, match="selection"):
         fit_sgd(_truth(MATERIALS["glossy-paint"]), selection="nope")
+
+
+# -- issue 15: the fast grid scan is the same computation, and the convergence report ------------
+def _selection_data_of(brdf):
+    from brdffit.fit import sgd as S
+
+    return S._selection_data(brdf, *S.SELECTION_STRIDES)
+
+
+def test_scan_normal_equations_match_the_direct_least_squares():
+    """The grid scan's costs (normal equations, all nodes and channels at once) equal the
+    weighted error of the direct NNLS on the samples (_linear_full + _score)."""
+    from brdffit.fit import sgd as S
+
+    data = _selection_data_of(_truth(MATERIALS["glossy-paint"]))
+    nodes = [(0.004, 2.3), (0.06, 1.3), (0.4, -0.5), (2.5, 3.0), (1e-4, 0.0)]
+    shapes = np.stack([S._spec_shape("sgd", a, p, data) for a, p in nodes])
+    fast = S._scan_linear(data, shapes)
+    for i in range(len(nodes)):
+        for c in range(3):
+            rho_d, abe = S._linear_full(data, c, shapes[i])
+            direct = S._score(data, c, shapes[i], rho_d, abe)
+            assert fast[i, c] == pytest.approx(direct, rel=1e-6, abs=1e-9 * data["gram"]["sWmm"][c])
+
+
+def test_vectorised_step1_grid_costs_match_nnls2():
+    from brdffit.fit import sgd as S
+
+    sl = two_slices(_truth(MATERIALS["rough"]))
+    w = S._weights("cosine", sl["theta_h"], sl["m_h"], sl["valid_h"])
+    B = np.stack([S._basis_h("sgd", sl["theta_h"], a, p) for a, p in
+                  [(0.01, 1.0), (0.4, 0.3), (2.0, -1.5), (1e-4, 3.5)]])
+    fast = S._nnls2_costs(B, sl["m_h"], w)
+    for i in range(len(B)):
+        np.testing.assert_allclose(fast[i], S._nnls2(B[i], sl["m_h"], w)[1], rtol=1e-8,
+                                   atol=1e-14)
+
+
+def test_grid_g1_tables_equal_direct_evaluation():
+    from brdffit.fit import sgd as S
+    from brdffit.grid import merl_theta_h
+
+    S.clear_caches()
+    for kind, a, p in (("sgd", 0.05, 1.2), ("sgd", 2.0, -1.0), ("ggx", 0.3, None),
+                       ("beckmann", 0.02, None)):
+        gh, gs = S._grid_g1(kind, a, p)
+        np.testing.assert_allclose(gh, S._G1_theta(kind, merl_theta_h(), a, p), rtol=1e-12)
+        np.testing.assert_allclose(gs, S._G1_theta(kind, S._G1_SCAN_NODES, a, p), rtol=1e-12)
+        assert S._grid_g1(kind, a, p)[0] is gh                  # memoised
+
+
+def test_sgd_fit_info_convergence_report():
+    model = fit_sgd(_truth(MATERIALS["glossy-paint"]))
+    info = model.fit_info
+    for key in ("converged", "success", "status", "message", "criterion", "iterations", "nit",
+                "max_iterations", "cap_reached", "final_relative_change"):
+        assert key in info, key
+    runs = [r for s in info["step1"] for r in s["runs"]]
+    assert len(runs) == info["n_local_runs"] >= 3
+    assert info["iterations"] == sum(r["nfev"] for r in runs) > 0
+    assert info["converged"] == all(r["status"] > 0 for r in runs) == info["success"]
+    assert info["cap_reached"] == any(r["status"] == 0 for r in runs)
+    assert "ftol" in info["criterion"] and info["max_iterations"] == 80
+    assert info["converged"]  # a synthetic SGD material: every local run reaches its tolerance
+
+
+def test_sgd_cap_reported_when_hit(monkeypatch):
+    from brdffit.fit import sgd as S
+
+    monkeypatch.setattr(S, "STEP1_MAX_NFEV", 2)
+    info = fit_sgd(_truth(MATERIALS["rough"])).fit_info
+    assert info["cap_reached"] and not info["converged"] and not info["success"]
+    assert "max_nfev" in info["message"] and info["max_iterations"] == 2

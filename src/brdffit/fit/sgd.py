@@ -618,7 +618,7 @@ def _step1(kind: str, theta, m, w, n_grid: tuple[int, int], starts: int):
             return np.where(np.isfinite(r), r, 1e6)
 
         order = _grid_starts(costs[:, c].reshape(len(la), len(ps)))
-        best, found = None, []
+        best, found, runs = None, [], []
         tried = 0
         for gi in order:
             if tried >= starts:
@@ -632,11 +632,15 @@ def _step1(kind: str, theta, m, w, n_grid: tuple[int, int], starts: int):
             hi = [np.log(a_hi)] + ([P_BOUNDS[1]] if kind == "sgd" else [])
             try:
                 res = optimize.least_squares(resid, q0, bounds=(lo, hi), method="trf",
-                                             x_scale=1.0, diff_step=1e-4, xtol=1e-10,
-                                             ftol=1e-12, max_nfev=80)
+                                             x_scale=1.0, diff_step=1e-4,
+                                             xtol=STEP1_XTOL, ftol=STEP1_FTOL,
+                                             max_nfev=STEP1_MAX_NFEV)
                 x, cost = res.x, res.cost
-            except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+                runs.append(_run_record(res))
+            except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
                 x, cost = q0, 0.5 * costs[gi, c]
+                runs.append({"status": -1, "nfev": 0, "converged": False,
+                             "message": f"{type(exc).__name__}: {exc}"})
             if not np.isfinite(cost):
                 continue
             found.append((x, cost))
@@ -657,9 +661,21 @@ def _step1(kind: str, theta, m, w, n_grid: tuple[int, int], starts: int):
                           "Fr": float(coef[0, 1]), "cost1": float(cost)})
         best = dict(cands[0])
         best["candidates"] = [{k: v for k, v in cd.items() if k != "x"} for cd in cands]
+        best["runs"] = runs
         best.pop("x")
         results.append(best)
     return results
+
+
+#: Step-1 local least squares (scipy TRF): termination tolerances and evaluation cap
+STEP1_XTOL, STEP1_FTOL, STEP1_MAX_NFEV = 1e-10, 1e-12, 80
+
+
+def _run_record(res) -> dict:
+    """Convergence record of one ``scipy.optimize.least_squares`` run: status ≥ 1 is a
+    tolerance stop (gtol/ftol/xtol), 0 the ``max_nfev`` cap."""
+    return {"status": int(res.status), "nfev": int(res.nfev), "converged": bool(res.status > 0),
+            "optimality": float(res.optimality), "message": str(res.message)}
 
 
 def _step2(kind: str, theta_d, m_d, valid_d, s1: dict, rows: np.ndarray | None = None
@@ -1022,11 +1038,13 @@ def _refine_full(kind: str, data: dict, c: int, cand: dict, max_nfev: int = 40) 
     try:
         res = optimize.least_squares(resid, q0, bounds=(lo, hi), method="trf", diff_step=1e-4,
                                      xtol=1e-8, ftol=1e-10, max_nfev=max_nfev)
-        q = res.x
-    except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+        q, run = res.x, _run_record(res)
+    except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
         q = q0
+        run = {"status": -1, "nfev": 0, "converged": False,
+               "message": f"{type(exc).__name__}: {exc}"}
     return {**cand, "alpha": float(np.exp(q[0])), "p": float(q[1]) if sgd else None,
-            "source": cand.get("source", "slice") + "+refined"}
+            "source": cand.get("source", "slice") + "+refined", "run": run}
 
 
 def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
@@ -1076,7 +1094,7 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
         data = _selection_data(brdf, *selection_strides)
         if scan_grid and linear == "full":
             scan = _full_scan(distribution, data, n_grid, starts)
-    channels, approx, chosen = [], [], []
+    channels, approx, chosen, refined = [], [], [], []
     row_cache: dict = {}
 
     def evaluate(c, cand):
@@ -1108,6 +1126,7 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
         if refine and data is not None and linear == "full":
             for t in scored[:refine]:
                 cd = _refine_full(distribution, data, c, t[4])
+                refined.append(cd)
                 scored.append((*evaluate(c, cd), len(cands), cd))
                 cands.append(cd)
             scored.sort(key=lambda t: (np.nan_to_num(t[0], nan=np.inf), t[3]))
@@ -1131,11 +1150,13 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
         if isinstance(ch["distribution"], SGD):
             ch["distribution"]._lambda_table
     t4 = time.perf_counter()
+    refine_runs = [cd["run"] for cd in refined if "run" in cd]
     model.fit_info = {"method": f"two-slice ({distribution})", "weighting": weighting,
                       "time": t4 - t0, "time_step1": t1 - t0, "time_step2": t2 - t1,
                       "time_g1_approx": t3 - t2, "time_g1_tables": t4 - t3,
                       "step1": [{k: v for k, v in r.items()} for r in s1],
-                      "selection": chosen}
+                      "selection": chosen,
+                      **_sgd_convergence([r["runs"] for r in s1], refine_runs)}
     model.fit_options = {"distribution": distribution, "weighting": weighting,
                          "starts": starts, "grid": list(grid), "selection": selection,
                          "linear": linear, "bounded": bounded, "scan_grid": scan_grid,
@@ -1143,6 +1164,41 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
                          "selection_strides": list(selection_strides)}
     _check_finite(model, label)
     return model
+
+
+def _sgd_convergence(step1_runs: list[list[dict]], refine_runs: list[dict]) -> dict:
+    """The convergence report of a two-slice fit (fields as the tabulated fit's).
+
+    The iterative parts are the step-1 local least-squares runs (scipy TRF, per channel
+    ``starts`` of them) and the optional ``refine`` runs; the rest (grid scan, linear solves,
+    candidate selection) is direct. ``converged``: every run stopped on its tolerance
+    (``ftol``/``xtol``/``gtol``), none on its ``max_nfev`` cap (``cap_reached``);
+    ``iterations``/``nit``: function evaluations of all runs; ``final_relative_change``:
+    not defined for these runs (None) — their first-order ``optimality`` is reported instead.
+    """
+    runs = [r for rs in step1_runs for r in rs] + list(refine_runs)
+    n_conv = sum(r["converged"] for r in runs)
+    capped = sum(r["status"] == 0 for r in runs)
+    failed = sum(r["status"] < 0 for r in runs)
+    converged = bool(runs) and n_conv == len(runs)
+    if converged:
+        msg = (f"converged: all {len(runs)} local least-squares runs stopped on their "
+               "tolerance")
+    else:
+        msg = (f"NOT converged: {n_conv} of {len(runs)} local least-squares runs stopped on "
+               f"their tolerance, {capped} at the max_nfev cap"
+               + (f", {failed} raised" if failed else "")
+               + "; the best candidate was still selected on the MERL subsample")
+    nfev = sum(r.get("nfev", 0) for r in runs)
+    opt = [r["optimality"] for r in runs if "optimality" in r]
+    return {"converged": converged, "success": converged, "status": 0 if converged else 1,
+            "message": msg,
+            "criterion": (f"step-1 scipy least_squares (TRF) per start: ftol={STEP1_FTOL:g}, "
+                          f"xtol={STEP1_XTOL:g}, cap max_nfev={STEP1_MAX_NFEV}; then direct "
+                          "grid scan, bounded linear solves and selection (not iterative)"),
+            "iterations": nfev, "nit": nfev, "max_iterations": STEP1_MAX_NFEV,
+            "cap_reached": bool(capped), "final_relative_change": None,
+            "optimality": max(opt) if opt else None, "n_local_runs": len(runs)}
 
 
 def _check_finite(model: PerChannelMicrofacetBRDF, label: str) -> None:
