@@ -23,12 +23,13 @@ and, since ``geometry_tangent`` is the mesh's, not applied (part of the measured
 (``brdffit.export.gltf.MATERIAL_METAL_F0``):
 
 * **dielectric** (``base_metalness = 0``): ``base_color = ρd`` (Lambert: ``base_weight = 1``,
-  ``base_diffuse_roughness = 0``), ``specular_weight = 1``,
-  ``specular_ior = (1 + √f)/(1 − √f)`` with ``f`` the mean over channels of ``F0/F90`` (the
-  Fresnel's own normal reflectance), ``specular_color = F90`` (OpenPBR's dielectric tint
-  multiplies the whole Fresnel curve). A dielectric fit of index η gives back ``specular_ior
-  = η`` and ``specular_color = ks``: exact Fresnel; a Schlick fit gets the exact dielectric
-  curve of the same F0 (lossy, measured);
+  ``base_diffuse_roughness = 0``), ``specular_weight = 1``, and of two candidates the one
+  closer to the fit (:func:`_dielectric_choice`): ``specular_ior = (1 + √f)/(1 − √f)`` with
+  ``f`` the mean over channels of ``F0/F90`` and ``specular_color = F90`` (OpenPBR's
+  dielectric tint multiplies the whole Fresnel curve: a dielectric fit of index η gives back
+  ``specular_ior = η``, ``specular_color = ks``, exact Fresnel), or ``f = max F0`` and
+  ``specular_color = F0/f`` (F(0°) exact with a low index: MaterialX darkens the base by the
+  albedo of the *untinted* dielectric, which a high index with a small tint overstates);
 * **metal** (``base_metalness = 1``): OpenPBR's metal is ``specular_weight ·
   F_Schlick(base_color, F90 = 1)`` (``specular_color`` = F82 tint, white = plain Schlick):
   ``specular_weight = max F90`` (≤ 1 unless F0 exceeds it), ``base_color = F0 /
@@ -221,7 +222,8 @@ def openpbr_parameters(model) -> dict:
     metal = (m.diffuse is None and lum > 0) or (lum >= MATERIAL_METAL_F0
                                                  and float(LUMA @ rd) < lum)
     p = {"specular_roughness": r, "specular_roughness_anisotropy": float(a),
-         "base_weight": 1.0, "base_diffuse_roughness": 0.0}
+         "base_weight": 1.0, "base_diffuse_roughness": 0.0,
+         "tangent_rotation_deg": float(np.degrees(rot))}
     if metal:
         sw = float(max(F90c.max(), F0c.max(), 1e-12))
         p.update(base_metalness=1.0, base_color=np.clip(F0c / sw, 0, 1).tolist(),
@@ -231,19 +233,56 @@ def openpbr_parameters(model) -> dict:
         if m.diffuse is not None:
             notes.append("metal: the fit's diffuse term is dropped")
     else:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(F90c > 0, F0c / np.where(F90c > 0, F90c, 1.0), 0.0)
-        f = float(np.clip(np.mean(ratio), 0.0, 0.95))
-        ior = float((1.0 + np.sqrt(f)) / (1.0 - np.sqrt(f)))
-        p.update(base_metalness=0.0, base_color=np.clip(rd, 0, 1).tolist(), specular_weight=1.0,
-                 specular_color=F90c.tolist(), specular_ior=ior)
-        notes.append(f"dielectric: specular_ior {ior:.4g} (exact dielectric Fresnel of F0 "
-                     f"{f:.4g}), specular_color = F90 {np.round(F90c, 4).tolist()}; base "
-                     "attenuated by the specular albedo")
+        p.update(base_metalness=0.0, base_color=np.clip(rd, 0, 1).tolist(), specular_weight=1.0)
+        p.update(_dielectric_choice(m, p, F0c, F90c, notes))
     notes.append("MaterialX GLSL: energy compensation and average-alpha G2 on the specular lobe")
-    p.update(notes=notes, tangent_rotation_deg=float(np.degrees(rot)), F0=F0.tolist(),
-             F90=F90.tolist(), rho_d=rd.tolist())
+    p.update(notes=notes, F0=F0.tolist(), F90=F90.tolist(), rho_d=rd.tolist())
     return p
+
+
+def _ior_of_f0(f: float) -> float:
+    q = float(np.sqrt(np.clip(f, 0.0, 0.95)))
+    return float((1.0 + q) / (1.0 - q))
+
+
+def _dielectric_choice(model, p, F0, F90, notes, n: int = 4096) -> dict:
+    """``specular_ior`` and ``specular_color`` of a dielectric: of the two candidates
+
+    * *shape*: ``F0(ior)`` = mean of ``F0/F90`` (the Fresnel's own normal reflectance),
+      ``specular_color = F90`` — the fit's Fresnel exactly when it is a dielectric one;
+    * *F0*: ``F0(ior)`` = the largest channel of F0, ``specular_color = F0/F0(ior)`` ≤ 1 —
+      F(0°) exact, F(90°) = specular_color; MaterialX attenuates the base by the albedo of
+      the untinted dielectric, so a tiny tint on a high index (a fit whose F is almost
+      constant) would darken the base: this candidate keeps the index low;
+
+    the one whose :class:`OpenPBRBRDF` is closer to the fit (cosine-weighted relative error,
+    ``n`` direction pairs) is kept."""
+    from ..evaluation.metrics import BRDFMetrics
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(F90 > 0, F0 / np.where(F90 > 0, F90, 1.0), 0.0)
+    ior_a = _ior_of_f0(float(np.mean(ratio)))
+    f0b = float(F0.max())
+    ior_b = _ior_of_f0(f0b)
+    f0_eta = ((ior_b - 1.0) / (ior_b + 1.0)) ** 2
+    tint_b = np.clip(F0 / f0_eta, 0.0, 1.0) if f0_eta > 0 else np.ones(3)
+    cands = {"shape": {"specular_ior": ior_a, "specular_color": F90.tolist()},
+             "F0": {"specular_ior": ior_b, "specular_color": tint_b.tolist()}}
+    metric = BRDFMetrics(model, n, 0, ("cos_rel_error",))
+    errs = {}
+    for k, c in cands.items():
+        eq = OpenPBRBRDF(p["base_color"], 0.0, p["specular_roughness"],
+                         specular_roughness_anisotropy=p["specular_roughness_anisotropy"],
+                         tangent_rotation=np.radians(p.get("tangent_rotation_deg", 0.0)), **c)
+        e = metric.evaluate(eq).get("cos_rel_error")
+        errs[k] = float(e) if e is not None and np.isfinite(e) else np.inf
+    best = min(errs, key=errs.get)
+    c = cands[best]
+    notes.append(f"dielectric: specular_ior {c['specular_ior']:.4g}, specular_color "
+                 f"{np.round(c['specular_color'], 4).tolist()} ('{best}' mapping; cos_rel_error "
+                 f"vs fit {', '.join(f'{k} {v:.4g}' for k, v in errs.items())}); base attenuated "
+                 "by the specular albedo")
+    return c
 
 
 def openpbr_equivalent(model) -> OpenPBRBRDF:
