@@ -562,30 +562,23 @@ def read_records(out_dir) -> list[dict]:
 
 
 def write_summary(out_dir, records: list[dict] | None = None) -> tuple[Path, Path]:
-    """Write ``summary.json`` and ``summary.csv`` (one row per material × model); entries
-    of ``records`` that are not records are skipped."""
+    """Write ``summary.json`` and ``summary.csv``: one row per material × model with flat,
+    named columns (α and glTF roughness √α, F0 and ρd per channel, table bytes, BRDF-space
+    errors, PSNR ± se and dE2000 from the render records when the batch rendered, fit time,
+    status, fit file) and each material's recommended model — the smallest fit within a
+    stated tolerance of the best (:mod:`brdffit.batch_summary`, whose rule
+    ``summary.json`` repeats). Entries of ``records`` that are not records are skipped."""
     import csv
     import io
 
+    from .batch_summary import COLUMNS, RECOMMENDATION_RULE, summary_rows
+
     out = Path(out_dir)
     records = read_records(out) if records is None else records
-    rows = []
-    for r in records:
-        if not isinstance(r, dict):
-            continue
-        row = {"material": r.get("material"), "model": r.get("model"), "status": r.get("status"),
-               "fit_time_s": r.get("fit_time_s"), "error": r.get("error", "")}
-        metrics = r.get("metrics") if isinstance(r.get("metrics"), dict) else {}
-        for k, v in metrics.items():
-            if not isinstance(v, dict):
-                row[f"metric_{k}"] = v
-        params = r.get("params") if isinstance(r.get("params"), dict) else {}
-        for k, v in params.items():
-            if isinstance(v, (int, float, str, bool)) or v is None:
-                row[f"param_{k}"] = v
-        rows.append(row)
-    _write_json(out / "summary.json", {"rows": rows})
-    fields: list[str] = []
+    rows, recommended = summary_rows(records, out)
+    _write_json(out / "summary.json", {"rows": rows, "recommended": recommended,
+                                       "recommendation_rule": RECOMMENDATION_RULE})
+    fields = list(COLUMNS)
     for row in rows:
         fields += [k for k in row if k not in fields]
     buf = io.StringIO()
