@@ -613,10 +613,10 @@ def _register_fitters() -> None:
     from .registry import register_fitter
 
     register_fitter("ggx-diffuse", fit_ggx_diffuse, summary,
-                    "GGX + Lambert, Schlick F0 per channel, compressive objective (Bagher 2016)")
+                    "GGX + Lambert, Schlick F0 or dielectric η Fresnel, compressive objective (Bagher 2016)")
     register_fitter("beckmann-diffuse", fit_beckmann_diffuse, summary,
-                    "Beckmann + Lambert, Schlick F0 per channel, compressive objective "
-                    "(Bagher 2016)")
+                    "Beckmann + Lambert, Schlick F0 or dielectric η Fresnel, compressive "
+                    "objective (Bagher 2016)")
 
 
 _register_fitters()
