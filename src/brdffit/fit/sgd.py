@@ -282,6 +282,38 @@ def _nnls2(b: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.
     return best, best_cost
 
 
+def _nnls2_single(b: np.ndarray, y: np.ndarray, w: np.ndarray) -> tuple[float, float]:
+    """:func:`_nnls2` for one channel (1D ``y``, ``w``), without the batch overhead (it runs
+    inside the step-1 least squares): the same three candidates — both free (feasible when
+    finite and ≥ 0), ``f = 0`` and ``a = 0`` (feasible when finite, with ``_nnls2``'s
+    convention that they are not when the joint solution is not finite) — and the same
+    choice (smallest residual, first on ties; ``(0, 0)`` when none is feasible)."""
+    c1 = w * (1.0 / np.pi)
+    c2 = b * w
+    yw = y * w
+    s11, s22, s12 = np.float64(c1 @ c1), np.float64(c2 @ c2), np.float64(c1 @ c2)
+    t1, t2 = np.float64(c1 @ yw), np.float64(c2 @ yw)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        det = s11 * s22 - s12 * s12
+        a = (s22 * t1 - s12 * t2) / det
+        f = (s11 * t2 - s12 * t1) / det
+        a_only = np.maximum(t1 / s11, 0.0)
+        f_only = np.maximum(t2 / s22, 0.0) if s22 > 0 else np.float64(0.0)
+    fin_a, fin_f = bool(np.isfinite(a)), bool(np.isfinite(f))
+    cands = ((a, f, fin_a and fin_f and a >= 0 and f >= 0),
+             (a_only, 0.0, bool(np.isfinite(a_only)) and fin_a),
+             (0.0, f_only, fin_f and bool(np.isfinite(f_only))))
+    best, best_cost = (0.0, 0.0), np.inf
+    for ca, cf, ok in cands:
+        if not ok:
+            continue
+        r = yw - c1 * ca - c2 * cf
+        cost = float(r @ r)
+        if cost < best_cost:
+            best, best_cost = (float(ca), float(cf)), cost
+    return best
+
+
 def _nnls2_costs(B: np.ndarray, y: np.ndarray, w: np.ndarray) -> np.ndarray:
     """:func:`_nnls2` costs ``(G, C)`` for ``G`` basis functions ``B`` ``(G, n)`` at once
     (same closed form, vectorised over the basis functions)."""
@@ -613,8 +645,8 @@ def _step1(kind: str, theta, m, w, n_grid: tuple[int, int], starts: int):
             alpha = np.exp(q[0])
             p = q[1] if kind == "sgd" else None
             b = _basis_h(kind, theta, alpha, p)
-            coef, _ = _nnls2(b, mc, wc)
-            r = (mc[:, 0] - coef[0, 0] / np.pi - coef[0, 1] * b) * wc[:, 0]
+            a_, f_ = _nnls2_single(b, mc[:, 0], wc[:, 0])
+            r = (mc[:, 0] - a_ / np.pi - f_ * b) * wc[:, 0]
             return np.where(np.isfinite(r), r, 1e6)
 
         order = _grid_starts(costs[:, c].reshape(len(la), len(ps)))
@@ -1097,6 +1129,14 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
     channels, approx, chosen, refined = [], [], [], []
     row_cache: dict = {}
 
+    shape_cache: dict = {}
+
+    def shape_of(cand):                 # the shape does not depend on the channel
+        key = (cand["alpha"], cand["p"])
+        if key not in shape_cache:
+            shape_cache[key] = _spec_shape(distribution, cand["alpha"], cand["p"], data)
+        return shape_cache[key]
+
     def evaluate(c, cand):
         rho_d = cand.get("rho_d", 0.0)
         abe, rows = None, None
@@ -1110,19 +1150,47 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
             abe = _step2(distribution, sl["theta_d"], m_d[:, c], valid_d[:, c], cand, rows)
         score = np.nan
         if data is not None:
-            shape = _spec_shape(distribution, cand["alpha"], cand["p"], data)
+            shape = shape_of(cand)
             if linear == "full":
                 rho_d, abe = _linear_full(data, c, shape, rows)
             score = _score(data, c, shape, rho_d, abe)
         return score, rho_d, abe
 
+    all_cands = []
     for c in range(3):
         cands = [{**cd, "source": "slice"} for cd in s1[c]["candidates"]] \
             if selection == "full" else [s1[c]]
         if scan is not None:
             cands += scan[c]
-        scored = sorted(((*evaluate(c, cd), k, cd) for k, cd in enumerate(cands)),
-                        key=lambda t: (np.nan_to_num(t[0], nan=np.inf), t[3]))
+        all_cands.append(cands)
+    # Exact pruning of the bounded evaluations (the albedo rows are the costly part): the
+    # unbounded least-squares cost of a candidate is a lower bound of its bounded cost, so a
+    # candidate whose lower bound exceeds the best bounded cost found so far cannot win.
+    prune = bool(bounded and linear == "full" and data is not None and not refine)
+    lower: dict = {}
+    if prune:
+        keys = list(dict.fromkeys((cd["alpha"], cd["p"]) for cs in all_cands for cd in cs))
+        lb = _scan_linear(data, np.stack([shape_of({"alpha": a, "p": p}) for a, p in keys]))
+        lower = {key: np.where(np.isfinite(lb[i]), lb[i], -np.inf) for i, key in enumerate(keys)}
+        slack = 1e-10 * _gram_data(data)["sWmm"]       # rounding of the normal equations
+    n_evaluated = []
+    for c in range(3):
+        cands = all_cands[c]
+        if prune:
+            order = sorted(range(len(cands)), key=lambda k: (
+                lower[(cands[k]["alpha"], cands[k]["p"])][c], k))
+            scored, best = [], np.inf
+            for k in order:
+                if lower[(cands[k]["alpha"], cands[k]["p"])][c] > best * (1 + 1e-6) + slack[c]:
+                    break
+                t = (*evaluate(c, cands[k]), k, cands[k])
+                scored.append(t)
+                best = min(best, float(np.nan_to_num(t[0], nan=np.inf)))
+            scored.sort(key=lambda t: (np.nan_to_num(t[0], nan=np.inf), t[3]))
+        else:
+            scored = sorted(((*evaluate(c, cd), k, cd) for k, cd in enumerate(cands)),
+                            key=lambda t: (np.nan_to_num(t[0], nan=np.inf), t[3]))
+        n_evaluated.append(len(scored))
         if refine and data is not None and linear == "full":
             for t in scored[:refine]:
                 cd = _refine_full(distribution, data, c, t[4])
@@ -1136,6 +1204,7 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
         channels.append({"distribution": dist, "rho_d": rho_d, "rho_s": rho_s,
                          "F0": F0, "F1": F1})
         chosen.append({"candidate": int(k), "n_candidates": len(cands),
+                       "n_evaluated": n_evaluated[c],
                        "source": cand.get("source", "slice"), "selection_cost": float(score)})
     t2 = time.perf_counter()
     if distribution == "sgd" and g1_approximation:
