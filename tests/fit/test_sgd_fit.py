@@ -398,3 +398,33 @@ def test_sgd_cap_reported_when_hit(monkeypatch):
     info = fit_sgd(_truth(MATERIALS["rough"])).fit_info
     assert info["cap_reached"] and not info["converged"] and not info["success"]
     assert "max_nfev" in info["message"] and info["max_iterations"] == 2
+
+
+def test_one_channel_nnls_matches_the_batch_version():
+    from brdffit.fit import sgd as S
+
+    rng = np.random.default_rng(0)
+    for i in range(400):
+        n = 90
+        b = rng.random(n) ** rng.uniform(1, 8)
+        y = [0.3 / np.pi + 2 * b + rng.normal(0, 0.01, n), -b + 0.5 * rng.random(n),
+             rng.random(n)][i % 3]
+        if i % 7 == 0:
+            b[:] = 0.0                                   # degenerate: (0, 0) as _nnls2
+        w = rng.random(n) * (rng.random(n) > 0.2)
+        coef, _ = S._nnls2(b, y[:, None], w[:, None])
+        np.testing.assert_allclose(S._nnls2_single(b, y, w), coef[0], rtol=1e-8, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["rough", "glossy-paint"])
+def test_pruned_candidate_selection_equals_full_evaluation(name, monkeypatch):
+    from brdffit.fit import sgd as S
+
+    brdf = _truth(MATERIALS[name])
+    pruned = fit_sgd(brdf)
+    monkeypatch.setattr(S, "_PRUNE", False)
+    full = fit_sgd(brdf)
+    assert [c["candidate"] for c in pruned.fit_info["selection"]] == \
+        [c["candidate"] for c in full.fit_info["selection"]]
+    assert pruned.channel_params() == full.channel_params()
+    assert all(c["n_evaluated"] <= c["n_candidates"] for c in pruned.fit_info["selection"])

@@ -1166,7 +1166,7 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
     # Exact pruning of the bounded evaluations (the albedo rows are the costly part): the
     # unbounded least-squares cost of a candidate is a lower bound of its bounded cost, so a
     # candidate whose lower bound exceeds the best bounded cost found so far cannot win.
-    prune = bool(bounded and linear == "full" and data is not None and not refine)
+    prune = bool(_PRUNE and bounded and linear == "full" and data is not None and not refine)
     lower: dict = {}
     if prune:
         keys = list(dict.fromkeys((cd["alpha"], cd["p"]) for cs in all_cands for cd in cs))
@@ -1233,6 +1233,9 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
                          "selection_strides": list(selection_strides)}
     _check_finite(model, label)
     return model
+
+
+_PRUNE = True                          # exact pruning of candidate evaluations (tests)
 
 
 def _sgd_convergence(step1_runs: list[list[dict]], refine_runs: list[dict]) -> dict:
