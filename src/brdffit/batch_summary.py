@@ -73,9 +73,10 @@ def _num(v) -> float | None:
 
 
 def read_render_records(out: Path) -> dict[str, dict]:
-    """``{material: {model: {psnr, psnr_se, mean_de2000, status}}}`` from
+    """``{material: {model: {psnr, psnr_se, mean_de2000, status, finished}}}`` from
     ``OUT/renders/*.json`` (records that cannot be read are ignored: their materials simply
-    have no rendered figures)."""
+    have no rendered figures). A render finished before the fit it would describe (the fit
+    was redone since) is not used."""
     found: dict[str, dict] = {}
     for p in sorted((Path(out) / "renders").glob("*.json")):
         if p.name.startswith("."):
@@ -87,8 +88,9 @@ def read_render_records(out: Path) -> dict[str, dict]:
         if not (isinstance(rec, dict) and isinstance(rec.get("material"), str)
                 and isinstance(rec.get("models"), dict)):
             continue
-        found[rec["material"]] = {str(k): v for k, v in rec["models"].items()
-                                  if isinstance(v, dict)}
+        finished = rec.get("finished") if isinstance(rec.get("finished"), str) else ""
+        found[rec["material"]] = {str(k): dict(v, finished=finished)
+                                  for k, v in rec["models"].items() if isinstance(v, dict)}
     return found
 
 
@@ -155,7 +157,9 @@ def summary_rows(records: list, out: Path) -> tuple[list[dict], dict[str, dict]]
             if not isinstance(v, (dict, list)):
                 row[k] = _num(v) if k in METRICS else v
         rend = renders.get(material, {}).get(model) if isinstance(material, str) else None
-        if isinstance(rend, dict) and rend.get("status") == "ok":
+        fit_done = r.get("finished") if isinstance(r.get("finished"), str) else ""
+        if isinstance(rend, dict) and rend.get("status") == "ok" \
+                and rend.get("finished", "") >= fit_done:  # not a render of an older fit
             row.update(psnr=_num(rend.get("psnr")), psnr_se=_num(rend.get("psnr_se")),
                        mean_de2000=_num(rend.get("mean_de2000")))
         rows.append(row)

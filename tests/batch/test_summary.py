@@ -80,6 +80,7 @@ def test_render_records_add_psnr_and_decide(batch_dir):
     renders = batch_dir / "renders"
     renders.mkdir(exist_ok=True)
     record = {"material": "plastic", "model": "render", "status": "ok",
+              "finished": "9999-01-01T00:00:00",
               "models": {"ggx": {"status": "ok", "psnr": 30.0, "psnr_se": 0.1,
                                  "mean_de2000": 2.5},
                          "beckmann-ct": {"status": "ok", "psnr": 41.0, "psnr_se": 0.1,
@@ -92,6 +93,10 @@ def test_render_records_add_psnr_and_decide(batch_dir):
         assert _f(rows["beckmann-ct"]["mean_de2000"]) == 0.4
         choice = json.loads((batch_dir / "summary.json").read_text())["recommended"]["plastic"]
         assert choice["by"] == "psnr" and choice["model"] == "beckmann-ct"  # ggx is 11 dB worse
+        record["finished"] = "2000-01-01T00:00:00"  # renders of fits redone since: not used
+        (renders / f"{slug('plastic')}.json").write_text(json.dumps(record))
+        write_summary(batch_dir)
+        assert {r["psnr"] for r in _csv(batch_dir)} == {""}
     finally:
         (renders / f"{slug('plastic')}.json").unlink()
 

@@ -19,6 +19,7 @@ Commands signal usage errors with :func:`usage_error` and partial failure with
 
 from __future__ import annotations
 
+import functools
 import importlib
 import sys
 
@@ -77,6 +78,7 @@ def check_models(names, option: str = "--models") -> list[str]:
     return names
 
 
+@functools.lru_cache(maxsize=None)
 def models_help(title: str = "Models") -> str:
     """The model list of ``--help`` texts: one line per declared model with its description
     (kept as is by Click: the block starts with ``\\b``), 80 columns wide."""
