@@ -5,6 +5,7 @@ match what the fitting modules register."""
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -72,7 +73,7 @@ def test_models_json_rows_come_from_the_registry(capsys):
     assert list(rows) == registry.known_names()
     for name, r in rows.items():
         info = registry.MODELS[name]
-        assert (r["isotropic_only"], r["fit_file_bytes"], r["fit_time_s"]) == (
+        assert (r["isotropic_only"], r["fit_file_bytes"], r["fit_cpu_s"]) == (
             info.isotropic_only, info.typical_bytes, info.typical_time_s)
         assert r["references"] and r["figures"] == "declared"
 
@@ -83,7 +84,7 @@ def test_models_measure(capsys):
     assert set(rows) == {"ggx", "sgd"}
     for r in rows.values():
         assert r["figures"] == "measured on synthetic:gold-ggx"
-        assert r["fit_time_s"] > 0 and r["fit_file_bytes"] > r["table_bytes"] >= 0
+        assert r["fit_cpu_s"] > 0 and r["fit_file_bytes"] > r["table_bytes"] >= 0
         assert 0 <= r["cos_rel_error"] < 0.5
     assert rows["ggx"]["cos_rel_error"] < 0.01  # gold-ggx is a GGX material
 
@@ -92,7 +93,7 @@ def test_models_measure_says_when_a_model_does_not_apply(capsys):
     assert main(["models", "--measure", "-m", "sgd", "--on", "synthetic:aniso-ggx",
                  "--json"]) == 0
     (row,) = json.loads(capsys.readouterr().out)["models"]
-    assert "isotropic inputs only" in row["error"] and row["fit_time_s"] is None
+    assert "isotropic inputs only" in row["error"] and row["fit_cpu_s"] is None
 
 
 def test_models_with_an_unknown_name_is_a_usage_error(capsys):
@@ -110,3 +111,17 @@ def test_every_registered_model_is_declared_with_its_isotropy():
     for info in registry.MODELS.values():
         assert len(info.description) <= 58 and "\n" not in info.description
         assert all(k.strip() in registry.PAPERS for k in info.paper.split(","))
+
+
+def test_declared_typical_figures_are_the_bench_measurements():
+    """The sizes and times `brdffit models` shows are those bench/bench_cli.py --models
+    measured (bench/results/cli.json), not typed in."""
+    path = Path(__file__).resolve().parents[2] / "bench" / "results" / "cli.json"
+    if not path.is_file():
+        pytest.skip("bench/results/cli.json not present")
+    measured = json.loads(path.read_text())["models"]["figures"]
+    for name, info in registry.MODELS.items():
+        m = measured[name]
+        assert (info.typical_bytes, info.typical_table_bytes) == (m["fit_file_bytes"],
+                                                                  m["table_bytes"]), name
+        assert info.typical_time_s == float(f"{m['fit_cpu_s']:.2g}"), name

@@ -6,8 +6,9 @@ file and of the tables inside it, the typical fit time, its one-line description
 paper. The typical figures are *declared* in the registry, measured by
 ``bench/bench_cli.py --models`` (its source is printed under the table). ``--measure``
 measures them now instead: it fits every model (or ``--models a,b``) to ``--on`` (default
-``synthetic:gold-ggx``), saves each fit to a temporary folder and reports the fit time, the
-file and table bytes and the error against the input (:func:`brdffit.cli.fit.quick_error`).
+``synthetic:gold-ggx``), saves each fit to a temporary folder and reports the fit-file and
+table bytes, the fit's CPU time and the error against the input
+(:func:`brdffit.cli.fit.quick_error`).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ def model_table() -> list[dict]:
                      "isotropic_only": info.isotropic_only,
                      "fit_file_bytes": info.typical_bytes,
                      "table_bytes": info.typical_table_bytes,
-                     "fit_time_s": info.typical_time_s, "figures": "declared"})
+                     "fit_cpu_s": info.typical_time_s, "figures": "declared"})
     return rows
 
 
@@ -52,7 +53,7 @@ def measure(rows: list[dict], spec: str, say=lambda msg: None) -> list[dict]:
     out = []
     with tempfile.TemporaryDirectory(prefix="brdffit-models-") as tmp:
         for row in rows:
-            row = dict(row, fit_file_bytes=None, table_bytes=None, fit_time_s=None,
+            row = dict(row, fit_file_bytes=None, table_bytes=None, fit_cpu_s=None,
                        figures=f"measured on {spec}")
             name = row["name"]
             if row["isotropic_only"] and not getattr(reference, "isotropic", False):
@@ -62,9 +63,9 @@ def measure(rows: list[dict], spec: str, say=lambda msg: None) -> list[dict]:
             say(f"fitting {name} to {spec} ...")
             try:
                 entry = registry.get(name)
-                t0 = time.perf_counter()
+                t0 = time.process_time()
                 fitted = entry.fit(reference)
-                row["fit_time_s"] = time.perf_counter() - t0
+                row["fit_cpu_s"] = time.process_time() - t0
                 path = Path(tmp) / f"{name}.npz"
                 save_fit(fitted, path, source=spec, options={"model": name})
                 row["fit_file_bytes"] = path.stat().st_size
@@ -87,11 +88,11 @@ def _num(v, unit: str = "") -> str:
 def format_table(rows: list[dict]) -> list[str]:
     """The text of ``brdffit models`` (80 columns): a line of figures and a line of
     description per model."""
-    lines = [f"{'MODEL':<17}{'ISO':<4}{'FILE B':>8}{'TABLE B':>9}{'FIT TIME':>10}  PAPER"]
+    lines = [f"{'MODEL':<17}{'ISO':<4}{'FILE B':>8}{'TABLE B':>9}{'FIT CPU':>10}  PAPER"]
     for r in rows:
         lines.append(f"{r['name']:<17}{'yes' if r['isotropic_only'] else 'no':<4}"
                      f"{_num(r['fit_file_bytes']):>8}{_num(r['table_bytes']):>9}"
-                     f"{_num(r['fit_time_s'], ' s'):>10}  {r['paper']}")
+                     f"{_num(r['fit_cpu_s'], ' s'):>10}  {r['paper']}")
         extra = r.get("error") or (f"error vs input {100 * r['cos_rel_error']:.2f} %"
                                    if r.get("cos_rel_error") is not None else "")
         lines.append(f"  {r['description']}" + (f" ({extra})" if extra else ""))
@@ -132,8 +133,8 @@ def register(app: typer.Typer) -> None:
         for line in format_table(rows):
             typer.echo(line)
         notes = ["ISO: fits isotropic inputs only. FILE B: bytes of the fit file (.npz); "
-                 "TABLE B: bytes of the tables in it.",
-                 f"Measured now on {on} (fit time on this machine)." if do_measure else
+                 "TABLE B: bytes of the tables in it; FIT CPU: CPU seconds of one fit.",
+                 f"Measured now on {on}, on this machine." if do_measure else
                  f"Typical figures (–: not measured): {registry.TYPICAL_SOURCE}; "
                  "`brdffit models --measure` measures them on this machine.",
                  "Papers:"]

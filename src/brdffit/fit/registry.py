@@ -48,7 +48,7 @@ class ModelInfo:
 
     ``typical_bytes``: size of its fit file (``.npz``) and ``typical_table_bytes``: bytes of
     the tables (arrays) inside it, for a fit of an isotropic MERL material;
-    ``typical_time_s``: fit time of that material on the machine of the bench
+    ``typical_time_s``: CPU seconds of that fit on the machine of the bench
     (:data:`TYPICAL_SOURCE`); ``None`` when not measured.
     """
 
@@ -63,8 +63,8 @@ class ModelInfo:
 
 
 #: Where the typical figures of :data:`MODELS` come from.
-TYPICAL_SOURCE = ("bench/bench_cli.py --models: one fit of the MERL file of "
-                  "gold-metallic-paint (bench/results/cli.json)")
+TYPICAL_SOURCE = ("bench/bench_cli.py --models: CPU time of one fit of the MERL file of "
+                  "gold-metallic-paint on a 2-core machine (bench/results/cli.json)")
 
 #: The papers of :data:`MODELS` (``ModelInfo.paper`` names them by first author and year).
 PAPERS = {
@@ -80,35 +80,49 @@ PAPERS = {
                  "Transactions on Graphics 1(1), 1982",
 }
 
+#: Typical figures of each model, ``(fit-file bytes, table bytes, fit CPU seconds)``: one fit
+#: of the MERL file of gold-metallic-paint on this project's 2-core machine, measured by
+#: ``bench/bench_cli.py --models`` (bench/results/cli.json, "models"; CPU time, 2 significant
+#: digits; tests/cli/test_help_models.py checks they match that file).
+_TYPICAL = {
+    "tabulated": (4393, 1800, 0.10), "ggx": (3193, 1080, 0.031),
+    "beckmann": (3207, 1080, 0.034), "ggx-diffuse": (2573, 0, 1.8),
+    "beckmann-diffuse": (2703, 0, 1.9), "sgd": (5966, 0, 0.36), "beckmann-2s": (5240, 0, 0.11),
+    "ggx-2s": (5098, 0, 0.092), "beckmann-ct": (1547, 0, 2.4), "ggx-ct": (1460, 0, 1.8),
+    "npf": (71733, 3264, 100.0), "npf-g-from-d": (5772, 3264, 2.1),
+    "npf-naive": (6762, 4344, 0.85), "npf-bivariate": (98639, 97200, 0.97),
+}
+
+
+def _model(name, module, description, paper, isotropic_only=False) -> ModelInfo:
+    size, tables, seconds = _TYPICAL.get(name, (None, None, None))
+    return ModelInfo(name, module, description, paper, isotropic_only, size, tables, seconds)
+
+
 #: Every built-in model, in the order the CLI lists them.
 MODELS: dict[str, ModelInfo] = {m.name: m for m in (
-    ModelInfo("tabulated", "tabulated", "tabulated NDF + Fresnel by power iteration",
-              "Dupuy 2015"),
-    ModelInfo("ggx", "tabulated", "GGX from the tabulated fit's slope moments", "Dupuy 2015"),
-    ModelInfo("beckmann", "tabulated", "Beckmann from the tabulated fit's slope moments",
-              "Dupuy 2015"),
-    ModelInfo("ggx-diffuse", "analytic", "GGX + Lambert + Schlick F0, whole-data fit",
-              "Dupuy 2015, Bagher 2016"),
-    ModelInfo("beckmann-diffuse", "analytic", "Beckmann + Lambert + Schlick F0, whole-data fit",
-              "Dupuy 2015, Bagher 2016"),
-    ModelInfo("sgd", "sgd", "Shifted Gamma Distribution per channel", "Bagher 2012",
-              isotropic_only=True),
-    ModelInfo("beckmann-2s", "sgd", "Beckmann per channel, two-slice fit", "Bagher 2012",
-              isotropic_only=True),
-    ModelInfo("ggx-2s", "sgd", "GGX per channel, two-slice fit", "Bagher 2012",
-              isotropic_only=True),
-    ModelInfo("beckmann-ct", "sgd", "Cook-Torrance Beckmann per channel, least squares",
-              "Cook 1982, Bagher 2012", isotropic_only=True),
-    ModelInfo("ggx-ct", "sgd", "Cook-Torrance GGX per channel, least squares",
-              "Cook 1982, Bagher 2012", isotropic_only=True),
-    ModelInfo("npf", "npf", "non-parametric factors D, F, G (independent G)", "Bagher 2016",
-              isotropic_only=True),
-    ModelInfo("npf-g-from-d", "npf", "non-parametric factors, G derived from D", "Bagher 2016",
-              isotropic_only=True),
-    ModelInfo("npf-naive", "npf", "non-parametric factors D, F, H (no shadowing)",
-              "Bagher 2016", isotropic_only=True),
-    ModelInfo("npf-bivariate", "npf", "non-parametric bivariate D(θh, θd) and F", "Bagher 2016",
-              isotropic_only=True),
+    _model("tabulated", "tabulated", "tabulated NDF + Fresnel by power iteration", "Dupuy 2015"),
+    _model("ggx", "tabulated", "GGX from the tabulated fit's slope moments", "Dupuy 2015"),
+    _model("beckmann", "tabulated", "Beckmann from the tabulated fit's slope moments",
+           "Dupuy 2015"),
+    _model("ggx-diffuse", "analytic", "GGX + Lambert + Schlick F0, whole-data fit",
+           "Dupuy 2015, Bagher 2016"),
+    _model("beckmann-diffuse", "analytic", "Beckmann + Lambert + Schlick F0, whole-data fit",
+           "Dupuy 2015, Bagher 2016"),
+    _model("sgd", "sgd", "Shifted Gamma Distribution per channel", "Bagher 2012", True),
+    _model("beckmann-2s", "sgd", "Beckmann per channel, two-slice fit", "Bagher 2012", True),
+    _model("ggx-2s", "sgd", "GGX per channel, two-slice fit", "Bagher 2012", True),
+    _model("beckmann-ct", "sgd", "Cook-Torrance Beckmann per channel, least squares",
+           "Cook 1982, Bagher 2012", True),
+    _model("ggx-ct", "sgd", "Cook-Torrance GGX per channel, least squares",
+           "Cook 1982, Bagher 2012", True),
+    _model("npf", "npf", "non-parametric factors D, F, G (independent G)", "Bagher 2016", True),
+    _model("npf-g-from-d", "npf", "non-parametric factors, G derived from D", "Bagher 2016",
+           True),
+    _model("npf-naive", "npf", "non-parametric factors D, F, H (no shadowing)", "Bagher 2016",
+           True),
+    _model("npf-bivariate", "npf", "non-parametric bivariate D(θh, θd) and F", "Bagher 2016",
+           True),
 )}
 
 
