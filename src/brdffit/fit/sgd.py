@@ -82,7 +82,24 @@ Remaining differences from the paper: (α, p) may come from the grid scan rather
 step-1 optimum (then it is a grid node unless ``refine`` > 0), and ρd, ρs, F0, F1 come from
 the full data; the slices still drive step 1. Measured (bench/bench_sgd.py ``--modes 16``):
 median compressive objective over the first 16 materials 1.35 → 0.16 (SGD), 1.71 → 0.19
-(two-slice GGX), 2.78 → 0.25 (two-slice Beckmann); SGD fit ≈ 1.5 s instead of ≈ 0.2 s.
+(two-slice GGX), 2.78 → 0.25 (two-slice Beckmann); the safeguards made the SGD fit ≈ 1.5-2.6 s
+instead of ≈ 0.2 s, brought back to ≈ 0.4 s CPU by the computational changes below.
+
+Speed (same computation, issue 15; ``bench/bench_sgd.py --speed``): the grid scan solves
+every node's non-negative linear least squares from its 4 × 4 normal equations, built for all
+144 nodes and 3 channels with two matrix products over the samples (:func:`_scan_linear`),
+with G1 interpolated from every 4th G1 node (≤ 4e-5 absolute; the scan only ranks nodes, the
+candidates are then evaluated with the full table); D is evaluated on the 90 θh nodes and the
+G1 interpolation cells are precomputed; the G1 tables of the fixed grid nodes are memoised
+for the process (:func:`clear_caches`); the bounded candidate evaluations (albedo rows, QP)
+are pruned exactly — a candidate whose unbounded cost (a lower bound of its bounded cost)
+exceeds the best bounded cost found cannot win; shapes and G1 tables are shared by the
+channels. On the 100 Neural-BRDF MERL materials the fitted (α, p, ρd, ρs, F0, F1) equal the
+previous implementation's to ≤ 3e-9 relative (rounding of the one-channel NNLS in step 1).
+
+Convergence report (``fit_info``, fields as the tabulated fit's): the iterative parts are
+the step-1 local least-squares runs; ``converged`` says every run stopped on its tolerance
+rather than its ``max_nfev`` cap (:func:`_sgd_convergence`).
 Eq. 11 with ``F(π/2) = 1`` can report ``F0 = 1, F1 < 0`` (``ρs F`` decreasing towards
 grazing, the §4.4 drop); the product ``ρs F`` is what the data determine.
 
