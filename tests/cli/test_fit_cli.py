@@ -111,7 +111,7 @@ def test_missing_input_is_an_error(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv", [["--iterations", "0"], ["--iterations", "many"],
-                                  ["--option", "novalue"]])
+                                  ["--option", "novalue"], ["-o", "a\x00b.npz"]])
 def test_bad_values_are_usage_errors(argv, capsys):
     assert main(["fit", "synthetic:gold-ggx", "--model", "ggx", *argv]) == 2
     assert "Traceback" not in capsys.readouterr().err

@@ -194,7 +194,11 @@ def _fast_runtime_param(param):
                 value = value.decode("utf-8", "replace")
             return str(value)
         if leaf is Path:
-            return Path(coerce_cli_path(value, info, path_type=None, param=param, ctx=ctx))
+            try:  # Typer's own checks (exists, file/dir, readable...), without Pydantic
+                return Path(coerce_cli_path(value, info, path_type=None, param=param, ctx=ctx))
+            except ValueError as exc:  # e.g. a NUL byte, which no file system allows
+                raise BadParameter(f"{value!r} is not a valid path ({exc}).", ctx=ctx,
+                                   param=param) from None
         if leaf is bool:
             if isinstance(value, bool):
                 return value
