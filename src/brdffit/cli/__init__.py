@@ -29,12 +29,9 @@ import sys
 import typer
 
 try:  # recent Typer vendors its own copy of Click; older ones use Click itself
-    from typer import _click as click
     from typer._click import exceptions as _click_exceptions
 except ImportError:  # pragma: no cover
-    import click
-
-    _click_exceptions = click.exceptions
+    from click import exceptions as _click_exceptions
 
 _EXIT = tuple({typer.Exit, getattr(_click_exceptions, "Exit", typer.Exit)})
 _ABORT = tuple({typer.Abort, getattr(_click_exceptions, "Abort", typer.Abort)})
