@@ -27,6 +27,7 @@ lacks. ``--summarise`` (also done at the end of a run) writes
 from __future__ import annotations
 
 import argparse
+import csv
 import json
 import os
 import sys
@@ -186,6 +187,14 @@ def summarise(args) -> dict:
            "load_average": os.getloadavg()}
     out = ROOT / "bench" / "results" / "report_database.json"
     out.write_text(json.dumps(fig, indent=1))
+    # per-material figures beside the summary: the run folder (runs/db) is not kept
+    with open(out.with_suffix(".csv"), "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["material", "model", "psnr_db", "psnr_se_db", "mean_de2000"])
+        for mat in sorted(table):
+            for m, (p_db, se_db, de) in table[mat].items():
+                w.writerow([mat, m, f"{p_db:.3f}", f"{se_db:.3f}",
+                            "" if de is None else f"{de:.4f}"])
     print(f"{len(table)} materials; tie threshold median {fig['median_tie_threshold_db']}")
     for m, s in per_model.items():
         print(f"  {m:>14} n={s['n']:3d} PSNR mean {s['mean_psnr']:6.2f} ± "
