@@ -172,3 +172,35 @@ def test_validation():
     assert d.params() == {"alpha": 0.1, "p": 1.5}
     assert d.D(np.array([0.0, 0.0, -1.0])) == 0.0
     assert d.G1(np.array([1.0, 0.0, 0.0])) == 0.0
+
+
+# A mirror-like channel of the MERL chrome SGD fit: Eq. 9 wants k at its bound and c ~ 1e17,
+# which the fit-file schema once refused (chrome, chrome-steel, tungsten-carbide had no SGD fit).
+SHARP = (0.0026943, 1.34819)
+
+
+def test_g1_approximation_of_a_mirror_like_sgd_is_saved_and_loaded(tmp_path):
+    from brdffit.fit.sgd import PerChannelMicrofacetBRDF
+    from brdffit.io.fitfile import load_fit, save_fit
+    from brdffit.microfacet.sgd import EQ9_C_MAX
+
+    d = SGD(*SHARP)
+    ap = d.g1_approximation(n=256)
+    assert 1e15 < ap["c"] <= EQ9_C_MAX and ap["max_abs"] < 1e-3
+    model = PerChannelMicrofacetBRDF(
+        [dict(distribution=d, rho_d=0.01, rho_s=0.5, F0=0.9, F1=0.0) for _ in range(3)],
+        g1_approx=[ap] * 3, g1="approx")
+    save_fit(model, tmp_path / "chrome.npz")
+    back = load_fit(tmp_path / "chrome.npz")
+    assert back.g1_approx[0]["c"] == ap["c"]
+
+
+def test_g1_approximation_caps_c_and_stays_close(monkeypatch):
+    """When every start wants c above the cap, k is capped so c stays representable."""
+    import brdffit.microfacet.sgd as sgd_mod
+
+    monkeypatch.setattr(sgd_mod, "EQ9_C_MAX", 1e8)
+    d = SGD(*SHARP)
+    ap = d.g1_approximation(n=256)
+    assert np.isfinite(ap["c"]) and 0 < ap["c"] <= 1e8
+    assert ap["max_abs"] < 0.05

@@ -142,7 +142,7 @@ from ..microfacet.ggx import GGX
 from ..microfacet.model import (MicrofacetBRDF, _lookup_distribution, distribution_from_state,
                                 distribution_to_state)
 from ..microfacet.gamma import upper_gamma
-from ..microfacet.sgd import SGD, SGDApproxG1, sgd_log_p22, sgd_mu_lambda
+from ..microfacet.sgd import EQ9_C_MAX, SGD, SGDApproxG1, sgd_log_p22, sgd_mu_lambda
 from ..schema import (ALBEDO_MAX, F1_MAX, SPECULAR_MAX, Choice, Component, ListOf, Nested, Number,
                       Opt, Schema, Text)
 from ..serialization import SerializableModel
@@ -398,7 +398,7 @@ class PerChannelMicrofacetBRDF(IsotropicBRDF, SerializableModel):
     #: fit-file state (:mod:`brdffit.schema`): three channels (distribution arrays under
     #: ``c0.``...), ρd in [0, ALBEDO_MAX], ρs in [0, SPECULAR_MAX], F0 in [0, 1] and
     #: |F1| <= F1_MAX (Eq. 11 with F(π/2) = 1 gives F1 ≪ 0 when ρs → 0); Eq. 9 parameters
-    #: λ in (0, 1e6], c in (0, 1e15] (MERL fits reach 1.1e7), k in (0, 1e3]
+    #: λ in (0, 1e6], c in (0, EQ9_C_MAX] (mirror-like MERL fits reach ~5e18), k in (0, 1e3]
     state_schema = Schema(
         {"channels": ListOf(Nested(Schema(
             {"distribution": Component(_lookup_distribution, what="distribution"),
@@ -407,7 +407,7 @@ class PerChannelMicrofacetBRDF(IsotropicBRDF, SerializableModel):
             required=("distribution", "rho_d", "rho_s", "F0", "F1"))),
             min_len=3, max_len=3, item_prefix="c{index}."),
          "g1_approx": Opt(ListOf(Opt(Nested(Schema(
-             {"lambda": Number(gt=0, le=1e6), "c": Number(gt=0, le=1e15),
+             {"lambda": Number(gt=0, le=1e6), "c": Number(gt=0, le=EQ9_C_MAX),
               "k": Number(gt=0, le=1e3)}, required=("lambda", "c", "k")))),
              min_len=3, max_len=3)),
          "g1": Choice("table", "approx"), "name": Opt(Text()), "source": Opt(Text())},

@@ -125,6 +125,12 @@ def sgd_mu_lambda(mu, alpha, p, h: float = _H_LOG, log_norm=None) -> np.ndarray:
     return (h * f.sum(axis=1)).reshape(shape)
 
 
+#: largest Eq. 9 ``c`` a fit produces or a fit file may hold: any finite c gives G1 in [0, 1]
+#: (θ0 follows from c), and 1e30 stays finite in the float32 GLSL export; mirror-like MERL
+#: SGDs reach ~5e18 (k = 50 at w = π/2 − θ0 ≈ 0.45)
+EQ9_C_MAX = 1e30
+
+
 def g1_eq9(theta, lam: float, c: float, k: float) -> np.ndarray:
     """Bagher 2012 Eq. 9: ``G1 ≈ 1 + λ(1 − exp(c (θ − θ0)^k))`` for θ > θ0, else 1.
 
@@ -338,20 +344,55 @@ class SGD(SlopeDistribution):
             c = np.log1p(1.0 / lam) / w**k
             return g1_eq9(theta, lam, c, k)
 
-        best = None
-        for lam0, kk in ((0.01, 2.0), (0.3, 4.0), (3.0, 8.0)):
-            q0 = np.log([lam0, w0, kk])
+        def c_of(q):
+            lam, w, k = np.exp(q)
+            with np.errstate(over="ignore", divide="ignore"):
+                return np.log1p(1.0 / lam) / w**k
+
+        def solve(q0, k_max):
             try:
-                res = optimize.least_squares(
+                return optimize.least_squares(
                     lambda q: model(q) - g, q0, method="trf",
-                    bounds=(np.log([1e-6, 1e-7, 0.05]), np.log([1e6, np.pi / 2, 50.0])),
+                    bounds=(np.log([1e-6, 1e-7, 0.05]), np.log([1e6, np.pi / 2, k_max])),
                     xtol=1e-12, ftol=1e-14, gtol=1e-14, max_nfev=150)
             except (ValueError, FloatingPointError):
+                return None
+
+        best, over = None, None                      # best admissible / best over the cap
+        for lam0, kk in ((0.01, 2.0), (0.3, 4.0), (3.0, 8.0)):
+            res = solve(np.log([lam0, w0, kk]), 50.0)
+            if res is None:
+                continue
+            if not c_of(res.x) <= EQ9_C_MAX:
+                over = res if over is None or res.cost < over.cost else over
                 continue
             if best is None or res.cost < best.cost:
                 best = res
             if 2.0 * best.cost / len(theta) < 1e-7:     # mse already at the paper's level
                 break
+        # Starts that wanted c = ln(1+1/λ)/w^k > EQ9_C_MAX (the sharp G1 edge of mirror-like
+        # SGDs) are refitted with k capped so that c stays representable at their w.
+        for _ in range(4):
+            if over is None or (best is not None and best.cost <= over.cost):
+                break
+            lam, w, _k = np.exp(over.x)
+            if w >= 1.0:
+                break
+            k_cap = 0.95 * np.log(EQ9_C_MAX / np.log1p(1.0 / lam)) / np.log(1.0 / w)
+            if not k_cap > 0.05:
+                break
+            x0 = over.x.copy()
+            x0[2] = np.log(min(np.exp(x0[2]), 0.99 * k_cap))
+            res = solve(x0, k_cap)
+            if res is None:
+                break
+            if c_of(res.x) <= EQ9_C_MAX:
+                if best is None or res.cost < best.cost:
+                    best = res
+                break
+            over = res
+        if best is None:                              # never reached on real SGDs
+            best = type("Flat", (), {"x": np.log([1e-6, np.pi / 2, 1.0])})()
         lam, w, k = np.exp(best.x)
         c = np.log1p(1.0 / lam) / w**k
         err = model(best.x) - g
@@ -406,10 +447,10 @@ class SGDApproxG1(SGD):
     """
 
     kind = "sgd_eq9"
-    #: fit-file state: the SGD's α, p and Eq. 9's λ <= 1e6, c <= 1e15, k <= 1e3 (all > 0)
+    #: fit-file state: the SGD's α, p and Eq. 9's λ <= 1e6, c <= EQ9_C_MAX, k <= 1e3 (all > 0)
     state_schema = Schema({"alpha": Number(gt=0, le=ALPHA_MAX),
                            "p": Number(ge=-P_EXPONENT_MAX, le=P_EXPONENT_MAX),
-                           "lam": Number(gt=0, le=1e6), "c": Number(gt=0, le=1e15),
+                           "lam": Number(gt=0, le=1e6), "c": Number(gt=0, le=EQ9_C_MAX),
                            "k": Number(gt=0, le=1e3)},
                           required=("alpha", "p", "lam", "c", "k"), strict=True)
 
