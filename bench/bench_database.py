@@ -185,7 +185,7 @@ def summarise(args) -> dict:
            "median_tie_threshold_db": float(np.median(thresholds)) if thresholds else None,
            "per_model": per_model, "wins": wins, "claims": claims,
            "load_average": os.getloadavg()}
-    out = ROOT / "bench" / "results" / "report_database.json"
+    out = ROOT / "bench" / "results" / f"{args.results}.json"
     out.write_text(json.dumps(fig, indent=1))
     # per-material figures beside the summary: the run folder (runs/db) is not kept
     with open(out.with_suffix(".csv"), "w", newline="") as fh:
@@ -212,6 +212,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default=str(ROOT / "runs" / "db"))
     ap.add_argument("--summarise", action="store_true")
+    ap.add_argument("--results", default="report_database",
+                    help="name of the summary in bench/results/ (.json and .csv)")
     ap.add_argument("--min-models", type=int, default=7,
                     help="render a material only when this many of its fits exist")
     args = ap.parse_args(argv)

@@ -62,11 +62,15 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "runs" / "db"))
     ap.add_argument("--reverse", action="store_true")
     ap.add_argument("--limit", type=int, default=0)
+    ap.add_argument("--only", default="", help="comma-separated material names to keep")
     args = ap.parse_args(argv)
     models = [m for m in args.models.split(",") if m]
     materials = []
     for src in SOURCES:
         materials += enumerate_materials(src)
+    if args.only:
+        keep = set(args.only.split(","))
+        materials = [m for m in materials if m[0] in keep]
     if args.limit:
         materials = materials[:args.limit]
     if args.reverse:
