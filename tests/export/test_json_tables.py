@@ -119,3 +119,20 @@ def test_npf_table_round_trip(tmp_path):
         back = load_npf_table(spec)
         assert list(back) == ["n0", "n1", "n2"]
         np.testing.assert_allclose(back["n1"].eval(wi, wo), models[1].eval(wi, wo), rtol=1e-6)
+
+
+# every model the registry fits goes to JSON and back (a tabulated fit once crashed:
+# "could not convert string to float: 'tabulated'")
+@pytest.mark.parametrize("model", ["tabulated", "ggx", "beckmann", "ggx-diffuse", "sgd",
+                                   "npf-g-from-d", "npf-naive", "npf-bivariate"])
+def test_every_registered_model_exports_to_json(tmp_path, model):
+    from brdffit.fit.registry import fit_model
+
+    options = {"max_iter": 3} if model in ("npf-g-from-d", "npf-naive") else {}
+    fitted, _ = fit_model(model, brdffit.synthetic("gold-ggx"), options)
+    export(fitted, "json", tmp_path / "m.json")
+    doc = json.loads((tmp_path / "m.json").read_text())
+    assert doc["parameters"] and "state" in doc
+    back = load_json(tmp_path / "m.json")
+    wi, wo = _pairs(400)
+    np.testing.assert_allclose(back.eval(wi, wo), fitted.eval(wi, wo), rtol=1e-6, atol=1e-9)

@@ -103,8 +103,8 @@ def test_xml_and_python_scenes_render(tmp_path, name):
 def test_plugin_scene_for_sgd(tmp_path):
     mi, _ = _mi()
     model = brdffit.synthetic("sgd-paint")
-    with pytest.raises(ExportError):
-        M.write_mitsuba_xml(model, tmp_path / "x.xml")
+    with pytest.raises(ExportError):          # no built-in plugin for SGD
+        M.write_mitsuba_xml(model, tmp_path / "x.xml", style="conductor")
     assert not (tmp_path / "x.xml").exists()
     info = M.write_mitsuba_python(model, tmp_path / "paint.py")
     assert info["plugin"] == "brdffit" and (tmp_path / "paint.fit.npz").exists()
@@ -147,3 +147,55 @@ def test_plugin_scene_for_npf(tmp_path):
     exec(compile((tmp_path / "npf.py").read_text(), "npf.py", "exec"), ns)
     img = np.array(mi.render(mi.load_dict(ns["scene_dict"](12, 4))))
     assert np.isfinite(img).all() and img[..., :3].max() > 0
+
+
+_PLAIN_MITSUBA = r"""
+import os, sys
+import numpy as np
+import mitsuba as mi
+mi.set_variant("llvm_ad_rgb")
+scene = mi.load_file(sys.argv[1], res=16, spp=4)
+kind = str(scene.shapes()[0].bsdf()).split("[")[0].strip()
+img = np.array(mi.render(scene))
+assert not any(m.startswith("brdffit") for m in sys.modules), "brdffit was imported"
+print(kind, bool(np.isfinite(img).all()), float(img[..., :3].max()))
+"""
+
+
+@pytest.mark.render
+@pytest.mark.parametrize("model", ["tabulated", "ggx-diffuse", "sgd", "npf-g-from-d",
+                                   "npf-naive", "npf-bivariate"])
+def test_mitsuba_xml_of_every_model_loads_in_plain_mitsuba(tmp_path, model):
+    """Issue 14.4: a scene that a Mitsuba install without brdffit loads and renders; models
+    with no built-in plugin go through an RGL tensor file and the stock ``measured`` plugin."""
+    import subprocess
+    import sys
+
+    from brdffit.fit.registry import fit_model
+
+    _mi()
+    options = {"max_iter": 3} if model in ("npf-g-from-d", "npf-naive") else {}
+    fitted, _ = fit_model(model, brdffit.synthetic("gold-ggx"), options)
+    info = M.write_mitsuba_xml(fitted, tmp_path / "my scene.xml")
+    assert all(os.path.isfile(f) for f in info["files"])
+    # the resampling error of the tensor file, read back by brdffit's own RGL reader
+    assert info["error"]["cos_rel_error"] < 0.02
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    run = subprocess.run([sys.executable, "-c", _PLAIN_MITSUBA, str(tmp_path / "my scene.xml")],
+                         capture_output=True, text=True, cwd=tmp_path, env=env, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    kind, finite, peak = run.stdout.split()
+    assert finite == "True" and float(peak) > 0
+    assert ("Measured" in kind) == (model != "ggx-diffuse"), kind
+
+
+def test_mitsuba_xml_failure_leaves_no_tensor_file(tmp_path, monkeypatch):
+    from brdffit.export import rgl
+
+    def boom(*a, **k):
+        raise ExportError("simulated failure")
+
+    monkeypatch.setattr(rgl, "rgl_error", boom)
+    with pytest.raises(ExportError):
+        M.write_mitsuba_xml(brdffit.synthetic("sgd-paint"), tmp_path / "s.xml")
+    assert list(tmp_path.iterdir()) == []

@@ -3,7 +3,8 @@
 ``FIT`` is a fit file (:func:`brdffit.io.fitfile.save_fit`, ``.npz``), a parameter JSON
 (:func:`brdffit.export.load_json`) or ``synthetic:NAME``. Targets (:data:`brdffit.export.TARGETS`):
 ``mitsuba`` (ready-to-render Python scene; built-in plugins or the project's plugin),
-``mitsuba-xml`` (XML scene, built-in plugins only), ``gltf``, ``glsl``, ``merl``, ``rgl``,
+``mitsuba-xml`` (XML scene for a plain Mitsuba install: built-in plugins, else an RGL tensor
+file for the stock ``measured`` plugin), ``gltf``, ``materialx``, ``glsl``, ``merl``, ``rgl``,
 ``json``; plus ``npf-uber`` (several NPF fits packed as the Bagher 2016 uber-texture). The
 summary (files, approximations, measured errors) is printed; ``--json`` prints it as JSON.
 A model that cannot go to the target, or an output that cannot be written, exits with status 1

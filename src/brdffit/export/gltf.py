@@ -189,8 +189,8 @@ class GLTFBRDF(IsotropicBRDF):
         return d
 
 
-def _ggx_model(model):
-    """``(model as single GGX lobe, notes)`` or ExportError."""
+def _ggx_model(model, target: str = "glTF 2.0"):
+    """``(model as single GGX lobe, notes)`` or ExportError (naming ``target``)."""
     from ..microfacet.model import MicrofacetBRDF
     from ..microfacet.tabulated import TabulatedSlopeDistribution
 
@@ -212,9 +212,9 @@ def _ggx_model(model):
         notes.append("Beckmann distribution replaced by GGX of the same (alpha_x, alpha_y, rho) "
                      "(same D at the normal, heavier tails)")
     if not (isinstance(model, MicrofacetBRDF) and is_elliptical(model.distribution, ("ggx",))):
-        fail(model, "glTF 2.0", "glTF's metallic-roughness model is a single GGX lobe; "
-             "expected a MicrofacetBRDF with a GGX, Beckmann or tabulated distribution, e.g. "
-             "from fit_ggx_diffuse (for other models use --to mitsuba or --to json)")
+        fail(model, target, f"{target} holds a single GGX lobe (+ Lambert); expected a "
+             "MicrofacetBRDF with a GGX, Beckmann or tabulated distribution, e.g. a ggx-diffuse "
+             "fit (this model can go to --to mitsuba-xml, mitsuba, glsl or json)")
     return model, notes
 
 

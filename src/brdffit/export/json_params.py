@@ -75,7 +75,8 @@ def _distribution_parameters(d) -> dict:
     if is_elliptical(d):
         return {"kind": kind, "alpha_x": d.alpha_x, "alpha_y": d.alpha_y, "rho": d.rho,
                 "units": "alpha: slope scale (dimensionless); rho: correlation"}
-    p = {k: (float(v) if np.isscalar(v) else v) for k, v in d.params().items()}
+    p = {k: (v.item() if isinstance(v, np.generic) else v) for k, v in d.params().items()}
+    kind = p.pop("kind", kind)                   # e.g. "tabulated" (a label, not a number)
     out = {"kind": kind, **p}
     if kind in ("sgd", "sgd_eq9"):
         out["units"] = ("alpha: SGD shape alpha (Bagher 2012 Eq. 8, dimensionless); p: exponent; "

@@ -194,7 +194,7 @@ def openpbr_parameters(model) -> dict:
     ``tangent_rotation_deg`` and the fit's ``F0``, ``F90``, ``rho_d``."""
     from .gltf import MATERIAL_METAL_F0, _ggx_model
 
-    m, notes = _ggx_model(model)
+    m, notes = _ggx_model(model, "MaterialX")
     d = m.distribution
     au, av, phi = principal_axes(d.alpha_x, d.alpha_y, d.rho)
     if au >= av:

@@ -394,7 +394,7 @@ def plastic_bsdf(model, n: int = 4096) -> tuple[dict, dict]:
 # XML
 # ------------------------------------------------------------------------------------------
 _BSDF_TYPES = {"diffuse", "roughconductor", "blendbsdf", "roughplastic", "roughdielectric",
-               "twosided"}
+               "twosided", "measured"}
 
 
 def _fmt(x) -> str:
@@ -552,14 +552,31 @@ def example_scene_dict(bsdf: dict, resolution: int = 64, spp: int = 16) -> dict:
 # files
 # ------------------------------------------------------------------------------------------
 def write_mitsuba_xml(model, path, resolution: int = 256, spp: int = 64,
-                      style: str = "conductor", **_ignored) -> dict:
-    """Write a ready-to-render XML scene with the built-in mapping of ``model`` (``style``
-    ``"conductor"``: roughconductor/diffuse/blendbsdf, exact up to the documented
-    approximations; ``"plastic"``: :func:`plastic_bsdf`); raises :class:`ExportError` for
-    models without one (use :func:`write_mitsuba_python`)."""
+                      style: str = "auto", **_ignored) -> dict:
+    """Write a ready-to-render XML scene that a plain Mitsuba 3 install loads (no brdffit).
+
+    ``style``:
+
+    * ``"conductor"`` – built-in plugins (roughconductor/diffuse/blendbsdf), exact up to the
+      documented approximations; :class:`ExportError` for models without such a mapping;
+    * ``"plastic"`` – :func:`plastic_bsdf`;
+    * ``"measured"`` – an RGL tensor file (:mod:`.rgl`, Dupuy & Jakob 2018 layout) written
+      next to the XML as ``<slug of the XML stem>.bsdf`` and read by Mitsuba's stock
+      ``measured`` plugin: any isotropic model (tabulated, per-channel SGD, NPF variants);
+    * ``"auto"`` (default) – ``"conductor"`` where the model maps to built-in plugins, else
+      ``"measured"``.
+
+    The XML and the tensor file are written as a whole (:class:`._common.StagedFiles`).
+    """
+    from ..paths import slug
+
     check_output_path(path)
     _count(resolution, "resolution")
     _count(spp, "spp")
+    if style not in ("auto", "conductor", "plastic", "measured"):
+        raise ExportError(f"unknown Mitsuba style {style!r}; expected 'auto', 'conductor', "
+                          "'plastic' or 'measured'")
+    tensor = None
     if style == "plastic":
         bsdf, info = plastic_bsdf(model)
         err = info.pop("error")
@@ -567,15 +584,43 @@ def write_mitsuba_xml(model, path, resolution: int = 256, spp: int = 64,
         bsdf, info = builtin_bsdf(model)
         err = mitsuba_error(model)
     else:
-        raise ExportError(f"unknown Mitsuba style {style!r}; expected 'conductor' or 'plastic'")
-    comment = (f"brdffit export of {label(model)}; alpha = slope-scale roughness (Mitsuba's "
-               f"alpha); notes: {'; '.join(info['notes']) or 'exact'}; "
-               f"cosine-weighted relative error vs the fit: {err['cos_rel_error']:.4g}")
-    data = scene_xml(bsdf, comment, resolution, spp).encode("utf-8")   # as declared
-    path = check_output_path(path)
-    with writing(path), atomic_write(path, "wb") as fh:
-        fh.write(data)
-    return {"files": [str(path)], "target": "mitsuba-xml", **info, "error": err}
+        try:
+            if style == "measured":
+                raise ExportError("measured requested")
+            bsdf, info = builtin_bsdf(model)
+            err = mitsuba_error(model)
+        except ExportError as exc:
+            if style == "auto" and not getattr(model, "isotropic", False):
+                raise ExportError(f"{exc} (and an anisotropic model cannot go to the RGL tensor "
+                                  "of Mitsuba's measured plugin; use --to mitsuba or json)") from None
+            path = check_output_path(path)
+            tensor = path.with_name(slug(path.stem) + ".bsdf")
+            bsdf = {"type": "measured", "filename": tensor.name}
+            info = {"notes": ["RGL tensor file for Mitsuba's measured plugin (resampled)"]}
+    if tensor is None:
+        comment = (f"brdffit export of {label(model)}; alpha = slope-scale roughness (Mitsuba's "
+                   f"alpha); notes: {'; '.join(info['notes']) or 'exact'}; "
+                   f"cosine-weighted relative error vs the fit: {err['cos_rel_error']:.4g}")
+        data = scene_xml(bsdf, comment, resolution, spp).encode("utf-8")   # as declared
+        path = check_output_path(path)
+        with writing(path), atomic_write(path, "wb") as fh:
+            fh.write(data)
+        return {"files": [str(path)], "target": "mitsuba-xml", **info, "error": err}
+    from .rgl import rgl_error, rgl_fields
+    from ..io.tensorfile import write_tensor_file
+
+    fields = rgl_fields(model)
+    with StagedFiles(path) as staged:
+        tmp = staged.path(tensor)
+        with writing(tensor):
+            write_tensor_file(tmp, fields)
+        err = rgl_error(model, tmp)
+        comment = (f"brdffit export of {label(model)} as an RGL tensor file for Mitsuba's "
+                   f"measured plugin; cosine-weighted relative error vs the fit: "
+                   f"{err['cos_rel_error']:.4g}")
+        with staged.open(path) as fh:
+            fh.write(scene_xml(bsdf, comment, resolution, spp).encode("utf-8"))
+    return {"files": [str(tensor), str(path)], "target": "mitsuba-xml", **info, "error": err}
 
 
 _SCRIPT = '''"""Ready-to-render Mitsuba 3 scene exported by brdffit (the model: EXPORTED, MATERIAL).

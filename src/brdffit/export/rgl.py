@@ -23,9 +23,10 @@ read; see :mod:`brdffit.io.rgl` for their meaning):
     points; luminance = Rec. 709 Y of rgb (clamped ≥ 0, plus a tiny floor so every slice has
     a positive integral), used for importance sampling.
 
-Only isotropic :class:`~brdffit.microfacet.model.MicrofacetBRDF` models (tabulated fits in
-particular, also GGX/Beckmann/SGD) map: other models have no NDF/σ; anisotropic ones would need
-φi slices (not implemented). The resampling error is measured by reading the file back
+Every isotropic model maps. An isotropic :class:`~brdffit.microfacet.model.MicrofacetBRDF`
+(tabulated fits in particular, also GGX/Beckmann/SGD) stores its own NDF and σ; other models
+(per-channel SGD, NPF factors) store the NDF of their tabulated fit as the warp
+(:func:`_proxy_warp`). Anisotropic models would need φi slices (not implemented). The resampling error is measured by reading the file back
 (:func:`rgl_error`).
 """
 
@@ -58,18 +59,33 @@ def _diffuse_weight(model) -> float:
     return float(np.clip(float(a_d) / max(float(a_d + a_s), 1e-12), 0.05, 0.95))
 
 
+def _proxy_warp(model):
+    """``(distribution, diffuse weight)`` of the warps for a model that is not a single
+    microfacet lobe (per-channel SGD, NPF factors, sums): the NDF of its tabulated fit
+    (Dupuy 2015, which follows the shape of the model's specular peak) mixed with a uniform
+    NDF at a fixed weight of 0.25, since such models carry no separate diffuse albedo. The
+    warps only steer where the rgb samples sit; the stored values are the model's own
+    ``f_r cos θo`` divided by this D, so the file still holds the model (deliberate
+    deviation from the measured files, whose D is the material's)."""
+    from ..fit.tabulated import fit_tabulated
+
+    return fit_tabulated(model).distribution, 0.25
+
+
 def rgl_fields(model, n_theta: int = 32, n_ndf: int = 256, vndf_res: int = 128,
                rgb_res: int = 64) -> dict:
     """The tensor-file fields of ``model`` (see module docstring)."""
     from ..io.rgl import _Marginal2D, phi_to_u, u_to_phi, u_to_theta
     from ..microfacet.model import MicrofacetBRDF
 
-    if not (isinstance(model, MicrofacetBRDF) and model.isotropic):
-        fail(model, "RGL .bsdf", "an isotropic MicrofacetBRDF (tabulated, GGX, Beckmann or SGD "
-             "NDF): the format stores the NDF, sigma and visible-normal warps; anisotropic "
-             "models would need phi_i slices (not implemented)")
-    dist = model.distribution
-    wd = _diffuse_weight(model)
+    if not getattr(model, "isotropic", False):
+        fail(model, "RGL .bsdf", "an isotropic BRDF: the format's single phi_i slice cannot "
+             "hold an anisotropic model (phi_i slices are not implemented); use --to json, "
+             "glsl or mitsuba")
+    if isinstance(model, MicrofacetBRDF):
+        dist, wd = model.distribution, _diffuse_weight(model)
+    else:
+        dist, wd = _proxy_warp(model)
 
     def D_of(w):
         d = np.nan_to_num(np.asarray(dist.D(w), float), nan=0.0, posinf=0.0)
