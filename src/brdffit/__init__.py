@@ -5,7 +5,8 @@ The public API is deliberately small; everything else lives in the subpackages:
 * :mod:`brdffit.geometry` – spherical, Rusinkiewicz and slope-space parameterisations
 * :mod:`brdffit.io` – readers/writers of measured formats and of fitted models
 * :mod:`brdffit.microfacet` – slope distributions, shadowing, Fresnel, ``MicrofacetBRDF``
-* :mod:`brdffit.fit` – the fitting methods, one module per paper
+* :mod:`brdffit.fit` – the fitting methods, one module per paper; ``brdffit.fit(brdf,
+  model="ggx")`` fits with any model by name, ``brdffit.fit_result(model)`` tells how it went
 * :mod:`brdffit.evaluation` – rendering, metrics, plots and the HTML report
 """
 
@@ -20,7 +21,8 @@ __all__ = ["BRDF", "IsotropicBRDF", "BRDFError", "BRDFFormatError", "FitError", 
            "synthetic", "list_synthetic", "load", "resample_to_merl", "write_merl",
            "MicrofacetBRDF", "Beckmann", "GGX", "SGD", "SchlickFresnel",
            "GeneralizedSchlickFresnel", "DielectricFresnel", "ConductorFresnel",
-           "TabulatedFresnel", "fit_tabulated", "fit_ggx", "fit_beckmann", "fit_sgd", "fit_npf",
+           "TabulatedFresnel", "fit", "fit_result", "FitResult", "fit_tabulated", "fit_ggx",
+           "fit_beckmann", "fit_sgd", "fit_npf", "fit_ggx_diffuse", "fit_beckmann_diffuse",
            "save_fit", "load_fit", "__version__"]
 
 
@@ -35,8 +37,12 @@ def __getattr__(name):  # lazy public API: keeps `import brdffit` fast and cycle
         "GeneralizedSchlickFresnel": ".microfacet", "DielectricFresnel": ".microfacet",
         "ConductorFresnel": ".microfacet", "TabulatedFresnel": ".microfacet",
         "fit_tabulated": ".fit", "fit_ggx": ".fit", "fit_beckmann": ".fit", "fit_sgd": ".fit",
-        "fit_npf": ".fit", "save_fit": ".io.fitfile", "load_fit": ".io.fitfile",
+        "fit_npf": ".fit", "fit_ggx_diffuse": ".fit", "fit_beckmann_diffuse": ".fit",
+        "fit_result": ".fit.result", "FitResult": ".fit.result",
+        "save_fit": ".io.fitfile", "load_fit": ".io.fitfile",
     }
+    if name == "fit":          # the subpackage itself: callable, brdffit.fit(brdf, model=...)
+        return import_module(".fit", __name__)
     if name in lazy:
         value = getattr(import_module(lazy[name], __name__), name)
         globals()[name] = value  # cached: later lookups do not come back here

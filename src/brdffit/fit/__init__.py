@@ -7,10 +7,19 @@
 * :mod:`.npf` – Bagher, Snyder, Nowrouzezahrai 2016, non-parametric factor model (``fit_npf``)
 * :mod:`.analytic` – GGX/Beckmann + Lambert with Schlick F0 fitted on the whole data with the
   compressive objective of Bagher 2016 (``fit_ggx_diffuse``, ``fit_beckmann_diffuse``)
+* :mod:`.registry` – every model by its name (the names of ``brdffit models`` and the CLI)
+* :mod:`.result` – :class:`~.result.FitResult`, a scipy-style view of any fit's report
+
+This package is also callable: ``brdffit.fit(brdf, model="ggx", **options)`` fits any BRDF
+(or load spec) with any registered model, by name (colour-science's ``method=`` habit). The
+package stays a package (``brdffit.fit.registry`` etc.): only its module type gains a
+``__call__`` that calls :func:`fit`.
 """
 
 from __future__ import annotations
 
+import sys
+import types
 from importlib import import_module
 
 _MODULES = ("tabulated", "sgd", "npf", "analytic")
@@ -19,7 +28,7 @@ _EXPORTS = {
     "fit_sgd": "sgd", "fit_beckmann_two_slice": "sgd", "fit_ggx_two_slice": "sgd",
     "fit_cook_torrance": "sgd", "fit_npf": "npf",
     "fit_ggx_diffuse": "analytic", "fit_beckmann_diffuse": "analytic",
-    "fit_analytic_diffuse": "analytic",
+    "fit_analytic_diffuse": "analytic", "FitResult": "result", "fit_result": "result",
 }
 
 
@@ -37,3 +46,65 @@ def __getattr__(name):
     if name in _EXPORTS:
         return getattr(import_module(f"{__name__}.{_EXPORTS[name]}"), name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def fit(brdf, model: str = "tabulated", **options):
+    """Fit ``brdf`` with the model named ``model``; returns the fitted model (a BRDF).
+
+    Parameters
+    ----------
+    brdf : BRDF or str
+        Any BRDF of the library (measured, synthetic, another fit) or a load spec for
+        :func:`brdffit.load` (``"gold.binary"``, ``"merl_nbrdf.zip:gold-metallic-paint"``,
+        ``"synthetic:gold-ggx"``).
+    model : str, default "tabulated"
+        A model name of :data:`brdffit.fit.registry.MODELS` (``brdffit models`` lists them:
+        ``tabulated``, ``ggx``, ``beckmann``, ``ggx-diffuse``, ``beckmann-diffuse``, ``sgd``,
+        ``npf``, ``npf-g-from-d``, ``npf-naive``, ``npf-bivariate``, ...), the same names as
+        ``brdffit fit --model``.
+    **options
+        Keyword options of the model's fitting function (e.g. ``tol=1e-8`` for
+        ``tabulated``, ``max_iter=200`` for the NPF models); see ``help`` of
+        :func:`fit_tabulated`, :func:`fit_sgd`, :func:`fit_npf`, :func:`fit_ggx_diffuse`.
+
+    Returns
+    -------
+    BRDF
+        The fitted model, with ``fit_info`` (the method's report) and ``fit_options``;
+        :func:`brdffit.fit_result` gives its :class:`~brdffit.fit.result.FitResult`.
+
+    Raises
+    ------
+    ValueError
+        Unknown model name (the message lists the known ones).
+    brdffit.FitError
+        The fit failed on this input.
+
+    Examples
+    --------
+    >>> import brdffit
+    >>> ggx = brdffit.fit("synthetic:gold-ggx", model="ggx")
+    >>> round(float(ggx.distribution.alpha_x), 3)
+    0.12
+    """
+    from .registry import fit as _fit
+    from .registry import known_names, list_fitters
+
+    if not isinstance(model, str) or (model not in known_names()
+                                      and model not in list_fitters()):
+        raise ValueError(f"unknown model {model!r}; expected one of {', '.join(known_names())}")
+    if isinstance(brdf, str):
+        from ..io import load
+
+        brdf = load(brdf)
+    return _fit(model, brdf, options)
+
+
+class _CallableModule(types.ModuleType):
+    """The type of this package: calling it calls :func:`fit`."""
+
+    def __call__(self, brdf, model: str = "tabulated", **options):
+        return fit(brdf, model, **options)
+
+
+sys.modules[__name__].__class__ = _CallableModule

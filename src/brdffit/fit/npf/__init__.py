@@ -56,6 +56,9 @@ __all__ = ["fit_npf", "VARIANTS", "ALL_STARTS", "summary"]
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
 ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
 DEFAULT_MAX_ITER = {"independent-g": 1000, "g-from-d": 300, "naive": 3000}
+#: model names of the registry and CLI -> variants (one naming scheme across CLI and API)
+CLI_VARIANTS = {"npf": "independent-g", "npf-g-from-d": "g-from-d", "npf-naive": "naive",
+                "npf-bivariate": "bivariate"}
 
 
 def _resolve_input(brdf, data):
@@ -192,7 +195,9 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         An isotropic BRDF (tabulated on the MERL grid with
         :func:`brdffit.grid.tabulate_merl_grid`) or a load spec for :func:`brdffit.io.load`.
     variant:
-        ``"independent-g"``, ``"g-from-d"``, ``"naive"`` or ``"bivariate"``.
+        ``"independent-g"``, ``"g-from-d"``, ``"naive"`` or ``"bivariate"``, or the same
+        by their model names ``"npf"``, ``"npf-g-from-d"``, ``"npf-naive"``,
+        ``"npf-bivariate"`` (:data:`CLI_VARIANTS`).
     data:
         Optional ``(values (90, 90, 180, 3), valid (90, 90, 180))`` instead of ``brdf``.
     compressive, restrict_deg, p, max_theta_io_deg:
@@ -228,8 +233,10 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
     NPFMicrofacetBRDF, NPFNaiveBRDF or NPFBivariateBRDF with ``fit_info`` (objective, history,
     iterations, GSS calls, timings, starts) and ``fit_options``.
     """
+    variant = CLI_VARIANTS.get(variant, variant)       # the model names work too
     if variant not in VARIANTS:
-        raise ValueError(f"variant: expected one of {VARIANTS}, found {variant!r}")
+        raise ValueError(f"variant: expected one of {VARIANTS} or the model names "
+                         f"{tuple(CLI_VARIANTS)}, found {variant!r}")
     t_start = time.perf_counter()
     values, valid, brdf_obj = _resolve_input(brdf, data)
     source = getattr(brdf_obj, "source", None) or (brdf if isinstance(brdf, str) else None)
@@ -428,8 +435,7 @@ def _register_cli() -> None:
         from ..registry import register_fitter
     except ImportError:
         return
-    for cli_name, var in (("npf", "independent-g"), ("npf-g-from-d", "g-from-d"),
-                          ("npf-naive", "naive"), ("npf-bivariate", "bivariate")):
+    for cli_name, var in CLI_VARIANTS.items():
         def fn(brdf, _v=var, **kw):
             if "iterations" in kw:                        # the CLI's --iterations
                 kw["max_iter"] = int(kw.pop("iterations"))

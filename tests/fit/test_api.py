@@ -1,0 +1,93 @@
+"""The top-level Python API: brdffit.fit(brdf, model=...), one naming scheme, FitResult."""
+
+from __future__ import annotations
+
+import doctest
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import brdffit
+from brdffit.fit import registry
+
+FAST = {"npf-g-from-d": {"max_iter": 4}, "npf-naive": {"max_iter": 4}}
+
+
+def test_fit_is_callable_and_stays_a_package():
+    assert callable(brdffit.fit)
+    import brdffit.fit.registry as reg        # the submodules are still there
+
+    assert reg is registry and brdffit.fit.registry is registry
+    assert callable(brdffit.fit)              # importing a submodule does not undo it
+
+
+@pytest.mark.parametrize("model", ["tabulated", "ggx", "ggx-diffuse", "sgd", "npf-g-from-d",
+                                   "npf-naive", "npf-bivariate"])
+def test_fit_by_name_equals_the_registry_fitter_and_reports(model):
+    ref = brdffit.synthetic("gold-ggx")
+    fitted = brdffit.fit(ref, model=model, **FAST.get(model, {}))
+    direct, _ = registry.fit_model(model, ref, FAST.get(model, {}))
+    wi = np.array([[0.3, 0.1, 0.95]]) / np.linalg.norm([0.3, 0.1, 0.95])
+    wo = np.array([[-0.2, 0.3, 0.93]]) / np.linalg.norm([-0.2, 0.3, 0.93])
+    np.testing.assert_allclose(fitted.eval(wi, wo), direct.eval(wi, wo), rtol=1e-12)
+    res = brdffit.fit_result(fitted)
+    info = fitted.fit_info
+    assert res.model is fitted and res.fit_info is info
+    assert res.time is not None and res.time > 0
+    if "converged" in info:
+        assert res.converged == info["converged"] and res.nit == info["nit"]
+    if model.startswith("npf-") and model != "npf-bivariate":
+        assert res.nit == info["iterations"] and res.fun == pytest.approx(info["objective"])
+        assert res.converged == info["stop_reason"].startswith("relative")
+        assert res.success == res.converged
+    if model == "npf-bivariate":
+        assert res.converged is None and "closed form" in res.message
+    if model == "ggx-diffuse":
+        assert res.fun == pytest.approx(info["objective"]) and res.converged is None
+    assert isinstance(res.message, str) and res.message
+    assert "success" in repr(res)
+
+
+def test_capped_fit_is_reported_not_converged():
+    m = brdffit.fit("synthetic:gold-ggx", model="tabulated", max_iterations=1, tol=1e-12)
+    res = brdffit.fit_result(m)
+    assert res.converged is False and res.success is False and "NOT converged" in res.message
+
+
+def test_load_spec_and_unknown_model():
+    m = brdffit.fit("synthetic:gold-ggx", model="ggx")
+    assert m.distribution.alpha_x == pytest.approx(0.12, rel=1e-3)
+    with pytest.raises(ValueError, match="unknown model 'nope'.*tabulated"):
+        brdffit.fit("synthetic:gold-ggx", model="nope")
+    with pytest.raises(ValueError, match="no fit_info"):
+        brdffit.fit_result(brdffit.synthetic("gold-ggx"))
+
+
+def test_npf_variants_accept_the_model_names():
+    from brdffit.fit import fit_npf
+
+    ref = brdffit.synthetic("gold-ggx")
+    a = fit_npf(ref, variant="npf-naive", max_iter=3)
+    b = fit_npf(ref, variant="naive", max_iter=3)
+    assert a.fit_info["variant"] == b.fit_info["variant"] == "naive"
+    assert a.fit_info["objective"] == b.fit_info["objective"]
+    with pytest.raises(ValueError, match="npf-g-from-d"):
+        fit_npf(ref, variant="g_from_d")
+
+
+def test_docstring_examples_run():
+    import brdffit.fit as fit_pkg
+    from brdffit.fit import result
+
+    for mod in (fit_pkg, result):
+        failed, tried = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
+        assert tried > 0 and failed == 0
+
+
+def test_import_brdffit_and_fit_attribute_do_not_import_numpy():
+    code = ("import sys, brdffit; f = brdffit.fit; assert callable(f); "
+            "print('numpy' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
