@@ -108,8 +108,15 @@ def test_write_glsl_and_uber_texture(tmp_path):
     m = _npf(1, "mat-a")
     info = GL.write_glsl(m, tmp_path / "npf.glsl")
     idx = json.loads((tmp_path / "npf.glsl.json").read_text())
-    tex = np.load(tmp_path / idx["textures"]["bf_tex_uber"]["file"])
+    from brdffit.evaluation.imageio import read_exr
+
+    entry = idx["textures"]["bf_tex_uber"]
+    tex = read_exr(tmp_path / entry["file"])             # float32 EXR, what engines load
+    assert entry["file"].endswith(".exr") and entry["shape"] == [1, GL.UBER_WIDTH, 3]
     assert tex.shape == (1, GL.UBER_WIDTH, 3) and len(info["files"]) == 3
+    np.testing.assert_array_equal(tex, np.asarray(GL.model_spec(m)["textures"]["uber"],
+                                                  np.float32))        # lossless
+    assert "uber" in entry["meaning"] and "texelFetch" in entry["lookup"]
     models = [_npf(s, f"mat-{s}") for s in range(4)]
     GL.pack_npf_uber_texture(models, tmp_path / "uber.npy")
     uber = np.load(tmp_path / "uber.npy")
@@ -153,3 +160,12 @@ def test_anisotropic_tabulated_fit_glsl():
     if GL.glslang_available():
         ok, log = GL.compile_glsl(GL.glsl_source(spec, main=True))
         assert ok, log
+
+
+def test_npf_uber_is_an_export_target(tmp_path):
+    from brdffit.export import TARGETS, export
+
+    assert "npf-uber" in TARGETS
+    info = export(_npf(2, "one"), "npf-uber", tmp_path / "one.npy")   # a single fit too
+    index = json.loads((tmp_path / "one.json").read_text())
+    assert index["rows"] == ["one"] and len(info["files"]) == 3

@@ -42,10 +42,6 @@ def _writer(to: str):
 
     from ..export import TARGETS
 
-    if to == "npf-uber":
-        from ..export.glsl import pack_npf_uber_texture
-
-        return pack_npf_uber_texture
     mod, fn = TARGETS[to]
     return getattr(import_module(mod, "brdffit.export"), fn)
 
@@ -109,7 +105,7 @@ def run_export(fits: list[str], to: str, out: Path, options: dict | None = None)
 def register(app: typer.Typer) -> None:
     from ..export import TARGETS
 
-    targets = list(TARGETS) + ["npf-uber"]
+    targets = list(TARGETS)
 
     @app.command("export")
     def export_cmd(
@@ -121,7 +117,7 @@ def register(app: typer.Typer) -> None:
                                          help="Target option key=value (JSON values)."),
         as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
     ) -> None:
-        """Export a fit to Mitsuba 3, glTF 2.0, GLSL, MERL, RGL or JSON."""
+        """Export a fit to Mitsuba 3, glTF 2.0, MaterialX, GLSL, MERL, RGL or JSON."""
         import click
 
         from ..export._common import shown

@@ -16,7 +16,10 @@ One module per target (conventions of every target in ``docs/conventions.md``):
 * :mod:`.glsl` – GLSL functions (GGX/Beckmann/SGD with the Eq. 9 G1, tabulated and NPF
   models from textures), the NPF "uber-texture" (Bagher 2016 Fig. 16), and the NumPy
   translation of the same code (:mod:`.glsl_cpu`);
-* :mod:`.merl` / :mod:`.rgl` – resampling to MERL ``.binary`` and RGL-style tensor files;
+* :mod:`.merl` / :mod:`.rgl` – resampling to MERL ``.binary`` and RGL-style tensor files
+  (``mitsuba-xml`` writes the latter for Mitsuba's ``measured`` plugin when no built-in
+  plugin maps the model);
+* ``npf-uber`` – one or several NPF fits packed as the uber-texture (:mod:`.glsl`);
 * :mod:`.tables` – import of published SGD (CSV) and NPF (uber-texture) parameter tables.
 
 :func:`export` dispatches on ``to`` (one of :data:`TARGETS`).
@@ -50,6 +53,8 @@ TARGETS = {
     "glsl": (".glsl", "write_glsl"),
     "merl": (".merl", "export_merl"),
     "rgl": (".rgl", "export_rgl"),
+    # one NPF fit or a list of them, packed as Bagher 2016's uber-texture (Fig. 16)
+    "npf-uber": (".glsl", "pack_npf_uber_texture"),
 }
 
 

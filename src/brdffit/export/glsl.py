@@ -53,7 +53,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ExportError
-from ._common import StagedFiles, check_output_path, fail, is_elliptical, label, writing
+from ._common import (StagedFiles, check_output_path, fail, is_elliptical, label, shown,
+                      writing)
 
 __all__ = ["GLSL_LIBRARY", "model_spec", "glsl_source", "write_glsl", "pack_npf_uber_texture",
            "npf_row", "compile_glsl", "glslang_available", "UBER_WIDTH", "TABLE_NODES"]
@@ -562,7 +563,7 @@ def pack_npf_uber_texture(models, path, exr: bool = True) -> dict:
     with ``exr``, ``path.with_suffix(".exr")`` (float32 RGB image, row = material).
     """
     path = check_output_path(path)
-    models = list(models)
+    models = list(models) if isinstance(models, (list, tuple)) else [models]   # one fit too
     if not models:
         raise ExportError("pack_npf_uber_texture: expected at least one NPF model, found none")
     tex = np.stack([npf_row(m) for m in models])
@@ -598,10 +599,46 @@ def pack_npf_uber_texture(models, path, exr: bool = True) -> dict:
 # ------------------------------------------------------------------------------------------
 # files and compilation
 # ------------------------------------------------------------------------------------------
+def _exr_bytes(img, final) -> bytes:
+    """The bytes of a float32 OpenEXR image of ``img`` (encoded in a private temporary file,
+    since OpenEXR writes only to paths), so that the output itself is written by Python like
+    every other file of the export (staged, all-or-nothing, errors naming ``final``)."""
+    from ..evaluation import imageio
+
+    with tempfile.TemporaryDirectory(prefix="brdffit-exr-") as d:
+        tmp = Path(d) / "texture.exr"
+        try:
+            imageio.write_exr(tmp, img)
+            return tmp.read_bytes()
+        except Exception as exc:  # noqa: BLE001 - OpenEXR raises plain exceptions
+            text = str(exc).lower()
+            why = ("file too large" if "too large" in text else
+                   "no space left on device" if "space" in text else type(exc).__name__)
+            raise ExportError(f"{shown(final)}: could not encode the OpenEXR texture "
+                              f"({why})") from None
+
+
+#: what each texture holds (manifest of :func:`write_glsl`)
+_TEXTURE_MEANING = {
+    "ndf": "row 0: log D(theta_m), row 1: sigma(theta) (Dupuy 2015 Eq. 3), on nodes uniform "
+           "in sqrt(2 theta / pi); anisotropic: log D over (theta_m, phi_m)",
+    "fresnel": "F(theta_d) per colour on 90 nodes uniform in theta_d (MERL sampling)",
+    "uber": "NPF uber-texture row (Bagher 2016 Fig. 16): D, F, G factors and rho_d, rho_s",
+    "naive": "NPF naive model: D(theta_h), F(theta_d), H(phi_d) factors and rho_d, rho_s",
+    "bivariate": "NPF bivariate table D(theta_h, theta_d) per colour",
+}
+
+
 def write_glsl(model, path, **_ignored) -> dict:
-    """Write ``path`` (``.glsl``: library + ``brdffit_eval``), its textures
-    (``<stem>.<name>.npy``) and ``<name>.json`` next to it (e.g. ``brdf.glsl.json``: texture
-    index, notes, conventions)."""
+    """Write ``path`` (``.glsl``: library + ``brdffit_eval``), its textures and
+    ``<name>.json`` next to it (e.g. ``brdf.glsl.json``: the manifest: texture files, shapes,
+    channel meaning, lookup convention, notes).
+
+    Every texture is a float32 RGB OpenEXR image ``<stem>.<name>.exr`` (ZIP-compressed, lossless;
+    what engines load), of ``rows × cols`` pixels: the shader's ``texelFetch(tex, ivec2(col,
+    row), 0)`` reads pixel (row, col) unfiltered; R, G, B are the colour channels of the table
+    (or the same value three times for a channel-independent table, as the manifest says).
+    """
     path = check_output_path(path)
     spec = model_spec(model)
     try:
@@ -617,10 +654,16 @@ def write_glsl(model, path, **_ignored) -> dict:
     index_path = path.with_name(path.name + ".json")
     with StagedFiles(path) as staged:
         for name, tex in spec["textures"].items():
-            tp = path.with_name(f"{path.stem}.{name}.npy")
+            tp = path.with_name(f"{path.stem}.{name}.exr")
+            img = np.asarray(tex, np.float32)
+            data = _exr_bytes(img, tp)
             with staged.open(tp) as fh:
-                np.save(fh, np.asarray(tex, np.float32))
-            index["textures"][f"bf_tex_{name}"] = {"file": tp.name, "shape": list(tex.shape)}
+                fh.write(data)
+            index["textures"][f"bf_tex_{name}"] = {
+                "file": tp.name, "format": "OpenEXR float32 RGB (R, G, B = colour channels)",
+                "shape": list(img.shape), "rows": int(img.shape[0]), "cols": int(img.shape[1]),
+                "lookup": "texelFetch(tex, ivec2(col, row), 0), no filtering",
+                "meaning": _TEXTURE_MEANING.get(name.split("_", 1)[-1], name)}
             files.append(str(tp))
         with staged.open(path) as fh:
             fh.write(src.encode("ascii"))
