@@ -117,7 +117,7 @@ def register(app: typer.Typer) -> None:
                                          help="Target option key=value (JSON values)."),
         as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
     ) -> None:
-        """Export a fit to Mitsuba 3, glTF, MaterialX, GLSL or JSON.."""
+        """Export a fit to Mitsuba 3, glTF, MaterialX, GLSL or JSON."""
         import click
 
         from ..export._common import shown
