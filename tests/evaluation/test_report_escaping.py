@@ -20,7 +20,8 @@ MODEL = "m<b onmouseover=alert(3)>\"'"
 #: tags the report itself writes
 ALLOWED = {"html", "head", "meta", "title", "style", "body", "p", "a", "h1", "h2", "h3", "div",
            "img", "b", "br", "table", "thead", "tbody", "tr", "th", "td", "code", "pre", "ul",
-           "li", "script", "sub", "span"}
+           "li", "script", "sub", "span", "details", "summary", "svg", "title", "rect",
+           "polyline", "label", "input"}
 
 
 class Page(HTMLParser):

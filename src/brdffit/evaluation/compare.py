@@ -149,6 +149,52 @@ def _safe_name(name: str) -> str:
 # ------------------------------------------------------------------------------------------
 # the comparison
 # ------------------------------------------------------------------------------------------
+def _convergence(model) -> dict | None:
+    """How the fit went (:func:`brdffit.fit.result.fit_result`) and its history, thinned to
+    at most 120 points, for the report's convergence plot: the objective per iteration
+    (NPF AWLS) or the relative change of the power iteration (tabulated)."""
+    from ..fit.result import fit_result
+
+    try:
+        res = fit_result(model)
+    except ValueError:
+        return None
+    info = res.fit_info
+    hist, what = None, None
+    if isinstance(info.get("history"), list) and len(info["history"]) > 1:
+        hist, what = info["history"], "objective"
+    elif isinstance(info.get("relative_change"), list) and info["relative_change"]:
+        hist, what = info["relative_change"], "relative change"
+    out = {"success": res.success, "converged": res.converged, "message": res.message,
+           "nit": res.nit, "fun": res.fun, "time": res.time}
+    if hist is not None:
+        h = np.asarray([x for x in hist if isinstance(x, (int, float))], float)
+        if h.size > 1:
+            idx = np.unique(np.linspace(0, h.size - 1, min(120, h.size)).round().astype(int))
+            out["history"] = {"quantity": what, "iteration": idx.tolist(),
+                              "value": h[idx].tolist()}
+    return out
+
+
+def _exports(model, folder: Path, stem: str) -> list[str]:
+    """Engine files of a fitted model next to the report (JSON always; glTF and MaterialX
+    where the model has that form): paths relative to the material folder. An export a model
+    cannot have is skipped, never an error of the comparison. (Mitsuba XML is left out: its
+    RGL tensor is ~3.5 MB per model; ``brdffit export FIT --to mitsuba-xml`` writes it.)"""
+    from ..errors import BRDFError
+    from ..export import export
+
+    done = []
+    for target, suffix, opts in (("json", ".json", {}), ("gltf", ".gltf", {"fidelity": False}),
+                                 ("materialx", ".mtlx", {"fidelity": False})):
+        try:
+            info = export(model, target, folder / f"{stem}{suffix}", **opts)
+        except (BRDFError, ImportError):
+            continue
+        done += [f"exports/{Path(f).name}" for f in info.get("files", [])]
+    return done
+
+
 def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report", *,
             material: str | None = None, name: str | None = None, scenes="paper",
             scene: str | None = None, spp: int = DEFAULT_SPP, batches: int = DEFAULT_BATCHES,
@@ -268,6 +314,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
             info = getattr(model, "fit_info", None)
             if info:
                 rec["fit_info"] = small_json(dict(info))
+                rec["convergence"] = _convergence(model)
             if save_fits and rec["origin"] == "fitted":
                 try:
                     from ..io.fitfile import SerializableModel, save_fit, table_bytes
@@ -277,6 +324,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
                                       source=getattr(reference, "source", None))
                         rec["fit_file"] = f"fits/{fp.name}"
                         rec["table_bytes"] = table_bytes(model)
+                        rec["exports"] = _exports(model, mdir / "exports", _safe_name(label))
                 except Exception as exc:  # noqa: BLE001 – saving is a convenience
                     rec.setdefault("warnings", []).append(f"could not save fit: {exc}")
         except Exception as exc:  # noqa: BLE001 – one failing model must not sink the report

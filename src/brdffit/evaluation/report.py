@@ -83,6 +83,18 @@ document.querySelectorAll('table.sortable').forEach(function (table) {
     });
   });
 });
+// Show only the rows of the materials table whose material name contains the filter text.
+function filterRows(text) {
+  var t = text.toLowerCase();
+  var table = document.getElementById('materials');
+  if (!table) return;
+  Array.prototype.forEach.call(table.tBodies[0].rows, function (r) {
+    var name = r.cells.length > 1 ? r.cells[1].textContent.toLowerCase() : '';
+    r.style.display = name.indexOf(t) >= 0 ? '' : 'none';
+  });
+}
+var filterBox = document.getElementById('filter');
+if (filterBox) filterBox.addEventListener('input', function () { filterRows(filterBox.value); });
 // After loading, record on <html> how many images loaded (used by the headless-browser check).
 window.addEventListener('load', function () {
   var imgs = Array.prototype.slice.call(document.images);
@@ -234,13 +246,36 @@ def _pm(value, se=None, bound=None, digits: int = 2) -> str:
     return f"{_fmt(v, digits)} ± {_fmt(e, digits)}"
 
 
-def _td_pm(m, cls="") -> str:
-    """A table cell ``PSNR ± se`` of a model (or one of its scenes), sortable by the PSNR."""
+def _td_pm(m, cls="", thumb: str = "") -> str:
+    """A table cell ``PSNR ± se`` of a model (or one of its scenes), sortable by the PSNR,
+    optionally under a thumbnail (``thumb``: HTML)."""
     if not isinstance(m, dict) or _num(m.get("psnr")) is None:
-        return '<td data-sort="">–</td>'
+        return f'<td data-sort="">{thumb}–</td>'
     c = f' class="{cls}"' if cls else ""
-    return (f'<td{c} data-sort="{_e(_sortkey(m.get("psnr")))}">'
+    return (f'<td{c} data-sort="{_e(_sortkey(m.get("psnr")))}">{thumb}'
             f'{_e(_pm(m.get("psnr"), m.get("psnr_se"), m.get("psnr_bound", m.get("bound"))))}</td>')
+
+
+def _thumb(slug: str, m: dict, result: dict) -> str:
+    """The model's rendering of the first scene as a 64-pixel thumbnail (``""`` if none)."""
+    png = m.get("png")
+    scenes = _scenes(result)
+    if scenes:
+        png = _model_scene(m, str(scenes[0].get("name"))).get("png")
+    if not isinstance(png, str) or _url(png) is None:     # the file's own link must be safe
+        return ""
+    return _img(f"{slug}/{png}", f"{m.get('name')} rendering", cls="thumb") + "<br>"
+
+
+def _batch_recommendations(path: Path) -> dict[str, str]:
+    """``{material: recommended model}`` from a batch's ``summary.json`` next to the report
+    (:mod:`brdffit.batch_summary`); ``{}`` when there is none or it cannot be read."""
+    try:
+        rec = json.loads(Path(path).read_text(encoding="utf-8")).get("recommended") or {}
+    except (OSError, ValueError, AttributeError):
+        return {}
+    return {str(k): str(v.get("model")) for k, v in rec.items()
+            if isinstance(v, dict) and v.get("model")}
 
 
 def _scenes(result) -> list[dict]:
@@ -314,19 +349,8 @@ def write_material_page(out_dir, result: dict, colorbar: str | None = "../assets
         if plots.get(key):
             parts.append(f"<h2>{_e(title)}</h2>{_img(plots[key], title, cls='plot')}")
 
-    # parameters
-    prm = []
-    for m in models:
-        p = m.get("params")
-        info = m.get("fit_info")
-        if p or info or m.get("fit_file"):
-            link = (f' (<a href="{_e(_url(m["fit_file"]))}">fit file</a>)'
-                    if _url(m.get("fit_file")) else "")
-            prm.append(f"<h3>{_e(m.get('name'))}{link}</h3><pre>"
-                       + _e(json.dumps({"params": p, "fit_info": info}, indent=1,
-                                       default=json_default)[:6000]) + "</pre>")
-    if prm:
-        parts.append("<h2>Fitted parameters</h2>" + "".join(prm))
+    # parameters, convergence, files
+    parts += _parameter_sections(models, mdir)
     if result.get("notes"):
         parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{_e(n)}</li>" for n in result["notes"])
                      + "</ul>")
@@ -334,6 +358,140 @@ def write_material_page(out_dir, result: dict, colorbar: str | None = "../assets
     with atomic_write(path, "w") as fh:
         fh.write(_page(f"brdffit compare – {name}", "\n".join(parts)))
     return path
+
+
+# ------------------------------------------------------------------------------------------
+# parameters, convergence and files of the fits
+# ------------------------------------------------------------------------------------------
+def _rgb3(v, digits=3) -> str:
+    if not isinstance(v, (list, tuple)) or not v:
+        return "–"
+    return ", ".join(_fmt(x, digits) for x in v[:3])
+
+
+def _params_table(models) -> str:
+    """α (slope scale) and glTF roughness √α side by side, F0 and ρd per channel, bytes."""
+    rows = []
+    for m in models:
+        f = (m.get("params") or {}).get("figures") if isinstance(m.get("params"), dict) else None
+        if not isinstance(f, dict):
+            continue
+        a = f.get("alpha") if isinstance(f.get("alpha"), list) else None
+        argb = f.get("alpha_rgb") if isinstance(f.get("alpha_rgb"), list) else None
+        if a:
+            alpha = f"αx {_fmt(a[0], 4)}, αy {_fmt(a[1], 4)}, ρ {_fmt(a[2], 3)}"
+            rough = ", ".join(_fmt(math.sqrt(x), 4) if _num(x) is not None and x >= 0 else "–"
+                              for x in a[:2])
+        elif argb:
+            alpha = "per channel " + _rgb3(argb, 4)
+            rough = "–"
+        else:
+            alpha, rough = "–", "–"
+        rows.append(f'<tr><td class="l">{_e(m.get("name"))}</td>'
+                    f'<td class="l">{_e(f.get("alpha_kind") or "–")}</td>'
+                    f'<td class="l">{_e(alpha)}</td><td>{_e(rough)}</td>'
+                    f'<td>{_e(_rgb3(f.get("f0")))}</td><td>{_e(_rgb3(f.get("rho_d")))}</td>'
+                    + _td(f.get("table_bytes"), 0) + "</tr>")
+    if not rows:
+        return ""
+    return ("<table class=\"sortable\" id=\"params\"><thead><tr><th class=\"l\">model</th>"
+            "<th class=\"l\">distribution</th><th class=\"l\">α (slope scale)</th>"
+            "<th>glTF roughness √α (x, y)</th><th>F0 (R, G, B)</th><th>ρd (R, G, B)</th>"
+            "<th>table bytes</th></tr></thead><tbody>" + "".join(rows) + "</tbody></table>"
+            '<p class="note">α: the slope-space scale of GGX/Beckmann (Mitsuba\'s alpha); glTF '
+            "and MaterialX roughness = √α; F0: Fresnel reflectance at normal incidence; ρd: "
+            "Lambertian albedo (ρd/π); SGD: the shape α of Bagher 2012 Eq. 8 per channel.</p>")
+
+
+def _sparkline(hist: dict, width: int = 220, height: int = 60) -> str:
+    """An inline SVG of a fit's history (log10 of the value against the iteration)."""
+    it = [x for x in hist.get("iteration", []) if isinstance(x, (int, float))]
+    val = [x for x in hist.get("value", []) if isinstance(x, (int, float))]
+    pts = [(i, math.log10(v)) for i, v in zip(it, val) if v > 0 and math.isfinite(v)]
+    if len(pts) < 2:
+        return ""
+    x0, x1 = pts[0][0], pts[-1][0]
+    ys = [y for _, y in pts]
+    y0, y1 = min(ys), max(ys)
+    sx = (width - 8) / max(x1 - x0, 1)
+    sy = (height - 8) / max(y1 - y0, 1e-12)
+    poly = " ".join(f"{4 + (x - x0) * sx:.1f},{height - 4 - (y - y0) * sy:.1f}" for x, y in pts)
+    label = (f"{hist.get('quantity', 'value')}: {val[0]:.3g} → {val[-1]:.3g} over "
+             f"{it[-1]} iterations (log scale)")
+    return (f'<svg width="{width}" height="{height}" role="img" aria-label="{_e(label)}">'
+            f'<title>{_e(label)}</title><rect width="{width}" height="{height}" fill="#fff" '
+            f'stroke="#ccc"/><polyline fill="none" stroke="#2060c0" stroke-width="1.5" '
+            f'points="{poly}"/></svg>')
+
+
+def _convergence_table(models) -> str:
+    rows = []
+    for m in models:
+        c = m.get("convergence")
+        if not isinstance(c, dict):
+            continue
+        conv = {True: "yes", False: "NO (cap reached)", None: "no criterion"}.get(
+            c.get("converged"), "–")
+        spark = _sparkline(c["history"]) if isinstance(c.get("history"), dict) else ""
+        rows.append(f'<tr><td class="l">{_e(m.get("name"))}</td><td class="l">{_e(conv)}</td>'
+                    + _td(c.get("nit"), 0) + _td(c.get("fun"), 4) + _td(c.get("time"), 2, unit=" s")
+                    + f'<td class="l">{_e(c.get("message"))}</td>'
+                    f'<td class="l">{spark or "closed form / no history"}</td></tr>')
+    if not rows:
+        return ""
+    return ("<h2>Convergence</h2><table class=\"sortable\" id=\"convergence\"><thead><tr>"
+            "<th class=\"l\">model</th><th class=\"l\">converged</th><th>iterations</th>"
+            "<th>final objective</th><th>fit time</th><th class=\"l\">stop reason</th>"
+            "<th class=\"l\">history</th></tr></thead><tbody>" + "".join(rows)
+            + "</tbody></table><p class=\"note\">History: the objective per AWLS iteration "
+            "(NPF; the starts, then the continuation of the best) or the relative change of "
+            "the power iteration (tabulated), log scale.</p>")
+
+
+def _files_list(m, mdir: Path) -> str:
+    """Links to the files of one model: fit file, exports, EXR renderings (those that exist)."""
+    files = []
+    if m.get("fit_file"):
+        files.append(m["fit_file"])
+    files += [f for f in (m.get("exports") or []) if isinstance(f, str)]
+    for sc in m.get("scenes") or []:
+        if isinstance(sc, dict) and isinstance(sc.get("exr"), str):
+            files.append(sc["exr"])
+    links = []
+    for f in files:
+        u = _url(f)
+        if u is not None and (mdir / f).is_file():
+            links.append(f'<a href="{_e(u)}">{_e(Path(f).name)}</a>')
+    return ", ".join(links)
+
+
+def _parameter_sections(models, mdir: Path) -> list[str]:
+    parts = []
+    table = _params_table(models)
+    if table:
+        parts.append("<h2>Fitted parameters</h2>" + table)
+    conv = _convergence_table(models)
+    if conv:
+        parts.append(conv)
+    files = [(m, _files_list(m, mdir)) for m in models]
+    if any(f for _, f in files):
+        parts.append("<h2>Files</h2><ul>" + "".join(
+            f"<li><b>{_e(m.get('name'))}</b>: {f}</li>" for m, f in files if f) + "</ul>"
+            '<p class="note">Fit files load with <code>brdffit.load_fit</code> (or any '
+            "<code>brdffit</code> command); <code>.gltf</code>/<code>.mtlx</code>: engine "
+            "materials (glTF 2.0, MaterialX OpenPBR); <code>.json</code>: every parameter.</p>")
+    raw = []
+    for m in models:
+        p, info = m.get("params"), m.get("fit_info")
+        if p or info:
+            raw.append(f"<details><summary>{_e(m.get('name'))}: all parameters and the fit "
+                       "report (JSON)</summary><pre>"
+                       + _e(json.dumps({"params": p, "fit_info": info}, indent=1,
+                                       ensure_ascii=False, default=json_default)[:20000])
+                       + "</pre></details>")
+    if raw:
+        parts.append("<h3>Full parameters</h3>" + "".join(raw))
+    return parts
 
 
 def _cell(src, alt, disp, caption) -> str:
@@ -472,6 +630,7 @@ def summarize(results: Iterable[dict], tie_db: float = 2.0) -> dict:
     psnr = {n: np.full(len(results), np.nan) for n in names}
     de = {n: np.full(len(results), np.nan) for n in names}
     se = {n: np.full(len(results), np.nan) for n in names}
+    cre = {n: np.full(len(results), np.nan) for n in names}
     for i, r in enumerate(results):
         for m in _models(r):
             if _ok(m):
@@ -479,6 +638,9 @@ def summarize(results: Iterable[dict], tie_db: float = 2.0) -> dict:
                 psnr[m["name"]][i] = np.nan if p is None else p
                 de[m["name"]][i] = np.nan if d is None else d
                 se[m["name"]][i] = np.nan if e is None else e
+                b = m.get("brdf") if isinstance(m.get("brdf"), dict) else {}
+                c = _num(b.get("cos_rel_error"))
+                cre[m["name"]][i] = np.nan if c is None else c
     per = {}
     for n in names:
         p, d = psnr[n], de[n]
@@ -490,7 +652,9 @@ def summarize(results: Iterable[dict], tie_db: float = 2.0) -> dict:
                   "median_psnr": float(np.median(pf)) if pf.size else None,
                   "mean_de2000": float(np.mean(df)) if df.size else None,
                   "median_de2000": float(np.median(df)) if df.size else None,
-                  "median_psnr_se": float(np.median(ef)) if ef.size else None}
+                  "median_psnr_se": float(np.median(ef)) if ef.size else None,
+                  "mean_cos_rel_error": (float(np.nanmean(cre[n]))
+                                         if np.isfinite(cre[n]).any() else None)}
     return {"models": names, "per_model": per, "wins": count_wins(psnr, tie_db) if names else {},
             "n_materials": len(results), "tie_db": tie_db}
 
@@ -506,17 +670,26 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
              "PSNR (Bagher et al. 2016 §5) in dB, higher is better (± its standard error, "
              "when the comparison measured it); dE2000 (mean over the foreground), lower is "
              "better.</p>"]
+    batch_links = [f'<a href="../{f}">{f}</a>' for f in ("summary.csv", "summary.json")
+                   if (out_dir.parent / f).is_file()]
+    recommended = _batch_recommendations(out_dir.parent / "summary.json")
+    if batch_links:
+        parts.append('<p class="note">Batch tables (one row per material and model: α, glTF '
+                     "roughness, F0, ρd, errors, PSNR ± se, fit time, fit file): "
+                     + ", ".join(batch_links) + ".</p>")
     # per-model summary
     rows = []
     for n in names:
         s = summ["per_model"][n]
         rows.append(f'<tr><td class="l">{_e(n)}</td>' + _td(s["n"], 0) + _td(s["mean_psnr"])
                     + _td(s["median_psnr"]) + _td(s.get("median_psnr_se"), 3)
-                    + _td(s["mean_de2000"]) + _td(s["median_de2000"]) + "</tr>")
+                    + _td(s["mean_de2000"]) + _td(s["median_de2000"])
+                    + _td(s.get("mean_cos_rel_error"), 4) + "</tr>")
     parts.append("<h2>Per model</h2><table class=\"sortable\" id=\"summary\"><thead><tr>"
                  "<th class=\"l\">model</th><th>materials</th><th>mean PSNR</th>"
                  "<th>median PSNR</th><th>median standard error</th>"
-                 "<th>mean dE2000</th><th>median dE2000</th></tr></thead>"
+                 "<th>mean dE2000</th><th>median dE2000</th>"
+                 "<th>mean cos-weighted rel. error (BRDF space)</th></tr></thead>"
                  "<tbody>" + "".join(rows) + "</tbody></table>")
     # wins/ties matrix
     if len(names) > 1:
@@ -544,7 +717,7 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
         slug = r["slug"]
         ref = r.get("reference") or {}
         thumb = (_img(slug + "/" + ref["png"], str(r.get("material", slug)) + " reference", cls="thumb")
-                 if ref.get("png") else "")
+                 if isinstance(ref.get("png"), str) and _url(ref["png"]) is not None else "")
         by = {m.get("name"): m for m in _models(r)}
         ps = [_num(m.get("psnr")) for m in by.values() if _ok(m) and _num(m.get("psnr")) is not None]
         best = max(ps) if ps else None
@@ -555,15 +728,21 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
                 cells.append('<td class="fail" data-sort="">' + (_e(m.get("status", "failed")) if m else "–") + "</td><td></td>")
                 continue
             cls = "best" if best is not None and _num(m.get("psnr")) == best else ""
-            cells.append(_td_pm(m, cls=cls) + _td(m.get("mean_de2000")))
+            cells.append(_td_pm(m, cls=cls, thumb=_thumb(slug, m, r)) + _td(m.get("mean_de2000")))
         rows.append(f'<tr><td class="l">{thumb}</td><td class="l" data-sort="{_e(str(r.get("material", slug)).lower())}">'
                     + (f'<a href="{_e(_url(slug))}/index.html">{_e(r.get("material", slug))}</a></td>'
                        if _url(slug) else f'{_e(r.get("material", slug))}</td>')
                     + (_td(r.get("noise_floor_psnr")) if legacy_floor else "")
+                    + (f'<td class="l">{_e(recommended.get(str(r.get("material")), "–"))}</td>'
+                       if recommended else "")
                     + "".join(cells) + "</tr>")
-    parts.append("<h2>Materials</h2><table class=\"sortable\" id=\"materials\"><thead><tr>"
+    parts.append("<h2>Materials</h2>"
+                 '<p><label>Filter: <input id="filter" type="search" placeholder="material '
+                 'name"></label></p>'
+                 "<table class=\"sortable\" id=\"materials\"><thead><tr>"
                  "<th class=\"l\">reference</th><th class=\"l\">material</th>"
                  + ("<th>noise floor PSNR (old results)</th>" if legacy_floor else "")
+                 + ("<th class=\"l\">recommended model</th>" if recommended else "")
                  + head + "</tr></thead><tbody>" + "".join(rows) + "</tbody></table>")
     path = out_dir / "index.html"
     with atomic_write(path, "w") as fh:
