@@ -42,11 +42,18 @@ sys.path.insert(0, str(ROOT / "src"))
 MODELS = ("npf-bivariate", "npf", "npf-naive", "npf-g-from-d", "sgd", "tabulated", "ggx",
           "beckmann")
 #: (better, worse, kind): "gt" = a beats b; "eq" = a ties b.
-CLAIMS = [("npf-bivariate", "npf", "gt"), ("npf", "npf-naive", "gt"),
+CLAIMS = [("ggx-diffuse", "ggx", "gt"), ("ggx-diffuse", "sgd", "gt"),
+          ("npf-bivariate", "npf", "gt"), ("npf", "npf-naive", "gt"),
           ("npf", "npf-g-from-d", "gt"), ("npf-naive", "npf-g-from-d", "eq"),
           ("npf-naive", "sgd", "gt"), ("npf-g-from-d", "sgd", "gt"), ("sgd", "ggx", "gt"),
           ("sgd", "beckmann", "gt"), ("ggx", "beckmann", "gt")]
 Z = 2.0
+
+
+def _models(names) -> list[str]:
+    """``names`` in the order of :data:`MODELS`, then any other model (e.g. ggx-diffuse)."""
+    names = set(names)
+    return [m for m in MODELS if m in names] + sorted(names - set(MODELS))
 
 
 def fit_folders(fits: Path) -> list[tuple[str, str, dict]]:
@@ -54,7 +61,7 @@ def fit_folders(fits: Path) -> list[tuple[str, str, dict]]:
     out = []
     for d in sorted(p for p in fits.iterdir() if p.is_dir()):
         models, name, spec = {}, None, None
-        for m in MODELS:
+        for m in _models(p.stem for p in d.glob("*.json")):
             rec = d / f"{m}.json"
             try:
                 r = json.loads(rec.read_text())
@@ -88,7 +95,7 @@ def render(args) -> None:
         t0, c0 = time.perf_counter(), time.process_time()
         try:
             compare(spec, models, report, name=name, save_fits=False, update_index=False,
-                    brdf_metrics=())
+                    brdf_metrics=(), exports=False)
             status = "ok"
         except Exception as exc:  # noqa: BLE001 - recorded, the run goes on
             status = f"failed: {type(exc).__name__}: {exc}"
@@ -118,7 +125,7 @@ def summarise(args) -> dict:
     report = Path(args.out) / "report"
     table = _table(report)
     per_model = {}
-    for m in MODELS:
+    for m in _models(m for row in table.values() for m in row):
         vals = [(row[m][0], row[m][1], row[m][2]) for row in table.values() if m in row]
         if not vals:
             continue

@@ -64,3 +64,18 @@ def test_index_thumbnails_filter_summary_links_and_recommendation(fitted_report)
     assert "recommended model" in text and "<td class=\"l\">ggx</td>" in text
     assert "cos-weighted rel. error" in text
     assert R.missing_links(idx) == []
+
+
+def test_loaded_fit_files_are_linked_where_they_are(tmp_path):
+    """A batch renders fits it saved in OUT/fits/: the page links them there (relative)."""
+    from brdffit.fit.registry import fit_model
+    from brdffit.io.fitfile import save_fit
+
+    ref = brdffit.synthetic("gold-ggx")
+    fp = save_fit(fit_model("ggx", ref)[0], tmp_path / "fits" / "gold" / "ggx.npz")
+    res = C.compare(ref, {"ggx": str(fp)}, tmp_path / "report", renderer=standin_render,
+                    spp=4, resolution=16, brdf_metric_samples=1 << 9)
+    page = tmp_path / "report" / res["slug"] / "index.html"
+    links = R.local_links(page)
+    assert "../../fits/gold/ggx.npz" in links and "exports/ggx.gltf" in links
+    assert R.missing_links(page) == []

@@ -203,6 +203,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
             brdf_metric_samples: int = 1 << 16,
             brdf_metrics: Sequence[str] = M.BRDFMetrics.ALL,
             fit_options: Mapping[str, Mapping] | None = None, save_fits: bool = True,
+            exports: bool = True,
             write_exr: bool | str = "reference", renderer: Callable | None = None,
             render_options: Mapping | None = None, update_index: bool = True,
             progress: Callable[[str], None] | None = None) -> dict:
@@ -244,6 +245,9 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
         ``True`` every model too, ``False`` none.
     fit_options:
         Per-model keyword arguments of the fitters.
+    exports:
+        Write JSON, glTF and MaterialX exports of every fitted or loaded model under
+        ``<slug>/exports/`` and link them (and the fit files) from the material page.
     brdf_metric_samples, brdf_metrics:
         Sample pairs of the cosine-weighted relative error and which BRDF-space metrics to
         compute (:class:`.metrics.BRDFMetrics`; the reference is prepared once).
@@ -299,6 +303,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
 
                 model = load_fit(what)
                 rec["origin"] = f"loaded {what}"
+                rec["loaded_from"] = str(what)
                 info = getattr(model, "fit_info", None) or {}
                 rec["fit_time"] = _num(info.get("time", info.get("time_s")))  # NPF: time_s
             elif is_isotropic_only(str(what)) and not getattr(reference, "isotropic", False):
@@ -315,6 +320,16 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
             if info:
                 rec["fit_info"] = small_json(dict(info))
                 rec["convergence"] = _convergence(model)
+            if exports and rec.get("loaded_from"):
+                # the fit file where it is (e.g. a batch's OUT/fits/), linked relative to the page
+                import os
+
+                from ..io.fitfile import table_bytes
+
+                rel = Path(os.path.relpath(Path(rec["loaded_from"]).resolve(), mdir.resolve()))
+                rec["fit_file"] = rel.as_posix()
+                rec["table_bytes"] = table_bytes(model)
+                rec["exports"] = _exports(model, mdir / "exports", _safe_name(label))
             if save_fits and rec["origin"] == "fitted":
                 try:
                     from ..io.fitfile import SerializableModel, save_fit, table_bytes
@@ -324,7 +339,9 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
                                       source=getattr(reference, "source", None))
                         rec["fit_file"] = f"fits/{fp.name}"
                         rec["table_bytes"] = table_bytes(model)
-                        rec["exports"] = _exports(model, mdir / "exports", _safe_name(label))
+                        if exports:
+                            rec["exports"] = _exports(model, mdir / "exports",
+                                                      _safe_name(label))
                 except Exception as exc:  # noqa: BLE001 – saving is a convenience
                     rec.setdefault("warnings", []).append(f"could not save fit: {exc}")
         except Exception as exc:  # noqa: BLE001 – one failing model must not sink the report
