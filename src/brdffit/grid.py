@@ -54,10 +54,26 @@ def tabulate_merl_grid(brdf, chunk: int = 1 << 18) -> tuple[np.ndarray, np.ndarr
     ``valid`` mask of shape ``(90, 90, 180)``. A BRDF that *is* a MERL table (it has a
     ``merl_table`` attribute returning ``(values, valid)``) is returned as stored, so that
     invalid measurements stay marked. Otherwise every finite, non-negative value is valid.
+
+    A BRDF that never changes after it is made (a Neural-BRDF network) may carry an empty list
+    ``_merl_grid_memo``: its tabulation is then computed once and returned read-only to every
+    later caller (every fit and metric of a material tabulates the same reference).
     """
     table = getattr(brdf, "merl_table", None)
     if table is not None:
         return table() if callable(table) else table
+    memo = getattr(brdf, "_merl_grid_memo", None)    # opt-in for immutable BRDFs (NBRDF)
+    if memo is not None:
+        if not memo:
+            values, valid = _evaluate(brdf, chunk)
+            values.setflags(write=False)
+            valid.setflags(write=False)
+            memo.append((values, valid))
+        return memo[0]
+    return _evaluate(brdf, chunk)
+
+
+def _evaluate(brdf, chunk: int) -> tuple[np.ndarray, np.ndarray]:
     th, td, pd = np.meshgrid(merl_theta_h(), merl_theta_d(), merl_phi_d(), indexing="ij")
     th, td, pd = th.ravel(), td.ravel(), pd.ravel()
     out = np.empty((th.size, 3))

@@ -129,6 +129,7 @@ class NBRDF(IsotropicBRDF):
                  precision: str = "float32"):
         if precision not in ("float32", "float64"):
             raise ValueError(f"precision must be 'float32' or 'float64', got {precision!r}")
+        self._merl_grid_memo: list = []     # the weights never change: tabulate once (grid.py)
         checked = []
         n_in = 6
         for k, (kernel, bias, act) in enumerate(layers):
