@@ -60,6 +60,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import hashlib
 import json
 import logging
@@ -359,6 +360,17 @@ def _base_record(task: Task | RenderTask) -> dict[str, Any]:
     return record
 
 
+@functools.lru_cache(maxsize=2)
+def _load_reference(spec: str):
+    """The measured BRDF of ``spec``, loaded once per worker process for the consecutive
+    tasks of one material (its models are submitted one after the other); with its MERL-grid
+    tabulation memoised (:func:`brdffit.grid.tabulate_merl_grid`) the fits and metrics of a
+    material share both. Two entries: the material of each of two interleaved task streams."""
+    from .io import load
+
+    return load(spec)
+
+
 def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
     """Run one task in this process and return its record (also written to disk).
 
@@ -366,14 +378,13 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
     with the error), so one bad material never stops a batch.
     """
     from .fit.registry import fit_model, is_isotropic_only, model_params
-    from .io import load
     from .io.fitfile import save_fit
 
     out = Path(out_dir)
     record = _base_record(task)
     t0 = time.perf_counter()
     try:
-        reference = load(task.spec)
+        reference = _load_reference(task.spec)
         if is_isotropic_only(task.model) and not getattr(reference, "isotropic", False):
             record["status"] = "skipped"
             record["error"] = f"{task.model} fits isotropic BRDFs only; {task.material} is anisotropic"
