@@ -79,9 +79,9 @@ def test_npf_variants_accept_the_model_names():
 
 def test_docstring_examples_run():
     import brdffit.fit as fit_pkg
-    from brdffit.fit import result
+    from brdffit.fit import analytic, result, tabulated
 
-    for mod in (fit_pkg, result):
+    for mod in (fit_pkg, result, tabulated, analytic):
         failed, tried = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
         assert tried > 0 and failed == 0
 

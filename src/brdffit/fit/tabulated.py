@@ -730,13 +730,66 @@ def to_ggx(model):
     return _analytic_model(model, "ggx")
 
 
-def fit_beckmann(brdf: BRDF, **kwargs):
-    """:func:`fit_tabulated` then :func:`to_beckmann`."""
+def fit_beckmann(brdf: BRDF, **kwargs) -> MicrofacetBRDF:
+    """Beckmann fit by slope moments (Dupuy et al. 2015 App. C): :func:`fit_tabulated`, then
+    :func:`to_beckmann` (same Fresnel table).
+
+    Parameters
+    ----------
+    brdf : BRDF
+        Any BRDF (isotropic or not).
+    **kwargs
+        Every option of :func:`fit_tabulated` (``n``, ``iterations``, ``tol``,
+        ``anisotropic``, ``rule``, ``max_iterations``, ...), for the tabulated fit the
+        moments are taken from.
+
+    Returns
+    -------
+    MicrofacetBRDF
+        Beckmann(αx, αy, ρ) with the tabulated Fresnel; ``fit_info`` is the tabulated fit's
+        (convergence of its power iteration).
+
+    Examples
+    --------
+    >>> import brdffit
+    >>> plastic = brdffit.synthetic("plastic-beckmann")       # Beckmann α = 0.18 + Lambert
+    >>> round(float(brdffit.fit_beckmann(plastic).distribution.alpha_x), 2)
+    1.16
+    >>> round(float(brdffit.fit_beckmann_diffuse(plastic).distribution.alpha_x), 2)
+    0.18
+
+    The slope moments absorb the Lambertian term into the distribution; a material with a
+    diffuse part is fitted by :func:`brdffit.fit.analytic.fit_beckmann_diffuse`.
+    """
     return to_beckmann(fit_tabulated(brdf, **kwargs))
 
 
-def fit_ggx(brdf: BRDF, **kwargs):
-    """:func:`fit_tabulated` then :func:`to_ggx`."""
+def fit_ggx(brdf: BRDF, **kwargs) -> MicrofacetBRDF:
+    """GGX fit by slope moments (Dupuy et al. 2015 App. C): :func:`fit_tabulated`, then
+    :func:`to_ggx` (same Fresnel table). For an engine material fitted over the whole data
+    with a Lambert term, see :func:`brdffit.fit.analytic.fit_ggx_diffuse`.
+
+    Parameters
+    ----------
+    brdf : BRDF
+        Any BRDF (isotropic or not).
+    **kwargs
+        Every option of :func:`fit_tabulated` (``n``, ``iterations``, ``tol``,
+        ``anisotropic``, ``rule``, ``max_iterations``, ...), for the tabulated fit the
+        moments are taken from.
+
+    Returns
+    -------
+    MicrofacetBRDF
+        GGX(αx, αy, ρ) with the tabulated Fresnel; ``fit_info`` is the tabulated fit's.
+
+    Examples
+    --------
+    >>> import brdffit
+    >>> m = brdffit.fit_ggx(brdffit.synthetic("gold-ggx"))
+    >>> round(float(m.distribution.alpha_x), 3)
+    0.12
+    """
     return to_ggx(fit_tabulated(brdf, **kwargs))
 
 
