@@ -180,3 +180,27 @@ def test_no_valid_samples_raises():
     vals = np.zeros((90, 90, 180, 3))
     with pytest.raises(FitError):
         fit_npf(data=(vals, np.zeros((90, 90, 180), bool)), variant="naive")
+
+
+def test_fit_info_reports_convergence(indep_truth, gfromd_truth):
+    """fit_info carries the tabulated fit's convergence fields (issue 15 item 4)."""
+    keys = ("converged", "success", "status", "message", "criterion", "tol", "nit",
+            "max_iterations", "cap_reached", "final_relative_change")
+    _, data = gfromd_truth
+    capped = fit_npf(data=data, variant="g-from-d", max_iter=3)
+    info = capped.fit_info
+    assert all(k in info for k in keys)
+    assert info["cap_reached"] and not info["converged"] and info["status"] == 1
+    assert info["nit"] == info["iterations"] == 3 and info["max_iterations"] == 3
+    assert "NOT converged" in info["message"] and info["final_relative_change"] >= 0
+    loose = fit_npf(data=data, variant="g-from-d", max_iter=300, tol=1e-2)
+    li = loose.fit_info
+    assert li["converged"] and li["success"] and not li["cap_reached"]
+    assert li["nit"] < 300 and "relative decrease" in li["criterion"]
+    _, data = indep_truth
+    ind = fit_npf(data=data, variant="independent-g", starts=("ones",), max_iter=4,
+                  start_max_iter=2)
+    ii = ind.fit_info
+    assert all(k in ii for k in keys) and ii["cap_reached"] and not ii["converged"]
+    biv = fit_npf(data=data, variant="bivariate")
+    assert biv.fit_info["converged"] and not biv.fit_info["cap_reached"]

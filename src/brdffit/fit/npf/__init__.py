@@ -255,6 +255,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
     def finish(model, E, extra):
         E = np.asarray(E, dtype=np.float64)
         info.update(extra)
+        info.update(_convergence(extra, tol, max_iter, variant))
         info.update(objective=float(E.sum()), objective_per_channel=E.tolist(),
                     normalised_objective=float(E.sum() / ref.sum()),
                     time_s=time.perf_counter() - t_start)
@@ -394,12 +395,55 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
                            if k not in ("gss_calls", "gss_evals")}
         history = history + [float(h) for h in res.history[1:]]
     _check_state(_arrays(bst), "independent-G fit")
-    extra.update(iterations=int(iters), gss_calls=int(gss), history=history)
+    if "continuation" in extra:
+        reason = extra["continuation"]["stop_reason"]
+    else:
+        best_reasons = [r.get("stop_reason", "") for r in ok_runs if r["start"] in blab]
+        reason = next((r for r in best_reasons if not r.startswith(_CONVERGED_REASONS)),
+                      best_reasons[0] if best_reasons else "max_iter")
+    extra.update(iterations=int(iters), gss_calls=int(gss), history=history,
+                 stop_reason=reason)
     return finish(_mf_model(bst, "independent-g", mat_name, source), bE, extra)
 
 
 def _arrays(st: MFState):
     return [st.D, st.F, st.G, st.rho_d, st.rho_s]
+
+
+#: Stop reasons of ``_solver.Monitor`` (and the closed-form bivariate fit) that mean converged.
+_CONVERGED_REASONS = ("relative decrease", "exact fit", "closed form")
+
+
+def _convergence(extra: dict, tol, max_iter, variant) -> dict:
+    """The convergence fields of ``fit_info``, named as the tabulated fit's
+    (:func:`brdffit.fit.tabulated`): ``converged``, ``success``, ``status``, ``message``,
+    ``criterion``, ``tol``, ``nit``, ``max_iterations``, ``cap_reached``,
+    ``final_relative_change`` (of the summed objective over the last AWLS iteration;
+    for independent-G the stop of the run that produced the kept factors: the continuation
+    of the best start, or the screened best starts when they converged)."""
+    reason = str(extra.get("stop_reason", "max_iter"))
+    hist = [float(h) for h in extra.get("history", [])]
+    last = (abs(hist[-2] - hist[-1]) / max(abs(hist[-1]), 1e-300)) if len(hist) >= 2 else 0.0
+    converged = reason.startswith(_CONVERGED_REASONS)
+    cap_reached = reason == "max_iter"
+    if variant == "bivariate":
+        criterion = "closed form (one weighted least-squares solve per (θh, θd) bin)"
+    else:
+        criterion = (f"relative decrease of the summed AWLS objective (E_prev - E) / E < tol "
+                     f"= {tol:g} for 3 consecutive iterations (Monitor.patience), or an exact "
+                     f"fit; safety cap max_iter = {max_iter}")
+    if converged:
+        msg = f"converged: {reason}"
+    elif cap_reached:
+        msg = (f"NOT converged: the cap of {max_iter} iterations was reached with relative "
+               f"change {last:.2e}")
+    else:
+        msg = f"NOT converged: {reason}"
+    nit = int(extra.get("iterations", len(hist) - 1 if hist else 0))
+    return {"converged": bool(converged), "success": bool(converged),
+            "status": 0 if converged else 1, "message": msg, "criterion": criterion,
+            "tol": tol, "nit": nit, "max_iterations": max_iter,
+            "cap_reached": bool(cap_reached), "final_relative_change": float(last)}
 
 
 def _run_info(res) -> dict:
