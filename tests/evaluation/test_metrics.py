@@ -125,6 +125,16 @@ def test_count_wins_two_db_ties():
         M.count_wins({"a": [1.0], "b": [1.0, 2.0]})
 
 
+def test_count_wins_ties_within_measured_standard_errors():
+    ps = {"a": [30.0, 30.0, 30.0, 30.0], "b": [29.5, 29.5, 29.95, 25.0]}
+    se = {"a": [0.1, 1.0, np.nan, 0.1], "b": [0.1, 1.0, 0.01, 0.1]}
+    w = M.count_wins(ps, se=se)
+    # 0.5 dB: a win at se 0.1 (threshold 0.28), a tie at se 1 (2.8); missing se: 2 dB rule
+    assert w["a"]["b"] == {"wins": 2, "ties": 2, "losses": 0, "n": 4}
+    assert w["b"]["a"] == {"wins": 0, "ties": 2, "losses": 2, "n": 4}
+    assert M.count_wins(ps, se=se, z=10.0)["a"]["b"]["ties"] == 3
+
+
 def test_prepared_brdf_metrics_match_direct_and_report_missing():
     ref, fit = Phongish(20), Lambert([0.5, 0.4, 0.3])
     bm = M.BRDFMetrics(ref, 1 << 12, seed=3)

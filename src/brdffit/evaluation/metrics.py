@@ -522,21 +522,30 @@ def brdf_metrics(reference, test, n_samples: int = 1 << 16, seed: int = 0,
 # ------------------------------------------------------------------------------------------
 # database summaries
 # ------------------------------------------------------------------------------------------
-def count_wins(psnr: Mapping[str, Sequence[float]], tie_db: float = 2.0) -> dict:
+def count_wins(psnr: Mapping[str, Sequence[float]], tie_db: float = 2.0, *,
+               se: Mapping[str, Sequence[float]] | None = None, z: float = 2.0) -> dict:
     """Pairwise wins, ties and losses between models over a set of renderings.
 
     ``psnr`` maps model name → PSNR per rendering (same order for every model; NaN = missing,
     skipped pairwise). Model ``a`` *beats* ``b`` on a rendering when
-    ``psnr_a > psnr_b + tie_db``; they *tie* when ``|psnr_a − psnr_b| <= tie_db`` (Bagher et
-    al. 2016 §5 use 2 dB). ``inf`` (an exact match) ties with ``inf``.
+    ``psnr_a > psnr_b + t``; they *tie* when ``|psnr_a − psnr_b| <= t``. The threshold ``t``
+    is ``tie_db`` (Bagher et al. 2016 §5 use 2 dB) unless ``se`` (model name → standard error
+    of each PSNR, dB) gives both standard errors of a pair: then ``t = z·sqrt(se_a² + se_b²)``,
+    a difference within ``z`` combined standard errors of the measurement (z = 2: ≈ 95 %).
+    ``inf`` (an exact match) ties with ``inf``.
 
     Returns ``{a: {b: {"wins": int, "ties": int, "losses": int, "n": int}}}`` for ``a != b``.
+
+    >>> count_wins({"a": [40.0, 30.0], "b": [39.9, 35.0]}, se={"a": [0.1, 0.1], "b": [0.1, 0.1]})["a"]["b"]
+    {'wins': 0, 'ties': 1, 'losses': 1, 'n': 2}
     """
     names = list(psnr)
     arrs = {k: np.asarray(v, dtype=np.float64) for k, v in psnr.items()}
     sizes = {a.shape for a in arrs.values()}
     if len(sizes) > 1:
         raise ValueError(f"expected the same number of renderings for every model, found {sizes}")
+    errs = {k: (np.asarray(se[k], dtype=np.float64) if se is not None and k in se
+                else np.full(arrs[k].shape, np.nan)) for k in names}
     out: dict = {}
     for a in names:
         out[a] = {}
@@ -546,9 +555,11 @@ def count_wins(psnr: Mapping[str, Sequence[float]], tie_db: float = 2.0) -> dict
             x, y = arrs[a], arrs[b]
             ok = ~(np.isnan(x) | np.isnan(y))
             x, y = x[ok], y[ok]
+            t = z * np.hypot(errs[a][ok], errs[b][ok])
+            t = np.where(np.isfinite(t), t, tie_db)
             both_inf = np.isinf(x) & np.isinf(y) & (np.sign(x) == np.sign(y))
             with np.errstate(invalid="ignore"):
                 d = np.where(both_inf, 0.0, x - y)
-            out[a][b] = {"wins": int(np.sum(d > tie_db)), "ties": int(np.sum(np.abs(d) <= tie_db)),
-                         "losses": int(np.sum(d < -tie_db)), "n": int(x.size)}
+            out[a][b] = {"wins": int(np.sum(d > t)), "ties": int(np.sum(np.abs(d) <= t)),
+                         "losses": int(np.sum(d < -t)), "n": int(x.size)}
     return out

@@ -612,9 +612,17 @@ def _metrics_table(models, scenes, best) -> str:
 # ------------------------------------------------------------------------------------------
 # index
 # ------------------------------------------------------------------------------------------
+#: a tie is a PSNR difference within this many combined standard errors (≈ 95 %)
+TIE_Z = 2.0
+
+
 def summarize(results: Iterable[dict], tie_db: float = 2.0) -> dict:
     """Per-model mean/median PSNR and dE2000 and pairwise wins/ties over materials, and the
     median standard error of the models' PSNR (results with ``psnr_se``).
+
+    Two models tie on a material when their PSNRs differ by at most ``TIE_Z`` combined
+    standard errors (``2·sqrt(se_a² + se_b²)``, the measured noise of that comparison), or by
+    at most ``tie_db`` when a standard error is missing (results of older versions).
 
     Returns ``{"models": [...], "per_model": {name: {...}}, "wins": count_wins(...)}``.
     Materials where a model failed count as missing (NaN) for that model.
@@ -655,8 +663,9 @@ def summarize(results: Iterable[dict], tie_db: float = 2.0) -> dict:
                   "median_psnr_se": float(np.median(ef)) if ef.size else None,
                   "mean_cos_rel_error": (float(np.nanmean(cre[n]))
                                          if np.isfinite(cre[n]).any() else None)}
-    return {"models": names, "per_model": per, "wins": count_wins(psnr, tie_db) if names else {},
-            "n_materials": len(results), "tie_db": tie_db}
+    wins = count_wins(psnr, tie_db, se=se, z=TIE_Z) if names else {}
+    return {"models": names, "per_model": per, "wins": wins,
+            "n_materials": len(results), "tie_db": tie_db, "tie_z": TIE_Z}
 
 
 def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
@@ -705,8 +714,10 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
                 cells.append(f'<td data-sort="{w["wins"]}">{w["wins"]} / {w["ties"]} / '
                              f'{w["losses"]}</td>')
             rows.append(f'<tr><td class="l">{_e(a)}</td>{"".join(cells)}</tr>')
-        parts.append("<h2>Wins / ties / losses (row vs column, tie = PSNR within "
-                     f"{summ['tie_db']:g} dB)</h2><table class=\"sortable\" id=\"wins\"><thead>"
+        parts.append("<h2>Wins / ties / losses (row vs column; tie = PSNRs within "
+                     f"{summ['tie_z']:g}·√(se<sub>a</sub>² + se<sub>b</sub>²), their measured "
+                     f"standard errors, or {summ['tie_db']:g} dB where one is missing)</h2>"
+                     "<table class=\"sortable\" id=\"wins\"><thead>"
                      f"<tr><th class=\"l\">model</th>{head}</tr></thead><tbody>"
                      + "".join(rows) + "</tbody></table>")
     # per material (results of older versions may carry a noise floor instead of errors)
