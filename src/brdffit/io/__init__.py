@@ -22,7 +22,12 @@ import os
 from importlib import import_module
 from pathlib import Path
 
+from typing import TYPE_CHECKING
+
 from ..errors import BRDFFormatError
+
+if TYPE_CHECKING:                       # annotations only: keeps `import brdffit.io` cheap
+    from ..brdf import BRDF
 
 __all__ = ["load", "resolve_spec", "data_search_path", "find_data_file", "read_merl", "write_merl",
            "resample_to_merl", "read_nbrdf", "read_nbrdf_collection", "list_materials",
@@ -173,7 +178,7 @@ def resolve_spec(spec) -> tuple[str, Path | None, str | None]:
     return kind, found, member
 
 
-def load(spec, **options):
+def load(spec: str | os.PathLike, **options) -> BRDF:
     """Load a BRDF from a path or spec and return it (a :class:`~brdffit.brdf.BRDF`).
 
     ``spec`` is one of

@@ -42,13 +42,18 @@ import datetime as _dt
 import hashlib
 import json
 import zipfile
+import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.lib import format as _npy
 
 from .._atomic import atomic_write
 from .._json import strict_json_default
+
+if TYPE_CHECKING:
+    from ..brdf import BRDF
 from ..errors import BRDFFormatError
 from ..schema import ArrayHeader, StateError, show
 from ..serialization import SerializableModel, model_registry, resolve_kind
@@ -108,7 +113,7 @@ def source_checksum(spec) -> str | None:
 # ------------------------------------------------------------------------------------------
 # writing
 # ------------------------------------------------------------------------------------------
-def save_fit(model, path, *, source=None, options: dict | None = None,
+def save_fit(model: BRDF, path: str | os.PathLike, *, source=None, options: dict | None = None,
              fit_info: dict | None = None) -> Path:
     """Write ``model`` to ``path`` (``.npz``) atomically and return the path.
 
@@ -458,7 +463,7 @@ def is_fit_file(path) -> bool:
         return False
 
 
-def load_fit(path):
+def load_fit(path: str | os.PathLike) -> BRDF:
     """Load a model written by :func:`save_fit`, validating it (see the module docstring).
 
     Raises :class:`~brdffit.errors.BRDFFormatError` naming the file (and the field) for any
