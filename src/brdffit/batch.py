@@ -64,6 +64,7 @@ import functools
 import hashlib
 import json
 import logging
+import math
 import os
 import time
 import traceback
@@ -74,11 +75,12 @@ from ._atomic import atomic_write
 from ._json import json_default
 from .errors import BRDFError
 from .paths import slug
+from .progress import describe
 
 __all__ = ["Task", "RenderSettings", "RenderTask", "enumerate_materials", "make_tasks",
            "make_render_tasks", "run_task", "run_render_task", "run_batch", "read_records",
            "write_summary", "lock_output", "BatchError", "OutputLocked", "TIMING_FIELDS",
-           "DEFAULT_RETRIES"]
+           "DEFAULT_RETRIES", "PROGRESS_TOPIC"]
 
 _log = logging.getLogger("brdffit.batch")
 
@@ -95,6 +97,14 @@ DEFAULT_RETRIES = 2
 
 _MEASURED_SUFFIXES = (".binary", ".bsdf", ".bin", ".h5")
 
+#: Dask event topic of the progress inside running tasks (:mod:`brdffit.progress`)
+PROGRESS_TOPIC = "brdffit-progress"
+#: a running task sends at most one progress event per this many seconds
+PROGRESS_INTERVAL_S = 1.0
+#: ``OUT/batch.log`` gets at most one progress line per task per this many seconds
+LOG_INTERVAL_S = 10.0
+LOG_NAME = "batch.log"
+
 
 class BatchError(BRDFError):
     """The batch cannot run as asked (names, cluster, output folder)."""
@@ -106,6 +116,30 @@ class OutputLocked(BatchError):
 
 def _warn(message: str) -> None:
     _log.warning("brdffit: warning: %s", message)
+
+
+@contextlib.contextmanager
+def _forward_progress(material: str, kind: str):
+    """Inside a Dask worker, send the task's progress events (:mod:`brdffit.progress`) to
+    the client under :data:`PROGRESS_TOPIC`; elsewhere, do nothing."""
+    try:
+        from distributed import get_worker
+
+        worker = get_worker()
+    except (ImportError, ValueError):
+        yield
+        return
+    from .progress import listening
+
+    def send(event: dict) -> None:
+        worker.log_event(PROGRESS_TOPIC, {**{k: v for k, v in event.items()
+                                             if isinstance(v, (str, int, float, bool, type(None)))},
+                                          "material": material, "model": kind})
+
+    with listening(send, min_interval=PROGRESS_INTERVAL_S):
+        yield
+
+
 
 
 @dataclasses.dataclass(frozen=True)
@@ -389,7 +423,8 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
             record["status"] = "skipped"
             record["error"] = f"{task.model} fits isotropic BRDFs only; {task.material} is anisotropic"
             raise _Skip
-        model, record["fit_time_s"] = fit_model(task.model, reference, task.options_dict())
+        with _forward_progress(task.material, task.model):
+            model, record["fit_time_s"] = fit_model(task.model, reference, task.options_dict())
         fit_path = task.fit_path(out)
         save_fit(model, fit_path, source=task.spec, options=task.options_dict())
         record["fit_file"] = fit_path.relative_to(out).as_posix()
@@ -478,11 +513,13 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
                 missing.append(model)
         record["missing_fits"] = missing
         st = task.settings
-        result = compare(load(task.spec), models, out / "report", name=task.material,
-                         scenes=st.scenes, spp=st.spp, batches=st.batches,
-                         resolution=st.resolution, seed=st.seed, save_fits=False,
-                         update_index=False,
-                         brdf_metrics=() if len(fit_metrics) == len(models) else BRDFMetrics.ALL)
+        with _forward_progress(task.material, "render"):
+            result = compare(load(task.spec), models, out / "report", name=task.material,
+                             scenes=st.scenes, spp=st.spp, batches=st.batches,
+                             resolution=st.resolution, seed=st.seed, save_fits=False,
+                             update_index=False,
+                             brdf_metrics=(() if len(fit_metrics) == len(models)
+                                           else BRDFMetrics.ALL))
         if len(fit_metrics) == len(models):  # the fit tasks measured them already: reuse
             for m in result["models"]:
                 m["brdf"] = fit_metrics.get(m["name"], m.get("brdf"))
@@ -798,7 +835,7 @@ def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
               workers: int = 2, memory_limit: str | None = None, metrics: bool = True,
               render: RenderSettings | None = None, retry_failed: bool = False,
               progress: Callable | bool = True, client=None, retries: int = DEFAULT_RETRIES,
-              wait_lock: bool = False) -> dict:
+              wait_lock: bool = False, on_event: Callable[[dict], None] | None = None) -> dict:
     """Run ``tasks`` on Dask, skipping finished ones; return counts and the records.
 
     ``scheduler``: address of an existing Dask scheduler (``tcp://host:port``); ``client``:
@@ -807,7 +844,12 @@ def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
     ``retries`` more times. ``render``: also render every material once its fits are done
     and write the report (module docstring). ``wait_lock``: wait for another batch on the
     same folder instead of raising :class:`OutputLocked`. ``progress``: ``True`` for a Rich
-    progress bar, ``False`` for none, or a callable ``(record) -> None``.
+    progress bar, ``False`` for none, or a callable ``(record) -> None``. ``on_event``: called
+    with the progress events of running tasks (:mod:`brdffit.progress`: ``stage``,
+    ``iteration``, ``max_iterations``, ``objective``, ``elapsed_s``, plus ``material`` and
+    ``model``), at most one per task per :data:`PROGRESS_INTERVAL_S`; they also reach the
+    progress bar (its last column) and ``OUT/batch.log`` (a line per finished task and at
+    most one progress line per task per :data:`LOG_INTERVAL_S`).
 
     Returns ``ran`` (tasks run now), ``failed`` (of those), ``lost`` (results that never
     came back, not recorded), ``skipped`` (already done), ``failed_total`` (tasks of this
@@ -835,7 +877,9 @@ def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
                 client, cluster = _client(scheduler, workers, memory_limit, retries)
             try:
                 _probe_workers(client, out, todo)
-                done = _run_todo(client, todo, out, metrics, progress, as_completed)
+                with _BatchLog(out / LOG_NAME, len(todo), len(skipped)) as log:
+                    done = _run_todo(client, todo, out, metrics, progress, as_completed,
+                                     log, on_event)
             finally:
                 if own:
                     client.close()
@@ -855,7 +899,8 @@ def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
             "wall_time_s": time.perf_counter() - t0, "records": records}
 
 
-def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed) -> list[dict]:
+def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed, log=None,
+              on_event=None) -> list[dict]:
     """Submit the fit tasks, and each render task once its material's fits are over."""
     fits = [t for t in todo if isinstance(t, Task)]
     renders = {t.material: t for t in todo if isinstance(t, RenderTask)}
@@ -863,9 +908,16 @@ def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed) ->
     tasks_of: dict = {}
     started: dict = {}
 
+    order: dict[str, int] = {}
+    for t in todo:
+        order.setdefault(t.material, len(order))
+
     def submit(fn, t, *args):
         kind = t.model if isinstance(t, Task) else "render"
-        fut = client.submit(fn, t, str(out), *args, pure=False,
+        # materials in order, the models of one material together: a worker then finds the
+        # material it just loaded in its cache (_load_reference); renders before new fits
+        prio = -order[t.material] + (len(order) if kind == "render" else 0)
+        fut = client.submit(fn, t, str(out), *args, pure=False, priority=prio,
                             key=f"brdffit-{slug(t.material)}-{slug(kind)}-{t.key()}")
         tasks_of[fut.key] = t
         started[fut.key] = time.perf_counter()
@@ -878,7 +930,8 @@ def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed) ->
             pending[t.material] += 1
     futures += [submit(run_render_task, r) for m, r in renders.items() if pending[m] == 0]
     done: list[dict] = []
-    with _Progress(todo, enabled=progress is True) as bar:
+    with _Progress(todo, enabled=progress is True) as bar, \
+            _subscribed(client, bar, log, on_event):
         queue = as_completed(futures)
         for fut in queue:
             t = tasks_of[fut.key]
@@ -889,6 +942,8 @@ def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed) ->
             fut.release()
             done.append(rec)
             bar.advance(rec)
+            if log is not None:
+                log.finished(rec)
             if callable(progress):
                 progress(rec)
             if isinstance(t, Task) and t.material in pending:
@@ -896,6 +951,87 @@ def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed) ->
                 if pending[t.material] == 0:
                     queue.add(submit(run_render_task, renders[t.material]))
     return done
+
+
+@contextlib.contextmanager
+def _subscribed(client, bar: "_Progress", log: "_BatchLog | None", on_event):
+    """Route the workers' progress events to the bar, the log and ``on_event``."""
+    def handle(event) -> None:
+        msg = event[1] if isinstance(event, tuple) and len(event) == 2 else event
+        if not isinstance(msg, dict):
+            return
+        bar.activity(msg)
+        if log is not None:
+            log.progress(msg)
+        _log.debug("%s %s %s", msg.get("material"), msg.get("model"), describe(msg))
+        if on_event is not None:
+            on_event(msg)
+
+    try:
+        client.subscribe_topic(PROGRESS_TOPIC, handle)
+    except Exception as exc:  # noqa: BLE001 – progress is optional, the batch is not
+        _warn(f"no progress from the workers: {type(exc).__name__}: {exc}")
+        yield
+        return
+    try:
+        yield
+    finally:
+        try:
+            client.unsubscribe_topic(PROGRESS_TOPIC)
+        except Exception:  # noqa: BLE001 – the client may be closing
+            pass
+
+
+class _BatchLog:
+    """``OUT/batch.log``: one line per run, per finished task and, at most every
+    :data:`LOG_INTERVAL_S` per task, per progress event (appended; the batch holds the
+    output lock, so it is the only writer)."""
+
+    def __init__(self, path: Path, n_todo: int, n_skipped: int):
+        import threading
+
+        self.path, self._lock, self._last = path, threading.Lock(), {}
+        self._head = f"run: {n_todo} task(s) to do, {n_skipped} already done"
+
+    def __enter__(self):
+        try:
+            self._f = open(self.path, "a", encoding="utf-8", buffering=1)
+        except OSError as exc:
+            _warn(f"{self.path}: cannot write the batch log: {exc}")
+            self._f = None
+        self._write(self._head)
+        return self
+
+    def _write(self, line: str) -> None:
+        if self._f is None:
+            return
+        stamp = time.strftime("%Y-%m-%dT%H:%M:%S")
+        with self._lock:
+            try:
+                self._f.write(f"{stamp} {line}\n")
+            except (OSError, ValueError):
+                pass
+
+    def progress(self, msg: dict) -> None:
+        key = (msg.get("material"), msg.get("model"))
+        now = time.monotonic()
+        if now - self._last.get(key, -math.inf) >= LOG_INTERVAL_S:
+            self._last[key] = now
+            self._write(f"{msg.get('material')} {msg.get('model')}: {describe(msg)}")
+
+    def finished(self, rec: dict) -> None:
+        self._last.pop((rec.get("material"), rec.get("model")), None)
+        what = rec.get("status")
+        if rec.get("error"):
+            what += f" ({str(rec['error']).splitlines()[0][:200]})"
+        wall = rec.get("wall_time_s")
+        self._write(f"{rec.get('material')} {rec.get('model')}: {what}"
+                    + (f" in {wall:.1f} s" if isinstance(wall, (int, float)) else ""))
+
+    def __exit__(self, *exc):
+        if self._f is not None:
+            self._write("end of run" if exc[0] is None else f"run stopped: {exc[0].__name__}")
+            self._f.close()
 
 
 class _Progress:
@@ -914,9 +1050,11 @@ class _Progress:
 
             self._p = Progress(TextColumn("{task.description:>14}"), BarColumn(),
                                MofNCompleteColumn(), TextColumn("{task.fields[failed]} failed"),
-                               TimeElapsedColumn(), TimeRemainingColumn())
+                               TimeElapsedColumn(), TimeRemainingColumn(),
+                               TextColumn("{task.fields[note]}"))
             self._p.__enter__()
-            self._ids = {m: self._p.add_task(m, total=self.total[m], failed=0) for m in self.models}
+            self._ids = {m: self._p.add_task(m, total=self.total[m], failed=0, note="")
+                         for m in self.models}
             self._failed = dict.fromkeys(self.models, 0)
         return self
 
@@ -924,7 +1062,13 @@ class _Progress:
         if self.enabled:
             m = rec["model"]
             self._failed[m] += rec.get("status") not in DONE
-            self._p.update(self._ids[m], advance=1, failed=self._failed[m])
+            self._p.update(self._ids[m], advance=1, failed=self._failed[m], note="")
+
+    def activity(self, event: dict) -> None:
+        """Show a running task's last progress event on its model's row."""
+        if self.enabled and event.get("model") in getattr(self, "_ids", {}):
+            note = f"{event.get('material', '')} {describe(event)}"
+            self._p.update(self._ids[event["model"]], note=note[:70])
 
     def __exit__(self, *exc):
         if self.enabled:

@@ -111,3 +111,25 @@ def test_local_workers_keep_numpy_temporaries_on_the_heap():
         client.close()
         cluster.close()
     assert env == {k: str(v) for k, v in WORKER_MALLOC_ENV.items()}
+
+
+def test_progress_inside_running_tasks_reaches_caller_and_log(tmp_path, dask_client):
+    """A long fit's iterations travel from the worker to ``on_event`` and OUT/batch.log."""
+    from brdffit.batch import LOG_NAME, run_batch
+
+    tasks = make_tasks([("gold", "synthetic:gold-ggx")], ["npf-g-from-d", "ggx"],
+                       {"npf-g-from-d": {"max_iter": 3}})
+    events = []
+    res = run_batch(tasks, tmp_path, client=dask_client, metrics=False, progress=False,
+                    on_event=events.append)
+    assert res["failed"] == 0 and res["ran"] == 2
+    npf = [e for e in events if e["model"] == "npf-g-from-d"]
+    assert npf, events                    # the first event of a task is never throttled
+    e = npf[0]
+    assert e["material"] == "gold" and e["stage"] == "G-from-D AWLS"
+    assert 1 <= e["iteration"] <= 3 and e["max_iterations"] == 3 and e["objective"] > 0
+    assert not [e for e in events if e["model"] == "ggx"]   # closed forms report nothing
+    log = (tmp_path / LOG_NAME).read_text(encoding="utf-8").splitlines()
+    assert any("gold npf-g-from-d: G-from-D AWLS: iteration" in line for line in log)
+    assert any(line.endswith(" s") and "gold ggx: ok in" in line for line in log)
+    assert "run: 2 task(s) to do, 0 already done" in log[0] and log[-1].endswith("end of run")

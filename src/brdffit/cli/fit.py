@@ -17,7 +17,9 @@ read and validated *before* the fitting module is imported, so a rejected file f
 
 from __future__ import annotations
 
+import contextlib
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -248,6 +250,33 @@ def check_usage(model: str, options: dict) -> None:
         check_options(model, options)
 
 
+@contextlib.contextmanager
+def _live_progress(enabled: bool):
+    """A status line on the terminal (stderr) with the iteration and objective of a long fit
+    (:mod:`brdffit.progress`); Rich is imported only when a fit reports progress."""
+    if not enabled:
+        yield
+        return
+    from ..progress import describe, listening
+
+    live: dict = {}
+
+    def show(event: dict) -> None:
+        if "status" not in live:
+            from rich.console import Console
+
+            live["status"] = Console(stderr=True).status("")
+            live["status"].start()
+        live["status"].update(f"fitting – {describe(event)}")
+
+    with listening(show, min_interval=0.2):
+        try:
+            yield
+        finally:
+            if "status" in live:
+                live["status"].stop()
+
+
 def run_fit(spec: str, model: str = "tabulated", out: Path | None = None,
             options: dict | None = None, *, error: bool = True) -> tuple[object, dict]:
     """Load ``spec``, fit it with ``model``, optionally save, and summarise; returns
@@ -403,7 +432,8 @@ def register(app: typer.Typer) -> None:
         if iterations is not None:
             opts["iterations"] = iterations
         check_usage(model, opts)
-        _, summary = run_fit(spec, model, out, opts, error=not no_error)
+        with _live_progress(enabled=not as_json and sys.stderr.isatty()):
+            _, summary = run_fit(spec, model, out, opts, error=not no_error)
         if as_json:
             from .._json import json_default
 

@@ -652,6 +652,7 @@ class _CRNEngine:
                 "peak_batches_only": batches_max}
 
     def _render(self, labels, spec, seeds, spp, resolution):
+        from ..progress import report
         from .render.core import MultiRenderer
 
         keys = [self.REF] + list(labels)
@@ -660,7 +661,9 @@ class _CRNEngine:
                            evaluators={k: self.evaluators[k] for k in keys})
         stacks = {k: [] for k in keys}
         alpha = []
-        for s in seeds:
+        for i, s in enumerate(seeds):
+            report(stage=f"render {spec.name}, {len(keys)} images", iteration=i + 1,
+                   max_iterations=len(seeds))
             res = mr.render(s, spp)
             for k in keys:
                 stacks[k].append(res.images[k])

@@ -47,6 +47,7 @@ import numpy as np
 from ...errors import FitError
 from ...losses.objective import ObjectiveOptions, prepare_objective
 from ...grid import tabulate_merl_grid
+from ...progress import step_callback
 from ...microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF
 from . import _solver
 from ._solver import MFState, NaiveState, Samples
@@ -276,7 +277,8 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         st0 = _start_state(init, values, valid, np.random.default_rng(seed))
         st = NaiveState(D=st0.D, F=st0.F, H=np.ones((3, 180)), rho_d=st0.rho_d, rho_s=st0.rho_s)
         res = _solver.run_naive(st, W, WZ, ref, eps=eps, tol=tol, max_iter=max_iter,
-                                callback=callback)
+                                callback=step_callback(callback, "naive AWLS",
+                                                       max_iter))
         st = res.state
         _check_state([st.D, st.F, st.H, st.rho_d, st.rho_s], "naive fit")
         E = _solver.naive_exact_objective(st, obj)
@@ -289,7 +291,8 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         options["init"] = init
         st = _start_state(init, values, valid, np.random.default_rng(seed))
         res = _solver.run_g_from_d(st, smp, eps=eps, tol=tol, max_iter=max_iter,
-                                   callback=callback)
+                                   callback=step_callback(callback, "G-from-D AWLS",
+                                                          max_iter))
         _check_state(_arrays(res.state), "G-from-D fit")
         return finish(_mf_model(res.state, "g-from-d", mat_name, source), res.E, _run_info(res))
 
@@ -318,7 +321,10 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
             start_states.append(("sgd", st, note))
         elif s == "g-from-d":
             gres = _solver.run_g_from_d(_slice_start(values, valid), smp, eps=0.0, tol=tol,
-                                        max_iter=DEFAULT_MAX_ITER["g-from-d"])
+                                        max_iter=DEFAULT_MAX_ITER["g-from-d"],
+                                        callback=step_callback(
+                                            None, "G-from-D for the g-from-d start",
+                                            DEFAULT_MAX_ITER["g-from-d"]))
             g = gres.state
             info["g_from_d_start"] = {"objective": float(gres.E.sum()),
                                       "iterations": gres.iterations, "time_s": gres.seconds}
@@ -328,14 +334,16 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
     runs = []
     best = None
 
-    def run_start(st):
+    def run_start(labelled):
+        label, st = labelled
         return _solver.run_independent_g(st, smp, eps=eps, smoothing=g_smoothing, tol=tol,
                                          max_iter=screen, extrapolate=extrapolate,
-                                         callback=callback)
+                                         callback=step_callback(
+                                             callback, f"start {label}", screen))
 
     # The starts are independent: run them on parallel threads (the AWLS kernels release the
     # GIL) and merge the results in the fixed order of ``starts``, so the fit is deterministic.
-    todo = [st for _, st, _ in start_states if st is not None]
+    todo = [(label, st) for label, st, _ in start_states if st is not None]
     with ThreadPoolExecutor(max_workers=max(1, min(_n_threads(), len(todo)))) as pool:
         results = iter(list(pool.map(run_start, todo)))
     for label, st, note in start_states:
@@ -380,7 +388,9 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
                                      for r in ok_runs if r["start"] in blab):
         res = _solver.run_independent_g(bst, smp, eps=eps, smoothing=g_smoothing, tol=tol,
                                         max_iter=max_iter - screen, extrapolate=extrapolate,
-                                        callback=callback)
+                                        callback=step_callback(
+                                            callback, "best start, continued",
+                                            max_iter - screen))
         if np.all(np.isfinite(res.E)) and np.all(res.E <= bE * (1 + 1e-9)):
             bst, bE = res.state, res.E
         extra["continuation"] = _run_info(res)
@@ -388,7 +398,9 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         gss += res.gss_calls
         history = history + [float(h) for h in res.history[1:]]
     if polish > 0:
-        res = _solver.polish_lm(bst, smp, eps=eps, max_iter=polish, callback=callback)
+        res = _solver.polish_lm(bst, smp, eps=eps, max_iter=polish,
+                                callback=step_callback(callback, "LM polish",
+                                                       polish))
         if np.all(np.isfinite(res.E)):
             bst, bE = res.state, np.minimum(res.E, bE)
         extra["polish"] = {k: v for k, v in _run_info(res).items()
