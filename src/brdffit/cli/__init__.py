@@ -38,6 +38,7 @@ _ABORT = tuple({typer.Abort, getattr(_click_exceptions, "Abort", typer.Abort)})
 _USAGE = (_click_exceptions.ClickException,)
 
 from ..errors import BRDFError
+from .._blas import single_thread_env
 
 _COMMAND_MODULES = ["info", "convert", "fit", "models", "render", "compare", "batch", "export",
                     "demo"]
@@ -281,6 +282,7 @@ def main(argv: list[str] | None = None) -> int:
     docstring). With ``standalone_mode=False`` Click *returns* the code of ``typer.Exit``
     (and raises everything else), so both are turned into a status here."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    single_thread_env()         # before NumPy loads: one BLAS thread (brdffit._blas)
     debug = "--debug" in argv
     try:
         code = command().main(args=argv, prog_name="brdffit", standalone_mode=False)

@@ -277,6 +277,37 @@ def _live_progress(enabled: bool):
                 live["status"].stop()
 
 
+def _source_checksum(spec: str) -> str | None:
+    from ..io.fitfile import source_checksum
+
+    return source_checksum(spec)
+
+
+def _in_background(fn, *args):
+    """Run ``fn(*args)`` on a thread now; the returned callable waits for its result (or
+    re-raises its error). Hashing the input (hashlib releases the GIL) overlaps the fit."""
+    import threading
+
+    box: dict = {}
+
+    def run() -> None:
+        try:
+            box["value"] = fn(*args)
+        except BaseException as exc:  # noqa: BLE001 – re-raised in the caller's thread
+            box["error"] = exc
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+
+    def result():
+        thread.join()
+        if "error" in box:
+            raise box["error"]
+        return box["value"]
+
+    return result
+
+
 def run_fit(spec: str, model: str = "tabulated", out: Path | None = None,
             options: dict | None = None, *, error: bool = True) -> tuple[object, dict]:
     """Load ``spec``, fit it with ``model``, optionally save, and summarise; returns
@@ -293,6 +324,7 @@ def run_fit(spec: str, model: str = "tabulated", out: Path | None = None,
     t0 = time.perf_counter()
     brdf = load(spec)  # read and validated before the fitting stack is imported
     timings["load"] = time.perf_counter() - t0
+    checksum = _in_background(_source_checksum, spec) if out is not None else None
     t0 = time.perf_counter()
     entry = _entry(model)
     timings["import"] = time.perf_counter() - t0
@@ -320,7 +352,7 @@ def run_fit(spec: str, model: str = "tabulated", out: Path | None = None,
             raise ExportError(f"{out}: expected a model that can be saved as a fit file, found "
                               f"{type(fitted).__name__} (e.g. per-channel fits are not saved)")
         t0 = time.perf_counter()
-        save_fit(fitted, out, source=spec,
+        save_fit(fitted, out, source=spec, source_sha256=checksum(),
                  options=dict(getattr(fitted, "fit_options", None) or options or {}, model=model))
         timings["save"] = time.perf_counter() - t0
         summary["output"] = str(out)

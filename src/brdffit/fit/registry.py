@@ -34,6 +34,8 @@ import time
 from collections.abc import Mapping
 from typing import Any, Callable
 
+from .._blas import with_single_blas_thread
+
 # NumPy is imported inside the functions that need it: `brdffit --help` reads MODELS.
 
 __all__ = ["Fitter", "FITTERS", "ModelInfo", "MODELS", "PAPERS", "TYPICAL_SOURCE",
@@ -168,7 +170,8 @@ def register_fitter(name: str, fn: Callable[..., Any], summary_fn: Callable | No
     doc = description if description is not None else (inspect.getdoc(fn) or "").split("\n")[0]
     declared = MODELS.get(str(name))  # the declaration may say "isotropic only" for the module
     iso = bool(isotropic_only) or bool(declared is not None and declared.isotropic_only)
-    entry = Fitter(str(name), fn, summary_fn, doc, iso)
+    # one BLAS thread: the fits make many small calls that BLAS threads only slow down
+    entry = Fitter(str(name), with_single_blas_thread(fn), summary_fn, doc, iso)
     FITTERS[entry.name] = entry
     return entry
 

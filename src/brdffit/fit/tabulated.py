@@ -309,14 +309,19 @@ def _merl_geometry():
         from ..grid import merl_phi_d, merl_theta_h
 
         th, td, pd = merl_theta_h(), merl_theta_d(), merl_phi_d()
-        a = np.cos(th)[:, None, None] * np.cos(td)[None, :, None]
-        bb = (np.sin(th)[:, None, None] * np.sin(td)[None, :, None]) * np.cos(pd)[None, None, :]
-        geo = {}
-        for key, c in (("i", a - bb), ("o", a + bb)):
+        # cos θi,o = cos θh cos θd ∓ sin θh sin θd cos φd computed in float32 (the stored
+        # type; faster than float64): |Δ| ≤ 1.2e-7 moves a lookup index by one on 0.04 % of
+        # the samples
+        a = (np.cos(th)[:, None] * np.cos(td)[None, :]).astype(np.float32)[:, :, None]
+        bb = ((np.sin(th)[:, None] * np.sin(td)[None, :]).astype(np.float32)[:, :, None]
+              * np.cos(pd).astype(np.float32)[None, None, :])
+        geo = {"ci": a - bb, "co": np.add(a, bb, out=bb)}
+        for key in ("i", "o"):
             # nearest sample of a dense uniform table of σ(cos θ) (|Δcos| ≤ 3e-5)
-            geo["c" + key] = c.astype(np.float32)
-            geo["i" + key] = np.rint(np.clip(c, 0.0, 1.0) * (_SIGMA_M - 1)).astype(np.int16)
-        geo["up"] = (a - bb > 0) & (a + bb > 0)
+            x = np.clip(geo["c" + key], 0.0, 1.0)
+            x *= _SIGMA_M - 1
+            geo["i" + key] = np.rint(x, out=x).astype(np.int16)
+        geo["up"] = (geo["ci"] > 0) & (geo["co"] > 0)
         _MERL_GEOMETRY.update(geo)
     return _MERL_GEOMETRY
 

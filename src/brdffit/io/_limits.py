@@ -191,6 +191,8 @@ def check_plausible_float64(raw: np.ndarray, path, what: str) -> None:
     ``raw`` holds little-endian float64 as read. When the values are implausible but their
     byte-swapped reading is not, the message says the file is big-endian.
     """
+    if _plausible(raw):
+        return
     finite = np.isfinite(raw)
     if not finite.all():
         bad = int(raw.size - np.count_nonzero(finite))
@@ -198,24 +200,42 @@ def check_plausible_float64(raw: np.ndarray, path, what: str) -> None:
         hint = (" (the file looks byte-swapped: big-endian float64)"
                 if _plausible(swapped) else "")
         raise BRDFFormatError(path, f"expected finite float64 {what}, found {bad} NaN/inf{hint}")
-    if not _plausible(raw):
-        a = np.abs(raw)
-        n_big = int(np.count_nonzero(a > MAX_ABS_VALUE))
-        n_sub = int(np.count_nonzero((a > 0) & (a < np.finfo(np.float64).tiny)))
-        if _plausible(raw.byteswap()):
-            raise BRDFFormatError(path, f"expected little-endian float64 {what}, found "
-                                        f"big-endian values (byte-swapped file: {n_big} values "
-                                        f"above {MAX_ABS_VALUE:g}, {n_sub} subnormal)")
-        raise BRDFFormatError(path, f"expected {what} of magnitude at most {MAX_ABS_VALUE:g} "
-                                    f"and not subnormal, found {n_big} larger (max "
-                                    f"{float(a.max()):.3g}) and {n_sub} subnormal values")
+    a = np.abs(raw)
+    n_big = int(np.count_nonzero(a > MAX_ABS_VALUE))
+    n_sub = int(np.count_nonzero((a > 0) & (a < np.finfo(np.float64).tiny)))
+    if _plausible(raw.byteswap()):
+        raise BRDFFormatError(path, f"expected little-endian float64 {what}, found "
+                                    f"big-endian values (byte-swapped file: {n_big} values "
+                                    f"above {MAX_ABS_VALUE:g}, {n_sub} subnormal)")
+    raise BRDFFormatError(path, f"expected {what} of magnitude at most {MAX_ABS_VALUE:g} "
+                                f"and not subnormal, found {n_big} larger (max "
+                                f"{float(a.max()):.3g}) and {n_sub} subnormal values")
+
+
+_CHUNK = 1 << 16
+_MAX_BITS = np.array(MAX_ABS_VALUE, dtype=np.float64).view(np.uint64)
+_TINY_BITS = np.array(np.finfo(np.float64).tiny, dtype=np.float64).view(np.uint64)
 
 
 def _plausible(raw: np.ndarray) -> bool:
-    with np.errstate(invalid="ignore", over="ignore"):
-        a = np.abs(raw)
-        ok = (a <= MAX_ABS_VALUE) & ((a == 0) | (a >= np.finfo(np.float64).tiny))
-    return bool(ok.all())
+    """Every value is 0 or a normal float of magnitude ≤ MAX_ABS_VALUE (not NaN/inf).
+
+    On the IEEE-754 bits with the sign cleared, magnitude order is integer order (NaN and
+    inf above every finite value), so two reductions decide it: ``max(bits) ≤ bits(MAX)``
+    and ``min(bits − 1) ≥ bits(tiny) − 1`` (0 wraps around to the largest integer)."""
+    if raw.size == 0:
+        return True
+    words = np.ascontiguousarray(raw, dtype=np.float64).reshape(-1).view(np.uint64)
+    buf = np.empty(min(words.size, _CHUNK), dtype=np.uint64)   # small, reused: no page faults
+    for k in range(0, words.size, _CHUNK):
+        bits = buf[:min(_CHUNK, words.size - k)]
+        np.bitwise_and(words[k:k + _CHUNK], np.uint64(0x7FFF_FFFF_FFFF_FFFF), out=bits)
+        if bits.max() > _MAX_BITS:
+            return False
+        np.subtract(bits, np.uint64(1), out=bits)
+        if bits.min() < _TINY_BITS - np.uint64(1):
+            return False
+    return True
 
 
 # -- HDF5 -----------------------------------------------------------------------------------

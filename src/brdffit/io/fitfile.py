@@ -114,8 +114,11 @@ def source_checksum(spec) -> str | None:
 # writing
 # ------------------------------------------------------------------------------------------
 def save_fit(model: BRDF, path: str | os.PathLike, *, source=None, options: dict | None = None,
-             fit_info: dict | None = None) -> Path:
+             fit_info: dict | None = None, source_sha256: str | None = None) -> Path:
     """Write ``model`` to ``path`` (``.npz``) atomically and return the path.
+
+    ``source`` (default: ``model.source``) is recorded with the SHA-256 of its file
+    (:func:`source_checksum`), or ``source_sha256`` when the caller computed it already.
 
     The state is checked against the model's schema first (exactly as :func:`load_fit` will
     read it): a model that could not be loaded back raises ``BRDFFormatError`` and nothing
@@ -134,7 +137,8 @@ def save_fit(model: BRDF, path: str | os.PathLike, *, source=None, options: dict
         "name": getattr(model, "name", None),
         "params": params,
         "source": {"spec": None if source is None else str(source),
-                   "sha256": source_checksum(source)},
+                   "sha256": source_sha256 if source_sha256 is not None
+                   else source_checksum(source)},
         "options": options if options is not None else (model.fit_options or {}),
         "fit_info": fit_info if fit_info is not None else (model.fit_info or {}),
         "brdffit_version": __version__,

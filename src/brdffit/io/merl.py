@@ -240,7 +240,13 @@ class MERLBRDF(IsotropicBRDF):
     format = "merl"
 
     def __init__(self, values, valid=None, *, interpolation: str = "trilinear",
-                 name: str = "merl", source: str | None = None, _raw: np.ndarray | None = None):
+                 name: str = "merl", source: str | None = None, _raw: np.ndarray | None = None,
+                 _validated: bool = False):
+        if _validated:              # read_merl: finite, ≥ 0 where valid, 0 elsewhere, shapes ok
+            self._init_tables(values, valid)
+            self._raw, self._packed = _raw, None
+            self.interpolation, self.name, self.source = interpolation, name, source
+            return
         values = np.asarray(values, dtype=np.float64)
         if values.shape != MERL_SHAPE + (3,):
             raise BRDFFormatError(source, f"expected a MERL table of shape {MERL_SHAPE + (3,)}, "
@@ -256,15 +262,17 @@ class MERLBRDF(IsotropicBRDF):
         if bad.any():
             raise BRDFFormatError(source, f"expected finite non-negative values at valid samples, "
                                           f"found {int(bad.sum())} NaN/inf/negative")
-        self._values = np.where(valid[..., None], values, 0.0)
-        self._values.flags.writeable = False
-        self._valid = valid.copy()
-        self._valid.flags.writeable = False
+        self._init_tables(np.where(valid[..., None], values, 0.0), valid.copy())
         self._raw = _raw
         self._packed = None
         self.interpolation = interpolation
         self.name = name
         self.source = source
+
+    def _init_tables(self, values: np.ndarray, valid: np.ndarray) -> None:
+        self._values, self._valid = values, valid
+        self._values.flags.writeable = False
+        self._valid.flags.writeable = False
 
     # -- table access ---------------------------------------------------------------------
     @property
@@ -382,11 +390,14 @@ def read_merl(path, interpolation: str = "trilinear") -> MERLBRDF:
                                     f"{0 if raw is None else raw.size} (file changed while read)")
     check_plausible_float64(raw, path, "values")
     raw = raw.reshape(3, _N)
-    valid = np.all(raw >= 0, axis=0).reshape(MERL_SHAPE)
-    values = (raw.T * MERL_SCALE).reshape(MERL_SHAPE + (3,))
+    valid = np.all(raw >= 0, axis=0)
+    values = np.ascontiguousarray(raw.T * MERL_SCALE)
+    if not valid.all():
+        values[~valid] = 0.0                        # MERL's negative marker: not measured
     raw.flags.writeable = False
-    return MERLBRDF(values, valid, interpolation=interpolation, name=path.stem,
-                    source=str(path), _raw=raw)
+    return MERLBRDF(values.reshape(MERL_SHAPE + (3,)), valid.reshape(MERL_SHAPE),
+                    interpolation=interpolation, name=path.stem, source=str(path), _raw=raw,
+                    _validated=True)
 
 
 # -- writing ------------------------------------------------------------------------------

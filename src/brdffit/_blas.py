@@ -1,0 +1,70 @@
+"""One BLAS thread for brdffit's fits (issue 15: fits and a CLI that finish fast).
+
+The fits do many *small* linear-algebra calls (least-squares Jacobians of a few columns,
+90×90 systems, 3-10 variable normal equations). A multi-threaded OpenBLAS wakes and spins
+its threads for each of them: measured on the 2-core bench machine (``brdffit fit`` of the
+MERL file of gold-metallic-paint, whole process, wall / user+sys CPU s), SGD 1.93 / 2.20
+with the default threads against 0.79 / 0.79 with one; ggx-diffuse 3.42 / 4.20 against
+1.42 / 1.42; tabulated 0.24 / 0.35 against 0.22 / 0.25. No fit here has a matrix large
+enough for BLAS threads to pay off, and parallel work (NPF starts, batch workers) is
+parallel above BLAS.
+
+* :func:`single_thread_env` — the command line, *before NumPy is imported*: sets
+  ``OPENBLAS_NUM_THREADS`` (and the MKL/BLIS/Accelerate equivalents) to 1 unless the user
+  set them; batch workers inherit it.
+* :func:`single_blas_thread` — the library: ``threadpoolctl`` limits BLAS to one thread
+  for the block (every fitter reached through :mod:`brdffit.fit.registry` runs in one).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import sys
+from contextlib import contextmanager
+from typing import Callable, Iterator
+
+__all__ = ["ENV_VARS", "single_thread_env", "single_blas_thread", "with_single_blas_thread"]
+
+ENV_VARS = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS",
+            "VECLIB_MAXIMUM_THREADS")
+
+
+def single_thread_env() -> bool:
+    """Set the BLAS thread variables the user has not set to 1; ``False`` (nothing done)
+    when NumPy is already imported (its BLAS read them at load time)."""
+    if "numpy" in sys.modules:
+        return False
+    for name in ENV_VARS:
+        os.environ.setdefault(name, "1")
+    return True
+
+
+def _env_says_one() -> bool:
+    return os.environ.get("OPENBLAS_NUM_THREADS") == "1" and "numpy" in sys.modules
+
+
+@contextmanager
+def single_blas_thread() -> Iterator[None]:
+    """Limit BLAS to one thread inside the block (no-op without ``threadpoolctl``, or when
+    the environment already did it)."""
+    if _env_says_one():
+        yield
+        return
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - a declared dependency
+        yield
+        return
+    with threadpool_limits(limits=1, user_api="blas"):
+        yield
+
+
+def with_single_blas_thread(fn: Callable) -> Callable:
+    """``fn`` run inside :func:`single_blas_thread` (signature and docs kept)."""
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with single_blas_thread():
+            return fn(*args, **kwargs)
+
+    return wrapper
