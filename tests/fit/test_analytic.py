@@ -51,6 +51,56 @@ def test_gold_ggx_alpha_within_one_percent():
     assert _err(ref, fit) < 0.02
 
 
+@pytest.mark.parametrize("f90", ["free", "one"])
+def test_gold_ggx_conductor_recovers_the_complex_index(f90, tmp_path):
+    """fresnel='conductor': per-channel (η, k) of gold recovered with α (the synthetic
+    material is GGX 0.12 with gold's exact conductor Fresnel); saved and loaded back."""
+    from brdffit.microfacet import ConductorFresnel
+    from brdffit.microfacet.fresnel import GOLD_ETA, GOLD_K
+
+    ref = brdffit.synthetic("gold-ggx")
+    fit = fit_ggx_diffuse(ref, fresnel="conductor", f90=f90)
+    info = fit.fit_info
+    assert info["fresnel"] == "conductor" and isinstance(fit.fresnel, ConductorFresnel)
+    assert info["alpha_x"] == pytest.approx(0.12, rel=0.001)
+    np.testing.assert_allclose(info["eta"], GOLD_ETA, rtol=0.01)
+    np.testing.assert_allclose(info["k"], GOLD_K, rtol=0.01)
+    assert info["objective_normalised"] < 1e-6                      # Schlick: 5e-5
+    assert info["objective_normalised"] < 0.01 * fit_ggx_diffuse(
+        ref, fresnel="schlick", moments=False).fit_info["objective_normalised"]
+    assert _err(ref, fit) < 0.002
+    brdffit.save_fit(fit, tmp_path / "c.npz")
+    back = brdffit.load_fit(tmp_path / "c.npz")
+    np.testing.assert_allclose(back.fresnel.eta, fit.fresnel.eta, rtol=1e-12)
+
+
+def test_plastic_conductor_degenerates_to_the_dielectric():
+    fit = fit_beckmann_diffuse(brdffit.synthetic("plastic-beckmann"), fresnel="conductor",
+                               moments=False)
+    info = fit.fit_info
+    assert info["alpha_x"] == pytest.approx(0.18, rel=0.01)
+    np.testing.assert_allclose(info["eta"], 1.5, rtol=0.01)
+    np.testing.assert_allclose(info["k"], 0.0, atol=0.01)
+    np.testing.assert_allclose(info["rho_d"], [0.45, 0.06, 0.04], rtol=0.01)
+
+
+def test_small_box_qp_matches_the_enumeration():
+    from brdffit.fit import analytic as A
+
+    rng = np.random.default_rng(5)
+    for _ in range(300):
+        k = int(rng.integers(1, 3))
+        m = rng.normal(size=(k, k))
+        H, g = m @ m.T + 1e-3 * np.eye(k), 3.0 * rng.normal(size=k)
+        lo, hi = [0.0] * k, list(rng.uniform(0.5, 5.0, size=k))
+        x, v = A._box_qp_small(H, g, lo, hi)
+        # every point of a fine grid of the box is at least as high
+        axes = [np.linspace(lo[i], hi[i], 201) for i in range(k)]
+        pts = np.stack([a.ravel() for a in np.meshgrid(*axes, indexing="ij")], -1)
+        grid_min = np.min(0.5 * np.einsum("ni,ij,nj->n", pts, H, pts) - pts @ g)
+        assert v <= grid_min + 1e-9 and np.all(x >= 0) and np.all(x <= np.array(hi) + 1e-12)
+
+
 def test_anisotropic_recovery():
     ref = brdffit.synthetic("aniso-ggx")                                 # (0.06, 0.3, 0.45)
     fit = fit_ggx_diffuse(ref)

@@ -30,7 +30,7 @@ from ..schema import F1_MAX, FRESNEL_MAX, INDEX_MAX, RGB, Array, Integer, Schema
 from .base import Fresnel
 
 __all__ = ["SchlickFresnel", "GeneralizedSchlickFresnel", "DielectricFresnel",
-           "ConductorFresnel", "TabulatedFresnel", "GOLD_ETA", "GOLD_K"]
+           "ConductorFresnel", "TabulatedFresnel", "GOLD_ETA", "GOLD_K", "conductor_reflectance"]
 
 #: Approximate RGB complex index of gold (linear sRGB primaries), as commonly tabulated for
 #: rendering (e.g. from Johnson & Christy 1972 spectral data reduced to RGB).
@@ -146,6 +146,38 @@ class DielectricFresnel(Fresnel):
         return f"DielectricFresnel(eta={np.round(self.eta, 4).tolist()})"
 
 
+def conductor_reflectance(c, eta, k) -> np.ndarray:
+    """Unpolarised Fresnel reflectance of a conductor ``eta + i k`` at ``cos θ = c``
+    (broadcast; ``c`` clamped to [0, 1] by the caller).
+
+    Exact, in real arithmetic: with ``s² = 1 − c²``, ``t0 = η² − k² − s²``,
+    ``a² + b² = √(t0² + 4η²k²)``, ``a = √((a² + b² + t0)/2)``:
+    ``Rs = (a²+b² − 2ac + c²)/(a²+b² + 2ac + c²)``,
+    ``Rp = Rs (c²(a²+b²) − 2acs² + s⁴)/(c²(a²+b²) + 2acs² + s⁴)`` (the classic closed form
+    of |r_s|², |r_p|², e.g. Cook & Torrance 1982 / PBRT); ``F = (Rs + Rp)/2`` in [0, 1].
+
+    >>> round(float(conductor_reflectance(1.0, 1.5, 0.0)), 4)      # dielectric, normal incidence
+    0.04
+    """
+    c = np.asarray(c, dtype=np.float64)
+    eta, k = np.asarray(eta, dtype=np.float64), np.asarray(k, dtype=np.float64)
+    c2 = c * c
+    s2 = 1.0 - c2
+    eta2, k2 = eta**2, k**2
+    t0 = eta2 - k2 - s2
+    a2b2 = np.sqrt(t0 * t0 + 4.0 * eta2 * k2)
+    a = np.sqrt(np.maximum(0.5 * (a2b2 + t0), 0.0))
+    t1 = a2b2 + c2
+    t2 = 2.0 * a * c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        Rs = (t1 - t2) / (t1 + t2)
+        t3 = c2 * a2b2 + s2 * s2
+        t4 = t2 * s2
+        Rp = Rs * (t3 - t4) / (t3 + t4)
+    F = 0.5 * (Rs + Rp)
+    return np.clip(np.where(np.isfinite(F), F, 1.0), 0.0, 1.0)
+
+
 class ConductorFresnel(Fresnel):
     """Exact unpolarised Fresnel of a conductor with complex index ``eta + i k`` (RGB).
 
@@ -166,27 +198,8 @@ class ConductorFresnel(Fresnel):
         self._n = self.eta + 1j * self.k
 
     def eval(self, cos_theta_d) -> np.ndarray:
-        """Exact, in real arithmetic: with ``s² = 1 − c²``, ``t0 = η² − k² − s²``,
-        ``a² + b² = √(t0² + 4η²k²)``, ``a = √((a² + b² + t0)/2)``:
-        ``Rs = (a²+b² − 2ac + c²)/(a²+b² + 2ac + c²)``,
-        ``Rp = Rs (c²(a²+b²) − 2acs² + s⁴)/(c²(a²+b²) + 2acs² + s⁴)`` (the classic
-        closed form of |r_s|², |r_p|², e.g. Cook & Torrance 1982 / PBRT)."""
-        c = _cos(cos_theta_d)
-        c2 = c * c
-        s2 = 1.0 - c2
-        eta2, k2 = self.eta**2, self.k**2
-        t0 = eta2 - k2 - s2
-        a2b2 = np.sqrt(t0 * t0 + 4.0 * eta2 * k2)
-        a = np.sqrt(np.maximum(0.5 * (a2b2 + t0), 0.0))
-        t1 = a2b2 + c2
-        t2 = 2.0 * a * c
-        with np.errstate(divide="ignore", invalid="ignore"):
-            Rs = (t1 - t2) / (t1 + t2)
-            t3 = c2 * a2b2 + s2 * s2
-            t4 = t2 * s2
-            Rp = Rs * (t3 - t4) / (t3 + t4)
-        F = 0.5 * (Rs + Rp)
-        return np.clip(np.where(np.isfinite(F), F, 1.0), 0.0, 1.0)
+        """:func:`conductor_reflectance` of the RGB index, ``(..., 3)``."""
+        return conductor_reflectance(_cos(cos_theta_d), self.eta, self.k)
 
     def params(self) -> dict:
         return {"eta": self.eta.tolist(), "k": self.k.tolist()}
