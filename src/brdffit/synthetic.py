@@ -26,9 +26,12 @@ used in renderers (gold: Johnson & Christy 1972; aluminium: Rakić 1995).
 
 from __future__ import annotations
 
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
 from .errors import BRDFError
+
+if TYPE_CHECKING:
+    from .brdf import BRDF
 
 __all__ = ["synthetic", "list_synthetic", "register_synthetic", "describe_synthetic"]
 
@@ -53,8 +56,21 @@ def describe_synthetic() -> dict[str, str]:
     return {k: _REGISTRY[k][1] for k in sorted(_REGISTRY)}
 
 
-def synthetic(name: str):
+def synthetic(name: str) -> BRDF:
     """A new instance of the synthetic material ``name`` (``source = "synthetic:NAME"``).
+
+    Parameters
+    ----------
+    name : str
+        One of :func:`list_synthetic` (``gold-ggx``, ``plastic-beckmann``, ``aniso-ggx``...).
+
+    Returns
+    -------
+    BRDF
+        The material, exactly known (the truth of recovery tests and the demo).
+
+    >>> synthetic("gold-ggx").source
+    'synthetic:gold-ggx'
 
     Raises :class:`~brdffit.errors.BRDFError` for an unknown name (listing the known ones)
     or when the material's model is unavailable.

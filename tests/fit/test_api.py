@@ -79,12 +79,16 @@ def test_npf_variants_accept_the_model_names():
 
 
 def test_docstring_examples_run():
-    import brdffit.fit as fit_pkg
-    from brdffit.fit import analytic, result, tabulated
+    import importlib
 
-    for mod in (fit_pkg, result, tabulated, analytic):
+    import brdffit.fit as fit_pkg
+    from brdffit.fit import analytic, result, sgd, tabulated
+
+    others = [importlib.import_module(f"brdffit.{m}") and sys.modules[f"brdffit.{m}"]
+              for m in ("synthetic", "microfacet.fresnel", "evaluation.metrics")]
+    for mod in (fit_pkg, result, tabulated, analytic, sgd, *others):
         failed, tried = doctest.testmod(mod, optionflags=doctest.ELLIPSIS)
-        assert tried > 0 and failed == 0
+        assert tried > 0 and failed == 0, mod.__name__
 
 
 def test_import_brdffit_and_fit_attribute_do_not_import_numpy():

@@ -21,6 +21,10 @@ from __future__ import annotations
 import sys
 import types
 from importlib import import_module
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..brdf import BRDF
 
 _MODULES = ("tabulated", "sgd", "npf", "analytic")
 _EXPORTS = {
@@ -48,7 +52,7 @@ def __getattr__(name):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def fit(brdf, model: str = "tabulated", **options):
+def fit(brdf: BRDF | str, model: str = "tabulated", **options) -> BRDF:
     """Fit ``brdf`` with the model named ``model``; returns the fitted model (a BRDF).
 
     Parameters

@@ -80,6 +80,7 @@ from __future__ import annotations
 
 import math
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import optimize
@@ -88,6 +89,9 @@ from ..errors import FitError
 from ..geometry import half_diff_to_io
 from ..grid import N_PHI_D, N_THETA_D, N_THETA_H, merl_phi_d, merl_theta_d, merl_theta_h
 from ..schema import ALBEDO_MAX, INDEX_MAX
+
+if TYPE_CHECKING:
+    from ..microfacet import MicrofacetBRDF
 
 __all__ = ["fit_analytic_diffuse", "fit_ggx_diffuse", "fit_beckmann_diffuse", "sample_set",
            "ALPHA_MIN", "ALPHA_MAX_FIT", "summary"]
@@ -707,7 +711,7 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
                          moments: bool = True, theta_d_stride: int | None = None,
                          phi_d_stride: int | None = None, theta_h_stride: int = 3,
                          n_phi_h: int = 12, objective=None,
-                         name: str | None = None):
+                         name: str | None = None) -> MicrofacetBRDF:
     """Fit ``ρd/π + ks F D G/(4 cos θi cos θo)`` to ``brdf`` (see the module docstring).
 
     Parameters
@@ -731,6 +735,13 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
         Density of the fitting samples (``theta_h_stride``, ``n_phi_h``: anisotropic only).
     objective:
         :class:`~brdffit.losses.objective.ObjectiveOptions` (default: the paper's).
+    name:
+        Name of the fitted model (default ``"<input>-<distribution>-diffuse"``).
+
+    Returns
+    -------
+    MicrofacetBRDF
+        See :func:`fit_ggx_diffuse`.
     """
     from ..microfacet import ConductorFresnel, DielectricFresnel, MicrofacetBRDF, SchlickFresnel
 
@@ -805,7 +816,7 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
     return model
 
 
-def fit_ggx_diffuse(brdf, **kwargs):
+def fit_ggx_diffuse(brdf, **kwargs) -> MicrofacetBRDF:
     """GGX + Lambert (ρd/π) with a Schlick (per-channel F0) or dielectric Fresnel, fitted
     over the whole data with the compressive objective (Bagher 2016): the engine-ready model.
 
@@ -835,9 +846,16 @@ def fit_ggx_diffuse(brdf, **kwargs):
     return fit_analytic_diffuse(brdf, "ggx", **kwargs)
 
 
-def fit_beckmann_diffuse(brdf, **kwargs):
+def fit_beckmann_diffuse(brdf, **kwargs) -> MicrofacetBRDF:
     """Beckmann + Lambert (ρd/π), fitted like :func:`fit_ggx_diffuse` (same options and
     result, with a Beckmann distribution).
+
+    Parameters
+    ----------
+    brdf : BRDF
+        Any BRDF (isotropic, or anisotropic with ``anisotropic=True``).
+    **kwargs
+        The options of :func:`fit_analytic_diffuse` (see :func:`fit_ggx_diffuse`).
 
     Examples
     --------

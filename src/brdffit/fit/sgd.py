@@ -1301,8 +1301,38 @@ def fit_sgd(brdf, *, weighting: str = "cosine", starts: int = 3,
             g1_approximation: bool = True, **kwargs) -> PerChannelMicrofacetBRDF:
     """Fit the SGD Cook-Torrance model of Bagher, Soler, Holzschuch 2012 (§5) per channel.
 
-    Returns a :class:`PerChannelMicrofacetBRDF` with, per channel, ``SGD(α, p)``, ρd, ρs,
-    F0, F1 and the Eq. 9 G1 approximation ``(λ, c, k, θ0)``.
+    Parameters
+    ----------
+    brdf : BRDF
+        An isotropic BRDF (its θd = 0 and θh = 0 slices are read, Bagher 2012 §5).
+    weighting : {"cosine", "relative"}
+        Weights of the step-1 fit of the θd = 0 slice (Eq. 12): ``"cosine"`` (default,
+        cos θi cos θo times the solid angle, §6.3-like) or ``"relative"`` (1/value, the
+        relative error of the paper's Eq. 12).
+    starts : int
+        Best candidates of the (α, p) grid scan refined per channel (multi-start).
+    g1_approximation : bool
+        Also fit the closed-form G1 approximation of Eq. 9 ``(λ, c, k, θ0)`` per channel
+        (what the renderer and the exports use); ``False`` keeps the numerical G1 (Eq. 6).
+    **kwargs
+        The options of :func:`fit_two_slice`: ``grid`` (the (α, p) scan), ``selection``,
+        ``linear`` and ``bounded`` (``selection="slice", linear="slice", bounded=False`` is
+        the paper's procedure; the defaults add the safeguards of the module docstring),
+        ``selection_strides``, ``scan_grid``, ``refine``, ``name``.
+
+    Returns
+    -------
+    PerChannelMicrofacetBRDF
+        Per channel ``SGD(α, p)``, ρd, ρs, F0, F1 and the Eq. 9 G1 approximation, with
+        ``fit_info`` (timings, candidates, the chosen candidate and its cost per channel,
+        convergence report) and ``fit_options``.
+
+    Examples
+    --------
+    >>> import brdffit
+    >>> m = brdffit.fit_sgd(brdffit.synthetic("sgd-paint"))
+    >>> type(m).__name__, len(m.channels)
+    ('PerChannelMicrofacetBRDF', 3)
     """
     return fit_two_slice(brdf, "sgd", weighting=weighting, starts=starts,
                          g1_approximation=g1_approximation, **kwargs)

@@ -491,7 +491,7 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
                   rule: str = "auto", hotspot: str = "G2",
                   max_iterations: int = DEFAULT_MAX_ITERATIONS,
                   fresnel_max: float = 100.0, p_floor: float = 1e-6,
-                  fresnel_max_theta_deg: float | None = 89.0):
+                  fresnel_max_theta_deg: float | None = 89.0) -> BRDF:
     """Fit the tabulated microfacet model of Dupuy et al. 2015 to ``brdf``.
 
     Parameters
@@ -525,6 +525,12 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
         the fitted model is evaluated and rendered with, so the fit reproduces the input's
         backscattering under its own ``eval``) or ``"G1"`` (the paper's Eq. 11, which biases
         α by about −2 % at GGX α = 0.2 and −16 % at α = 0.8 for a G2 microsurface).
+    fresnel_max:
+        Upper clamp of the extracted Fresnel table (Eq. 19-20 divide by the model; near
+        zero slope density the ratio is unbounded).
+    p_floor:
+        Samples where the fitted slope PDF is below ``p_floor · max P`` are left out of the
+        Fresnel average (the ratio is undefined there).
     fresnel_max_theta_deg:
         Samples with θi or θo above this angle are left out of the Fresnel average (default
         89°, the cut of Bagher et al. 2016 Eq. 7-12; ``None`` uses every sample as the paper).
@@ -533,7 +539,11 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
         relative error from 1.7-12 to 0.07-0.45; on the Neural-BRDF MERL set it changes it by
         under 3 %.
 
-    Returns a ``MicrofacetBRDF(TabulatedSlopeDistribution, TabulatedFresnel)`` with
+    Returns
+    -------
+    BRDF
+        A ``MicrofacetBRDF(TabulatedSlopeDistribution, TabulatedFresnel)`` (a
+        ``PerChannelBRDF`` of three with ``per_channel=True``) with
     ``fit_info`` (eigenvalue = F0 of the paper, timings, and the convergence report of
     :func:`convergence_info`: ``converged``, ``success``, ``status``, ``message``,
     ``criterion``, ``tol``, ``iterations``/``nit``, ``max_iterations``, ``cap_reached``,

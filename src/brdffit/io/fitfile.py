@@ -117,8 +117,17 @@ def save_fit(model: BRDF, path: str | os.PathLike, *, source=None, options: dict
              fit_info: dict | None = None, source_sha256: str | None = None) -> Path:
     """Write ``model`` to ``path`` (``.npz``) atomically and return the path.
 
-    ``source`` (default: ``model.source``) is recorded with the SHA-256 of its file
-    (:func:`source_checksum`), or ``source_sha256`` when the caller computed it already.
+    Parameters
+    ----------
+    model : BRDF
+        A fitted model that can be saved (``SerializableModel`` with a ``fit_kind``).
+    path : str or os.PathLike
+        The fit file to write (replaced atomically; nothing is written on error).
+    source : str, optional
+        The input's load spec (default ``model.source``), recorded with the SHA-256 of its
+        file (:func:`source_checksum`), or ``source_sha256`` when the caller computed it.
+    options, fit_info : dict, optional
+        Recorded instead of ``model.fit_options`` / ``model.fit_info``.
 
     The state is checked against the model's schema first (exactly as :func:`load_fit` will
     read it): a model that could not be loaded back raises ``BRDFFormatError`` and nothing
@@ -469,6 +478,17 @@ def is_fit_file(path) -> bool:
 
 def load_fit(path: str | os.PathLike) -> BRDF:
     """Load a model written by :func:`save_fit`, validating it (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A fit file (``.npz``); treated as untrusted: sizes, shapes, dtypes and values are
+        checked against the model's schema before anything is decompressed or built.
+
+    Returns
+    -------
+    BRDF
+        The fitted model, with ``fit_info``, ``fit_options`` and ``source`` from the file.
 
     Raises :class:`~brdffit.errors.BRDFFormatError` naming the file (and the field) for any
     file that is not a well-formed fit of a known kind within its schema.

@@ -453,6 +453,9 @@ def write_merl(brdf_or_table, path) -> Path:
 def resample_to_merl(brdf, path=None, *, interpolation: str = "trilinear") -> MERLBRDF:
     """Tabulate an isotropic BRDF on the MERL grid; write it to ``path`` when given.
 
+    ``interpolation`` (``"trilinear"`` or ``"nearest"``) is how the returned table is
+    evaluated between its samples.
+
     Returns the :class:`MERLBRDF` (values at invalid/non-finite/negative evaluations are
     marked invalid). Raises :class:`~brdffit.errors.BRDFFormatError` for an anisotropic BRDF:
     the MERL grid cannot represent it.

@@ -44,6 +44,7 @@ from typing import Iterable
 
 import numpy as np
 
+from ...brdf import BRDF
 from ...errors import FitError
 from ...losses.objective import ObjectiveOptions, prepare_objective
 from ...grid import tabulate_merl_grid
@@ -187,7 +188,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
             g_smoothing: float = 1.0, dr_epsilon: float | None = None,
             start_max_iter: int | None = 100, polish: int = 0, extrapolate: bool = False,
             init: str = "slices",
-            name: str | None = None, callback=None, verbose: bool = False):
+            name: str | None = None, callback=None, verbose: bool = False) -> BRDF:
     """Fit a non-parametric factor model (Bagher, Snyder & Nowrouzezahrai 2016).
 
     Parameters
@@ -228,6 +229,15 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         Dynamic-range clamp (default 1e-6 for independent-G, 0 for G-from-D and naive).
     init:
         Start of G-from-D / naive: ``"slices"`` (default), ``"ones"`` or ``"random"``.
+    n_random, seed:
+        Number of random independent-G starts and the seed of every random start.
+    name:
+        Name of the fitted model (default: the input's name).
+    callback:
+        ``callback(iteration, objective)`` after every AWLS / LM iteration (any variant but
+        bivariate); progress listeners (:mod:`brdffit.progress`) receive the same steps.
+    verbose:
+        Print one line per independent-G start.
 
     Returns
     -------
