@@ -1035,41 +1035,58 @@ class _BatchLog:
 
 
 class _Progress:
-    """Rich progress bar with per-model counts and ETA (no-op when disabled)."""
+    """Rich progress bar with per-model counts and ETA, and below it one line per running
+    task with its last progress event (no-op when disabled). The lines are cropped to the
+    terminal width, so the bars keep their room at 80 columns."""
 
     def __init__(self, tasks: Sequence[Task], enabled: bool):
         self.enabled = enabled
         kinds = [getattr(t, "model", "render") for t in tasks]
         self.models = sorted(set(kinds))
         self.total = {m: kinds.count(m) for m in self.models}
+        self._running: dict[tuple, str] = {}
 
     def __enter__(self):
         if self.enabled:
+            import threading
+
+            from rich.console import Group
+            from rich.live import Live
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
                                        TimeElapsedColumn, TimeRemainingColumn)
+            from rich.text import Text
 
             self._p = Progress(TextColumn("{task.description:>14}"), BarColumn(),
                                MofNCompleteColumn(), TextColumn("{task.fields[failed]} failed"),
-                               TimeElapsedColumn(), TimeRemainingColumn(),
-                               TextColumn("{task.fields[note]}"))
-            self._p.__enter__()
-            self._ids = {m: self._p.add_task(m, total=self.total[m], failed=0, note="")
+                               TimeElapsedColumn(), TimeRemainingColumn())
+            self._status = Text("", no_wrap=True, overflow="ellipsis")
+            self._lock = threading.Lock()
+            self._live = Live(Group(self._p, self._status), refresh_per_second=4)
+            self._live.__enter__()
+            self._ids = {m: self._p.add_task(m, total=self.total[m], failed=0)
                          for m in self.models}
             self._failed = dict.fromkeys(self.models, 0)
         return self
+
+    def _show(self) -> None:
+        with self._lock:
+            self._status.plain = "\n".join(self._running.values())
 
     def advance(self, rec: dict) -> None:
         if self.enabled:
             m = rec["model"]
             self._failed[m] += rec.get("status") not in DONE
-            self._p.update(self._ids[m], advance=1, failed=self._failed[m], note="")
+            self._p.update(self._ids[m], advance=1, failed=self._failed[m])
+            self._running.pop((rec.get("material"), m), None)
+            self._show()
 
     def activity(self, event: dict) -> None:
-        """Show a running task's last progress event on its model's row."""
+        """Show a running task's last progress event on its own line."""
         if self.enabled and event.get("model") in getattr(self, "_ids", {}):
-            note = f"{event.get('material', '')} {describe(event)}"
-            self._p.update(self._ids[event["model"]], note=note[:70])
+            key = (event.get("material"), event["model"])
+            self._running[key] = f"  {event['model']} {event.get('material', '')}: {describe(event)}"
+            self._show()
 
     def __exit__(self, *exc):
         if self.enabled:
-            self._p.__exit__(*exc)
+            self._live.__exit__(*exc)
