@@ -133,3 +133,35 @@ def test_progress_inside_running_tasks_reaches_caller_and_log(tmp_path, dask_cli
     assert any("gold npf-g-from-d: G-from-D AWLS: iteration" in line for line in log)
     assert any(line.endswith(" s") and "gold ggx: ok in" in line for line in log)
     assert "run: 2 task(s) to do, 0 already done" in log[0] and log[-1].endswith("end of run")
+
+
+def test_progress_display_shows_running_tasks_within_80_columns(monkeypatch):
+    import io
+    import re
+
+    import rich.live
+    from rich.console import Console
+
+    from brdffit.batch import Task, _Progress
+
+    buf = io.StringIO()
+    init = rich.live.Live.__init__
+
+    def at_80_columns(self, *a, **k):
+        k["console"] = Console(file=buf, width=80, force_terminal=True, color_system=None)
+        init(self, *a, **k)
+
+    monkeypatch.setattr(rich.live.Live, "__init__", at_80_columns)
+    tasks = [Task("alum-bronze", "x", "npf"), Task("alum-bronze", "x", "ggx")]
+    with _Progress(tasks, enabled=True) as bar:
+        bar.activity({"material": "alum-bronze", "model": "npf", "stage": "start ones",
+                      "iteration": 41, "max_iterations": 100, "objective": 3.06e-4,
+                      "elapsed_s": 54, "note": "x" * 200})
+        bar._live.refresh()
+        shown = buf.getvalue()
+        bar.advance({"material": "alum-bronze", "model": "npf", "status": "ok"})
+        assert bar._status.plain == ""                     # finished: its line goes away
+    lines = re.split(r"\x1b\[[0-9;?]*[A-Za-z]|\n|\r", shown)   # frames, rows
+    assert any("npf alum-bronze: start ones: iteration 41/100" in x for x in lines)
+    assert all(len(x) <= 80 for x in lines)
+    assert any("0/1 0 failed" in x for x in lines)        # the bars keep their columns
