@@ -127,3 +127,22 @@ def test_fitted_plastic_round_trip(tmp_path):
     assert inp["specular_ior"] == pytest.approx(1.5, rel=1e-4)
     np.testing.assert_allclose(list(inp["base_color"]), [0.45, 0.06, 0.04], rtol=1e-3)
     assert 0 < info["fidelity"]["cos_rel_error"] < 0.3
+
+
+def test_dielectric_with_a_flat_fresnel_gets_the_balanced_index():
+    """A fit whose Fresnel is almost constant and small (ks·Schlick(0.9), ks = 0.01, as
+    ggx-diffuse finds on many MERL dielectrics): neither end of the F(0°)-exact family (the
+    shape's high index darkens the base; max F0's low index reaches F(90°) ≈ 1), but the
+    index of f = √(f_shape · f_F0), F(0°) still exact."""
+    from brdffit.export.materialx import _ior_of_f0, openpbr_parameters
+    from brdffit.microfacet import SchlickFresnel
+
+    fit = MicrofacetBRDF(GGX(0.05), SchlickFresnel(0.9), diffuse=[0.3, 0.2, 0.1],
+                         specular=[0.01, 0.01, 0.01])
+    p = openpbr_parameters(fit)
+    assert p["base_metalness"] == 0.0 and any("'balanced' mapping" in n for n in p["notes"])
+    f_shape, f_f0 = 0.9, 0.009
+    assert p["specular_ior"] == pytest.approx(_ior_of_f0(np.sqrt(f_shape * f_f0)), rel=1e-9)
+    f = ((p["specular_ior"] - 1) / (p["specular_ior"] + 1)) ** 2
+    np.testing.assert_allclose(np.array(p["specular_color"]) * f, 0.009, rtol=1e-9)  # F(0°)
+    assert 0.01 < p["specular_color"][0] < 1.0                                         # F(90°)
