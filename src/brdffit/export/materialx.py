@@ -258,14 +258,19 @@ def _dielectric_choice(model, p, F0, F90, notes, n: int = 4096) -> dict:
       but F(90°) ≈ 1: grazing highlights far brighter than the fit's;
 
     the mapping used is the *shape* one when the fit's Fresnel is a dielectric one (exact
-    index and tint), else the **balanced** one between them, ``f = √(f_shape · f_F0)``. Why: BRDF-space errors
-    do not rank these candidates as renders do (the F0 end has the lowest cosine-weighted
-    error and the worst pictures). Measured against the ``ggx-diffuse`` fit, rendered with
-    common random numbers (paper suite, 96², 32 spp × 4): on 8 evenly spaced Neural-BRDF MERL
-    materials with a dielectric mapping the balanced index gains +7.5 dB PSNR on average over
-    the former choice (the lower cosine-weighted error of the two ends; min −1.5 dB on
-    red-plastic, max +15.9 dB on specular-green-phenolic); along the family it was within
-    2 dB of the best member on 5 more. The cosine-weighted errors of the three are in the notes.
+    index and tint), else the one of *shape* and **balanced** — ``f = √(f_shape · f_F0)``,
+    between the two ends — with the lower cosine-weighted error (a dark base loses little to
+    the shape's darkening and keeps its exact grazing Fresnel). Why: BRDF-space errors
+    do not rank the F0 end as renders do (it has the lowest cosine-weighted error and the
+    worst pictures). Measured against the ``ggx-diffuse`` fit, rendered with common random
+    numbers (paper suite, 96², 32 spp × 4): on 8 evenly spaced Neural-BRDF MERL materials
+    with a dielectric mapping the balanced index gained +7.5 dB PSNR on average over the
+    former choice (the lower cosine-weighted error of the two ends; max +15.9 dB on
+    specular-green-phenolic), and along the family it was within 2 dB of the best member on 5
+    more; but always using it lost 20.5 dB on black-obsidian and 12.7 dB on black-phenolic
+    (dark bases, where the shape end is right) — hence the choice between shape and balanced.
+    ``bench/bench_export_fidelity.py`` measures the result over MERL-100. The
+    cosine-weighted errors of the three are in the notes.
     """
     from ..evaluation.metrics import BRDFMetrics
 
@@ -295,8 +300,10 @@ def _dielectric_choice(model, p, F0, F90, notes, n: int = 4096) -> dict:
 
     if isinstance(getattr(model, "fresnel", None), DielectricFresnel) and np.isfinite(errs["shape"]):
         best = "shape"              # the fit's Fresnel is OpenPBR's: index and tint exact
-    else:
-        best = "balanced" if np.isfinite(errs["balanced"]) else min(errs, key=errs.get)
+    else:                           # the F0 end is never used: its grazing peaks ruin renders
+        best = min(("shape", "balanced"), key=errs.get)
+        if not np.isfinite(errs[best]):
+            best = min(errs, key=errs.get)
     c = cands[best]
     notes.append(f"dielectric: specular_ior {c['specular_ior']:.4g}, specular_color "
                  f"{np.round(c['specular_color'], 4).tolist()} ('{best}' mapping; cos_rel_error "
