@@ -246,12 +246,12 @@ def _ior_of_f0(f: float) -> float:
     return float((1.0 + q) / (1.0 - q))
 
 
-def _dielectric_choice(model, p, F0, F90, notes, n: int = 4096) -> dict:
+def _dielectric_choice(model, p, F0, F90, notes, n: int = 1 << 15) -> dict:
     """``specular_ior`` and ``specular_color`` of a dielectric. Along the family with F(0°)
     exact — ``F0(ior) = f``, ``specular_color = F0/f`` (so F(90°) = F0/f) — two ends:
 
-    * *shape*: ``f`` = mean of ``F0/F90`` (the Fresnel's own normal reflectance),
-      ``specular_color = F90`` — the fit's Fresnel exactly when it is a dielectric one, but
+    * *shape*: ``f`` = mean of ``F0/F90`` (the Fresnel's own normal reflectance), so
+      ``specular_color`` = F90 — the fit's Fresnel exactly when it is a dielectric one, but
       MaterialX attenuates the base by the albedo of the *untinted* dielectric, so a fit whose
       F is almost constant (high index, tiny tint) loses its base;
     * *F0*: ``f`` = the largest channel of F0, tint ≤ 1 — a low index that keeps the base,
@@ -270,7 +270,8 @@ def _dielectric_choice(model, p, F0, F90, notes, n: int = 4096) -> dict:
     more; but always using it lost 20.5 dB on black-obsidian and 12.7 dB on black-phenolic
     (dark bases, where the shape end is right) — hence the choice between shape and balanced.
     ``bench/bench_export_fidelity.py`` measures the result over MERL-100. The
-    cosine-weighted errors of the three are in the notes.
+    cosine-weighted errors (2¹⁵ direction pairs: fewer misjudge sharp lobes) of the three
+    are in the notes.
     """
     from ..evaluation.metrics import BRDFMetrics
 
@@ -285,9 +286,7 @@ def _dielectric_choice(model, p, F0, F90, notes, n: int = 4096) -> dict:
         tint = np.clip(F0 / f_eta, 0.0, 1.0) if f_eta > 0 else np.ones(3)
         return {"specular_ior": ior, "specular_color": tint.tolist()}
 
-    cands = {"balanced": candidate(f_bal),
-             "shape": {"specular_ior": _ior_of_f0(f_shape), "specular_color": F90.tolist()},
-             "F0": candidate(f_f0)}
+    cands = {"balanced": candidate(f_bal), "shape": candidate(f_shape), "F0": candidate(f_f0)}
     metric = BRDFMetrics(model, n, 0, ("cos_rel_error",))
     errs = {}
     for k, c in cands.items():
