@@ -219,11 +219,17 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", default=str(ROOT / "runs" / "db"))
     ap.add_argument("--summarise", action="store_true")
-    ap.add_argument("--results", default="report_database",
-                    help="name of the summary in bench/results/ (.json and .csv)")
+    ap.add_argument("--results", default=None,
+                    help="name of the summary in bench/results/ (.json and .csv); default "
+                         "report_database for the default --out, database_<out folder name> "
+                         "otherwise (a run on other fits never overwrites the database's)")
     ap.add_argument("--min-models", type=int, default=7,
                     help="render a material only when this many of its fits exist")
     args = ap.parse_args(argv)
+    if args.results is None:
+        default_out = Path(ap.get_default("out")).resolve()
+        args.results = ("report_database" if Path(args.out).resolve() == default_out
+                        else f"database_{Path(args.out).name}")
     if not args.summarise:
         render(args)
     summarise(args)
