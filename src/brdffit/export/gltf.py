@@ -32,7 +32,11 @@ GGX tails; the loss is measured):
   fit's specular scale, F its Fresnel), clipped to [0, 1];
 * **metallic rule**: a metal (``metallic = 1``, ``baseColorFactor = F0``, the fit's diffuse
   term dropped, F90 = 1) when the luminance of F0 is ≥ 0.08 (``MATERIAL_METAL_F0``: common
-  dielectrics, η ≤ 1.8, have F0 ≤ 0.08) and exceeds the luminance of the fit's ρd, or when
+  dielectrics, η ≤ 1.8, have F0 ≤ 0.08), exceeds the luminance of the fit's ρd and — with
+  the extensions — the luminance of the fit's F90 is ≥ 0.8 (``METAL_MIN_F90``; measured
+  fits such as the ggx-diffuse ones of MERL's metallic paints reach only 0.1-0.5 at
+  grazing, which glTF's metal would raise to 1: 7.7-29 dB against the fit; as dielectrics
+  with ``specularFactor`` = F90 they keep both reflectances and the diffuse term), or when
   the fit has no diffuse term at all (tabulated fits: their Fresnel table absorbs the
   diffuse part; a dielectric would be black);
 * otherwise a **dielectric Lambert + Schlick F0**: ``metallic = 0``, ``baseColorFactor = ρd``
@@ -70,6 +74,9 @@ __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material"
            "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0"]
 
 MATERIAL_METAL_F0 = 0.08
+#: with the KHR extensions (``specular=True``), a fit is exported as a metal only when the
+#: luminance of its F90 is at least this (glTF's metal reaches 1 at grazing)
+METAL_MIN_F90 = 0.8
 
 
 class GLTFBRDF(IsotropicBRDF):
@@ -289,7 +296,10 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
     F0c = np.clip(F0, 0.0, 1.0)
     rd = np.zeros(3) if m.diffuse is None else np.asarray(m.diffuse, float)
     lum = float(LUMA @ F0c)
-    metal = (m.diffuse is None and lum > 0) or (lum >= MATERIAL_METAL_F0
+    # a metal's F90 is 1 in glTF: with the extensions, a fit whose grazing reflectance is far
+    # below 1 keeps it (and its diffuse term) as a dielectric with specularFactor = F90
+    grazing_ok = not specular or float(LUMA @ np.clip(F90, 0.0, None)) >= METAL_MIN_F90
+    metal = (m.diffuse is None and lum > 0) or (lum >= MATERIAL_METAL_F0 and grazing_ok
                                                  and float(LUMA @ rd) < lum)
     spec = None
     if metal:
