@@ -386,14 +386,20 @@ def _linear(S, data, fresnel: str, f90: str, Fd=None):
             "ks": None if f90 == "one" else np.clip(ks, 0.0, KS_MAX), "E": E}
 
 
+def _shape_of(kind, params, data):
+    """``S`` of the distribution of ``params = (αx, αy, ρ, ·)``, ``None`` when invalid."""
+    try:
+        return _spec_shape(_distribution(kind, *params[:3]), data)
+    except ValueError:
+        return None
+
+
 def _evaluate(kind, params, data, fresnel, f90):
     """``(E, linear part)`` of ``params = (αx, αy, ρ, η)``; ``(inf, None)`` if invalid."""
-    ax, ay, rho, eta = params
-    try:
-        dist = _distribution(kind, ax, ay, rho)
-    except ValueError:
+    S = _shape_of(kind, params, data)
+    if S is None:
         return np.inf, None
-    S = _spec_shape(dist, data)
+    eta = params[3]
     Fd = _fresnel_values(fresnel, eta, data)
     lin = _linear(S, data, fresnel, f90, Fd)
     if lin is None:
@@ -510,12 +516,9 @@ def _conductor_channel(nodes, c: int, f90: str, starts):
 
 def _conductor_at(kind, params, data, f90, starts_per_channel):
     """The conductor fit for the distribution ``params``: ``(E, lin)`` or ``(inf, None)``."""
-    ax, ay, rho, _ = params
-    try:
-        dist = _distribution(kind, ax, ay, rho)
-    except ValueError:
+    S = _shape_of(kind, params, data)
+    if S is None:
         return np.inf, None
-    S = _spec_shape(dist, data)
     nodes = _node_sums(S, data)
     out = [_conductor_channel(nodes, c, f90, starts_per_channel[c]) for c in range(3)]
     if any(o is None for o in out):
