@@ -284,8 +284,9 @@ def main() -> None:
                 print(f"timing the baseline {rev} ...", flush=True)
                 result["baseline"] = {"revision": rev, "commands": time_commands(
                     py, base / "src", gold, bad, args.runs, baseline=True)}
-        else:
-            for key in ("commands", "fit_breakdown", "baseline"):
+        else:   # keep the command timings with the revision and load they were measured at
+            for key in ("commands", "fit_breakdown", "baseline", "revision",
+                        "load_average_before", "load_average_after"):
                 if key in previous:
                     result[key] = previous[key]
         if args.models:
@@ -297,10 +298,12 @@ def main() -> None:
             figs = dict(previous.get("models", {}).get("figures", {}))
             figs.update(model_figures(gold, names))
             result["models"] = {"input": what, "figures": figs,
-                                "measured_at_revision": result["revision"]}
+                                "measured_at_revision": _git("rev-parse", "--short", "HEAD"),
+                                "load_average": os.getloadavg()}
         elif "models" in previous:
             result["models"] = previous["models"]
-    result["load_average_after"] = os.getloadavg()
+    if not args.no_commands:
+        result["load_average_after"] = os.getloadavg()
     result["note"] = ("children run with bytecode caching (PYTHONPYCACHEPREFIX in a temporary "
                       "folder; this machine's sessions set PYTHONDONTWRITEBYTECODE=1), after one "
                       "warm-up run of each command; medians over the runs, interleaved")

@@ -87,12 +87,13 @@ PAPERS = {
 #: ``bench/bench_cli.py --models`` (bench/results/cli.json, "models"; CPU time, 2 significant
 #: digits; tests/cli/test_help_models.py checks they match that file).
 _TYPICAL = {
-    "tabulated": (4393, 1800, 0.10), "ggx": (3193, 1080, 0.031),
-    "beckmann": (3207, 1080, 0.034), "ggx-diffuse": (2573, 0, 1.8),
-    "beckmann-diffuse": (2703, 0, 1.9), "sgd": (5966, 0, 0.36), "beckmann-2s": (5240, 0, 0.11),
-    "ggx-2s": (5098, 0, 0.092), "beckmann-ct": (1547, 0, 2.4), "ggx-ct": (1460, 0, 1.8),
-    "npf": (71733, 3264, 100.0), "npf-g-from-d": (5772, 3264, 2.1),
-    "npf-naive": (6762, 4344, 0.85), "npf-bivariate": (98639, 97200, 0.97),
+    "tabulated": (4393, 1800, 0.049), "ggx": (3194, 1080, 0.03),
+    "beckmann": (3208, 1080, 0.029), "ggx-diffuse": (3014, 0, 1.1),
+    "beckmann-diffuse": (3138, 0, 1.1), "sgd": (5957, 0, 0.46),
+    "beckmann-2s": (5243, 0, 0.11), "ggx-2s": (5099, 0, 0.064),
+    "beckmann-ct": (1547, 0, 0.72), "ggx-ct": (1457, 0, 0.55), "npf": (72217, 3264, 98.0),
+    "npf-g-from-d": (6178, 3264, 1.6), "npf-naive": (7182, 4344, 1.0),
+    "npf-bivariate": (98912, 97200, 0.63),
 }
 
 
