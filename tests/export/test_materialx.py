@@ -146,3 +146,16 @@ def test_dielectric_with_a_flat_fresnel_gets_the_balanced_index():
     f = ((p["specular_ior"] - 1) / (p["specular_ior"] + 1)) ** 2
     np.testing.assert_allclose(np.array(p["specular_color"]) * f, 0.009, rtol=1e-9)  # F(0°)
     assert 0.01 < p["specular_color"][0] < 1.0                                         # F(90°)
+
+
+def test_metal_like_fit_with_low_grazing_reflectance_is_a_dielectric():
+    """The glTF rule: F0 0.2 but F90 0.3 keeps the diffuse term as a dielectric."""
+    from brdffit.export.materialx import openpbr_parameters
+
+    fit = MicrofacetBRDF(GGX(0.1), SchlickFresnel(2.0 / 3.0), diffuse=[0.05, 0.04, 0.03],
+                         specular=[0.3, 0.3, 0.3])
+    p = openpbr_parameters(fit)
+    assert p["base_metalness"] == 0.0
+    np.testing.assert_allclose(p["base_color"], [0.05, 0.04, 0.03])
+    gold = openpbr_parameters(brdffit.synthetic("gold-ggx"))      # F90 = 1: still a metal
+    assert gold["base_metalness"] == 1.0

@@ -71,7 +71,8 @@ from ..brdf import IsotropicBRDF, _as_dirs
 from ._common import LUMA, check_output_path, fail, is_elliptical, shown, writing
 
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material",
-           "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0"]
+           "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0",
+           "METAL_MIN_F90"]
 
 MATERIAL_METAL_F0 = 0.08
 #: with the KHR extensions (``specular=True``), a fit is exported as a metal only when the

@@ -31,7 +31,8 @@ and, since ``geometry_tangent`` is the mesh's, not applied (part of the measured
   the *untinted* dielectric, which a high index with a small tint overstates) and ``max
   F0`` (a low index that keeps the base but reaches F(90°) ≈ 1) — chosen by rendering; a
   dielectric fit of index η gives back ``specular_ior = η``, ``specular_color = ks`` exactly;
-* **metal** (``base_metalness = 1``): OpenPBR's metal is ``specular_weight ·
+* **metal** (``base_metalness = 1``) under glTF's rule (luminance of F0 ≥ 0.08, above ρd's,
+  and of F90 ≥ 0.8; or no diffuse term): OpenPBR's metal is ``specular_weight ·
   F_Schlick(base_color, F90 = 1)`` (``specular_color`` = F82 tint, white = plain Schlick):
   ``specular_weight = max F90`` (≤ 1 unless F0 exceeds it), ``base_color = F0 /
   specular_weight`` — exact for a Schlick fit with a grey ks.
@@ -193,7 +194,7 @@ def _schlick_f82(cos_t, f0, f82_tint):
 def openpbr_parameters(model) -> dict:
     """OpenPBR inputs of a fit by the rules of the module docstring, with ``notes``,
     ``tangent_rotation_deg`` and the fit's ``F0``, ``F90``, ``rho_d``."""
-    from .gltf import MATERIAL_METAL_F0, _ggx_model
+    from .gltf import MATERIAL_METAL_F0, METAL_MIN_F90, _ggx_model
 
     m, notes = _ggx_model(model, "MaterialX")
     d = m.distribution
@@ -220,7 +221,11 @@ def openpbr_parameters(model) -> dict:
     F0c, F90c = np.clip(F0, 0.0, 1.0), np.clip(F90, 0.0, 1.0)
     rd = np.zeros(3) if m.diffuse is None else np.asarray(m.diffuse, float)
     lum = float(LUMA @ F0c)
+    # as for glTF: a fit whose grazing reflectance stays far below 1 is no metal (OpenPBR's
+    # metal would drop its diffuse term): +9.4 dB mean (min +5.1) rendered against the fit on
+    # the 10 MERL materials this moved (paper suite, CRN)
     metal = (m.diffuse is None and lum > 0) or (lum >= MATERIAL_METAL_F0
+                                                 and float(LUMA @ F90c) >= METAL_MIN_F90
                                                  and float(LUMA @ rd) < lum)
     p = {"specular_roughness": r, "specular_roughness_anisotropy": float(a),
          "base_weight": 1.0, "base_diffuse_roughness": 0.0,
