@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -81,10 +80,10 @@ class Outcome:
         return found
 
 
-def _limit(max_bytes: int):
-    def apply():  # runs in the child before exec
-        resource.setrlimit(resource.RLIMIT_AS, (max_bytes, max_bytes))
-    return apply
+_LAUNCHER = ("import os, resource, sys\n"
+             "n = int(sys.argv[1])\n"
+             "resource.setrlimit(resource.RLIMIT_AS, (n, n))\n"
+             "os.execv(sys.executable, [sys.executable, '-m', 'brdffit', *sys.argv[2:]])\n")
 
 
 def run_limited(args: Sequence[str], *, cwd=None, max_bytes: int = MEMORY_LIMIT,
@@ -95,14 +94,17 @@ def run_limited(args: Sequence[str], *, cwd=None, max_bytes: int = MEMORY_LIMIT,
     thread stacks) and inherits the environment otherwise. Peak resident memory comes from
     ``wait4``'s resource usage of the child.
     """
-    argv = [sys.executable, "-m", "brdffit", *map(str, args)]
+    # The limit is set by a small launcher that then execs brdffit: with a preexec_fn,
+    # subprocess would fork() this (large) test process, and Linux's ru_maxrss of the child
+    # keeps the RSS it had before exec — the parent's, not the input's.
+    argv = [sys.executable, "-c", _LAUNCHER, str(int(max_bytes)), *map(str, args)]
     child_env = {**os.environ, **(env or {}), "OMP_NUM_THREADS": "1",
                  "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
                  "NUMBA_NUM_THREADS": "1", "PYTHONFAULTHANDLER": ""}
     t0 = time.perf_counter()
     with tempfile.TemporaryFile("w+") as fout, tempfile.TemporaryFile("w+") as ferr:
         proc = subprocess.Popen(argv, cwd=cwd, env=child_env, stdout=fout, stderr=ferr,
-                                text=True, preexec_fn=_limit(max_bytes))
+                                text=True)
         timed_out = False
         while True:  # wait4 gives this child's own peak RSS (Popen.wait would not)
             pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
@@ -118,4 +120,5 @@ def run_limited(args: Sequence[str], *, cwd=None, max_bytes: int = MEMORY_LIMIT,
         proc.returncode = os.waitstatus_to_exitcode(status)
         fout.seek(0), ferr.seek(0)
         out, err = fout.read(), ferr.read()
-    return Outcome(argv[3:], proc.returncode, out, err, seconds, usage.ru_maxrss * 1024, timed_out)
+    return Outcome(list(map(str, args)), proc.returncode, out, err, seconds,
+                   usage.ru_maxrss * 1024, timed_out)
