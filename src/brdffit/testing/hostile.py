@@ -91,12 +91,12 @@ def run_limited(args: Sequence[str], *, cwd=None, max_bytes: int = MEMORY_LIMIT,
     """Run ``python -m brdffit ARGS`` with an address-space limit of ``max_bytes``.
 
     The child gets one thread per numerical library (so the limit measures the input, not
-    thread stacks) and inherits the environment otherwise. Peak resident memory comes from
-    ``wait4``'s resource usage of the child.
+    thread stacks) and inherits the environment otherwise. Peak resident memory is the
+    child's ``VmHWM`` (/proc) polled every 5 ms once it runs brdffit: ``wait4``'s
+    ``ru_maxrss`` cannot be used, since Linux keeps in it the RSS the child had *before*
+    exec — this (possibly large) test process's, copied by fork.
     """
-    # The limit is set by a small launcher that then execs brdffit: with a preexec_fn,
-    # subprocess would fork() this (large) test process, and Linux's ru_maxrss of the child
-    # keeps the RSS it had before exec — the parent's, not the input's.
+    # the limit is set by a small launcher that then execs brdffit (no preexec_fn)
     argv = [sys.executable, "-c", _LAUNCHER, str(int(max_bytes)), *map(str, args)]
     child_env = {**os.environ, **(env or {}), "OMP_NUM_THREADS": "1",
                  "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
@@ -106,7 +106,9 @@ def run_limited(args: Sequence[str], *, cwd=None, max_bytes: int = MEMORY_LIMIT,
         proc = subprocess.Popen(argv, cwd=cwd, env=child_env, stdout=fout, stderr=ferr,
                                 text=True)
         timed_out = False
-        while True:  # wait4 gives this child's own peak RSS (Popen.wait would not)
+        peak = 0
+        while True:
+            peak = max(peak, _hwm_after_exec(proc.pid))
             pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
             if pid:
                 break
@@ -120,5 +122,21 @@ def run_limited(args: Sequence[str], *, cwd=None, max_bytes: int = MEMORY_LIMIT,
         proc.returncode = os.waitstatus_to_exitcode(status)
         fout.seek(0), ferr.seek(0)
         out, err = fout.read(), ferr.read()
-    return Outcome(list(map(str, args)), proc.returncode, out, err, seconds,
-                   usage.ru_maxrss * 1024, timed_out)
+    return Outcome(list(map(str, args)), proc.returncode, out, err, seconds, peak, timed_out)
+
+
+def _hwm_after_exec(pid: int) -> int:
+    """``VmHWM`` of ``pid`` in bytes once it has exec'd the launcher or brdffit (its
+    command line is then ``python -c …`` or ``python -m brdffit …``), else 0."""
+    try:
+        with open(f"/proc/{pid}/cmdline", "rb") as fh:
+            argv = fh.read().split(b"\0")
+        if not (argv[1:2] == [b"-c"] or argv[1:3] == [b"-m", b"brdffit"]):
+            return 0                                   # still the fork of this process
+        with open(f"/proc/{pid}/status", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return 0
