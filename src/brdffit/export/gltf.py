@@ -268,6 +268,17 @@ def _is_default_specular(ext) -> bool:
             and all(abs(c - 1.0) < 1e-12 for c in ext["specularColorFactor"]))
 
 
+def is_metal(m, F0c, rd, F90=None) -> bool:
+    """The metallic rule (module docstring) shared by glTF and MaterialX: no diffuse term,
+    or F0's luminance ≥ ``MATERIAL_METAL_F0`` above ρd's and — when ``F90`` is given (a
+    target that can carry F90 otherwise) — F90's luminance ≥ ``METAL_MIN_F90``."""
+    lum = float(LUMA @ F0c)
+    if m.diffuse is None:
+        return lum > 0
+    grazing_ok = F90 is None or float(LUMA @ F90) >= METAL_MIN_F90
+    return lum >= MATERIAL_METAL_F0 and grazing_ok and float(LUMA @ rd) < lum
+
+
 def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> dict:
     """``{"baseColorFactor", "metallicFactor", "roughnessFactor", "alpha", "notes",
     "anisotropy", "specular", ...}`` of a fit by the rules of the module docstring; with
@@ -296,12 +307,9 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
     F90 = ks * (np.ones(3) if m.fresnel is None else np.asarray(m.fresnel.eval(0.0), float))
     F0c = np.clip(F0, 0.0, 1.0)
     rd = np.zeros(3) if m.diffuse is None else np.asarray(m.diffuse, float)
-    lum = float(LUMA @ F0c)
     # a metal's F90 is 1 in glTF: with the extensions, a fit whose grazing reflectance is far
     # below 1 keeps it (and its diffuse term) as a dielectric with specularFactor = F90
-    grazing_ok = not specular or float(LUMA @ np.clip(F90, 0.0, None)) >= METAL_MIN_F90
-    metal = (m.diffuse is None and lum > 0) or (lum >= MATERIAL_METAL_F0 and grazing_ok
-                                                 and float(LUMA @ rd) < lum)
+    metal = is_metal(m, F0c, rd, np.clip(F90, 0.0, None) if specular else None)
     spec = None
     if metal:
         base = F0c
