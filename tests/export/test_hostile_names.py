@@ -433,8 +433,8 @@ def test_nul_in_output_name_is_one_clean_error(tmp_path, capsys):
 
 
 def test_unrepresentable_model_is_one_line(tmp_path, capsys):
-    for to, model in (("materialx", "sgd-paint"), ("gltf", "sgd-paint"), ("rgl", "aniso-ggx"),
-                      ("merl", "aniso-ggx")):
+    # (anisotropic models go to rgl since issue 14.4: phi_i slices)
+    for to, model in (("materialx", "sgd-paint"), ("gltf", "sgd-paint"), ("merl", "aniso-ggx")):
         rc = main(["export", f"synthetic:{model}", "--to", to, "-o", str(tmp_path / f"x.{to}")])
         err = capsys.readouterr().err
         assert rc == 1 and len(err.strip().splitlines()) == 1 and err.startswith("brdffit: error:")

@@ -162,15 +162,24 @@ print(kind, bool(np.isfinite(img).all()), float(img[..., :3].max()))
 """
 
 
+def run_plain_mitsuba(script: str, *args, cwd):
+    """Run ``script`` (e.g. :data:`_PLAIN_MITSUBA`, which refuses to have imported brdffit) in
+    a fresh interpreter without ``PYTHONPATH``: a Mitsuba install that never sees brdffit.
+    Returns the ``CompletedProcess`` (text output)."""
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    return subprocess.run([sys.executable, "-c", script, *map(str, args)], capture_output=True,
+                          text=True, cwd=cwd, env=env, timeout=300)
+
+
 @pytest.mark.render
 @pytest.mark.parametrize("model", ["tabulated", "ggx-diffuse", "sgd", "npf-g-from-d",
                                    "npf-naive", "npf-bivariate"])
 def test_mitsuba_xml_of_every_model_loads_in_plain_mitsuba(tmp_path, model):
     """Issue 14.4: a scene that a Mitsuba install without brdffit loads and renders; models
     with no built-in plugin go through an RGL tensor file and the stock ``measured`` plugin."""
-    import subprocess
-    import sys
-
     from brdffit.fit.registry import fit_model
 
     _mi()
@@ -180,9 +189,7 @@ def test_mitsuba_xml_of_every_model_loads_in_plain_mitsuba(tmp_path, model):
     assert all(os.path.isfile(f) for f in info["files"])
     # the resampling error of the tensor file, read back by brdffit's own RGL reader
     assert info["error"]["cos_rel_error"] < 0.02
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
-    run = subprocess.run([sys.executable, "-c", _PLAIN_MITSUBA, str(tmp_path / "my scene.xml")],
-                         capture_output=True, text=True, cwd=tmp_path, env=env, timeout=300)
+    run = run_plain_mitsuba(_PLAIN_MITSUBA, tmp_path / "my scene.xml", cwd=tmp_path)
     assert run.returncode == 0, run.stderr[-2000:]
     kind, finite, peak = run.stdout.split()
     assert finite == "True" and float(peak) > 0

@@ -22,7 +22,7 @@ def export_merl(model, path, **_ignored) -> dict:
 
     if not getattr(model, "isotropic", False):
         fail(model, "MERL .binary", "an isotropic BRDF (the MERL grid has no φh axis); "
-             "anisotropic fits can go to 'json', 'mitsuba' or 'glsl'")
+             "anisotropic fits can go to 'rgl', 'mitsuba-xml', 'json', 'mitsuba' or 'glsl'")
     path = check_output_path(path)
     table = resample_to_merl(model)
     with writing(path):

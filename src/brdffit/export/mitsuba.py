@@ -562,7 +562,8 @@ def write_mitsuba_xml(model, path, resolution: int = 256, spp: int = 64,
     * ``"plastic"`` – :func:`plastic_bsdf`;
     * ``"measured"`` – an RGL tensor file (:mod:`.rgl`, Dupuy & Jakob 2018 layout) written
       next to the XML as ``<slug of the XML stem>.bsdf`` and read by Mitsuba's stock
-      ``measured`` plugin: any isotropic model (tabulated, per-channel SGD, NPF variants);
+      ``measured`` plugin: any model (tabulated, per-channel SGD, NPF variants; anisotropic
+      models with ``phi_i`` slices, see :mod:`.rgl`);
     * ``"auto"`` (default) – ``"conductor"`` where the model maps to built-in plugins, else
       ``"measured"``.
 
@@ -589,10 +590,7 @@ def write_mitsuba_xml(model, path, resolution: int = 256, spp: int = 64,
                 raise ExportError("measured requested")
             bsdf, info = builtin_bsdf(model)
             err = mitsuba_error(model)
-        except ExportError as exc:
-            if style == "auto" and not getattr(model, "isotropic", False):
-                raise ExportError(f"{exc} (and an anisotropic model cannot go to the RGL tensor "
-                                  "of Mitsuba's measured plugin; use --to mitsuba or json)") from None
+        except ExportError:
             path = check_output_path(path)
             tensor = path.with_name(slug(path.stem) + ".bsdf")
             bsdf = {"type": "measured", "filename": tensor.name}
@@ -606,10 +604,14 @@ def write_mitsuba_xml(model, path, resolution: int = 256, spp: int = 64,
         with writing(path), atomic_write(path, "wb") as fh:
             fh.write(data)
         return {"files": [str(path)], "target": "mitsuba-xml", **info, "error": err}
-    from .rgl import rgl_error, rgl_fields
+    from .rgl import phi_i_reduction, rgl_error, rgl_fields
     from ..io.tensorfile import write_tensor_file
 
     fields = rgl_fields(model)
+    n_phi, red = int(fields["phi_i"].size), phi_i_reduction(fields["phi_i"])
+    info.update(phi_i_slices=n_phi, reduction=red)
+    if n_phi > 1:
+        info["notes"].append(f"anisotropic: {n_phi} phi_i slices over 2pi/{red}")
     with StagedFiles(path) as staged:
         tmp = staged.path(tensor)
         with writing(tensor):
