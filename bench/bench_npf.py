@@ -62,7 +62,7 @@ from brdffit.grid import tabulate_merl_grid  # noqa: E402
 
 ZIP = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
 SPECULAR = ("nickel", "color-changing-paint1", "maroon-plastic", "white-fabric2")
-FIELDS = ["material", "variant", "time_s", "iterations", "gss_calls", "objective",
+FIELDS = ["material", "variant", "time_s", "iterations", "line_searches", "objective",
           "normalised_objective", "relative_error", "fit_objective", "stop_reason", "status",
           "starts"]
 
@@ -123,8 +123,8 @@ def summarise(rows: list[dict]) -> dict:
         out["per_variant"][v] = {
             "time_s": _stats(r["time_s"] for r in rs),
             "iterations": _stats(r["iterations"] for r in rs),
-            "gss_calls": _stats(r["gss_calls"] for r in rs),
-            "materials_invoking_gss": sum(1 for r in rs if float(r["gss_calls"]) > 0),
+            "line_searches": _stats(r["line_searches"] for r in rs),
+            "materials_with_line_searches": sum(1 for r in rs if float(r["line_searches"]) > 0),
             "normalised_objective_mean": float(np.mean([float(r["normalised_objective"])
                                                         for r in rs])),
             "relative_error_mean": float(np.mean([float(r["relative_error"]) for r in rs])),
@@ -180,7 +180,7 @@ def from_batch(batch_dir: Path, json_path: Path, csv_path: Path) -> dict:
             row["status"] = ("ok" if all(np.all(np.isfinite(f)) and np.all(f >= 0) for f in factors)
                              else "non-finite or negative factor")
             met = rec.get("metrics") or {}
-            row.update(iterations=info.get("iterations"), gss_calls=info.get("gss_calls", 0),
+            row.update(iterations=info.get("iterations"), line_searches=info.get("line_searches", 0),
                        objective=info.get("objective"),
                        normalised_objective=met.get("compressive_objective"),
                        relative_error=met.get("cos_rel_error"),
@@ -263,7 +263,7 @@ def main(argv=None) -> int:
                 fv, _ = tabulate_merl_grid(model)
                 o = objective_from_values(fv, values, valid, std)
                 rel = relative_error_from_values(fv, values, valid)
-                row.update(iterations=info.get("iterations"), gss_calls=info.get("gss_calls"),
+                row.update(iterations=info.get("iterations"), line_searches=info.get("line_searches"),
                            objective=f"{o['objective']:.9g}",
                            normalised_objective=f"{o['normalised']:.6g}",
                            relative_error=f"{rel['relative_error']:.6g}",
@@ -281,7 +281,7 @@ def main(argv=None) -> int:
                 row.update(status=f"error: {type(exc).__name__}: {exc}")
             rows.append(row)
             print(f"{name:28s} {v:14s} t={row.get('time_s', '-'):>8s}s "
-                  f"it={row.get('iterations', '-')!s:>5s} gss={row.get('gss_calls', '-')!s:>4s} "
+                  f"it={row.get('iterations', '-')!s:>5s} gss={row.get('line_searches', '-')!s:>4s} "
                   f"E/E0={row.get('normalised_objective', '-'):>10s} "
                   f"relerr={row.get('relative_error', '-'):>9s} {row['status']}", flush=True)
         write_rows(csv_path, rows)

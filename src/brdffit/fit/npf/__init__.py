@@ -19,9 +19,14 @@ Deviations from the paper (deliberate, documented):
 * Samples at φd and π − φd are folded into one (same θh, θd, swapped θi/θo, so the same
   model value): every least-squares update is unchanged, Eq. 7 changes by a constant that
   is added back, and each pass costs half.
-* Independent-G does one G step per outer iteration (D, F, G, ρ), with the golden-section
-  search whenever that step increases the objective (the paper iterates G "until it converges
-  or increases the objective").
+* Independent-G does one G step per outer iteration (D, F, G, ρ), taken with an exact line
+  search over-relaxed by ω = 1.9 (the objective along the G step is a quartic built in one
+  pass, ``_solver.line_search_g``; the paper iterates G "until it converges or increases the
+  objective"), and each sweep is followed by an accepted-only-if-better over-relaxation of
+  all factors (``extrapolate``, default on). Together they make the fit converge where plain
+  AWLS crawls along the near-ambiguity of F(θd) and G(θi)G(θo): bench/bench_npf.py.
+* G-from-D searches along a D step that increases the objective by parabolic interpolation
+  started from the previous accepted step (``_solver.run_g_from_d``).
 * Objective weights at cell centres (see :mod:`brdffit.losses.objective`).
 * The start "from the SGD fit" uses :func:`brdffit.fit.sgd.fit_sgd` when that module exists
   (the paper used its authors' earlier Bagher et al. 2012 fits); otherwise it is skipped and
@@ -57,7 +62,7 @@ __all__ = ["fit_npf", "VARIANTS", "ALL_STARTS", "summary"]
 
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
 ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
-DEFAULT_MAX_ITER = {"independent-g": 1000, "g-from-d": 300, "naive": 3000}
+DEFAULT_MAX_ITER = {"independent-g": 2000, "g-from-d": 300, "naive": 3000}
 #: model names of the registry and CLI -> variants (one naming scheme across CLI and API)
 CLI_VARIANTS = {"npf": "independent-g", "npf-g-from-d": "g-from-d", "npf-naive": "naive",
                 "npf-bivariate": "bivariate"}
@@ -186,7 +191,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
             max_iter: int | None = None, tol: float = 1e-6,
             starts: Iterable[str] | None = None, n_random: int = 4, seed: int = 0,
             g_smoothing: float = 1.0, dr_epsilon: float | None = None,
-            start_max_iter: int | None = 100, polish: int = 0, extrapolate: bool = False,
+            start_max_iter: int | None = 100, polish: int = 0, extrapolate: bool = True,
             init: str = "slices",
             name: str | None = None, callback=None, verbose: bool = False) -> BRDF:
     """Fit a non-parametric factor model (Bagher, Snyder & Nowrouzezahrai 2016).
@@ -207,7 +212,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         (Fig. 7), restricted angular range (Fig. 15), compressive power, θi/θo cut (89°).
     max_iter, tol:
         Stopping rule (see :mod:`._solver`); ``max_iter`` defaults per variant
-        (independent-G 1000, G-from-D 300, naive 3000).
+        (independent-G 2000 in all, screening included; G-from-D 300; naive 3000).
     starts:
         Independent-G starts, any of ``ALL_STARTS`` (default: all, as the paper:
         ``n_random`` random starts, all-ones, SGD fit, G-from-D fit, data slices). The best
@@ -221,8 +226,8 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         factors at once) run after AWLS; 0 (default) is the paper's AWLS only. An extension
         that crosses the flat valleys where AWLS crawls (see ``_solver.polish_lm``).
     extrapolate:
-        Independent-G: over-relaxation after each AWLS sweep, accepted only if it lowers the
-        objective (extension, default off = plain AWLS).
+        Independent-G: over-relaxation of all factors after each AWLS sweep, accepted only if
+        it lowers the objective (extension, default on; off = the paper's sweeps).
     g_smoothing:
         σ (in G samples) of the Gaussian smoothing of G in independent-G (0 disables).
     dr_epsilon:
@@ -242,7 +247,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
     Returns
     -------
     NPFMicrofacetBRDF, NPFNaiveBRDF or NPFBivariateBRDF with ``fit_info`` (objective, history,
-    iterations, GSS calls, timings, starts) and ``fit_options``.
+    iterations, line searches, timings, starts, convergence) and ``fit_options``.
     """
     variant = CLI_VARIANTS.get(variant, variant)       # the model names work too
     if variant not in VARIANTS:
@@ -278,7 +283,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         B, E = _solver.fit_bivariate_table(obj)
         _check_state([B], "bivariate fit")
         model = NPFBivariateBRDF(np.moveaxis(B, 0, -1), name=mat_name, source=source)
-        return finish(model, E, {"iterations": 1, "gss_calls": 0, "history": [float(E.sum())],
+        return finish(model, E, {"iterations": 1, "line_searches": 0, "history": [float(E.sum())],
                                  "stop_reason": "closed form"})
 
     if variant == "naive":
@@ -393,7 +398,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
                    ok_runs[0]["history"])
     extra = {"starts": runs, "best_start_per_channel": blab}
     iters = sum(r["iterations"] for r in ok_runs)
-    gss = sum(r["gss_calls"] for r in ok_runs)
+    gss = sum(r["line_searches"] for r in ok_runs)
     if screen < max_iter and not all(r.get("stop_reason", "").startswith(("relative", "exact"))
                                      for r in ok_runs if r["start"] in blab):
         res = _solver.run_independent_g(bst, smp, eps=eps, smoothing=g_smoothing, tol=tol,
@@ -405,7 +410,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
             bst, bE = res.state, res.E
         extra["continuation"] = _run_info(res)
         iters += res.iterations
-        gss += res.gss_calls
+        gss += res.line_searches
         history = history + [float(h) for h in res.history[1:]]
     if polish > 0:
         res = _solver.polish_lm(bst, smp, eps=eps, max_iter=polish,
@@ -414,7 +419,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         if np.all(np.isfinite(res.E)):
             bst, bE = res.state, np.minimum(res.E, bE)
         extra["polish"] = {k: v for k, v in _run_info(res).items()
-                           if k not in ("gss_calls", "gss_evals")}
+                           if k not in ("line_searches", "line_search_evals")}
         history = history + [float(h) for h in res.history[1:]]
     _check_state(_arrays(bst), "independent-G fit")
     if "continuation" in extra:
@@ -423,7 +428,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         best_reasons = [r.get("stop_reason", "") for r in ok_runs if r["start"] in blab]
         reason = next((r for r in best_reasons if not r.startswith(_CONVERGED_REASONS)),
                       best_reasons[0] if best_reasons else "max_iter")
-    extra.update(iterations=int(iters), gss_calls=int(gss), history=history,
+    extra.update(iterations=int(iters), line_searches=int(gss), history=history,
                  stop_reason=reason)
     return finish(_mf_model(bst, "independent-g", mat_name, source), bE, extra)
 
@@ -469,8 +474,8 @@ def _convergence(extra: dict, tol, max_iter, variant) -> dict:
 
 
 def _run_info(res) -> dict:
-    return {"iterations": res.iterations, "gss_calls": res.gss_calls,
-            "gss_evals": res.gss_evals, "stop_reason": res.reason, "run_time_s": res.seconds,
+    return {"iterations": res.iterations, "line_searches": res.line_searches,
+            "line_search_evals": res.line_search_evals, "stop_reason": res.reason, "run_time_s": res.seconds,
             "history": [float(h) for h in res.history]}
 
 
@@ -490,7 +495,7 @@ def summary(model) -> dict:
     return {"model": model.fit_kind, "variant": getattr(model, "variant", None),
             "objective": info.get("objective"),
             "normalised_objective": info.get("normalised_objective"),
-            "iterations": info.get("iterations"), "gss_calls": info.get("gss_calls"),
+            "iterations": info.get("iterations"), "line_searches": info.get("line_searches"),
             "time_s": info.get("time_s")}
 
 

@@ -151,3 +151,43 @@ def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_
                 gG[c, iu] += e * r
                 for v in range(4):
                     GG[c, iu, idx[v]] += e * gv[v]
+
+
+@njit(cache=True, nogil=True)
+def p_stats_line(hd, gi0, gti, go0, gto, inv_cc, w, z, G, dG, Q):  # pragma: no cover
+    """Polynomial coefficients in ``t`` of the bin statistics along the G line
+    ``G + t dG``: ``P(t) = p0 + p1 t + p2 t²`` per sample, and per (channel, bin) ``Q[..., 0:3]``
+    = ``Σ w p_m`` (S1), ``Q[..., 3:8]`` = the quartic of ``Σ w P²`` (S2), ``Q[..., 8:11]`` =
+    ``Σ w z p_m`` (Spz). ``Q`` is (3, 8100, 11)."""
+    n = hd.shape[0]
+    Q[:] = 0.0
+    for j in range(n):
+        k = hd[j]
+        a = gi0[j]
+        t = gti[j]
+        b = go0[j]
+        s = gto[j]
+        ic = inv_cc[j]
+        for c in range(3):
+            g_i = _lerp(G, c, a, t)
+            g_o = _lerp(G, c, b, s)
+            d_i = _lerp(dG, c, a, t)
+            d_o = _lerp(dG, c, b, s)
+            wj = w[c, j] * ic
+            p0 = g_i * g_o
+            p1 = g_i * d_o + d_i * g_o
+            p2 = d_i * d_o
+            wz = wj * z[c, j]
+            w2 = wj * ic
+            q = Q[c, k]
+            q[0] += wj * p0
+            q[1] += wj * p1
+            q[2] += wj * p2
+            q[3] += w2 * p0 * p0
+            q[4] += w2 * 2.0 * p0 * p1
+            q[5] += w2 * (p1 * p1 + 2.0 * p0 * p2)
+            q[6] += w2 * 2.0 * p1 * p2
+            q[7] += w2 * p2 * p2
+            q[8] += wz * p0
+            q[9] += wz * p1
+            q[10] += wz * p2

@@ -31,7 +31,13 @@ from . import _kernels
 
 NH = ND = NG = 90
 NP = 180
-_GR = (math.sqrt(5.0) - 1.0) / 2.0
+#: independent-G G step (:func:`line_search_g`): largest step along the AWLS G update and
+#: over-relaxation factor ω of the exact line-search minimiser (chosen on MERL materials:
+#: ω = 1.3 / 1.5 / 1.7 / 1.9 / 2 gave 8.020 / 8.006 / 7.993 / 7.981 / 8.009e-4 after 300
+#: iterations on alum-bronze, ω = 1 8.044e-4 and the former golden-section search 8.035e-4,
+#: at twice the time per iteration)
+G_STEP_CAP = 4.0
+G_OVER_RELAX = 1.9
 
 
 @dataclass
@@ -109,6 +115,15 @@ class Samples:
                              np.ascontiguousarray(X, dtype=np.float64),
                              np.ascontiguousarray(rho_d, dtype=np.float64), S1, S2, Spz)
         return E + self.e_offset, (S1, S2, Spz)
+
+    def line_stats(self, G, dG):
+        """One pass: the bin statistics along ``G + t dG`` as polynomials in t, (3, 8100, 11)
+        (see :func:`._kernels.p_stats_line`)."""
+        Q = np.empty((3, NH * ND, 11))
+        _kernels.p_stats_line(self.hd, self.gi0, self.gti, self.go0, self.gto, self.inv_cc,
+                              self.w, self.z, np.ascontiguousarray(G, dtype=np.float64),
+                              np.ascontiguousarray(dG, dtype=np.float64), Q)
+        return Q
 
     def g_system(self, G, X, rho_d):
         arrs = [np.empty((3, NG)), np.empty((3, NG)), np.empty((3, NG)),
@@ -193,48 +208,45 @@ class Monitor:
         return False
 
 
-def golden_section(fun, need, e0, max_eval=12):
-    """Per-channel golden-section search of ``t ∈ [0, 1]`` minimising ``fun(t) -> (E, aux)``
-    for the channels in ``need`` (others are evaluated at t = 1). ``e0`` is ``E(0)``.
-    Returns ``(t, E, aux)`` of the best point evaluated; t = 0 (no change) if nothing beat
-    ``e0``. Press et al. 2007 §10.2."""
+def parabolic_search(fun, need, e0, e1, aux1, max_eval=2, t_first=0.5):
+    """Per-channel line search of ``t ∈ (0, 1]`` for the channels in ``need``, whose full
+    step (``t = 1``, objective ``e1``, auxiliary data ``aux1``) increased the objective
+    ``e0 = E(0)``: successive parabolic interpolation (Press et al. 2007 §10.3) from
+    ``E(0), E(1/2), E(1)``, each new point the vertex of the parabola through the best three
+    (clipped to [1e-3, 1]; halving where the three are not convex). ``fun(t) -> (E, aux)``
+    evaluates all channels (channels not in ``need`` at t = 1). Returns ``(t, E, aux,
+    n_eval)`` of the best point; t = 0 where nothing beat ``e0``."""
+    pts_t = [np.zeros(3), np.ones(3)]
+    pts_e = [np.asarray(e0, dtype=np.float64), np.asarray(e1, dtype=np.float64)]
     best_t = np.where(need, 0.0, 1.0)
-    best_e = np.where(need, e0, np.inf)
-    best_aux = None
-    a = np.zeros(3)
-    b = np.ones(3)
-    c = b - _GR * (b - a)
-    d = a + _GR * (b - a)
-    n_eval = 0
-
-    def ev(t):
-        nonlocal best_aux, n_eval
-        tt = np.where(need, t, 1.0)
+    best_e = np.where(need, e0, e1)
+    best_aux = aux1
+    t_next = np.clip(np.broadcast_to(np.asarray(t_first, dtype=np.float64), (3,)), 1e-3, 1.0)
+    for n_eval in range(1, max_eval + 1):
+        tt = np.where(need, t_next, 1.0)
         E, aux = fun(tt)
-        n_eval += 1
-        better = E < best_e
-        if best_aux is None:
-            best_aux = aux
-            better = better | ~need
-        else:
-            best_aux = tuple(np.where(better[:, None], x, y) if np.ndim(x) == 2 else
-                             np.where(better, x, y) for x, y in zip(aux, best_aux))
-        best_t[:] = np.where(better, tt, best_t)
-        best_e[:] = np.where(better, E, best_e)
-        return E
-
-    fc = ev(c)
-    fd = ev(d)
-    while n_eval < max_eval:
-        left = fc < fd
-        b = np.where(left, d, b)
-        a = np.where(left, a, c)
-        nc = b - _GR * (b - a)
-        nd = a + _GR * (b - a)
-        newt = np.where(left, nc, nd)
-        fn = ev(newt)
-        c, d, fc, fd = (np.where(left, nc, d), np.where(left, c, nd),
-                        np.where(left, fn, fd), np.where(left, fc, fn))
+        better = need & (E < best_e)
+        best_aux = tuple(np.where(better[:, None], x, y) if np.ndim(x) == 2 else
+                         np.where(better, x, y) for x, y in zip(aux, best_aux))
+        best_t = np.where(better, tt, best_t)
+        best_e = np.where(better, E, best_e)
+        pts_t.append(tt)
+        pts_e.append(np.asarray(E, dtype=np.float64))
+        if n_eval == max_eval:
+            break
+        T = np.stack(pts_t)
+        V = np.stack(pts_e)
+        order = np.argsort(V, axis=0)[:3]                  # the best three points per channel
+        a, b, c = (np.take_along_axis(T, order[i:i + 1], 0)[0] for i in range(3))
+        fa, fb, fc = (np.take_along_axis(V, order[i:i + 1], 0)[0] for i in range(3))
+        num = (a - b) ** 2 * (fa - fc) - (a - c) ** 2 * (fa - fb)
+        den = (a - b) * (fa - fc) - (a - c) * (fa - fb)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            vertex = a - 0.5 * num / den
+            curvature = ((fc - fb) / (c - b) - (fb - fa) / (b - a)) / (c - a)
+        convex = np.isfinite(vertex) & np.isfinite(curvature) & (curvature > 0)
+        t_next = np.clip(np.where(convex, vertex, 0.5 * np.where(best_t > 0, best_t, tt)),
+                         1e-3, 1.0)
     return best_t, best_e, best_aux, n_eval
 
 
@@ -298,6 +310,60 @@ def _solve_tridiag(diag, off, rhs, old):
     return np.where(np.isfinite(out), out, old)
 
 
+def _poly_at(coef, t):
+    """Evaluate per-channel polynomials ``coef[c, ..., m] t_c^m`` (ascending powers)."""
+    t = np.asarray(t, dtype=np.float64).reshape(3, *([1] * (coef.ndim - 2)))
+    out = np.zeros(coef.shape[:-1])
+    for m in range(coef.shape[-1] - 1, -1, -1):
+        out = out * t + coef[..., m]
+    return out
+
+
+def line_search_g(smp: Samples, g_old, g_new, X, rho_d, eps, t_cap, over_relax=1.0):
+    """Exact line search of the G step (an extension of §4.3, replacing a golden-section search
+    of 6 passes over the samples): along ``G(t) = g_old + t (g_new − g_old)`` every sample's ``P = G(θi) G(θo)/cc``
+    is a quadratic in t, so the bin statistics are polynomials in t (one pass,
+    :meth:`Samples.line_stats`) and Eq. 7 at fixed ρd and ``X = ρs D F`` is a quartic in t.
+    Its minimiser ``t*`` over ``[0, t_max]`` is found (roots of the cubic derivative),
+    ``t_max = max(1, min(t_cap, the largest t keeping G ≥ eps))``; with ``over_relax = ω``
+    the step ``min(ω t*, t_max)`` is taken instead whenever it still lowers the quartic below
+    ``E(0)`` (over-relaxation; for a parabola any ω < 2 does). Returns ``(t (3,), G, S)``,
+    S the bin statistics at t; a channel whose quartic does not decrease keeps ``t = 0``."""
+    dG = g_new - g_old
+    Q = smp.line_stats(g_old, dG)
+    a = rho_d[:, None]
+    s1 = np.einsum("ck,ckm->cm", X, Q[..., 0:3])
+    s2 = np.einsum("ck,ckm->cm", X * X, Q[..., 3:8])
+    spz = np.einsum("ck,ckm->cm", X, Q[..., 8:11])
+    quartic = s2.copy()
+    quartic[:, :3] += 2.0 * a * s1 - 2.0 * spz
+    quartic[:, 0] += (rho_d * rho_d * smp.sum_w + smp.sum_wzz - 2.0 * rho_d * smp.sum_wz)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        room = np.where(dG < 0, (g_old - eps) / -dG, np.inf)
+    t_max = np.maximum(np.minimum(room.min(axis=1), t_cap), 1.0)   # t = 1 is always feasible
+    t_best = np.zeros(3)
+    for c in range(3):
+        q = quartic[c]
+        cands = [0.0, float(t_max[c])]
+        deriv = np.array([4 * q[4], 3 * q[3], 2 * q[2], q[1]])
+        if np.all(np.isfinite(deriv)) and np.any(deriv != 0):
+            for r in np.roots(np.trim_zeros(deriv, "f")):
+                if abs(r.imag) <= 1e-9 * max(1.0, abs(r.real)) and 0.0 < r.real < t_max[c]:
+                    cands.append(float(r.real))
+        vals = [np.polynomial.polynomial.polyval(tc, q) for tc in cands]
+        t_best[c] = cands[int(np.argmin(vals))]
+    e0 = quartic[:, 0]
+    if over_relax != 1.0:
+        t_over = np.minimum(over_relax * t_best, t_max)
+        t_best = np.where(_poly_at(quartic, t_over) < e0, t_over, t_best)
+    e_t = _poly_at(quartic, t_best)
+    t_best = np.where(e_t < e0, t_best, 0.0)
+    G = np.maximum(g_old + t_best[:, None] * dG, eps)
+    S = (_poly_at(Q[..., 0:3], t_best), _poly_at(Q[..., 3:8], t_best),
+         _poly_at(Q[..., 8:11], t_best))
+    return t_best, G, S
+
+
 @dataclass
 class RunResult:
     state: object
@@ -305,9 +371,10 @@ class RunResult:
     iterations: int
     history: list
     reason: str
-    gss_calls: int
-    gss_evals: int
+    line_searches: int
+    line_search_evals: int
     seconds: float
+    extra: dict = field(default_factory=dict)
 
 
 def _extrapolate(st: MFState, prev: MFState, beta, smp: Samples, eps, E):
@@ -342,12 +409,12 @@ def _state_arrays(st: MFState):
 
 
 def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol=1e-6,
-                      max_iter=1000, gss_max_eval=6, extrapolate=False,
+                      max_iter=1000, g_step_cap=None, extrapolate=False,
                       callback=None) -> RunResult:
     """Independent-G AWLS (§4.2-4.3): D, F (Eq. 14), G(θi) and G(θo) updates averaged and
-    Gaussian-smoothed (σ = ``smoothing`` samples; golden-section search along the step when
-    the objective increases), ρd/ρs by Cramer's rule, max-normalisation and DR clamping at
-    ``eps``. With ``extrapolate`` each sweep is followed by an accepted-if-better
+    Gaussian-smoothed (σ = ``smoothing`` samples), taken with the exact, over-relaxed line
+    search of :func:`line_search_g` (the paper searches along the step only when it increases
+    the objective), ρd/ρs by Cramer's rule, max-normalisation and DR clamping at ``eps``. With ``extrapolate`` each sweep is followed by an accepted-if-better
     over-relaxation step (:func:`_extrapolate`), which shortens the long AWLS "swamps"
     caused by the near-ambiguity between F(θd) and G(θi)G(θo)."""
     t0 = time.perf_counter()
@@ -358,7 +425,8 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
     E, S = smp.stats(st.G, X, st.rho_d)
     _rho_update(st, smp, S)
     mon = Monitor(smp.sum_wzz, tol, max_iter)
-    gss_calls = gss_evals = 0
+    g_step_cap = G_STEP_CAP if g_step_cap is None else float(g_step_cap)
+    line_steps = over_relaxed = 0
     E = expanded_objective(st, smp, S)
     mon.history.append(float(E.sum()))
     beta = np.ones(3)
@@ -379,30 +447,10 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
         if smoothing and smoothing > 0:
             g_new = gaussian_filter1d(g_new, smoothing, axis=1, mode="nearest")
         g_new = np.maximum(g_new, eps)
-        e_new, S_new = smp.stats(g_new, X, st.rho_d)
-        need = e_new > e_before + 1e-12 * smp.sum_wzz
-        if np.any(need):
-            gss_calls += 1
-            g_old = st.G
-
-            def fun(t):
-                g = np.maximum(g_old + t[:, None] * (g_new - g_old), eps)
-                e, s = smp.stats(g, X, st.rho_d)
-                return e, (g,) + s
-
-            t, e_best, aux, n = golden_section(fun, need, e_before, gss_max_eval)
-            gss_evals += n
-            # channels that did not need the search keep the full step
-            g_acc = np.where(need[:, None], aux[0], g_new)
-            S_new = tuple(np.where(need[:, None], a, b) for a, b in zip(aux[1:], S_new))
-            # where the search found nothing better than t = 0, keep the old G and stats
-            keep = need & (t == 0.0)
-            g_acc = np.where(keep[:, None], g_old, g_acc)
-            S_new = tuple(np.where(keep[:, None], a, b) for a, b in zip(S, S_new))
-            st.G = g_acc
-        else:
-            st.G = g_new
-        S = S_new
+        t, st.G, S = line_search_g(smp, st.G, g_new, X, st.rho_d, eps, g_step_cap,
+                                   G_OVER_RELAX)
+        line_steps += 1
+        over_relaxed += int(np.sum(t > 1.0))
         # max-normalise G: P scales by 1/m², S1, Spz by 1/m², S2 by 1/m⁴
         m = st.G.max(axis=1)
         m = np.where(m > 0, m, 1.0)
@@ -423,15 +471,20 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
             break
     X = st.rho_s[:, None] * outer_df(st.D, st.F)
     E, _ = smp.stats(st.G, X, st.rho_d)        # exact final objective
-    return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, gss_calls,
-                     gss_evals, time.perf_counter() - t0)
+    return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, 0, 0,
+                     time.perf_counter() - t0,
+                     {"g_line_searches": line_steps, "g_over_relaxed": over_relaxed})
 
 
 def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
-                 gss_max_eval=8, callback=None) -> RunResult:
-    """G-from-D AWLS (§4.3): D by Eq. 14, G from D (Eq. 19 + Smith Λ), objective check and
-    golden-section search along D's step when it increases; F by Eq. 14; ρd/ρs by Cramer;
-    negative components clamped to 0 (``eps``)."""
+                 search_evals=2, callback=None) -> RunResult:
+    """G-from-D AWLS (§4.3): D by Eq. 14, G from D (Eq. 19 + Smith Λ), objective check and a
+    line search along D's step when it increases (:func:`parabolic_search`, ``search_evals``
+    evaluations, its first trial the channel's previous accepted step: the accepted steps
+    are small, 0.03-0.6, and change slowly); F by Eq. 14; ρd/ρs by Cramer; negative
+    components clamped to 0 (``eps``). The paper does not say which search; a golden-section
+    search with 8 evaluations gave objectives within ±0.06 % of this one on six MERL
+    materials at 2-2.7× the time."""
     t0 = time.perf_counter()
     st.D, st.rho_s = normalise(np.maximum(st.D, eps), st.rho_s, eps)
     st.F, st.rho_s = normalise(np.maximum(st.F, eps), st.rho_s, eps)
@@ -442,7 +495,8 @@ def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
     E = expanded_objective(st, smp, S)
     mon = Monitor(smp.sum_wzz, tol, max_iter)
     mon.history.append(float(E.sum()))
-    gss_calls = gss_evals = 0
+    t_prev = np.full(3, 0.5)
+    line_searches = line_search_evals = 0
     while True:
         A_old = st.rho_s[:, None] * st.D                      # ρs·D, the scale-free quantity
         d_raw = np.maximum(_d_update(st, S), eps)
@@ -461,13 +515,15 @@ def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
         # e_before comes from the expanded form: allow for its rounding (≈1e-15 Σwz²)
         need = e_new > e_before + 1e-12 * smp.sum_wzz
         if np.any(need):
-            gss_calls += 1
+            line_searches += 1
 
             def fun(t):
                 return make(A_old + t[:, None] * (A_new - A_old))
 
-            t, _, aux_g, n = golden_section(fun, need, e_before, gss_max_eval)
-            gss_evals += n
+            t, _, aux_g, n = parabolic_search(fun, need, e_before, e_new, aux, search_evals,
+                                              t_prev)
+            t_prev = np.where(need & (t > 0), t, t_prev)
+            line_search_evals += n
             aux = tuple(np.where(need[:, None] if np.ndim(a) == 2 else need, a, b)
                         for a, b in zip(aux_g, aux))
             keep = need & (t == 0.0)
@@ -488,8 +544,8 @@ def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
             break
     X = st.rho_s[:, None] * outer_df(st.D, st.F)
     E, _ = smp.stats(st.G, X, st.rho_d)
-    return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, gss_calls,
-                     gss_evals, time.perf_counter() - t0)
+    return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, line_searches,
+                     line_search_evals, time.perf_counter() - t0)
 
 
 # -- naive model (Eq. 4) ----------------------------------------------------------------------

@@ -1,0 +1,142 @@
+"""NPF fits with the product's defaults (issue 15 item 2): convergence rate, time and
+objective against a reference run.
+
+For each Neural-BRDF MERL material (tabulated once): ``fit_npf(variant="independent-g")``
+(all starts) and ``fit_npf(variant="g-from-d")`` with no options; CPU time of the process
+(all threads) and wall time, the final objective (Eq. 7), ``converged``, iterations, stop
+reason. With ``--reference DIR`` (a ``brdffit batch`` output whose ``fits/<material>/npf.npz``
+and ``npf-g-from-d.npz`` were made by an earlier version) the objective ratio new / reference
+per material, i.e. "never above today's capped fit". Materials of the reference run first.
+
+    nice .venv/bin/python bench/bench_npf_defaults.py --reference runs/db20
+
+Writes ``bench/results/npf_defaults.json`` (summary, load average) and
+``npf_defaults_materials.csv`` (one row per material × variant) atomically after every
+material; re-running resumes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from brdffit._atomic import atomic_write  # noqa: E402
+
+ZIP = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
+VARIANTS = {"npf": "independent-g", "npf-g-from-d": "g-from-d"}
+FIELDS = ["material", "model", "cpu_s", "wall_s", "objective", "converged", "nit",
+          "stop_reason", "continuation_iterations", "reference_objective", "ratio_to_reference",
+          "reference_converged", "reference_time_s"]
+
+
+def _stats(xs):
+    xs = [float(x) for x in xs]
+    return {"min": min(xs), "avg": float(np.mean(xs)), "median": float(np.median(xs)),
+            "max": max(xs), "n": len(xs)} if xs else {}
+
+
+def summarise(rows, args, load0):
+    out = {"benchmark": "NPF with product defaults", "command": " ".join(sys.argv),
+           "load_average_start": load0, "load_average_now": list(os.getloadavg()),
+           "cpus": os.cpu_count(), "per_model": {}}
+    for model in VARIANTS:
+        rs = [r for r in rows if r["model"] == model]
+        if not rs:
+            continue
+        ratios = [float(r["ratio_to_reference"]) for r in rs if r["ratio_to_reference"]]
+        out["per_model"][model] = {
+            "materials": len(rs),
+            "converged": sum(r["converged"] == "True" for r in rs),
+            "cpu_s": _stats(r["cpu_s"] for r in rs),
+            "wall_s": _stats(r["wall_s"] for r in rs),
+            "iterations": _stats(r["nit"] for r in rs),
+            "with_reference": len(ratios),
+            "ratio_to_reference": _stats(ratios),
+            "above_reference": sum(x > 1.0 for x in ratios),
+            "above_reference_by_more_than_1e-3": sum(x > 1.001 for x in ratios),
+            "not_converged": [r["material"] for r in rs if r["converged"] != "True"],
+        }
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--zip", default=str(ZIP))
+    ap.add_argument("--reference", default=None, help="brdffit batch output of an earlier run")
+    ap.add_argument("--only", default="", help="comma-separated material names")
+    ap.add_argument("--models", default=",".join(VARIANTS))
+    ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "npf_defaults"))
+    args = ap.parse_args(argv)
+    if not Path(args.zip).exists():
+        print(f"skipped: {args.zip} not found (needs ../shared/data)")
+        return 0
+    from brdffit import load_fit
+    from brdffit.batch import enumerate_materials
+    from brdffit.fit.npf import fit_npf
+    from brdffit.grid import tabulate_merl_grid
+    from brdffit.io import load
+
+    names = [n for n, _ in enumerate_materials(args.zip)]
+    ref_dir = Path(args.reference) if args.reference else None
+    if ref_dir:
+        first = [n for n in names if (ref_dir / "fits" / n).is_dir()]
+        names = first + [n for n in names if n not in first]
+    if args.only:
+        names = args.only.split(",")
+    models = args.models.split(",")
+    csv_path, json_path = Path(args.out + "_materials.csv"), Path(args.out + ".json")
+    rows = list(csv.DictReader(open(csv_path))) if csv_path.exists() else []
+    done = {(r["material"], r["model"]) for r in rows}
+    load0 = list(os.getloadavg())
+    for name in names:
+        todo = [m for m in models if (name, m) not in done]
+        if not todo:
+            continue
+        data = tabulate_merl_grid(load(f"{args.zip}:{name}"))
+        for model in todo:
+            c0, w0 = time.process_time(), time.perf_counter()
+            fi = fit_npf(data=data, variant=VARIANTS[model], name=name).fit_info
+            row = {"material": name, "model": model,
+                   "cpu_s": round(time.process_time() - c0, 2),
+                   "wall_s": round(time.perf_counter() - w0, 2),
+                   "objective": fi["objective"], "converged": fi["converged"],
+                   "nit": fi["nit"], "stop_reason": fi["stop_reason"],
+                   "continuation_iterations": fi.get("continuation", {}).get("iterations", 0)}
+            ref = ref_dir / "fits" / name / f"{model}.npz" if ref_dir else None
+            if ref is not None and ref.exists():
+                rfi = load_fit(ref).fit_info
+                row.update(reference_objective=rfi["objective"],
+                           ratio_to_reference=fi["objective"] / rfi["objective"],
+                           reference_converged=rfi.get("converged"),
+                           reference_time_s=rfi.get("time_s"))
+            rows.append(row)
+            print(f"{name:28s} {model:13s} cpu {row['cpu_s']:6.1f} s  wall {row['wall_s']:6.1f} s"
+                  f"  conv {fi['converged']!s:5s} it {fi['nit']:5d}"
+                  f"  ratio {row.get('ratio_to_reference', float('nan')):.5f}", flush=True)
+        buf = io.StringIO()
+        w = csv.DictWriter(buf, FIELDS)
+        w.writeheader()
+        for r in rows:
+            w.writerow({k: r.get(k, "") for k in FIELDS})
+        with atomic_write(csv_path, "w") as fh:
+            fh.write(buf.getvalue())
+        rows = list(csv.DictReader(io.StringIO(buf.getvalue())))
+        with atomic_write(json_path, "w") as fh:
+            json.dump(summarise(rows, args, load0), fh, indent=1)
+    print(json.dumps(summarise(rows, args, load0)["per_model"], indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
