@@ -208,45 +208,58 @@ class Monitor:
         return False
 
 
-def parabolic_search(fun, need, e0, e1, aux1, max_eval=2, t_first=0.5):
+def parabolic_search(fun, need, e0, e1, aux1, max_eval=2, t_first=0.5, max_total=8,
+                     min_t=0.01):
     """Per-channel line search of ``t ∈ (0, 1]`` for the channels in ``need``, whose full
     step (``t = 1``, objective ``e1``, auxiliary data ``aux1``) increased the objective
-    ``e0 = E(0)``: successive parabolic interpolation (Press et al. 2007 §10.3) from
-    ``E(0), E(1/2), E(1)``, each new point the vertex of the parabola through the best three
-    (clipped to [1e-3, 1]; halving where the three are not convex). ``fun(t) -> (E, aux)``
-    evaluates all channels (channels not in ``need`` at t = 1). Returns ``(t, E, aux,
-    n_eval)`` of the best point; t = 0 where nothing beat ``e0``."""
+    ``e0 = E(0)``: successive parabolic interpolation (Press et al. 2007 §10.3), the first
+    trial at ``t_first``, each next one the vertex of the parabola through the best three
+    points evaluated (``0`` and ``1`` included). A channel stops after ``max_eval``
+    evaluations once it has found a decrease; until then the trials shrink (at most a quarter
+    of the smallest failed one) until a trial below ``min_t`` has failed (the step is then
+    not a descent direction: t = 0) or ``max_total`` evaluations. ``fun(t) -> (E, aux)``
+    evaluates all channels (channels not in ``need`` at t = 1, finished ones at their best t).
+    Returns ``(t, E, aux, n_eval)`` of the best point; t = 0 where nothing beat ``e0``."""
     pts_t = [np.zeros(3), np.ones(3)]
     pts_e = [np.asarray(e0, dtype=np.float64), np.asarray(e1, dtype=np.float64)]
     best_t = np.where(need, 0.0, 1.0)
     best_e = np.where(need, e0, e1)
     best_aux = aux1
-    t_next = np.clip(np.broadcast_to(np.asarray(t_first, dtype=np.float64), (3,)), 1e-3, 1.0)
-    for n_eval in range(1, max_eval + 1):
-        tt = np.where(need, t_next, 1.0)
+    smallest_failed = np.ones(3)
+    t_next = np.clip(np.broadcast_to(np.asarray(t_first, dtype=np.float64), (3,)), 1e-6, 1.0)
+    active = np.array(need, dtype=bool)
+    n_eval = 0
+    while np.any(active) and n_eval < max_total:
+        tt = np.where(active, t_next, best_t)
         E, aux = fun(tt)
-        better = need & (E < best_e)
+        n_eval += 1
+        better = active & (E < best_e)
         best_aux = tuple(np.where(better[:, None], x, y) if np.ndim(x) == 2 else
                          np.where(better, x, y) for x, y in zip(aux, best_aux))
         best_t = np.where(better, tt, best_t)
         best_e = np.where(better, E, best_e)
+        smallest_failed = np.where(active & (E >= e0), np.minimum(smallest_failed, tt),
+                                   smallest_failed)
         pts_t.append(tt)
         pts_e.append(np.asarray(E, dtype=np.float64))
-        if n_eval == max_eval:
-            break
+        active &= ~((best_t > 0) & (n_eval >= max_eval))
+        active &= ~((best_t == 0) & (smallest_failed < min_t))   # not a descent direction
         T = np.stack(pts_t)
         V = np.stack(pts_e)
         order = np.argsort(V, axis=0)[:3]                  # the best three points per channel
         a, b, c = (np.take_along_axis(T, order[i:i + 1], 0)[0] for i in range(3))
         fa, fb, fc = (np.take_along_axis(V, order[i:i + 1], 0)[0] for i in range(3))
-        num = (a - b) ** 2 * (fa - fc) - (a - c) ** 2 * (fa - fb)
-        den = (a - b) * (fa - fc) - (a - c) * (fa - fb)
         with np.errstate(divide="ignore", invalid="ignore"):
+            num = (a - b) ** 2 * (fa - fc) - (a - c) ** 2 * (fa - fb)
+            den = (a - b) * (fa - fc) - (a - c) * (fa - fb)
             vertex = a - 0.5 * num / den
             curvature = ((fc - fb) / (c - b) - (fb - fa) / (b - a)) / (c - a)
         convex = np.isfinite(vertex) & np.isfinite(curvature) & (curvature > 0)
-        t_next = np.clip(np.where(convex, vertex, 0.5 * np.where(best_t > 0, best_t, tt)),
-                         1e-3, 1.0)
+        vertex = np.where(convex & (vertex > 0), vertex, np.inf)
+        shrink = 0.25 * smallest_failed
+        t_next = np.where(best_t > 0, np.where(np.isfinite(vertex), vertex, 0.5 * best_t),
+                          np.minimum(vertex, shrink))
+        t_next = np.clip(t_next, 1e-6, 1.0)
     return best_t, best_e, best_aux, n_eval
 
 
