@@ -279,6 +279,16 @@ def is_metal(m, F0c, rd, F90=None) -> bool:
     return lum >= MATERIAL_METAL_F0 and grazing_ok and float(LUMA @ rd) < lum
 
 
+def reflectances(m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(F0, F90, ρd)`` of a GGX/Beckmann model with optional ``specular`` (ks), ``fresnel``
+    and ``diffuse``: ``F0 = ks·F(θd = 0)``, ``F90 = ks·F(θd = 90°)`` (unclipped)."""
+    ks = np.ones(3) if m.specular is None else np.asarray(m.specular, float)
+    F0 = ks * (np.ones(3) if m.fresnel is None else np.asarray(m.fresnel.eval(1.0), float))
+    F90 = ks * (np.ones(3) if m.fresnel is None else np.asarray(m.fresnel.eval(0.0), float))
+    rd = np.zeros(3) if m.diffuse is None else np.asarray(m.diffuse, float)
+    return F0, F90, rd
+
+
 def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> dict:
     """``{"baseColorFactor", "metallicFactor", "roughnessFactor", "alpha", "notes",
     "anisotropy", "specular", ...}`` of a fit by the rules of the module docstring; with
@@ -302,11 +312,8 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
                          f"rotation={aniso[2]:.4g} rad (principal axes of the slope matrix)")
     if alpha > 1.0:
         notes.append(f"alpha={alpha:.4g} > 1 clipped to glTF's largest roughness 1")
-    ks = np.ones(3) if m.specular is None else np.asarray(m.specular, float)
-    F0 = ks * (np.ones(3) if m.fresnel is None else np.asarray(m.fresnel.eval(1.0), float))
-    F90 = ks * (np.ones(3) if m.fresnel is None else np.asarray(m.fresnel.eval(0.0), float))
+    F0, F90, rd = reflectances(m)
     F0c = np.clip(F0, 0.0, 1.0)
-    rd = np.zeros(3) if m.diffuse is None else np.asarray(m.diffuse, float)
     # a metal's F90 is 1 in glTF: with the extensions, a fit whose grazing reflectance is far
     # below 1 keeps it (and its diffuse term) as a dielectric with specularFactor = F90
     metal = is_metal(m, F0c, rd, np.clip(F90, 0.0, None) if specular else None)

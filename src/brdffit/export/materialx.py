@@ -194,7 +194,7 @@ def _schlick_f82(cos_t, f0, f82_tint):
 def openpbr_parameters(model) -> dict:
     """OpenPBR inputs of a fit by the rules of the module docstring, with ``notes``,
     ``tangent_rotation_deg`` and the fit's ``F0``, ``F90``, ``rho_d``."""
-    from .gltf import _ggx_model, is_metal
+    from .gltf import _ggx_model, is_metal, reflectances
 
     m, notes = _ggx_model(model, "MaterialX")
     d = m.distribution
@@ -215,11 +215,8 @@ def openpbr_parameters(model) -> dict:
         notes.append(f"anisotropy: geometry_tangent = the mesh tangent rotated by "
                      f"{np.degrees(rot):.6g} deg about the normal (rotate3d), the rougher "
                      "principal axis of the fit")
-    ks = np.ones(3) if m.specular is None else np.asarray(m.specular, float)
-    F0 = ks * (np.ones(3) if m.fresnel is None else np.asarray(m.fresnel.eval(1.0), float))
-    F90 = ks * (np.ones(3) if m.fresnel is None else np.asarray(m.fresnel.eval(0.0), float))
+    F0, F90, rd = reflectances(m)
     F0c, F90c = np.clip(F0, 0.0, 1.0), np.clip(F90, 0.0, 1.0)
-    rd = np.zeros(3) if m.diffuse is None else np.asarray(m.diffuse, float)
     # as for glTF: a fit whose grazing reflectance stays far below 1 is no metal (OpenPBR's
     # metal would drop its diffuse term): +9.4 dB mean (min +5.1) rendered against the fit on
     # the 10 MERL materials this moved (paper suite, CRN)
