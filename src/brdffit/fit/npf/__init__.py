@@ -62,7 +62,7 @@ __all__ = ["fit_npf", "VARIANTS", "ALL_STARTS", "summary"]
 
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
 ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
-DEFAULT_MAX_ITER = {"independent-g": 2000, "g-from-d": 300, "naive": 3000}
+DEFAULT_MAX_ITER = {"independent-g": 4000, "g-from-d": 300, "naive": 3000}
 #: model names of the registry and CLI -> variants (one naming scheme across CLI and API)
 CLI_VARIANTS = {"npf": "independent-g", "npf-g-from-d": "g-from-d", "npf-naive": "naive",
                 "npf-bivariate": "bivariate"}
@@ -212,7 +212,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         (Fig. 7), restricted angular range (Fig. 15), compressive power, θi/θo cut (89°).
     max_iter, tol:
         Stopping rule (see :mod:`._solver`); ``max_iter`` defaults per variant
-        (independent-G 2000 in all, screening included; G-from-D 300; naive 3000).
+        (independent-G 4000 in all, screening included; G-from-D 300; naive 3000).
     starts:
         Independent-G starts, any of ``ALL_STARTS`` (default: all, as the paper:
         ``n_random`` random starts, all-ones, SGD fit, G-from-D fit, data slices). The best
