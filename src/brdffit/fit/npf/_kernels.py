@@ -18,6 +18,12 @@ def _lerp(G, c, k, t):  # pragma: no cover
     return G[c, k] + t * (G[c, k + 1] - G[c, k])
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _sample(hd, gi0, gti, go0, gto, inv_cc, j):  # pragma: no cover
+    """Sample ``j``: its bin, the G cells and weights of θi and θo, ``1/(cos θi cos θo)``."""
+    return hd[j], gi0[j], gti[j], go0[j], gto[j], inv_cc[j]
+
+
 @njit(cache=True, nogil=True)
 def p_stats(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz):  # pragma: no cover
     """Accumulate per (θh, θd) bin ``S1 = Σ w P``, ``S2 = Σ w P²``, ``Spz = Σ w P z`` for the
@@ -29,12 +35,7 @@ def p_stats(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz):  # 
     S2[:] = 0.0
     Spz[:] = 0.0
     for j in range(n):
-        k = hd[j]
-        a = gi0[j]
-        t = gti[j]
-        b = go0[j]
-        s = gto[j]
-        ic = inv_cc[j]
+        k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
         for c in range(3):
             g_i = _lerp(G, c, a, t)
             g_o = _lerp(G, c, b, s)
@@ -65,12 +66,7 @@ def g_normal_equations(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
     Ao_o[:] = 0.0
     bo[:] = 0.0
     for j in range(n):
-        k = hd[j]
-        a = gi0[j]
-        t = gti[j]
-        b = go0[j]
-        s = gto[j]
-        ic = inv_cc[j]
+        k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
         for c in range(3):
             g_i = _lerp(G, c, a, t)
             g_o = _lerp(G, c, b, s)
@@ -162,12 +158,7 @@ def p_stats_line(hd, gi0, gti, go0, gto, inv_cc, w, z, G, dG, Q):  # pragma: no 
     n = hd.shape[0]
     Q[:] = 0.0
     for j in range(n):
-        k = hd[j]
-        a = gi0[j]
-        t = gti[j]
-        b = go0[j]
-        s = gto[j]
-        ic = inv_cc[j]
+        k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
         for c in range(3):
             g_i = _lerp(G, c, a, t)
             g_o = _lerp(G, c, b, s)
