@@ -24,7 +24,8 @@ Deviations from the paper (deliberate, documented):
   pass, ``_solver.line_search_g``; the paper iterates G "until it converges or increases the
   objective"), and each sweep is followed by an accepted-only-if-better over-relaxation of
   all factors (``extrapolate``, default on). Together they make the fit converge where plain
-  AWLS crawls along the near-ambiguity of F(θd) and G(θi)G(θo): bench/bench_npf.py.
+  AWLS crawls along the near-ambiguity of F(θd) and G(θi)G(θo): bench/bench_npf_defaults.py
+  and bench/bench_npf_convergence.py.
 * G-from-D searches along a D step that increases the objective by parabolic interpolation
   started from the previous accepted step (``_solver.run_g_from_d``).
 * Objective weights at cell centres (see :mod:`brdffit.losses.objective`).
@@ -283,8 +284,8 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         B, E = _solver.fit_bivariate_table(obj)
         _check_state([B], "bivariate fit")
         model = NPFBivariateBRDF(np.moveaxis(B, 0, -1), name=mat_name, source=source)
-        return finish(model, E, {"iterations": 1, "line_searches": 0, "history": [float(E.sum())],
-                                 "stop_reason": "closed form"})
+        return finish(model, E, {"iterations": 1, "line_searches": 0,
+                                 "history": [float(E.sum())], "stop_reason": "closed form"})
 
     if variant == "naive":
         options["init"] = init
@@ -398,7 +399,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
                    ok_runs[0]["history"])
     extra = {"starts": runs, "best_start_per_channel": blab}
     iters = sum(r["iterations"] for r in ok_runs)
-    gss = sum(r["line_searches"] for r in ok_runs)
+    line_searches = sum(r["line_searches"] for r in ok_runs)
     if screen < max_iter and not all(r.get("stop_reason", "").startswith(("relative", "exact"))
                                      for r in ok_runs if r["start"] in blab):
         res = _solver.run_independent_g(bst, smp, eps=eps, smoothing=g_smoothing, tol=tol,
@@ -410,7 +411,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
             bst, bE = res.state, res.E
         extra["continuation"] = _run_info(res)
         iters += res.iterations
-        gss += res.line_searches
+        line_searches += res.line_searches
         history = history + [float(h) for h in res.history[1:]]
     if polish > 0:
         res = _solver.polish_lm(bst, smp, eps=eps, max_iter=polish,
@@ -428,7 +429,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         best_reasons = [r.get("stop_reason", "") for r in ok_runs if r["start"] in blab]
         reason = next((r for r in best_reasons if not r.startswith(_CONVERGED_REASONS)),
                       best_reasons[0] if best_reasons else "max_iter")
-    extra.update(iterations=int(iters), line_searches=int(gss), history=history,
+    extra.update(iterations=int(iters), line_searches=int(line_searches), history=history,
                  stop_reason=reason)
     return finish(_mf_model(bst, "independent-g", mat_name, source), bE, extra)
 
@@ -475,7 +476,8 @@ def _convergence(extra: dict, tol, max_iter, variant) -> dict:
 
 def _run_info(res) -> dict:
     return {"iterations": res.iterations, "line_searches": res.line_searches,
-            "line_search_evals": res.line_search_evals, "stop_reason": res.reason, "run_time_s": res.seconds,
+            "line_search_evals": res.line_search_evals, "stop_reason": res.reason,
+            "run_time_s": res.seconds, **res.extra,
             "history": [float(h) for h in res.history]}
 
 

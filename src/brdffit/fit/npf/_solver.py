@@ -17,7 +17,6 @@ relative decrease of the total objective ``(E_prev − E)/E`` is below ``tol``, 
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -333,9 +332,9 @@ def _poly_at(coef, t):
 
 
 def line_search_g(smp: Samples, g_old, g_new, X, rho_d, eps, t_cap, over_relax=1.0):
-    """Exact line search of the G step (an extension of §4.3, replacing a golden-section search
-    of 6 passes over the samples): along ``G(t) = g_old + t (g_new − g_old)`` every sample's ``P = G(θi) G(θo)/cc``
-    is a quadratic in t, so the bin statistics are polynomials in t (one pass,
+    """Exact line search of the G step (an extension of §4.3, replacing a golden-section
+    search of 6 passes over the samples): along ``G(t) = g_old + t (g_new − g_old)`` every
+    sample's ``P = G(θi) G(θo)/cc`` is a quadratic in t, so the bin statistics are polynomials in t (one pass,
     :meth:`Samples.line_stats`) and Eq. 7 at fixed ρd and ``X = ρs D F`` is a quartic in t.
     Its minimiser ``t*`` over ``[0, t_max]`` is found (roots of the cubic derivative),
     ``t_max = max(1, min(t_cap, the largest t keeping G ≥ eps))``; with ``over_relax = ω``
@@ -427,8 +426,8 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
     """Independent-G AWLS (§4.2-4.3): D, F (Eq. 14), G(θi) and G(θo) updates averaged and
     Gaussian-smoothed (σ = ``smoothing`` samples), taken with the exact, over-relaxed line
     search of :func:`line_search_g` (the paper searches along the step only when it increases
-    the objective), ρd/ρs by Cramer's rule, max-normalisation and DR clamping at ``eps``. With ``extrapolate`` each sweep is followed by an accepted-if-better
-    over-relaxation step (:func:`_extrapolate`), which shortens the long AWLS "swamps"
+    the objective), ρd/ρs by Cramer's rule, max-normalisation and DR clamping at ``eps``.
+    With ``extrapolate`` each sweep is followed by an accepted-if-better over-relaxation step (:func:`_extrapolate`), which shortens the long AWLS "swamps"
     caused by the near-ambiguity between F(θd) and G(θi)G(θo)."""
     t0 = time.perf_counter()
     for name in ("D", "F", "G"):
@@ -439,7 +438,7 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
     _rho_update(st, smp, S)
     mon = Monitor(smp.sum_wzz, tol, max_iter)
     g_step_cap = G_STEP_CAP if g_step_cap is None else float(g_step_cap)
-    line_steps = over_relaxed = 0
+    over_relaxed = 0
     E = expanded_objective(st, smp, S)
     mon.history.append(float(E.sum()))
     beta = np.ones(3)
@@ -449,7 +448,6 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
         st.D, st.rho_s = normalise(_d_update(st, S), st.rho_s, eps)
         st.F, st.rho_s = normalise(_f_update(st, S), st.rho_s, eps)
         _rho_update(st, smp, S)
-        e_before = expanded_objective(st, smp, S)
         X = st.rho_s[:, None] * outer_df(st.D, st.F)
         Ai_d, Ai_o, bi, Ao_d, Ao_o, bo = smp.g_system(st.G, X, st.rho_d)
         # G(θi) (G(θo) fixed) and G(θo) (G(θi) fixed) updates: the paper averages the two
@@ -462,7 +460,6 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
         g_new = np.maximum(g_new, eps)
         t, st.G, S = line_search_g(smp, st.G, g_new, X, st.rho_d, eps, g_step_cap,
                                    G_OVER_RELAX)
-        line_steps += 1
         over_relaxed += int(np.sum(t > 1.0))
         # max-normalise G: P scales by 1/m², S1, Spz by 1/m², S2 by 1/m⁴
         m = st.G.max(axis=1)
@@ -484,9 +481,10 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
             break
     X = st.rho_s[:, None] * outer_df(st.D, st.F)
     E, _ = smp.stats(st.G, X, st.rho_d)        # exact final objective
-    return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, 0, 0,
+    n_it = len(mon.history) - 1          # one G line search (one pass) per iteration
+    return RunResult(st, E, n_it, mon.history, mon.reason, n_it, n_it,
                      time.perf_counter() - t0,
-                     {"g_line_searches": line_steps, "g_over_relaxed": over_relaxed})
+                     {"g_steps_over_relaxed": over_relaxed, "sweeps_extrapolated": n_extra})
 
 
 def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
