@@ -64,6 +64,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..io.rgl import phi_i_reduction  # noqa: F401 - re-exported (the reader's rule)
 from ._common import LUMA, StagedFiles, check_output_path, label, writing
 
 __all__ = ["rgl_fields", "export_rgl", "rgl_error", "rgl_reduction", "default_n_phi",
@@ -163,14 +164,6 @@ def _phi_grid(reduction: int, n_phi: int) -> np.ndarray:
     """``phi_i`` of an anisotropic file: ``n_phi`` uniform azimuths over [−π, −π + 2π/r]
     (what Mitsuba folds into; both ends stored so that ``rint(2π / span)`` = r)."""
     return -np.pi + (2.0 * np.pi / reduction) * np.linspace(0.0, 1.0, n_phi)
-
-
-def phi_i_reduction(phi_i) -> int:
-    """The reduction Mitsuba derives from ``phi_i`` (``Measured()``: 0 = isotropic, one slice
-    or two; else ``rint(2π / (φ_last − φ_0))``)."""
-    if phi_i.size <= 2:
-        return 0
-    return int(np.rint(2.0 * np.pi / float(phi_i[-1] - phi_i[0])))
 
 
 def _check_sizes(sizes: dict, n_slices: int) -> None:

@@ -81,6 +81,15 @@ def u_to_phi(u):
     return (2.0 * np.asarray(u, np.float64) - 1.0) * np.pi
 
 
+def phi_i_reduction(phi_i) -> int:
+    """The symmetry reduction Mitsuba's ``Measured()`` derives from ``phi_i``: 0 (isotropic)
+    for one or two slices, else ``rint(2π / (φ_last − φ_0))``."""
+    phi_i = np.asarray(phi_i)
+    if phi_i.size <= 2:
+        return 0
+    return int(np.rint(2.0 * np.pi / float(phi_i[-1] - phi_i[0])))
+
+
 def elevation(d):
     """θ of unit vectors, computed as Mitsuba's ``Measured::elevation`` (stable near 0):
     2 asin(|d − n| / 2)."""
@@ -426,11 +435,9 @@ class RGLBRDF(BRDF):
                                             "integral, found an all-zero slice")
 
         self.name = name or (Path(self.source).stem if self.source else "rgl")
-        # Measured(): m_isotropic = phi_i.shape[0] <= 2; m_reduction = rint(2π / (φ_last − φ_0))
+        # Measured(): m_isotropic = phi_i.shape[0] <= 2
         self.isotropic = nphi <= 2
-        self.reduction = 0
-        if not self.isotropic:
-            self.reduction = int(np.rint(2 * np.pi / float(self.phi_i[-1] - self.phi_i[0])))
+        self.reduction = phi_i_reduction(self.phi_i)
         params = (self.phi_i, self.theta_i)
         self._ndf = _Marginal2D(self.ndf, (), normalize=False, enable_sampling=False)
         self._sigma = _Marginal2D(self.sigma, (), normalize=False, enable_sampling=False)
