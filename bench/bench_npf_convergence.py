@@ -41,6 +41,10 @@ CONFIGS = {
     "cap3000-extrapolate": {"extrapolate": True, "max_iter": 3000},
     "baseline": None,       # the default fit of --baseline-src, in a subprocess
     "screen20-extrapolate-cap2000": {"start_max_iter": 20, "extrapolate": True, "max_iter": 2000},
+    # the over-relaxation ω of the independent-G G step (module constant G_OVER_RELAX)
+    "omega1": {"_g_over_relax": 1.0},
+    "omega1.3": {"_g_over_relax": 1.3},
+    "omega1.9": {"_g_over_relax": 1.9},
 }
 
 
@@ -92,7 +96,7 @@ def main(argv=None) -> int:
     import numpy as np
 
     from brdffit.batch import enumerate_materials
-    from brdffit.fit.npf import fit_npf
+    from brdffit.fit.npf import _solver, fit_npf
     from brdffit.grid import tabulate_merl_grid
     from brdffit.io import load
 
@@ -118,8 +122,14 @@ def main(argv=None) -> int:
                 def cb(it, e, c0=c0, trace=trace):
                     trace.append((time.process_time() - c0, e))
 
-                m = fit_npf(data=data, variant="independent-g", name=name, callback=cb,
-                            **CONFIGS[cfg])
+                kwargs = dict(CONFIGS[cfg])
+                omega = kwargs.pop("_g_over_relax", _solver.G_OVER_RELAX)
+                saved, _solver.G_OVER_RELAX = _solver.G_OVER_RELAX, omega
+                try:
+                    m = fit_npf(data=data, variant="independent-g", name=name, callback=cb,
+                                **kwargs)
+                finally:
+                    _solver.G_OVER_RELAX = saved
                 cpu, wall = time.process_time() - c0, time.perf_counter() - t0
                 info = m.fit_info
             last = info.get("continuation") or {}
