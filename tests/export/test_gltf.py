@@ -37,6 +37,19 @@ def test_gltf_brdf_matches_library_components():
     np.testing.assert_allclose(GLTFBRDF(base, 1.0, r).eval(wi, wo), metal, rtol=1e-10, atol=1e-12)
 
 
+def _kept_by_schlick(f0, f90, k=16):
+    """Cosine-weighted mean of ``1 − Schlick(f0, f90, V·H)`` over a stratified grid of
+    direction pairs: the fraction of the base glTF's dielectric keeps on average."""
+    from brdffit.brdf import cosine_hemisphere_sample
+
+    u = (np.stack(np.meshgrid(*[np.arange(k)] * 4, indexing="ij"), -1).reshape(-1, 4) + 0.5) / k
+    wi, wo = cosine_hemisphere_sample(u[:, :2]), cosine_hemisphere_sample(u[:, 2:])
+    h = wi + wo
+    h /= np.linalg.norm(h, axis=-1, keepdims=True)
+    x5 = (1.0 - np.sum(wo * h, -1)) ** 5
+    return float(np.mean(1.0 - (f0 + (f90 - f0) * x5)))
+
+
 def test_exact_gltf_metal_round_trips():
     base, r = np.array([0.95, 0.64, 0.54]), 0.3
     model = MicrofacetBRDF(GGX(r * r), SchlickFresnel(base), correlated=False, name="copper")
@@ -54,7 +67,11 @@ def test_dielectric_rule_and_file(tmp_path):
     assert doc["asset"]["version"] == "2.0"
     pbr = doc["materials"][0]["pbrMetallicRoughness"]
     assert pbr["metallicFactor"] == 0.0
-    np.testing.assert_allclose(pbr["baseColorFactor"], [0.5, 0.2, 0.1, 1.0])
+    # ρd divided by the fraction of the base glTF keeps under its specular layer (F0 0.045)
+    kept = _kept_by_schlick(0.045, 1.0)
+    assert 0.85 < kept < 0.97
+    np.testing.assert_allclose(pbr["baseColorFactor"], [0.5 / kept, 0.2 / kept, 0.1 / kept, 1.0],
+                               rtol=2e-3)
     assert pbr["roughnessFactor"] == pytest.approx(np.sqrt(0.2))
     assert info["fidelity"]["cos_rel_error"] > 0          # F0 0.045 -> 0.04 etc. is lossy
 
@@ -233,13 +250,15 @@ def test_exports_pass_the_khronos_validator(tmp_path):
 def test_metal_like_fit_with_low_grazing_reflectance_stays_dielectric():
     """F0 looks metallic (0.2) but F90 is 0.3 (ks·Schlick, as ggx-diffuse finds on metallic
     paints): glTF's metal would force F90 = 1; with the extensions it is a dielectric whose
-    specularFactor carries F90 and whose base keeps ρd — and it is closer to the fit."""
+    specularFactor carries F90 and whose base keeps ρd (compensated for the layer) — and it
+    is closer to the fit."""
     fit = MicrofacetBRDF(GGX(0.1), SchlickFresnel(2.0 / 3.0), diffuse=[0.05, 0.04, 0.03],
                          specular=[0.3, 0.3, 0.3])
     p = gltf_parameters(fit)
     assert p["metallicFactor"] == 0.0
     assert p["specular"]["specularFactor"] == pytest.approx(0.3, rel=1e-9)
-    np.testing.assert_allclose(p["baseColorFactor"][:3], [0.05, 0.04, 0.03])
+    np.testing.assert_allclose(p["baseColorFactor"][:3],
+                               np.array([0.05, 0.04, 0.03]) / _kept_by_schlick(0.2, 0.3), rtol=2e-3)
     core = gltf_parameters(fit, specular=False)            # core glTF only: the metal rule
     assert core["metallicFactor"] == 1.0
     mine = gltf_fidelity(fit, metrics=("normalized_l2",))["normalized_l2"]

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import brdffit
+from brdffit.brdf import cosine_hemisphere_sample
 from brdffit.export import TARGETS, export
 from brdffit.microfacet import GGX, DielectricFresnel, MicrofacetBRDF, SchlickFresnel
 
@@ -20,6 +21,22 @@ def _read(path):
     doc = mx.createDocument()
     mx.readFromXmlFile(doc, str(path))
     return doc
+
+
+def _diffuse_albedo(p, n=1 << 16):
+    """Cosine-weighted mean of the exported dielectric's base term, ``π (f(base) − f(0))``,
+    on a stratified grid of direction pairs (independent of the exporter's random pairs)."""
+    k = int(round(n ** 0.25))
+    u = (np.stack(np.meshgrid(*[np.arange(k)] * 4, indexing="ij"), -1).reshape(-1, 4) + 0.5) / k
+    wi, wo = (cosine_hemisphere_sample(u[:, 2 * j:2 * j + 2]) for j in (0, 1))
+
+    def brdf(base):
+        return OpenPBRBRDF(base, 0.0, p["specular_roughness"], specular_ior=p["specular_ior"],
+                           specular_color=p["specular_color"],
+                           specular_roughness_anisotropy=p["specular_roughness_anisotropy"])
+
+    return np.pi * np.mean(brdf(p["base_color"]).eval(wi, wo) - brdf(np.zeros(3)).eval(wi, wo),
+                           axis=0)
 
 
 def _inputs(doc):
@@ -49,8 +66,14 @@ def test_target_registered_and_documents_validate(tmp_path):
     _, inp = _inputs(_read(tmp_path / "diel.mtlx"))
     assert inp["specular_ior"] == pytest.approx(1.7, rel=1e-6)            # (float32 in files)
     np.testing.assert_allclose(list(inp["specular_color"]), [0.9, 0.8, 0.7], rtol=1e-6)
-    np.testing.assert_allclose(list(inp["base_color"]), [0.4, 0.2, 0.1], rtol=1e-6)
     assert inp["base_metalness"] == 0.0
+    # the base colour is ρd compensated for the specular layer's darkening: same hue, and the
+    # diffuse albedo (cosine-weighted mean over direction pairs) is the fit's ρd
+    base = np.array(list(inp["base_color"]))
+    np.testing.assert_allclose(base / base[0], [1.0, 0.5, 0.25], rtol=1e-6)
+    assert 1.05 < base[0] / 0.4 < 1.25
+    p = openpbr_parameters(models["diel"])
+    np.testing.assert_allclose(_diffuse_albedo(p), [0.4, 0.2, 0.1], rtol=2e-3)
     # the correlated anisotropic metal connects a rotated tangent
     _, inp = _inputs(_read(tmp_path / "aniso.mtlx"))
     assert inp["geometry_tangent"] and inp["specular_roughness_anisotropy"] > 0.5
@@ -125,8 +148,24 @@ def test_fitted_plastic_round_trip(tmp_path):
     info = export(fit, "materialx", tmp_path / "p.mtlx")
     _, inp = _inputs(_read(tmp_path / "p.mtlx"))
     assert inp["specular_ior"] == pytest.approx(1.5, rel=1e-4)
-    np.testing.assert_allclose(list(inp["base_color"]), [0.45, 0.06, 0.04], rtol=1e-3)
+    np.testing.assert_allclose(_diffuse_albedo(info["parameters"]), [0.45, 0.06, 0.04],
+                               rtol=3e-3)
     assert 0 < info["fidelity"]["cos_rel_error"] < 0.3
+
+
+def test_compensated_base_lowers_the_loss_of_a_diffuse_dielectric():
+    """The base colour ρd (uncompensated) renders darker than the fit: its cosine-weighted
+    error against the fit is several times the compensated one's."""
+    from brdffit.evaluation.metrics import brdf_metrics
+
+    fit = MicrofacetBRDF(GGX(0.2), DielectricFresnel(1.5), diffuse=[0.6, 0.5, 0.4])
+    p = openpbr_parameters(fit)
+    err = {}
+    for key, base in (("compensated", p["base_color"]), ("rho_d", [0.6, 0.5, 0.4])):
+        eq = OpenPBRBRDF(base, 0.0, p["specular_roughness"], specular_ior=p["specular_ior"],
+                         specular_color=p["specular_color"])
+        err[key] = brdf_metrics(fit, eq, 1 << 15, metrics=("cos_rel_error",))["cos_rel_error"]
+    assert err["compensated"] < 0.5 * err["rho_d"], err
 
 
 def test_dielectric_with_a_flat_fresnel_gets_the_balanced_index():
@@ -156,6 +195,6 @@ def test_metal_like_fit_with_low_grazing_reflectance_is_a_dielectric():
                          specular=[0.3, 0.3, 0.3])
     p = openpbr_parameters(fit)
     assert p["base_metalness"] == 0.0
-    np.testing.assert_allclose(p["base_color"], [0.05, 0.04, 0.03])
+    np.testing.assert_allclose(_diffuse_albedo(p), [0.05, 0.04, 0.03], rtol=3e-3)
     gold = openpbr_parameters(brdffit.synthetic("gold-ggx"))      # F90 = 1: still a metal
     assert gold["base_metalness"] == 1.0

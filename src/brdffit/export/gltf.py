@@ -39,8 +39,10 @@ GGX tails; the loss is measured):
   with ``specularFactor`` = F90 they keep both reflectances and the diffuse term), or when
   the fit has no diffuse term at all (tabulated fits: their Fresnel table absorbs the
   diffuse part; a dielectric would be black);
-* otherwise a **dielectric Lambert + Schlick F0**: ``metallic = 0``, ``baseColorFactor = ρd``
-  (clipped to [0, 1]), and with ``specular=True`` (default) the extensions carry F0 and F90:
+* otherwise a **dielectric Lambert + Schlick F0**: ``metallic = 0``, ``baseColorFactor =
+  ρd / κ`` (clipped to [0, 1]; κ per channel the cosine-weighted mean over direction pairs
+  of the ``1 − F_d`` by which glTF weights the base, so the diffuse albedo is the fit's on
+  average: :func:`brdffit.export._common.diffuse_kept_fraction`), and with ``specular=True`` (default) the extensions carry F0 and F90:
   ``specularFactor = min(1, max(max F90, max F0))`` (f90 of the dielectric: exact when the
   fit's F90 is grey), ``r = F0 / specularFactor``, ``ior = (1 + √max r)/(1 − √max r)``
   (``KHR_materials_ior``; F0 of the ior = the largest channel of r) and
@@ -49,7 +51,7 @@ GGX tails; the loss is measured):
   written only when they differ from the defaults (ior 1.5, factors 1). With
   ``specular=False`` the core's fixed f0 = 0.04, f90 = 1 are used (lossy, reported);
 * what stays lossy (measured): glTF weights the diffuse term by ``(1 − F_d)`` (the fit adds
-  ρd/π unweighted), its Fresnel curve is Schlick's (a dielectric fit's exact curve is
+  ρd/π unweighted: κ restores the mean, not the dependence on the directions), its Fresnel curve is Schlick's (a dielectric fit's exact curve is
   replaced), and its Smith V is separable (core) or the extension's height-correlated form;
 * optionally (``optimize=True``, CLI ``--option optimize=true``) baseColor, metallic and
   roughness are refined by least squares in BRDF space (:func:`optimize_parameters`);
@@ -68,7 +70,8 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..brdf import IsotropicBRDF, _as_dirs
-from ._common import LUMA, check_output_path, fail, is_elliptical, shown, writing
+from ._common import (LUMA, check_output_path, diffuse_kept_fraction, fail, is_elliptical, shown,
+                      writing)
 
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material",
            "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0",
@@ -343,13 +346,24 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
         notes.append("uncorrelated Smith G of the fit replaced by the extension's "
                      "height-correlated V")
     notes.append("Fresnel curve replaced by Schlick's with the F0/F90 above")
-    return {"baseColorFactor": [float(x) for x in base] + [1.0],
-            "metallicFactor": 1.0 if metal else 0.0,
-            "roughnessFactor": float(np.sqrt(min(alpha, 1.0))), "alpha": alpha,
-            "anisotropy": None if aniso is None else {"anisotropyStrength": aniso[1],
-                                                      "anisotropyRotation": aniso[2]},
-            "specular": spec, "F0": F0.tolist(), "F90": F90.tolist(), "rho_d": rd.tolist(),
-            "notes": notes}
+    out = {"baseColorFactor": [float(x) for x in base] + [1.0],
+           "metallicFactor": 1.0 if metal else 0.0,
+           "roughnessFactor": float(np.sqrt(min(alpha, 1.0))), "alpha": alpha,
+           "anisotropy": None if aniso is None else {"anisotropyStrength": aniso[1],
+                                                     "anisotropyRotation": aniso[2]},
+           "specular": spec, "F0": F0.tolist(), "F90": F90.tolist(), "rho_d": rd.tolist(),
+           "notes": notes}
+    if not metal and np.any(base > 0):
+        # glTF mixes the base with the specular layer by (1 − F(V·H)): the fit adds ρd/π
+        # unattenuated, so divide by the fraction kept (cosine-weighted mean)
+        kept = diffuse_kept_fraction(
+            lambda b: _brdf_of(dict(out, baseColorFactor=[float(x) for x in b] + [1.0])))
+        base = np.clip(base / np.maximum(kept, 1e-6), 0.0, 1.0)
+        out["baseColorFactor"] = [float(x) for x in base] + [1.0]
+        notes.append(f"baseColor {np.round(base, 4).tolist()} = rho_d / the fraction of the "
+                     f"base the specular layer lets through ({np.round(kept, 4).tolist()}, "
+                     "cosine-weighted mean)" + (": clipped to 1" if np.any(base >= 1) else ""))
+    return out
 
 
 def _brdf_of(p: dict, name: str = "gltf") -> "GLTFBRDF":

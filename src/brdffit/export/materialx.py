@@ -22,8 +22,10 @@ and, since ``geometry_tangent`` is the mesh's, not applied (part of the measured
 ``F0 = ks·F(0°)``, ``F90 = ks·F(90°)`` and ``ρd`` as for glTF, and the same metallic rule
 (``brdffit.export.gltf.MATERIAL_METAL_F0``):
 
-* **dielectric** (``base_metalness = 0``): ``base_color = ρd`` (Lambert: ``base_weight = 1``,
-  ``base_diffuse_roughness = 0``), ``specular_weight = 1``, ``specular_ior =
+* **dielectric** (``base_metalness = 0``): ``base_color = ρd / κ`` (Lambert: ``base_weight =
+  1``, ``base_diffuse_roughness = 0``; κ the cosine-weighted mean of the ``1 − E(θo)`` by
+  which OpenPBR darkens the base under the specular layer, so the diffuse albedo is the
+  fit's on average, :func:`compensated_base`), ``specular_weight = 1``, ``specular_ior =
   (1 + √f)/(1 − √f)`` and ``specular_color = F0/f`` (F(0°) exact; OpenPBR's dielectric
   tint multiplies the whole Fresnel curve) with ``f`` the geometric mean of the two ends of
   that family (:func:`_dielectric_choice`): the mean over channels of ``F0/F90`` (the fit's
@@ -42,7 +44,8 @@ MaterialX's GLSL (``mx_dielectric_bsdf``, ``mx_generalized_schlick_bsdf``, ``mx_
 multiplies the specular lobe by the energy compensation ``1 + F (1 − E)/E`` (E the GGX
 directional albedo, its rational fit ``mx_ggx_dir_albedo_analytic``), uses the isotropic
 height-correlated G2 of the average α = √(αx αy), and attenuates the diffuse base by
-``1 − E_F(θo)·comp`` (the dielectric's directional albedo) — the fit adds ρd/π unchanged.
+``1 − E_F(θo)·comp`` (the dielectric's directional albedo) — the fit adds ρd/π unchanged
+(the base colour restores the mean, not the dependence on θo).
 
 :class:`OpenPBRBRDF` re-implements that GLSL evaluation (reflection only: no coat, fuzz,
 thin film, transmission or subsurface; Lambert base) as a :class:`~brdffit.brdf.BRDF`.
@@ -54,7 +57,8 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..brdf import IsotropicBRDF, _as_dirs
-from ._common import LUMA, check_output_path, principal_axes, shown, writing
+from ._common import (LUMA, check_output_path, diffuse_kept_fraction, principal_axes,
+                      shown, writing)
 
 __all__ = ["OpenPBRBRDF", "openpbr_parameters", "openpbr_equivalent", "materialx_fidelity",
            "materialx_document", "write_materialx", "validate_document"]
@@ -278,20 +282,21 @@ def _dielectric_choice(model, p, F0, F90, notes, n: int = 1 << 15) -> dict:
         ratio = np.where(F90 > 0, F0 / np.where(F90 > 0, F90, 1.0), 0.0)
     f_shape, f_f0 = float(np.mean(ratio)), float(F0.max())
     f_bal = float(np.sqrt(f_shape * f_f0)) if f_shape > 0 and f_f0 > 0 else max(f_f0, f_shape)
+    rho_d = np.asarray(p["base_color"], float)       # the fit's ρd (clipped to [0, 1])
 
     def candidate(f):
         ior = _ior_of_f0(f)
         f_eta = ((ior - 1.0) / (ior + 1.0)) ** 2
         tint = np.clip(F0 / f_eta, 0.0, 1.0) if f_eta > 0 else np.ones(3)
-        return {"specular_ior": ior, "specular_color": tint.tolist()}
+        c = {"specular_ior": ior, "specular_color": tint.tolist()}
+        c["base_color"] = compensated_base(p, c, rho_d)
+        return c
 
     cands = {"balanced": candidate(f_bal), "shape": candidate(f_shape), "F0": candidate(f_f0)}
     metric = BRDFMetrics(model, n, 0, ("cos_rel_error",))
     errs = {}
     for k, c in cands.items():
-        eq = OpenPBRBRDF(p["base_color"], 0.0, p["specular_roughness"],
-                         specular_roughness_anisotropy=p["specular_roughness_anisotropy"],
-                         tangent_rotation=np.radians(p.get("tangent_rotation_deg", 0.0)), **c)
+        eq = _dielectric(p, c)
         e = metric.evaluate(eq).get("cos_rel_error")
         errs[k] = float(e) if e is not None and np.isfinite(e) else np.inf
     from ..microfacet import DielectricFresnel
@@ -305,9 +310,33 @@ def _dielectric_choice(model, p, F0, F90, notes, n: int = 1 << 15) -> dict:
     c = cands[best]
     notes.append(f"dielectric: specular_ior {c['specular_ior']:.4g}, specular_color "
                  f"{np.round(c['specular_color'], 4).tolist()} ('{best}' mapping; cos_rel_error "
-                 f"vs fit {', '.join(f'{k} {v:.4g}' for k, v in errs.items())}); base attenuated "
-                 "by the specular albedo")
+                 f"vs fit {', '.join(f'{k} {v:.4g}' for k, v in errs.items())}); base_color "
+                 f"{np.round(c['base_color'], 4).tolist()} = rho_d / the fraction of the base "
+                 "the specular layer lets through (cosine-weighted mean)")
+    if np.any(np.asarray(c["base_color"]) >= 1.0):
+        notes.append("base_color clipped to 1: the fit's diffuse albedo is not reachable under "
+                     "the specular layer")
     return c
+
+
+def _dielectric(p, c, base_color=None) -> "OpenPBRBRDF":
+    """The dielectric :class:`OpenPBRBRDF` of the roughness inputs ``p`` and the Fresnel
+    inputs ``c`` (base colour ``base_color``, else ``c["base_color"]``)."""
+    return OpenPBRBRDF(c["base_color"] if base_color is None else base_color, 0.0,
+                       p["specular_roughness"], specular_ior=c["specular_ior"],
+                       specular_color=c["specular_color"],
+                       specular_roughness_anisotropy=p["specular_roughness_anisotropy"],
+                       tangent_rotation=np.radians(p.get("tangent_rotation_deg", 0.0)))
+
+
+def compensated_base(p, c, rho_d) -> list:
+    """The base colour that gives a dielectric OpenPBR material the fit's diffuse albedo:
+    OpenPBR darkens its base by ``1 − E(θo)`` (the specular layer's directional albedo,
+    energy compensation included), which the fit (``ρd/π`` added to the lobe) does not, so
+    ``base_color = ρd / κ`` with κ the cosine-weighted mean of that factor
+    (:func:`brdffit.export._common.diffuse_kept_fraction`), clipped to [0, 1]."""
+    kept = diffuse_kept_fraction(lambda b: _dielectric(p, c, b))
+    return np.clip(np.asarray(rho_d, float) / np.maximum(kept, 1e-6), 0.0, 1.0).tolist()
 
 
 def openpbr_equivalent(model) -> OpenPBRBRDF:
