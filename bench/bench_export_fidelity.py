@@ -48,13 +48,32 @@ FIELDS = ("material", "target", "cos_rel_error", "psnr_db", "psnr_se_db", "mean_
           "fit_cpu_s", "fit_fresnel", "fit_alpha")
 
 
-def equivalents(fit) -> dict:
-    from brdffit.export.gltf import gltf_equivalent
+def equivalents(fit, ablation: bool = False, optimized: bool = False) -> dict:
+    """The equivalent BRDF of each target; with ``ablation`` also glTF and MaterialX with the
+    dielectric base colour = ρd (``-uncompensated``: before the base was divided by the
+    fraction the specular layer lets through); with ``optimized`` glTF with
+    ``optimize=True`` (``gltf-optimized``)."""
+    import copy
+
+    from brdffit.export.gltf import _brdf_of, gltf_equivalent, gltf_parameters
     from brdffit.export.materialx import openpbr_equivalent
     from brdffit.export.mitsuba import mitsuba_equivalent
 
-    return {"gltf": gltf_equivalent(fit), "materialx": openpbr_equivalent(fit),
-            "mitsuba-xml": mitsuba_equivalent(fit)}
+    eqs = {"gltf": gltf_equivalent(fit), "materialx": openpbr_equivalent(fit),
+           "mitsuba-xml": mitsuba_equivalent(fit)}
+    if optimized:
+        eqs["gltf-optimized"] = gltf_equivalent(fit, optimize=True)
+    if ablation:
+        g = gltf_parameters(fit)
+        if g["metallicFactor"] == 0.0:
+            g = dict(g, baseColorFactor=np.clip(g["rho_d"], 0, 1).tolist() + [1.0])
+        eqs["gltf-uncompensated"] = _brdf_of(g, name="gltf-uncompensated")
+        m = copy.copy(eqs["materialx"])
+        if m.base_metalness == 0.0:
+            m.base_color = np.clip(np.zeros(3) if fit.diffuse is None else fit.diffuse, 0, 1)
+        m.name = "materialx-uncompensated"
+        eqs["materialx-uncompensated"] = m
+    return eqs
 
 
 def measure(name: str, spec: str, args) -> list[dict]:
@@ -66,7 +85,7 @@ def measure(name: str, spec: str, args) -> list[dict]:
     c0 = time.process_time()
     fit = brdffit.fit(ref, model="ggx-diffuse")
     fit_cpu = time.process_time() - c0
-    eqs = equivalents(fit)
+    eqs = equivalents(fit, args.ablation, args.optimized)
     with tempfile.TemporaryDirectory() as tmp:
         res = compare(fit, eqs, tmp, name=name, scenes=args.scenes, spp=args.spp,
                       batches=args.batches, resolution=args.res, save_fits=False,
@@ -94,7 +113,8 @@ def _stats(values) -> dict:
 
 def summarise(rows: list[dict]) -> dict:
     out = {}
-    for t in TARGETS:
+    targets = list(dict.fromkeys(r["target"] for r in rows))
+    for t in targets:
         sel = [r for r in rows if r["target"] == t]
         worst = max(sel, key=lambda r: float(r["cos_rel_error"]), default=None)
         out[t] = {"cos_rel_error": _stats(float(r["cos_rel_error"]) for r in sel),
@@ -102,6 +122,19 @@ def summarise(rows: list[dict]) -> dict:
                   "psnr_se_db": _stats(_num(r["psnr_se_db"]) for r in sel),
                   "mean_de2000": _stats(_num(r["mean_de2000"]) for r in sel),
                   "worst_cos_rel_error_material": None if worst is None else worst["material"]}
+    for t in TARGETS:           # paired (common random numbers): compensated − ρd base
+        if f"{t}-uncompensated" not in targets:
+            continue
+        by = {(r["material"], r["target"]): _num(r["psnr_db"]) for r in rows}
+        d = np.array([by[(m, t)] - by[(m, f"{t}-uncompensated")]
+                      for m in {r["material"] for r in rows}
+                      if by.get((m, t)) is not None
+                      and by.get((m, f"{t}-uncompensated")) is not None])
+        out[f"{t}_psnr_gain_of_compensation_db"] = {
+            "n": int(d.size), "mean": float(d.mean()) if d.size else None,
+            "se": float(d.std(ddof=1) / np.sqrt(d.size)) if d.size > 1 else None,
+            "min": float(d.min()) if d.size else None, "max": float(d.max()) if d.size else None,
+            "improved": int(np.sum(d > 0)), "unchanged": int(np.sum(d == 0))}
     fits = {r["material"]: _num(r["fit_cpu_s"]) for r in rows}
     out["ggx_diffuse_fit_cpu_s"] = _stats(fits.values())
     return out
@@ -126,9 +159,16 @@ def main(argv=None) -> int:
     ap.add_argument("--batches", type=int, default=8)
     ap.add_argument("--resume", action="store_true", help="keep the rows of the CSV")
     ap.add_argument("--name", default="export_fidelity", help="results file stem")
+    ap.add_argument("--optimized", action="store_true",
+                    help="also render glTF with --option optimize=true")
+    ap.add_argument("--only", default="", help="comma-separated material names")
+    ap.add_argument("--ablation", action="store_true",
+                    help="also render glTF/MaterialX with base colour = ρd (uncompensated)")
     args = ap.parse_args(argv)
 
     mats = enumerate_materials("merl_nbrdf.zip")[::max(args.every, 1)]
+    if args.only:
+        mats = [m for m in mats if m[0] in set(args.only.split(","))]
     if args.limit:
         mats = mats[:args.limit]
     csv_path, json_path = RESULTS / f"{args.name}.csv", RESULTS / f"{args.name}.json"
