@@ -86,6 +86,8 @@ def measure(name: str, spec: str, args) -> list[dict]:
     fit = brdffit.fit(ref, model="ggx-diffuse")
     fit_cpu = time.process_time() - c0
     eqs = equivalents(fit, args.ablation, args.optimized)
+    if args.targets:
+        eqs = {k: v for k, v in eqs.items() if k in set(args.targets.split(","))}
     with tempfile.TemporaryDirectory() as tmp:
         res = compare(fit, eqs, tmp, name=name, scenes=args.scenes, spp=args.spp,
                       batches=args.batches, resolution=args.res, save_fits=False,
@@ -162,6 +164,7 @@ def main(argv=None) -> int:
     ap.add_argument("--optimized", action="store_true",
                     help="also render glTF with --option optimize=true")
     ap.add_argument("--only", default="", help="comma-separated material names")
+    ap.add_argument("--targets", default="", help="render only these (comma-separated)")
     ap.add_argument("--ablation", action="store_true",
                     help="also render glTF/MaterialX with base colour = ρd (uncompensated)")
     args = ap.parse_args(argv)
