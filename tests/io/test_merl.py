@@ -60,6 +60,12 @@ def test_layout_scaling_and_mask(merl_file, raw_table):
     assert b.n_invalid == int(invalid.sum())
     assert np.all(values[~valid] == 0.0)
     assert b.name == "random" and b.source == str(merl_file)
+    # every channel is one contiguous block, as in the file (no transposed copy is made)
+    for c in range(3):
+        assert values[..., c].flags["C_CONTIGUOUS"]
+        np.testing.assert_array_equal(values[..., c].ravel(), np.where(invalid, 0.0,
+                                                                       raw[c] * SCALE[c]))
+    assert not values.flags.writeable and not valid.flags.writeable
 
 
 def test_file_round_trip_is_bit_exact(merl_file, tmp_path):

@@ -51,7 +51,7 @@ import numpy as np
 
 from ..brdf import BRDF
 from ..errors import FitError
-from ..grid import N_THETA_H, merl_theta_d, tabulate_merl_grid
+from ..grid import N_PHI_D, N_THETA_H, merl_theta_d, tabulate_merl_grid
 from ..microfacet.tabulated import (TabulatedSlopeDistribution,
                                     azimuthal_clamped_cosine_integral, radial_rule)
 from ..schema import ListOf, Nested, Opt, Schema, Text
@@ -300,15 +300,17 @@ def _lookup_uniform(table, x):
 
 _MERL_GEOMETRY: dict = {}
 _SIGMA_M = 16384
+_N_PHI_HALF = 91  # φd ≤ π/2: the MERL samples 0..90 (π − φd of sample k is sample 180 − k)
 
 
 def _merl_geometry():
-    """Cached geometry of the MERL grid: ``cos θi``, ``cos θo`` (float32, φh = 0), lookup
-    indices into a uniform ``cos θ`` table, and the above-horizon mask."""
+    """Cached geometry of the MERL grid for ``φd ≤ π/2`` (shape ``(90, 90, 91)``): ``cos θi``,
+    ``cos θo`` (float32, φh = 0), lookup indices into a uniform ``cos θ`` table, and the
+    above-horizon mask. The other half follows by symmetry (:func:`_mirror_phi_d`)."""
     if not _MERL_GEOMETRY:
         from ..grid import merl_phi_d, merl_theta_h
 
-        th, td, pd = merl_theta_h(), merl_theta_d(), merl_phi_d()
+        th, td, pd = merl_theta_h(), merl_theta_d(), merl_phi_d()[:_N_PHI_HALF]
         # cos θi,o = cos θh cos θd ∓ sin θh sin θd cos φd computed in float32 (the stored
         # type; faster than float64): |Δ| ≤ 1.2e-7 moves a lookup index by one on 0.04 % of
         # the samples
@@ -324,6 +326,66 @@ def _merl_geometry():
         geo["up"] = (geo["ci"] > 0) & (geo["co"] > 0)
         _MERL_GEOMETRY.update(geo)
     return _MERL_GEOMETRY
+
+
+def _mirror_phi_d(half: np.ndarray) -> np.ndarray:
+    """``(…, 180)`` from the ``φd ≤ π/2`` half ``(…, 91)`` of a quantity symmetric under
+    ``φd → π − φd`` (the swap of θi and θo: sample ``k`` takes the value of ``180 − k``)."""
+    full = np.empty(half.shape[:-1] + (N_PHI_D,), dtype=half.dtype)
+    full[..., :_N_PHI_HALF] = half
+    full[..., _N_PHI_HALF:] = half[..., _N_PHI_HALF - 2:0:-1]
+    return full
+
+
+def _weighted_phi_h_sums(values, weight) -> np.ndarray:
+    """``Σ_{θh, φd} values · weight`` per θd, ``(90, 3)``, the cheapest way for the layout."""
+    if all(values[..., c].flags["C_CONTIGUOUS"] for c in range(3)):  # channel-planar storage
+        return np.stack([np.einsum("hdp,hdp->d", values[..., c], weight, dtype=np.float64)
+                         for c in range(3)], -1)
+    values = np.ascontiguousarray(values)  # channel-last: one (1 × Nφ) @ (Nφ × 3) per (θh, θd)
+    return np.matmul(weight[:, :, None, :].astype(values.dtype), values)[:, :, 0, :].sum(0)
+
+
+def _merl_fresnel_sums(values, valid, dist, p_floor, max_theta_deg):
+    """Sums of ``f / f_id`` over the valid MERL samples of each θd and their counts.
+
+    ``f/f_id = f · 4 cos⁴θh (σi co + σo ci − ci co) / P(θh)`` (Eq. 19-20 with the
+    Smith-uncorrelated G of Eq. 8). The geometric weight is symmetric under
+    ``φd → π − φd`` (θi ↔ θo), so it is computed on half the grid and mirrored.
+    """
+    from ..grid import merl_theta_h
+
+    th = merl_theta_h()
+    geo = _merl_geometry()
+    sigma_tab = _sigma_of_cos(dist, _SIGMA_M).astype(np.float32)
+    ci, co = geo["ci"], geo["co"]
+    p_h = dist._p_unit_polar(np.tan(th))
+    usable_h = p_h >= p_floor * p_h.max()
+    scale = np.where(usable_h, 4.0 * np.cos(th) ** 4 / np.where(usable_h, p_h, 1.0), 0.0)
+    weight = sigma_tab[geo["ii"]] * co
+    weight += sigma_tab[geo["io"]] * ci
+    weight -= ci * co
+    weight *= scale.astype(np.float32)[:, None, None]
+    usable = geo["up"] & usable_h[:, None, None]
+    if max_theta_deg is not None:
+        c_min = np.float32(np.cos(np.radians(max_theta_deg)))
+        usable &= (ci >= c_min) & (co >= c_min)
+    weight[~usable] = 0.0
+    weight = _mirror_phi_d(weight)
+    values = np.asarray(values)
+    data_ok = None if valid is None or np.all(valid) else np.asarray(valid, dtype=bool)
+    sums = _weighted_phi_h_sums(values if data_ok is None
+                                else np.where(data_ok[..., None], values, 0.0), weight)
+    if not np.all(np.isfinite(sums)):  # NaN/inf samples (they propagate): invalid, not zeros
+        finite = np.all(np.isfinite(values), axis=-1)
+        data_ok = finite if data_ok is None else data_ok & finite
+        sums = _weighted_phi_h_sums(np.where(data_ok[..., None], values, 0.0), weight)
+    if data_ok is None:  # every sample counts: twice each interior φd of the half grid
+        per_phi = usable.sum(axis=0)
+        counts = 2 * per_phi.sum(-1) - per_phi[:, 0] - per_phi[:, -1]
+    else:
+        counts = (_mirror_phi_d(usable) & data_ok).sum(axis=(0, 2))
+    return sums, counts
 
 
 def extract_fresnel(brdf: BRDF, dist: TabulatedSlopeDistribution, *, merl=None,
@@ -346,39 +408,7 @@ def extract_fresnel(brdf: BRDF, dist: TabulatedSlopeDistribution, *, merl=None,
     td = merl_theta_d()
     if dist.isotropic and (merl is not None or getattr(brdf, "isotropic", False)):
         values, valid = merl if merl is not None else tabulate_merl_grid(brdf)
-        values = np.asarray(values)
-        from ..grid import merl_theta_h
-
-        th = merl_theta_h()
-        geo = _merl_geometry()
-        sigma_tab = _sigma_of_cos(dist, _SIGMA_M).astype(np.float32)
-        sig_i = sigma_tab[geo["ii"]]
-        sig_o = sigma_tab[geo["io"]]
-        ci, co = geo["ci"], geo["co"]
-        p_h = dist._p_unit_polar(np.tan(th))
-        usable_h = p_h >= p_floor * p_h.max()
-        scale = np.where(usable_h, 4.0 * np.cos(th) ** 4 / np.where(usable_h, p_h, 1.0), 0.0)
-        # f/f_id = f · 4 cos⁴θh (σi co + σo ci − ci co) / P(θh)
-        weight = (sig_i * co + sig_o * ci - ci * co) * scale.astype(np.float32)[:, None, None]
-        ok = geo["up"] & usable_h[:, None, None]
-        if max_theta_deg is not None:
-            c_min = np.float32(np.cos(np.radians(max_theta_deg)))
-            ok = ok & (ci >= c_min) & (co >= c_min)
-        if valid is not None and not np.all(valid):
-            ok = ok & np.asarray(valid, dtype=bool)
-        vals = values
-        if not np.all(np.isfinite(vals)):  # non-finite samples are invalid, not zeros
-            ok = ok & np.all(np.isfinite(vals), axis=-1)
-            vals = np.where(np.isfinite(vals), vals, 0.0)
-        weight = np.where(ok, weight, np.float32(0.0))
-        # Σ_{θh, φd} f · weight for each θd, in the cheapest way for the table's memory layout
-        if all(vals[..., c].flags["C_CONTIGUOUS"] for c in range(3)):  # channel-planar storage
-            sums = np.stack([np.einsum("hdp,hdp->d", vals[..., c], weight, dtype=np.float64)
-                             for c in range(3)], -1)
-        else:  # channel-last: one batched (1 × Nφ) @ (Nφ × 3) product per (θh, θd)
-            vals = np.ascontiguousarray(vals)
-            sums = np.matmul(weight[:, :, None, :].astype(vals.dtype), vals)[:, :, 0, :].sum(0)
-        counts = ok.sum(axis=(0, 2))
+        sums, counts = _merl_fresnel_sums(values, valid, dist, p_floor, max_theta_deg)
     else:
         n_h, n_ph, n_pd = aniso_grid
         th = (np.arange(n_h) / n_h) ** 2 * (np.pi / 2)

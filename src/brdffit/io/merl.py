@@ -391,11 +391,14 @@ def read_merl(path, interpolation: str = "trilinear") -> MERLBRDF:
     check_plausible_float64(raw, path, "values")
     raw = raw.reshape(3, _N)
     valid = np.all(raw >= 0, axis=0)
-    values = np.ascontiguousarray(raw.T * MERL_SCALE)
+    # scaled in the file's channel-planar order: values is a (θh, θd, φd, RGB) view whose
+    # channels are each contiguous (no transpose copy; the fits read one channel at a time)
+    planar = raw * MERL_SCALE[:, None]
     if not valid.all():
-        values[~valid] = 0.0                        # MERL's negative marker: not measured
+        planar[:, ~valid] = 0.0                     # MERL's negative marker: not measured
     raw.flags.writeable = False
-    return MERLBRDF(values.reshape(MERL_SHAPE + (3,)), valid.reshape(MERL_SHAPE),
+    values = planar.reshape((3,) + MERL_SHAPE).transpose(1, 2, 3, 0)
+    return MERLBRDF(values, valid.reshape(MERL_SHAPE),
                     interpolation=interpolation, name=path.stem, source=str(path), _raw=raw,
                     _validated=True)
 
