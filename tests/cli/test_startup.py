@@ -70,6 +70,10 @@ def test_tabulated_fit_of_a_merl_file_imports_no_scipy_numba_or_pydantic(merl_fi
     assert code == 0 and out.is_file()
     assert not mods & set(HEAVY), mods & set(HEAVY)
     assert "brdffit.fit.npf" not in mods and "brdffit.fit.sgd" not in mods
+    # only the command that runs is imported and built
+    assert "brdffit.cli.fit" in mods
+    assert not {f"brdffit.cli.{m}" for m in ("batch", "compare", "demo", "export", "render",
+                                             "info", "convert", "models")} & mods
 
 
 def test_a_rejected_input_fails_before_the_fitting_stack_is_imported(merl_file, tmp_path):

@@ -92,37 +92,42 @@ def models_help(title: str = "Models") -> str:
     return "\n".join(lines)
 
 
-app = typer.Typer(
-    name="brdffit",
-    help="Fit compact microfacet models to measured BRDFs (MERL, RGL, UTIA, Neural-BRDF).\n\n"
-         "Exit status: 0 all done, 1 error, 2 usage (unknown model, bad option or value, "
-         "output folder locked), 3 some tasks failed (the rest is done).",
-    epilog=models_help(),
-    no_args_is_help=True,
-    add_completion=False,
-    pretty_exceptions_enable=False,
-    rich_markup_mode=None,  # plain Click help: no Rich import (~80 ms), 80-column friendly
-    context_settings={"help_option_names": ["-h", "--help"]},
-)
-
-
-@app.callback()
 def _root(debug: bool = typer.Option(False, "--debug", help="Show full tracebacks on errors.")):
     """brdffit: measured BRDFs in, compact physically based microfacet models out."""
 
 
-def _load_commands() -> None:
-    for name in _COMMAND_MODULES:
+def build_app(commands=None) -> typer.Typer:
+    """The ``brdffit`` Typer app with the commands of ``commands`` (module names of
+    ``_COMMAND_MODULES``; default: all of them)."""
+    new = typer.Typer(
+        name="brdffit",
+        help="Fit compact microfacet models to measured BRDFs (MERL, RGL, UTIA, Neural-BRDF)."
+             "\n\nExit status: 0 all done, 1 error, 2 usage (unknown model, bad option or "
+             "value, output folder locked), 3 some tasks failed (the rest is done).",
+        epilog=models_help(),
+        no_args_is_help=True,
+        add_completion=False,
+        pretty_exceptions_enable=False,
+        rich_markup_mode=None,  # plain Click help: no Rich import (~80 ms), 80-column friendly
+        context_settings={"help_option_names": ["-h", "--help"]},
+    )
+    new.callback()(_root)
+    for name in _COMMAND_MODULES if commands is None else commands:
         try:
             module = importlib.import_module(f"{__name__}.{name}")
         except ModuleNotFoundError as exc:  # a command module not written yet
             if exc.name == f"{__name__}.{name}":
                 continue
             raise
-        module.register(app)
+        module.register(new)
+    return new
 
 
-_load_commands()
+def __getattr__(name: str):
+    if name == "app":  # the whole app, built on first use (main builds only what it runs)
+        globals()["app"] = full = build_app()
+        return full
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # -- the Click command, tuned ----------------------------------------------------------------
@@ -259,13 +264,22 @@ def _tune(command) -> None:
             cmd.get_help_option = get_help_option
 
 
-def command():
-    """The Click command of the ``brdffit`` app (:func:`_tune`-d)."""
+def command(name: str | None = None):
+    """The Click command of the ``brdffit`` app (:func:`_tune`-d): the whole app, or with
+    ``name`` the app with that one command (what ``brdffit NAME ...`` runs: the other command
+    modules are not imported and their Click commands not built)."""
     from typer.main import get_command
 
-    cmd = get_command(app)
+    cmd = get_command(build_app(None if name is None else [name]))
     _tune(cmd)
     return cmd
+
+
+def _command_name(argv: list[str]) -> str | None:
+    """The command ``argv`` runs, when it is one of ours (the root has no option that takes
+    a value, so the first argument that is not an option is the command)."""
+    first = next((a for a in argv if not a.startswith("-")), None)
+    return first if first in _COMMAND_MODULES else None
 
 
 def _click_usage_error(exc: BaseException) -> bool:
@@ -285,7 +299,8 @@ def main(argv: list[str] | None = None) -> int:
     single_thread_env()         # before NumPy loads: one BLAS thread (brdffit._blas)
     debug = "--debug" in argv
     try:
-        code = command().main(args=argv, prog_name="brdffit", standalone_mode=False)
+        code = command(_command_name(argv)).main(args=argv, prog_name="brdffit",
+                                                  standalone_mode=False)
     except _EXIT as exc:
         return exc.exit_code
     except _ABORT:

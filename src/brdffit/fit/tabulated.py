@@ -340,8 +340,8 @@ def _mirror_phi_d(half: np.ndarray) -> np.ndarray:
 def _weighted_phi_h_sums(values, weight) -> np.ndarray:
     """``Σ_{θh, φd} values · weight`` per θd, ``(90, 3)``, the cheapest way for the layout."""
     if all(values[..., c].flags["C_CONTIGUOUS"] for c in range(3)):  # channel-planar storage
-        return np.stack([np.einsum("hdp,hdp->d", values[..., c], weight, dtype=np.float64)
-                         for c in range(3)], -1)
+        weight = weight.astype(np.result_type(values.dtype, np.float64))  # one cast, not three
+        return np.stack([np.einsum("hdp,hdp->d", values[..., c], weight) for c in range(3)], -1)
     values = np.ascontiguousarray(values)  # channel-last: one (1 × Nφ) @ (Nφ × 3) per (θh, θd)
     return np.matmul(weight[:, :, None, :].astype(values.dtype), values)[:, :, 0, :].sum(0)
 
