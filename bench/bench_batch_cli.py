@@ -63,6 +63,21 @@ def per_model(out: Path) -> dict:
     return res
 
 
+def per_render(out: Path) -> dict:
+    """Render tasks: status counts, task time, and the rendered PSNR per model."""
+    recs = [json.loads(p.read_text()) for p in sorted((out / "renders").glob("*.json"))]
+    status: dict = {}
+    psnr: dict = {}
+    for r in recs:
+        status[r.get("status")] = status.get(r.get("status"), 0) + 1
+        for model, m in (r.get("models") or {}).items():
+            if m.get("psnr") is not None:
+                psnr.setdefault(model, []).append(m["psnr"])
+    return {"n": len(recs), "status": status,
+            "task_wall_s": _stats(r.get("wall_time_s") for r in recs),
+            "psnr_db": {m: _stats(v) for m, v in sorted(psnr.items())}}
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--every", type=int, default=5)
@@ -70,12 +85,17 @@ def main() -> int:
     ap.add_argument("--out", default="runs/db20b")
     ap.add_argument("--reference", default=None, help="output folder of an earlier run")
     ap.add_argument("--summarise", action="store_true", help="only summarise --out")
+    ap.add_argument("--render", action="store_true",
+                    help="pass --render (the four-scene paper suite, product defaults)")
+    ap.add_argument("--name", default=None, help="results file suffix (default: the count)")
     args = ap.parse_args()
     from brdffit.batch import enumerate_materials
 
     names = [n for n, _ in enumerate_materials("merl_nbrdf.zip")][::args.every]
     cmd = [str(ROOT / ".venv" / "bin" / "brdffit"), "batch", "merl_nbrdf.zip",
            "--models", args.models, "--only", ",".join(names), "--out", args.out, "--quiet"]
+    if args.render:
+        cmd.append("--render")
     result = {"benchmark": "one brdffit batch invocation, every model",
               "command": " ".join(cmd[1:]), "materials": names, "cpus": os.cpu_count()}
     if not args.summarise:
@@ -92,6 +112,8 @@ def main() -> int:
     out = ROOT / args.out
     pm = per_model(out)
     result["per_model"] = pm
+    if args.render:
+        result["renders"] = per_render(out)
     if args.reference:
         ref = per_model(ROOT / args.reference)
         cmp = {}
@@ -109,7 +131,8 @@ def main() -> int:
     for m in pm.values():
         m.pop("objective", None)
     print(json.dumps(result, indent=1))
-    with atomic_write(ROOT / "bench" / "results" / f"batch_one_invocation_{len(names)}_v2.json",
+    name = args.name or f"{len(names)}_v2"
+    with atomic_write(ROOT / "bench" / "results" / f"batch_one_invocation_{name}.json",
                       "w") as fh:
         json.dump(result, fh, indent=1)
     return 0
