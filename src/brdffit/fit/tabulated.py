@@ -349,9 +349,11 @@ def _weighted_phi_h_sums(values, weight) -> np.ndarray:
 def _merl_fresnel_sums(values, valid, dist, p_floor, max_theta_deg):
     """Sums of ``f / f_id`` over the valid MERL samples of each θd and their counts.
 
-    ``f/f_id = f · 4 cos⁴θh (σi co + σo ci − ci co) / P(θh)`` (Eq. 19-20 with the
-    Smith-uncorrelated G of Eq. 8). The geometric weight is symmetric under
-    ``φd → π − φd`` (θi ↔ θo), so it is computed on half the grid and mirrored.
+    ``f/f_id = f · 4 cos⁴θh (σi co + σo ci − ci co) / P(θh)`` (Eq. 19-20; the
+    height-correlated Smith ``G = 1/(1 + Λi + Λo)`` with ``σ = cos θ (1 + Λ)``, as the
+    anisotropic branch). The geometric weight is symmetric under ``φd → π − φd``
+    (θi ↔ θo), so it is computed on half the grid and mirrored. A NaN/inf sample makes the
+    sums non-finite: they are then recomputed without the non-finite samples.
     """
     from ..grid import merl_theta_h
 
