@@ -2,7 +2,8 @@
 objective against a reference run.
 
 For each Neural-BRDF MERL material (tabulated once): ``fit_npf(variant="independent-g")``
-(all starts) and ``fit_npf(variant="g-from-d")`` with no options; CPU time of the process
+(all starts) and ``fit_npf(variant="g-from-d")`` with no options (``--models
+npf-g-from-d,npf-g-from-d-plain``: also G-from-D without over-relaxation, side by side); CPU time of the process
 (all threads) and wall time, the final objective (Eq. 7), ``converged``, iterations, stop
 reason. With ``--reference DIR`` (a ``brdffit batch`` output whose ``fits/<material>/npf.npz``
 and ``npf-g-from-d.npz`` were made by an earlier version) the objective ratio new / reference
@@ -34,7 +35,11 @@ sys.path.insert(0, str(ROOT / "src"))
 from brdffit._atomic import atomic_write  # noqa: E402
 
 ZIP = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
-VARIANTS = {"npf": "independent-g", "npf-g-from-d": "g-from-d"}
+#: model → (variant, options); ``npf-g-from-d-plain`` is G-from-D without the over-relaxed
+#: sweeps (the default before session 8), run side by side with ``--models``
+VARIANTS = {"npf": ("independent-g", {}), "npf-g-from-d": ("g-from-d", {}),
+            "npf-g-from-d-plain": ("g-from-d", {"extrapolate": False})}
+DEFAULT_MODELS = ("npf", "npf-g-from-d")
 FIELDS = ["material", "model", "cpu_s", "wall_s", "objective", "converged", "nit",
           "stop_reason", "continuation_iterations", "reference_objective", "ratio_to_reference",
           "reference_converged", "reference_time_s"]
@@ -76,7 +81,8 @@ def main(argv=None) -> int:
     ap.add_argument("--zip", default=str(ZIP))
     ap.add_argument("--reference", default=None, help="brdffit batch output of an earlier run")
     ap.add_argument("--only", default="", help="comma-separated material names")
-    ap.add_argument("--models", default=",".join(VARIANTS))
+    ap.add_argument("--models", default=",".join(DEFAULT_MODELS),
+                    help=f"comma-separated, among {', '.join(VARIANTS)}")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "npf_defaults"))
     ap.add_argument("--max-iter", type=int, default=None,
                     help="independent-G cap instead of the default (a study, not the product)")
@@ -109,15 +115,18 @@ def main(argv=None) -> int:
         data = tabulate_merl_grid(load(f"{args.zip}:{name}"))
         for model in todo:
             c0, w0 = time.process_time(), time.perf_counter()
-            kw = {"max_iter": args.max_iter} if args.max_iter and model == "npf" else {}
-            fi = fit_npf(data=data, variant=VARIANTS[model], name=name, **kw).fit_info
+            variant, kw = VARIANTS[model]
+            if args.max_iter and model == "npf":
+                kw = dict(kw, max_iter=args.max_iter)
+            fi = fit_npf(data=data, variant=variant, name=name, **kw).fit_info
             row = {"material": name, "model": model,
                    "cpu_s": round(time.process_time() - c0, 2),
                    "wall_s": round(time.perf_counter() - w0, 2),
                    "objective": fi["objective"], "converged": fi["converged"],
                    "nit": fi["nit"], "stop_reason": fi["stop_reason"],
                    "continuation_iterations": fi.get("continuation", {}).get("iterations", 0)}
-            ref = ref_dir / "fits" / name / f"{model}.npz" if ref_dir else None
+            ref_model = "npf-g-from-d" if model == "npf-g-from-d-plain" else model
+            ref = ref_dir / "fits" / name / f"{ref_model}.npz" if ref_dir else None
             if ref is not None and ref.exists():
                 rfi = load_fit(ref).fit_info
                 row.update(reference_objective=rfi["objective"],
