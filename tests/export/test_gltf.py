@@ -263,3 +263,31 @@ def test_metal_like_fit_with_low_grazing_reflectance_stays_dielectric():
     assert core["metallicFactor"] == 1.0
     mine = gltf_fidelity(fit, metrics=("normalized_l2",))["normalized_l2"]
     assert mine < 0.5 * gltf_fidelity(fit, metrics=("normalized_l2",), specular=False)["normalized_l2"]
+
+
+def _albedo_on_grid(brdf, k=16):
+    """π × the mean of f over a stratified grid of cosine-distributed direction pairs: the
+    cosine-weighted mean albedo (independent of the exporter's random pairs)."""
+    from brdffit.brdf import cosine_hemisphere_sample
+
+    u = (np.stack(np.meshgrid(*[np.arange(k)] * 4, indexing="ij"), -1).reshape(-1, 4) + 0.5) / k
+    wi, wo = cosine_hemisphere_sample(u[:, :2]), cosine_hemisphere_sample(u[:, 2:])
+    return np.pi * np.mean(np.asarray(brdf.eval(wi, wo)), axis=0)
+
+
+def test_metal_keeps_the_fits_mean_albedo_when_its_grazing_reflectance_exceeds_one():
+    """A rough fit whose F90 is ~2 (ks·Schlick, as ggx-diffuse finds on polyethylene) is a
+    metal under the rule; glTF's metal stops at F90 = 1, so base colour = F0 loses a third of
+    the light. The exported base colour is the one whose cosine-weighted mean albedo is the
+    fit's (rendered: polyethylene 13.6 → 33.2 dB)."""
+    f0, ks = np.array([0.5, 0.445, 0.375]), np.array([2.14, 1.96, 1.93])   # ks·F at 0°, 90°
+    fit = MicrofacetBRDF(GGX(0.79), SchlickFresnel(f0 / ks), diffuse=[0.031, 0.07, 0.098],
+                         specular=ks)
+    p = gltf_parameters(fit)
+    assert p["metallicFactor"] == 1.0
+    target = _albedo_on_grid(fit)
+    got = _albedo_on_grid(GLTFBRDF(p["baseColorFactor"][:3], 1.0, p["roughnessFactor"]))
+    np.testing.assert_allclose(got, target, rtol=1e-2)
+    as_f0 = _albedo_on_grid(GLTFBRDF(f0, 1.0, p["roughnessFactor"]))
+    assert np.all(np.abs(as_f0 / target - 1) > 0.15)        # what base colour = F0 gave
+    assert np.all(np.asarray(p["baseColorFactor"][:3]) > f0)

@@ -230,11 +230,18 @@ def diffuse_kept_fraction(make_brdf, n_pairs: int = 1 << 14, seed: int = 0) -> n
     Both directions are cosine-distributed (:func:`brdffit.brdf.cosine_hemisphere_sample`)
     from a fixed seed, so the result is deterministic; ``n_pairs`` = 2¹⁴ gives ~1e-4.
     """
+    return (cosine_weighted_albedo(make_brdf(np.ones(3)), n_pairs, seed)
+            - cosine_weighted_albedo(make_brdf(np.zeros(3)), n_pairs, seed))
+
+
+def cosine_weighted_albedo(brdf, n_pairs: int = 1 << 14, seed: int = 0) -> np.ndarray:
+    """Per channel, the directional albedo of ``brdf`` averaged over incident directions with
+    the weight ``cos θi``: ``π`` times the mean of ``f(wi, wo)`` over direction pairs that are
+    both cosine-distributed (:func:`brdffit.brdf.cosine_hemisphere_sample`, fixed seed: the
+    same pairs for every call with the same ``n_pairs`` and ``seed``)."""
     from ..brdf import cosine_hemisphere_sample
 
     u = np.random.default_rng(seed).random((2, n_pairs, 2))
     wi, wo = cosine_hemisphere_sample(u[0]), cosine_hemisphere_sample(u[1])
-    f1 = np.asarray(make_brdf(np.ones(3)).eval(wi, wo), dtype=np.float64)
-    f0 = np.asarray(make_brdf(np.zeros(3)).eval(wi, wo), dtype=np.float64)
-    return np.pi * np.mean(f1 - f0, axis=0)
+    return np.pi * np.mean(np.asarray(brdf.eval(wi, wo), dtype=np.float64), axis=0)
 

@@ -31,7 +31,9 @@ GGX tails; the loss is measured):
 * reflectances of the fit: ``F0 = ks · F(θd = 0)`` and ``F90 = ks · F(θd = 90°)`` (ks the
   fit's specular scale, F its Fresnel), clipped to [0, 1];
 * **metallic rule**: a metal (``metallic = 1``, ``baseColorFactor = F0``, the fit's diffuse
-  term dropped, F90 = 1) when the luminance of F0 is ≥ 0.08 (``MATERIAL_METAL_F0``: common
+  term dropped, F90 = 1; for a fit with a diffuse term, the base colour whose
+  cosine-weighted mean albedo is the fit's, which also carries the grazing reflectance above
+  1 and the dropped diffuse: polyethylene's ggx-diffuse fit, F90 ≈ 2, 13.6 → 33.2 dB) when the luminance of F0 is ≥ 0.08 (``MATERIAL_METAL_F0``: common
   dielectrics, η ≤ 1.8, have F0 ≤ 0.08), exceeds the luminance of the fit's ρd and — with
   the extensions — the luminance of the fit's F90 is ≥ 0.8 (``METAL_MIN_F90``; measured
   fits such as the ggx-diffuse ones of MERL's metallic paints reach only 0.1-0.5 at
@@ -70,8 +72,8 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..brdf import IsotropicBRDF, _as_dirs
-from ._common import (LUMA, check_output_path, diffuse_kept_fraction, fail, is_elliptical, shown,
-                      writing)
+from ._common import (LUMA, check_output_path, cosine_weighted_albedo, diffuse_kept_fraction,
+                      fail, is_elliptical, shown, writing)
 
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material",
            "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0",
@@ -353,6 +355,22 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
                                                      "anisotropyRotation": aniso[2]},
            "specular": spec, "F0": F0.tolist(), "F90": F90.tolist(), "rho_d": rd.tolist(),
            "notes": notes}
+    if metal and m.diffuse is not None:
+        # a fit that separated its diffuse term: glTF's metal is affine in its base colour
+        # (Schlick F = c + (1 − c)(1 − V·H)⁵), take the c whose cosine-weighted mean albedo is
+        # the fit's, which also counts what glTF cannot carry (a grazing reflectance above
+        # F90 = 1, the dropped diffuse term). Fits without one (tabulated, moment GGX) keep
+        # c = F0: their Fresnel absorbs the diffuse part, and matching the albedo was not
+        # better there in BRDF space (15 of 30 fits worse), with no render evidence
+        a0, a1 = (cosine_weighted_albedo(_brdf_of(dict(out, baseColorFactor=[b] * 3 + [1.0])))
+                  for b in (0.0, 1.0))
+        target = cosine_weighted_albedo(m)
+        base = np.clip((target - a0) / np.maximum(a1 - a0, 1e-9), 0.0, 1.0)
+        out["baseColorFactor"] = [float(x) for x in base] + [1.0]
+        notes.append(f"metal: baseColor {np.round(base, 4).tolist()} keeps the fit's "
+                     f"cosine-weighted mean albedo {np.round(target, 4).tolist()} (F0: "
+                     f"{np.round(F0c, 4).tolist()})" + (": clipped" if np.any(
+                         (target - a0) / np.maximum(a1 - a0, 1e-9) > 1) else ""))
     if not metal and np.any(base > 0):
         # glTF mixes the base with the specular layer by (1 − F(V·H)): the fit adds ρd/π
         # unattenuated, so divide by the fraction kept (cosine-weighted mean)
