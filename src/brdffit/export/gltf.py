@@ -33,18 +33,19 @@ GGX tails; the loss is measured):
 * **metallic rule**: a metal (``metallic = 1``, ``baseColorFactor = F0``, the fit's diffuse
   term dropped, F90 = 1; for a fit with a diffuse term, the base colour whose
   cosine-weighted mean albedo is the fit's, which also carries the grazing reflectance above
-  1 and the dropped diffuse: polyethylene's ggx-diffuse fit, F90 ≈ 2, 13.6 → 33.2 dB) when the luminance of F0 is ≥ 0.08 (``MATERIAL_METAL_F0``: common
-  dielectrics, η ≤ 1.8, have F0 ≤ 0.08), exceeds the luminance of the fit's ρd and — with
-  the extensions — the luminance of the fit's F90 is ≥ 0.8 (``METAL_MIN_F90``; measured
-  fits such as the ggx-diffuse ones of MERL's metallic paints reach only 0.1-0.5 at
-  grazing, which glTF's metal would raise to 1: 7.7-29 dB against the fit; as dielectrics
-  with ``specularFactor`` = F90 they keep both reflectances and the diffuse term), or when
-  the fit has no diffuse term at all (tabulated fits: their Fresnel table absorbs the
-  diffuse part; a dielectric would be black);
+  1 and the dropped diffuse: polyethylene's ggx-diffuse fit, F90 ≈ 2, 13.6 → 33.2 dB) when
+  the luminance of F0 is ≥ 0.08 (``MATERIAL_METAL_F0``: common dielectrics, η ≤ 1.8, have F0
+  ≤ 0.08), exceeds the luminance of the fit's ρd and — with the extensions — the luminance
+  of the fit's F90 is ≥ 0.8 (``METAL_MIN_F90``; measured fits such as the ggx-diffuse ones
+  of MERL's metallic paints reach only 0.1-0.5 at grazing, which glTF's metal would raise to
+  1: 7.7-29 dB against the fit; as dielectrics with ``specularFactor`` = F90 they keep both
+  reflectances and the diffuse term), or when the fit has no diffuse term at all (tabulated
+  fits: their Fresnel table absorbs the diffuse part; a dielectric would be black);
 * otherwise a **dielectric Lambert + Schlick F0**: ``metallic = 0``, ``baseColorFactor =
   ρd / κ`` (clipped to [0, 1]; κ per channel the cosine-weighted mean over direction pairs
   of the ``1 − F_d`` by which glTF weights the base, so the diffuse albedo is the fit's on
-  average: :func:`brdffit.export._common.diffuse_kept_fraction`), and with ``specular=True`` (default) the extensions carry F0 and F90:
+  average: :func:`brdffit.export._common.diffuse_kept_fraction`), and with
+  ``specular=True`` (default) the extensions carry F0 and F90:
   ``specularFactor = min(1, max(max F90, max F0))`` (f90 of the dielectric: exact when the
   fit's F90 is grey), ``r = F0 / specularFactor``, ``ior = (1 + √max r)/(1 − √max r)``
   (``KHR_materials_ior``; F0 of the ior = the largest channel of r) and
@@ -53,8 +54,8 @@ GGX tails; the loss is measured):
   written only when they differ from the defaults (ior 1.5, factors 1). With
   ``specular=False`` the core's fixed f0 = 0.04, f90 = 1 are used (lossy, reported);
 * what stays lossy (measured): glTF weights the diffuse term by ``(1 − F_d)`` (the fit adds
-  ρd/π unweighted: κ restores the mean, not the dependence on the directions), its Fresnel curve is Schlick's (a dielectric fit's exact curve is
-  replaced), and its Smith V is separable (core) or the extension's height-correlated form;
+  ρd/π unweighted: κ restores the mean, not the dependence on the directions), its Fresnel
+  curve is Schlick's (a dielectric fit's exact curve is replaced), and its Smith V is separable (core) or the extension's height-correlated form;
 * optionally (``optimize=True``, CLI ``--option optimize=true``) baseColor, metallic and
   roughness are refined by least squares in BRDF space (:func:`optimize_parameters`);
 * the loss of fidelity is measured by :func:`gltf_fidelity` (BRDF-space metrics of
@@ -355,6 +356,10 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
                                                      "anisotropyRotation": aniso[2]},
            "specular": spec, "F0": F0.tolist(), "F90": F90.tolist(), "rho_d": rd.tolist(),
            "notes": notes}
+
+    def with_base(b) -> GLTFBRDF:  # the material above with base colour b (affine in b)
+        return _brdf_of(dict(out, baseColorFactor=[float(x) for x in b] + [1.0]))
+
     if metal and m.diffuse is not None:
         # a fit that separated its diffuse term: glTF's metal is affine in its base colour
         # (Schlick F = c + (1 − c)(1 − V·H)⁵), take the c whose cosine-weighted mean albedo is
@@ -362,20 +367,19 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
         # F90 = 1, the dropped diffuse term). Fits without one (tabulated, moment GGX) keep
         # c = F0: their Fresnel absorbs the diffuse part, and matching the albedo was not
         # better there in BRDF space (15 of 30 fits worse), with no render evidence
-        a0, a1 = (cosine_weighted_albedo(_brdf_of(dict(out, baseColorFactor=[b] * 3 + [1.0])))
-                  for b in (0.0, 1.0))
+        a0 = cosine_weighted_albedo(with_base(np.zeros(3)))
         target = cosine_weighted_albedo(m)
-        base = np.clip((target - a0) / np.maximum(a1 - a0, 1e-9), 0.0, 1.0)
+        wanted = (target - a0) / np.maximum(cosine_weighted_albedo(with_base(np.ones(3))) - a0,
+                                            1e-9)
+        base = np.clip(wanted, 0.0, 1.0)
         out["baseColorFactor"] = [float(x) for x in base] + [1.0]
         notes.append(f"metal: baseColor {np.round(base, 4).tolist()} keeps the fit's "
                      f"cosine-weighted mean albedo {np.round(target, 4).tolist()} (F0: "
-                     f"{np.round(F0c, 4).tolist()})" + (": clipped" if np.any(
-                         (target - a0) / np.maximum(a1 - a0, 1e-9) > 1) else ""))
+                     f"{np.round(F0c, 4).tolist()})" + (": clipped" if np.any(wanted > 1) else ""))
     if not metal and np.any(base > 0):
         # glTF mixes the base with the specular layer by (1 − F(V·H)): the fit adds ρd/π
         # unattenuated, so divide by the fraction kept (cosine-weighted mean)
-        kept = diffuse_kept_fraction(
-            lambda b: _brdf_of(dict(out, baseColorFactor=[float(x) for x in b] + [1.0])))
+        kept = diffuse_kept_fraction(with_base)
         base = np.clip(base / np.maximum(kept, 1e-6), 0.0, 1.0)
         out["baseColorFactor"] = [float(x) for x in base] + [1.0]
         notes.append(f"baseColor {np.round(base, 4).tolist()} = rho_d / the fraction of the "
