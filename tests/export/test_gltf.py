@@ -37,13 +37,20 @@ def test_gltf_brdf_matches_library_components():
     np.testing.assert_allclose(GLTFBRDF(base, 1.0, r).eval(wi, wo), metal, rtol=1e-10, atol=1e-12)
 
 
-def _kept_by_schlick(f0, f90, k=16):
-    """Cosine-weighted mean of ``1 − Schlick(f0, f90, V·H)`` over a stratified grid of
-    direction pairs: the fraction of the base glTF's dielectric keeps on average."""
+def cosine_pairs_grid(k=16):
+    """``(wi, wo)``: a stratified grid of k⁴ direction pairs, both cosine-distributed, for
+    cosine-weighted means over pairs independent of the exporters' random pairs (also used
+    by test_materialx)."""
     from brdffit.brdf import cosine_hemisphere_sample
 
     u = (np.stack(np.meshgrid(*[np.arange(k)] * 4, indexing="ij"), -1).reshape(-1, 4) + 0.5) / k
-    wi, wo = cosine_hemisphere_sample(u[:, :2]), cosine_hemisphere_sample(u[:, 2:])
+    return cosine_hemisphere_sample(u[:, :2]), cosine_hemisphere_sample(u[:, 2:])
+
+
+def _kept_by_schlick(f0, f90, k=16):
+    """Cosine-weighted mean of ``1 − Schlick(f0, f90, V·H)`` over a stratified grid of
+    direction pairs: the fraction of the base glTF's dielectric keeps on average."""
+    wi, wo = cosine_pairs_grid(k)
     h = wi + wo
     h /= np.linalg.norm(h, axis=-1, keepdims=True)
     x5 = (1.0 - np.sum(wo * h, -1)) ** 5
@@ -266,12 +273,8 @@ def test_metal_like_fit_with_low_grazing_reflectance_stays_dielectric():
 
 
 def _albedo_on_grid(brdf, k=16):
-    """π × the mean of f over a stratified grid of cosine-distributed direction pairs: the
-    cosine-weighted mean albedo (independent of the exporter's random pairs)."""
-    from brdffit.brdf import cosine_hemisphere_sample
-
-    u = (np.stack(np.meshgrid(*[np.arange(k)] * 4, indexing="ij"), -1).reshape(-1, 4) + 0.5) / k
-    wi, wo = cosine_hemisphere_sample(u[:, :2]), cosine_hemisphere_sample(u[:, 2:])
+    """π × the mean of f over :func:`cosine_pairs_grid`: the cosine-weighted mean albedo."""
+    wi, wo = cosine_pairs_grid(k)
     return np.pi * np.mean(np.asarray(brdf.eval(wi, wo)), axis=0)
 
 

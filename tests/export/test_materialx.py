@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import brdffit
-from brdffit.brdf import cosine_hemisphere_sample
 from brdffit.export import TARGETS, export
 from brdffit.microfacet import GGX, DielectricFresnel, MicrofacetBRDF, SchlickFresnel
+from tests.export.test_gltf import cosine_pairs_grid
 
 mx = pytest.importorskip("MaterialX")
 
@@ -26,9 +26,7 @@ def _read(path):
 def _diffuse_albedo(p, n=1 << 16):
     """Cosine-weighted mean of the exported dielectric's base term, ``π (f(base) − f(0))``,
     on a stratified grid of direction pairs (independent of the exporter's random pairs)."""
-    k = int(round(n ** 0.25))
-    u = (np.stack(np.meshgrid(*[np.arange(k)] * 4, indexing="ij"), -1).reshape(-1, 4) + 0.5) / k
-    wi, wo = (cosine_hemisphere_sample(u[:, 2 * j:2 * j + 2]) for j in (0, 1))
+    wi, wo = cosine_pairs_grid(int(round(n ** 0.25)))
 
     def brdf(base):
         return OpenPBRBRDF(base, 0.0, p["specular_roughness"], specular_ior=p["specular_ior"],
