@@ -51,7 +51,8 @@ import numpy as np
 
 from ..brdf import BRDF
 from ..errors import FitError
-from ..grid import N_PHI_D, N_THETA_H, merl_theta_d, tabulate_merl_grid
+from ..grid import (N_PHI_D, N_THETA_H, merl_phi_d, merl_theta_d, merl_theta_h,
+                    tabulate_merl_grid)
 from ..microfacet.tabulated import (TabulatedSlopeDistribution,
                                     azimuthal_clamped_cosine_integral, radial_rule)
 from ..schema import ListOf, Nested, Opt, Schema, Text
@@ -308,8 +309,6 @@ def _merl_geometry():
     ``cos θo`` (float32, φh = 0), lookup indices into a uniform ``cos θ`` table, and the
     above-horizon mask. The other half follows by symmetry (:func:`_mirror_phi_d`)."""
     if not _MERL_GEOMETRY:
-        from ..grid import merl_phi_d, merl_theta_h
-
         th, td, pd = merl_theta_h(), merl_theta_d(), merl_phi_d()[:_N_PHI_HALF]
         # cos θi,o = cos θh cos θd ∓ sin θh sin θd cos φd computed in float32 (the stored
         # type; faster than float64): |Δ| ≤ 1.2e-7 moves a lookup index by one on 0.04 % of
@@ -355,8 +354,6 @@ def _merl_fresnel_sums(values, valid, dist, p_floor, max_theta_deg):
     (θi ↔ θo), so it is computed on half the grid and mirrored. A NaN/inf sample makes the
     sums non-finite: they are then recomputed without the non-finite samples.
     """
-    from ..grid import merl_theta_h
-
     th = merl_theta_h()
     geo = _merl_geometry()
     sigma_tab = _sigma_of_cos(dist, _SIGMA_M).astype(np.float32)
