@@ -9,7 +9,7 @@ import pytest
 import brdffit
 from brdffit.export import TARGETS, export
 from brdffit.microfacet import GGX, DielectricFresnel, MicrofacetBRDF, SchlickFresnel
-from tests.export.test_gltf import cosine_pairs_grid
+from tests.export.test_gltf import _albedo_on_grid, cosine_pairs_grid
 
 mx = pytest.importorskip("MaterialX")
 
@@ -196,3 +196,25 @@ def test_metal_like_fit_with_low_grazing_reflectance_is_a_dielectric():
     np.testing.assert_allclose(_diffuse_albedo(p), [0.05, 0.04, 0.03], rtol=3e-3)
     gold = openpbr_parameters(brdffit.synthetic("gold-ggx"))      # F90 = 1: still a metal
     assert gold["base_metalness"] == 1.0
+
+
+def test_metal_keeps_the_fits_mean_albedo_when_its_grazing_reflectance_exceeds_one():
+    """glTF's rule for OpenPBR: a rough fit with F90 ~2 and a diffuse term (ggx-diffuse on
+    polyethylene) is a metal; OpenPBR's metal (energy compensation included, quadratic in the
+    base colour) drops the diffuse term and stops at F90 = 1, so base_color = F0 gave too much
+    light here (the compensation of a rough lobe); the exported base_color has the fit's
+    cosine-weighted mean albedo (rendered: polyethylene 16.2 -> 27.6 dB)."""
+    f0, ks = np.array([0.5, 0.445, 0.375]), np.array([2.14, 1.96, 1.93])
+    fit = MicrofacetBRDF(GGX(0.79), SchlickFresnel(f0 / ks), diffuse=[0.031, 0.07, 0.098],
+                         specular=ks)
+    p = openpbr_parameters(fit)
+    assert p["base_metalness"] == 1.0
+
+    def openpbr(base):
+        return OpenPBRBRDF(base, 1.0, p["specular_roughness"],
+                           specular_weight=p["specular_weight"])
+
+    target = _albedo_on_grid(fit)
+    np.testing.assert_allclose(_albedo_on_grid(openpbr(p["base_color"])), target, rtol=1e-2)
+    as_f0 = _albedo_on_grid(openpbr(np.clip(f0 / p["specular_weight"], 0, 1)))
+    assert np.all(np.abs(as_f0 / target - 1) > 0.05)          # what base_color = F0 gave

@@ -245,3 +245,23 @@ def cosine_weighted_albedo(brdf, n_pairs: int = 1 << 14, seed: int = 0) -> np.nd
     wi, wo = cosine_hemisphere_sample(u[0]), cosine_hemisphere_sample(u[1])
     return np.pi * np.mean(np.asarray(brdf.eval(wi, wo), dtype=np.float64), axis=0)
 
+
+
+def base_for_albedo(make_brdf, target, n_pairs: int = 1 << 14, seed: int = 0):
+    """Per channel, the base colour ``c ∈ [0, 1]`` whose material ``make_brdf(c)`` has the
+    cosine-weighted mean albedo ``target`` (:func:`cosine_weighted_albedo`, same pairs for
+    every call). Exact when that albedo is a polynomial of degree ≤ 2 in ``c`` — glTF's metal
+    (Schlick F = c + (1 − c)(1 − V·H)⁵: affine) and OpenPBR's as MaterialX evaluates it (F
+    times the energy compensation 1 + F(1 − E)/E: quadratic) — from its values at c = 0, ½, 1,
+    taking the root on the increasing branch. Returns ``(c, unclipped)``; ``unclipped`` > 1
+    means the target is out of the material's reach.
+    """
+    a0, ah, a1 = (cosine_weighted_albedo(make_brdf(np.full(3, c)), n_pairs, seed)
+                  for c in (0.0, 0.5, 1.0))
+    q = 2.0 * (a1 - 2.0 * ah + a0)                   # albedo = a0 + b c + q c²
+    b = a1 - a0 - q
+    t = np.asarray(target, dtype=np.float64) - a0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        root = 2.0 * t / (b + np.sqrt(np.maximum(b * b + 4.0 * q * t, 0.0)))   # stable form
+    wanted = np.where(np.isfinite(root), root, 0.0)
+    return np.clip(wanted, 0.0, 1.0), wanted

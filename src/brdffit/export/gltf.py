@@ -73,8 +73,8 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..brdf import IsotropicBRDF, _as_dirs
-from ._common import (LUMA, check_output_path, cosine_weighted_albedo, diffuse_kept_fraction,
-                      fail, is_elliptical, shown, writing)
+from ._common import (LUMA, base_for_albedo, check_output_path, cosine_weighted_albedo,
+                      diffuse_kept_fraction, fail, is_elliptical, shown, writing)
 
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material",
            "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0",
@@ -367,11 +367,8 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
         # F90 = 1, the dropped diffuse term). Fits without one (tabulated, moment GGX) keep
         # c = F0: their Fresnel absorbs the diffuse part, and matching the albedo was not
         # better there in BRDF space (15 of 30 fits worse), with no render evidence
-        a0 = cosine_weighted_albedo(with_base(np.zeros(3)))
         target = cosine_weighted_albedo(m)
-        wanted = (target - a0) / np.maximum(cosine_weighted_albedo(with_base(np.ones(3))) - a0,
-                                            1e-9)
-        base = np.clip(wanted, 0.0, 1.0)
+        base, wanted = base_for_albedo(with_base, target)
         out["baseColorFactor"] = [float(x) for x in base] + [1.0]
         notes.append(f"metal: baseColor {np.round(base, 4).tolist()} keeps the fit's "
                      f"cosine-weighted mean albedo {np.round(target, 4).tolist()} (F0: "

@@ -37,7 +37,9 @@ and, since ``geometry_tangent`` is the mesh's, not applied (part of the measured
   and of F90 ≥ 0.8; or no diffuse term): OpenPBR's metal is ``specular_weight ·
   F_Schlick(base_color, F90 = 1)`` (``specular_color`` = F82 tint, white = plain Schlick):
   ``specular_weight = max F90`` (≤ 1 unless F0 exceeds it), ``base_color = F0 /
-  specular_weight`` — exact for a Schlick fit with a grey ks.
+  specular_weight`` — exact for a Schlick fit with a grey ks; for a fit with a diffuse
+  term (which the metal drops), ``base_color`` is instead the one whose cosine-weighted mean
+  albedo is the fit's (:func:`~brdffit.export._common.base_for_albedo`; glTF's rule).
 
 What stays lossy (measured by :func:`materialx_fidelity` against :class:`OpenPBRBRDF`):
 MaterialX's GLSL (``mx_dielectric_bsdf``, ``mx_generalized_schlick_bsdf``, ``mx_layer``)
@@ -57,8 +59,8 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..brdf import IsotropicBRDF, _as_dirs
-from ._common import (LUMA, check_output_path, diffuse_kept_fraction, principal_axes,
-                      shown, writing)
+from ._common import (LUMA, base_for_albedo, check_output_path, cosine_weighted_albedo,
+                      diffuse_kept_fraction, principal_axes, shown, writing)
 
 __all__ = ["OpenPBRBRDF", "openpbr_parameters", "openpbr_equivalent", "materialx_fidelity",
            "materialx_document", "write_materialx", "validate_document"]
@@ -235,7 +237,15 @@ def openpbr_parameters(model) -> dict:
         notes.append(f"metal: specular_weight {sw:.4g} x Schlick(base_color, 1) (fit F90: "
                      f"{np.round(F90, 4).tolist()})")
         if m.diffuse is not None:
-            notes.append("metal: the fit's diffuse term is dropped")
+            # as for glTF: OpenPBR's metal drops the diffuse term and stops at F90 = 1; take
+            # the base colour whose cosine-weighted mean albedo is the fit's (polyethylene)
+            target = cosine_weighted_albedo(m)
+            base, wanted = base_for_albedo(lambda b: _brdf_of(dict(p, base_color=b)), target)
+            p["base_color"] = base.tolist()
+            notes.append(f"metal: base_color {np.round(base, 4).tolist()} keeps the fit's "
+                         f"cosine-weighted mean albedo {np.round(target, 4).tolist()} (its "
+                         f"diffuse term folded in; F0: {np.round(F0c, 4).tolist()})"
+                         + (": clipped" if np.any(wanted > 1) else ""))
     else:
         p.update(base_metalness=0.0, base_color=np.clip(rd, 0, 1).tolist(), specular_weight=1.0)
         p.update(_dielectric_choice(m, p, F0c, F90c, notes))
@@ -322,11 +332,8 @@ def _dielectric_choice(model, p, F0, F90, notes, n: int = 1 << 15) -> dict:
 def _dielectric(p, c, base_color=None) -> "OpenPBRBRDF":
     """The dielectric :class:`OpenPBRBRDF` of the roughness inputs ``p`` and the Fresnel
     inputs ``c`` (base colour ``base_color``, else ``c["base_color"]``)."""
-    return OpenPBRBRDF(c["base_color"] if base_color is None else base_color, 0.0,
-                       p["specular_roughness"], specular_ior=c["specular_ior"],
-                       specular_color=c["specular_color"],
-                       specular_roughness_anisotropy=p["specular_roughness_anisotropy"],
-                       tangent_rotation=np.radians(p.get("tangent_rotation_deg", 0.0)))
+    return _brdf_of({**p, **c, "base_metalness": 0.0, "specular_weight": 1.0,
+                     "base_color": c["base_color"] if base_color is None else base_color})
 
 
 def compensated_base(p, c, rho_d) -> list:
@@ -341,13 +348,16 @@ def compensated_base(p, c, rho_d) -> list:
 
 def openpbr_equivalent(model) -> OpenPBRBRDF:
     """The :class:`OpenPBRBRDF` of the exported ``open_pbr_surface``."""
-    p = openpbr_parameters(model)
+    return _brdf_of(openpbr_parameters(model), f"{getattr(model, 'name', 'model')}-openpbr")
+
+
+def _brdf_of(p: dict, name: str = "openpbr") -> OpenPBRBRDF:
+    """The :class:`OpenPBRBRDF` of the inputs ``p`` (as :func:`openpbr_parameters` names them)."""
     return OpenPBRBRDF(p["base_color"], p["base_metalness"], p["specular_roughness"],
                        specular_ior=p["specular_ior"], specular_color=p["specular_color"],
                        specular_weight=p["specular_weight"],
                        specular_roughness_anisotropy=p["specular_roughness_anisotropy"],
-                       tangent_rotation=np.radians(p["tangent_rotation_deg"]),
-                       name=f"{getattr(model, 'name', 'model')}-openpbr")
+                       tangent_rotation=np.radians(p.get("tangent_rotation_deg", 0.0)), name=name)
 
 
 def materialx_fidelity(model, n_samples: int = 1 << 15,
