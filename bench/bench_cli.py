@@ -15,6 +15,11 @@ Prints and writes ``bench/results/cli.json``:
 * ``--baseline REV``: the same commands on the source tree of git revision ``REV``
   (``git archive`` into a temporary folder, run with ``PYTHONPATH``): before/after in one
   run, at the same load;
+* ``--reference CMD``: a reference program doing the same job, timed interleaved with the
+  commands above (side by side, same load), e.g. the authors' C++ (jdupuy/dj_brdf, built
+  outside the repository: ``djb::merl`` read, ``djb::tabular(merl, 90, true)`` fit, tables
+  written): ``--reference "/tmp/cpp/djfit {input} {output}"``; the JSON keeps the command
+  and the ratio of the fit process to it;
 * ``--models [A,B]``: one fit of GOLD per model (fit time, CPU, fit-file and table bytes,
   quick error): the typical figures :data:`brdffit.fit.registry.MODELS` declares.
 
@@ -33,6 +38,7 @@ import json
 import os
 import platform
 import re
+import shlex
 import statistics
 import subprocess
 import sys
@@ -46,6 +52,8 @@ SHARED = REPO.parent / "shared" / "data"
 HEAVY = ("numpy", "scipy", "numba", "llvmlite", "pydantic", "rich", "click", "mitsuba",
          "drjit", "dask", "distributed", "matplotlib", "colour", "h5py", "PIL")
 C_REFERENCE_S = 0.175  # issue 15: jdupuy/dj_brdf (egsr_2015, g++ -O3) on this machine
+REFERENCE = "reference program (--reference): read, fit, save"
+FIT = "fit tabulated -o (read, fit, save)"
 
 _WRAP = "import sys\nfrom brdffit.cli import main\nsys.exit(main(sys.argv[1:]))"
 
@@ -108,7 +116,7 @@ def _has_no_error(py: str, env: dict) -> bool:
 
 
 def _commands(py: str, gold: Path, bad: Path, out: Path, baseline: bool,
-              no_error: bool = True) -> dict[str, list]:
+              no_error: bool = True, reference: str | None = None) -> dict[str, list]:
     cli = [py, "-c", _WRAP]
     fit = cli + ["fit", str(gold), "--model", "tabulated", "-o", str(out)]
     cmds = {
@@ -117,21 +125,24 @@ def _commands(py: str, gold: Path, bad: Path, out: Path, baseline: bool,
         "brdffit --help": cli + ["--help"],
         # the C++ reference's job: read the MERL file, fit, save (a baseline without
         # --no-error also computes the error figure: see "baseline_no_error" in the JSON)
-        "fit tabulated -o (read, fit, save)": fit + ["--no-error"] if no_error else fit,
+        FIT: fit + ["--no-error"] if no_error else fit,
         "fit rejected input": cli + ["fit", str(bad), "--model", "tabulated", "-o", str(out)],
         "info rejected input": cli + ["info", str(bad)],
     }
     if not baseline:
         cmds["brdffit models"] = cli + ["models"]
         cmds["fit tabulated -o, with error figure"] = fit
+        if reference:
+            cmds[REFERENCE] = shlex.split(reference.format(input=gold,
+                                                           output=out.with_suffix(".ref")))
     return cmds
 
 
-def time_commands(py, src, gold, bad, runs, baseline=False) -> dict:
+def time_commands(py, src, gold, bad, runs, baseline=False, reference=None) -> dict:
     env = _env(src)
     no_error = _has_no_error(py, env)
     with tempfile.TemporaryDirectory() as tmp:
-        cmds = _commands(py, gold, bad, Path(tmp) / "f.npz", baseline, no_error)
+        cmds = _commands(py, gold, bad, Path(tmp) / "f.npz", baseline, no_error, reference)
         res = {k: {"wall": [], "cpu": [], "status": None} for k in cmds}
         for argv in cmds.values():  # warm-up: bytecode caches, page cache
             _run(argv, env)
@@ -143,7 +154,11 @@ def time_commands(py, src, gold, bad, runs, baseline=False) -> dict:
                 res[name]["status"] = status
     out = {k: {"wall_s": _stats(v["wall"]), "cpu_s": _stats(v["cpu"]), "exit": v["status"]}
            for k, v in res.items()}
-    out["fit tabulated -o (read, fit, save)"]["no_error"] = no_error
+    out[FIT]["no_error"] = no_error
+    if REFERENCE in out:
+        out[REFERENCE]["command"] = reference
+        out[REFERENCE]["fit_over_reference"] = {
+            k: out[FIT][k]["median"] / out[REFERENCE][k]["median"] for k in ("wall_s", "cpu_s")}
     return out
 
 
@@ -268,6 +283,9 @@ def main() -> None:
     ap.add_argument("--models", nargs="?", const="all", default=None,
                     help="also fit GOLD with these models (comma-separated; default all)")
     ap.add_argument("--no-commands", action="store_true", help="only --models")
+    ap.add_argument("--reference", default=None,
+                    help="reference program timed side by side: a command with {input} and "
+                         "{output}, e.g. '/tmp/cpp/djfit {input} {output}'")
     ap.add_argument("--out", default=str(ROOT / "results" / "cli.json"))
     args = ap.parse_args()
     py = sys.executable
@@ -285,7 +303,8 @@ def main() -> None:
         result["input"] = what
         if not args.no_commands:
             print(f"timing {args.runs} runs of each command (current tree) ...", flush=True)
-            result["commands"] = time_commands(py, None, gold, bad, args.runs)
+            result["commands"] = time_commands(py, None, gold, bad, args.runs,
+                                               reference=args.reference)
             print("breakdown of the fit process ...", flush=True)
             result["fit_breakdown"] = breakdown(py, gold, args.runs)
             if args.baseline:
@@ -333,6 +352,9 @@ def main() -> None:
             b = base.get(name)
             bt = (f"{b['wall_s']['median']:.3f} / {b['cpu_s']['median']:.3f}" if b else "")
             status = "" if r["exit"] in (0, None) else f"  (exit {r['exit']})"
+            if "fit_over_reference" in r:
+                status += "  fit / reference: {wall_s:.2f} wall, {cpu_s:.2f} CPU".format(
+                    **r["fit_over_reference"])
             print(f"{name:<40}{r['wall_s']['median']:>9.3f}{r['cpu_s']['median']:>9.3f}   "
                   f"{bt}{status}")
         print("\nfit process, where the time goes (median wall s):")
