@@ -117,7 +117,7 @@ def _has_no_error(py: str, env: dict) -> bool:
 
 def _commands(py: str, gold: Path, bad: Path, out: Path, baseline: bool,
               no_error: bool = True, reference: str | None = None) -> dict[str, list]:
-    cli = [py, "-c", _WRAP]
+    cli = [py, "-m", "brdffit"]  # the tree's own entry point, as the console script runs it
     fit = cli + ["fit", str(gold), "--model", "tabulated", "-o", str(out)]
     cmds = {
         "python -c pass": [py, "-c", "pass"],

@@ -76,6 +76,29 @@ def test_tabulated_fit_of_a_merl_file_imports_no_scipy_numba_or_pydantic(merl_fi
                                              "info", "convert", "models")} & mods
 
 
+def test_the_script_entry_point_writes_and_flushes_everything(merl_file, tmp_path):
+    """`python -m brdffit` runs :func:`brdffit.cli.run` (main, then gc.freeze before the
+    exit): the fit file is complete, stdout flushed, the exit status main's; the console
+    script is the same function."""
+    out = tmp_path / "f.npz"
+    proc = subprocess.run([sys.executable, "-m", "brdffit", "fit", str(merl_file), "--model",
+                           "tabulated", "-o", str(out), "--json"], capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads(proc.stdout)
+    from brdffit.io import load
+
+    assert np.isclose(load(str(out)).fit_info["eigenvalue"], summary["details"]["eigenvalue"])
+    bad = subprocess.run([sys.executable, "-m", "brdffit", "fit", str(tmp_path / "missing")],
+                         capture_output=True, text=True, timeout=300)
+    assert bad.returncode == 1 and bad.stderr.count("\n") == 1
+    import tomllib
+    from pathlib import Path
+
+    scripts = tomllib.loads((Path(__file__).parents[2] / "pyproject.toml").read_text())
+    assert scripts["project"]["scripts"]["brdffit"] == "brdffit.cli:run"
+
+
 def test_a_rejected_input_fails_before_the_fitting_stack_is_imported(merl_file, tmp_path):
     bad = tmp_path / "bad.binary"
     bad.write_bytes(merl_file.read_bytes()[:1000])  # truncated
