@@ -246,7 +246,6 @@ def cosine_weighted_albedo(brdf, n_pairs: int = 1 << 14, seed: int = 0) -> np.nd
     return np.pi * np.mean(np.asarray(brdf.eval(wi, wo), dtype=np.float64), axis=0)
 
 
-
 def base_for_albedo(make_brdf, target, n_pairs: int = 1 << 14, seed: int = 0):
     """Per channel, the base colour ``c ∈ [0, 1]`` whose material ``make_brdf(c)`` has the
     cosine-weighted mean albedo ``target`` (:func:`cosine_weighted_albedo`, same pairs for
