@@ -162,3 +162,49 @@ def test_real_material_beats_the_moment_conversion(shared_data):
     ours = compressive_objective(fit, ref)["normalised"]
     moments = compressive_objective(brdffit.fit_ggx(ref), ref)["normalised"]
     assert ours < 0.5 * moments, (ours, moments)
+
+
+@pytest.mark.parametrize("fresnel,f90", [("schlick", "free"), ("schlick", "one"),
+                                         ("dielectric", "free"), ("dielectric", "one")])
+def test_linear_part_is_the_bounded_weighted_least_squares_optimum(fresnel, f90):
+    """`_linear` assembles the normal equations from pooled weighted sums; it must give the
+    bounded weighted least-squares optimum of the sample-by-sample problem (scipy's
+    lsq_linear on √w-scaled rows) and its objective, for every Fresnel / F90 case."""
+    from scipy.optimize import lsq_linear
+
+    from brdffit.fit.analytic import ALBEDO_MAX, KS_MAX, _linear
+
+    rng = np.random.default_rng(7)
+    n = 400
+    S = rng.gamma(0.5, 2.0, n)
+    x5 = rng.random(n) ** 5
+    Fd = 0.04 + 0.96 * x5
+    z = np.stack([0.2 / np.pi + 0.6 * S * (0.3 + 0.7 * x5) + 0.02 * rng.standard_normal(n)
+                  for _ in range(3)], -1).clip(0)
+    z[:, 2] *= 0.05                                  # a dark channel: bounds become active
+    w = rng.random((n, 3)) + 0.1
+    data = {"w": w, "z": z, "x5": x5}
+    lin = _linear(S, data, fresnel, f90, Fd)
+    diff = np.full(n, 1.0 / np.pi)
+    if fresnel == "schlick" and f90 == "one":
+        M, off, hi = np.stack([diff, S * (1 - x5)], 1), S * x5, [ALBEDO_MAX, 1.0]
+    elif fresnel == "schlick":
+        M, off, hi = np.stack([diff, S, S * x5], 1), 0.0, [ALBEDO_MAX, np.inf, np.inf]
+    elif f90 == "one":
+        M, off, hi = diff[:, None], S * Fd, [ALBEDO_MAX]
+    else:
+        M, off, hi = np.stack([diff, S * Fd], 1), 0.0, [ALBEDO_MAX, KS_MAX]
+    E = 0.0
+    for c in range(3):
+        sw = np.sqrt(w[:, c])
+        r = lsq_linear(M * sw[:, None], (z[:, c] - off) * sw, bounds=(0.0, hi), tol=1e-14,
+                       method="bvls")
+        E += 2.0 * r.cost
+        assert lin["rho_d"][c] == pytest.approx(r.x[0], rel=1e-6, abs=1e-9)
+        if fresnel == "schlick" and f90 == "free":
+            assert lin["ks"][c] == pytest.approx(r.x[1] + r.x[2], rel=1e-6, abs=1e-9)
+        elif f90 == "free":
+            assert lin["ks"][c] == pytest.approx(r.x[1], rel=1e-6, abs=1e-9)
+        elif fresnel == "schlick":
+            assert lin["F0"][c] == pytest.approx(r.x[1], rel=1e-6, abs=1e-9)
+    assert lin["E"] == pytest.approx(E, rel=1e-9)

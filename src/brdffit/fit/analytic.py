@@ -343,35 +343,65 @@ def _fresnel_values(fresnel: str, eta, data) -> np.ndarray | None:
     return np.clip(np.where(np.isfinite(F), F, 1.0), 0.0, 1.0)
 
 
+def _weighted_sums(data) -> tuple:
+    """``(w, w z, Σ w, Σ w z, Σ w z²)`` per channel, computed once per sample set."""
+    if "_sums" not in data:
+        w, z = data["w"], data["z"]
+        wz = w * z
+        data["_sums"] = (w, wz, w.sum(0), wz.sum(0), np.einsum("nc,nc->c", wz, z))
+    return data["_sums"]
+
+
 def _linear(S, data, fresnel: str, f90: str, Fd=None):
     """Per channel the exact optimum of the linear parameters for the shape ``S``.
 
     Schlick, ``f90="free"``: ``f = ρd/π + A S + C S x⁵`` (A = ks F0, C = ks (1 − F0) ≥ 0);
     ``f90="one"``: ``f = ρd/π + F0 S (1 − x⁵) + S x⁵``. Dielectric: ``f = ρd/π + ks S F(η)``
-    (``f90="one"``: ks = 1). Returns ``{"rho_d", "F0", "ks", "E"}`` or ``None``."""
-    w, z, x5 = data["w"], data["z"], data["x5"]
-    diff = np.full_like(S, 1.0 / np.pi)
+    (``f90="one"``: ks = 1). Returns ``{"rho_d", "F0", "ks", "E"}`` or ``None``.
+
+    The normal equations of the three channels come from one product of the weights with
+    the columns, their pairwise products and the offset terms (the constant diffuse column's
+    sums are those of the sample set, :func:`_weighted_sums`)."""
+    x5 = data["x5"]
     if fresnel == "schlick" and f90 == "one":
-        cols, offset = [diff, S * (1.0 - x5)], S * x5
+        cols, offset = [S * (1.0 - x5)], S * x5
         lo, hi = [0.0, 0.0], [ALBEDO_MAX, 1.0]
     elif fresnel == "schlick":
-        cols, offset = [diff, S, S * x5], 0.0
+        cols, offset = [S, S * x5], None
         lo, hi = [0.0, 0.0, 0.0], [ALBEDO_MAX, np.inf, np.inf]
     elif f90 == "one":
-        cols, offset = [diff], S * Fd
+        cols, offset = [], S * Fd
         lo, hi = [0.0], [ALBEDO_MAX]
     else:
-        cols, offset = [diff, S * Fd], 0.0
+        cols, offset = [S * Fd], None
         lo, hi = [0.0, 0.0], [ALBEDO_MAX, KS_MAX]
-    M = np.stack(cols, -1)                                   # (N, k)
+    w, wz, w_sum, wz_sum, wzz_sum = _weighted_sums(data)
+    k = len(cols)
+    pairs = [(i, j) for i in range(k) for j in range(i, k)]
+    vecs = cols + [cols[i] * cols[j] for i, j in pairs]
+    if offset is not None:
+        vecs += [offset, offset * offset] + [col * offset for col in cols]
+    V = np.stack(vecs, -1)
+    Wv, Zv = w.T @ V, wz.T @ V                               # (3, len(vecs))
+    d = 1.0 / np.pi                                          # the diffuse column
     rho_d, F0, ks, E = np.zeros(3), np.zeros(3), np.ones(3), 0.0
     for c in range(3):
-        y = z[:, c] - offset
-        Mw = M * w[:, c:c + 1]
-        x, v = _box_qp(M.T @ Mw, Mw.T @ y, lo, hi)
+        H = np.empty((k + 1, k + 1))
+        g = np.empty(k + 1)
+        H[0, 0], g[0], yy = d * d * w_sum[c], d * wz_sum[c], wzz_sum[c]
+        H[0, 1:] = H[1:, 0] = d * Wv[c, :k]
+        g[1:] = Zv[c, :k]
+        for n, (i, j) in enumerate(pairs):
+            H[i + 1, j + 1] = H[j + 1, i + 1] = Wv[c, k + n]
+        if offset is not None:                               # y = z − offset
+            o = k + len(pairs)
+            g[0] -= d * Wv[c, o]
+            g[1:] -= Wv[c, o + 2:]
+            yy += Wv[c, o + 1] - 2.0 * Zv[c, o]
+        x, v = _box_qp(H, g, lo, hi)
         if x is None:
             return None
-        E += max(float(np.sum(w[:, c] * y * y) + 2.0 * v), 0.0)
+        E += max(float(yy + 2.0 * v), 0.0)
         rho_d[c] = x[0]
         if fresnel == "schlick" and f90 == "one":
             F0[c] = x[1]
