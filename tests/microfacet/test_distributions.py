@@ -279,3 +279,28 @@ def test_visible_normals_are_visible_and_g1_bounded(ax, ay, rho, theta, phi, bec
     g = d.G1(w)
     assert 0.0 < g <= 1.0
     assert d.sigma(w) - d.sigma(-w) == pytest.approx(w[2], abs=1e-12)
+
+
+@pytest.mark.parametrize("alpha", [0.005, 0.05, 0.5])
+def test_beckmann_lambda_cutoff_leaves_shadowing_unchanged(alpha):
+    """Beckmann Λ is set to 0 from a = LAMBDA_ZERO_A on (skipping erfc/exp): there the
+    closed form is below 2.3e-17, so Λ differs by < 1e-18 and G2 = 1/(1 + Λi + Λo) is
+    bit-identical to the closed form everywhere."""
+    from scipy import special
+
+    from brdffit.microfacet import Beckmann
+    from brdffit.microfacet.beckmann import LAMBDA_ZERO_A
+
+    d = Beckmann(alpha)
+    rng = np.random.default_rng(3)
+    w = rng.normal(size=(50_000, 3))
+    w[:, 2] = np.abs(w[:, 2])
+    w /= np.linalg.norm(w, axis=1, keepdims=True)
+    a = w[:, 2] / np.sqrt(d._quad(w[:, 0], w[:, 1]))
+    closed = 0.5 * (np.exp(-a * a) / (a * np.sqrt(np.pi)) - special.erfc(a))
+    lam = d._lambda_upper(w[:, 0], w[:, 1], w[:, 2])
+    assert np.any(a >= LAMBDA_ZERO_A) and np.any(a < LAMBDA_ZERO_A)
+    np.testing.assert_array_equal(lam[a < LAMBDA_ZERO_A], closed[a < LAMBDA_ZERO_A])
+    assert np.max(np.abs(lam - closed)) < 1e-18
+    np.testing.assert_array_equal(1.0 / (1.0 + lam[:-1] + lam[1:]),
+                                  1.0 / (1.0 + closed[:-1] + closed[1:]))

@@ -38,6 +38,8 @@ special = _LazySpecial()
 __all__ = ["Beckmann"]
 
 _SQRT_PI = np.sqrt(np.pi)
+#: Λ(a) < 2.3e-17 from here on (``_lambda_upper``)
+LAMBDA_ZERO_A = 6.0
 
 
 def _beckmann_visible_x(t: np.ndarray, u: np.ndarray, iterations: int = 80) -> np.ndarray:
@@ -105,9 +107,15 @@ class Beckmann(EllipticalSlopeDistribution):
         return np.exp(-self._quad_inv(mx, my) / mz2) / (np.pi * self._det_sqrt * mz2 * mz2)
 
     def _lambda_upper(self, wx, wy, wz):
-        """``Λ = (erf a − 1)/2 + e^{−a²}/(2a√π)``, ``a = w_z/√(w_xyᵀ S w_xy)``."""
+        """``Λ = (erf a − 1)/2 + e^{−a²}/(2a√π)``, ``a = w_z/√(w_xyᵀ S w_xy)``; 0 for
+        ``a ≥ LAMBDA_ZERO_A`` (there Λ < 2.3e-17: ``1 + Λ`` is 1 in float64, so G and σ/cos θ
+        are unchanged, and the fits skip erfc/exp on most directions of a smooth lobe)."""
         a = wz / np.sqrt(self._quad(wx, wy))
-        return 0.5 * (np.exp(-a * a) / (a * _SQRT_PI) - special.erfc(a))
+        out = np.zeros(np.shape(a))
+        near = ~(a >= LAMBDA_ZERO_A)                  # NaN stays on the exact formula
+        an = a[near]
+        out[near] = 0.5 * (np.exp(-an * an) / (an * _SQRT_PI) - special.erfc(an))
+        return out
 
     def sigma(self, w) -> np.ndarray:
         """``σ(w) = w_z (1 + erf a)/2 + √Q e^{−a²}/(2√π)`` for every ``w`` (Eq. 3 closed)."""
