@@ -55,7 +55,8 @@ GGX tails; the loss is measured):
   ``specular=False`` the core's fixed f0 = 0.04, f90 = 1 are used (lossy, reported);
 * what stays lossy (measured): glTF weights the diffuse term by ``(1 − F_d)`` (the fit adds
   ρd/π unweighted: κ restores the mean, not the dependence on the directions), its Fresnel
-  curve is Schlick's (a dielectric fit's exact curve is replaced), and its Smith V is separable (core) or the extension's height-correlated form;
+  curve is Schlick's (a dielectric fit's exact curve is replaced), and its Smith V is
+  separable (core) or the extension's height-correlated form;
 * optionally (``optimize=True``, CLI ``--option optimize=true``) baseColor, metallic and
   roughness are refined by least squares in BRDF space (:func:`optimize_parameters`);
 * the loss of fidelity is measured by :func:`gltf_fidelity` (BRDF-space metrics of
@@ -372,7 +373,8 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
         out["baseColorFactor"] = [float(x) for x in base] + [1.0]
         notes.append(f"metal: baseColor {np.round(base, 4).tolist()} keeps the fit's "
                      f"cosine-weighted mean albedo {np.round(target, 4).tolist()} (F0: "
-                     f"{np.round(F0c, 4).tolist()})" + (": clipped" if np.any(wanted > 1) else ""))
+                     f"{np.round(F0c, 4).tolist()})"
+                     + (": clipped" if np.any(wanted > 1) else ""))
     if not metal and np.any(base > 0):
         # glTF mixes the base with the specular layer by (1 − F(V·H)): the fit adds ρd/π
         # unattenuated, so divide by the fraction kept (cosine-weighted mean)
