@@ -483,10 +483,11 @@ def _node_sums(S, data):
     Σwz, ΣwSz, Σwz². The conductor objective is then exact in O(nodes), not O(samples)."""
     cos_nodes, inv = np.unique(np.round(data["cos_d"], 12), return_inverse=True)
     n = cos_nodes.size
-    w, z = data["w"], data["z"]
+    w, wz = _weighted_sums(data)[:2]
+    z = data["z"]
     sums = {}
     for name, per_sample in (("W", w), ("S1", w * S[:, None]), ("SS", w * (S * S)[:, None]),
-                             ("Z1", w * z), ("SZ", w * z * S[:, None]), ("Z2", w * z * z)):
+                             ("Z1", wz), ("SZ", wz * S[:, None]), ("Z2", wz * z)):
         sums[name] = np.stack([np.bincount(inv, per_sample[:, c], minlength=n)
                                for c in range(3)], -1)
     return cos_nodes, sums
