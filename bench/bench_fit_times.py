@@ -42,7 +42,8 @@ for m in names:
     fi = brdffit.fit(ref, model=model).fit_info
     out[m] = {"cpu": time.process_time() - c, "alpha": fi.get("alpha_x"),
               "rho_d": fi.get("rho_d"), "F0": fi.get("F0"), "fresnel": fi.get("fresnel"),
-              "objective": fi.get("objective")}
+              "objective": fi.get("objective"),
+              "objective_by_fresnel": fi.get("objective_by_fresnel")}
 print(json.dumps(out))
 """
 
@@ -64,6 +65,19 @@ def _cpu(rows: dict) -> dict:
     return {"first_fit_s": cpu[0], "mean_s": float(np.mean(rest)),
             "median_s": float(np.median(rest)), "max_s": float(np.max(rest)),
             "max_material": max(list(rows)[1:] or list(rows), key=lambda m: rows[m]["cpu"])}
+
+
+def _by_fresnel(cur: dict, base: dict) -> dict:
+    """Per Fresnel candidate (when the fits record them): min / max of the objective ratio
+    current / baseline over the materials, and how many are above / below by > 1e-9."""
+    out = {}
+    for m in cur:
+        a, b = cur[m].get("objective_by_fresnel") or {}, base[m].get("objective_by_fresnel") or {}
+        for k in set(a) & set(b):
+            if b[k] > 0:
+                out.setdefault(k, []).append((a[k] / b[k], m))
+    return {k: {"min": min(v), "max": max(v), "above": sum(r > 1 + 1e-9 for r, _ in v),
+                "below": sum(r < 1 - 1e-9 for r, _ in v), "n": len(v)} for k, v in out.items()}
 
 
 def main() -> None:
@@ -93,7 +107,8 @@ def main() -> None:
             "max_relative_parameter_difference": diffs[worst], "at": worst,
             "same_fresnel": sum(base[m]["fresnel"] == cur[m]["fresnel"] for m in cur),
             "n": len(cur),
-            "cpu_total_ratio": sum(cur[m]["cpu"] for m in cur) / sum(base[m]["cpu"] for m in cur)}
+            "cpu_total_ratio": sum(cur[m]["cpu"] for m in cur) / sum(base[m]["cpu"] for m in cur),
+            "objective_ratio_by_fresnel": _by_fresnel(cur, base)}
     result["load_average_after"] = os.getloadavg()
     out = Path(args.out or ROOT / "bench" / "results" / f"fit_times_{args.model}.json")
     out.write_text(json.dumps(result, indent=1) + "\n")

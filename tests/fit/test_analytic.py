@@ -208,3 +208,32 @@ def test_linear_part_is_the_bounded_weighted_least_squares_optimum(fresnel, f90)
         elif fresnel == "schlick":
             assert lin["F0"][c] == pytest.approx(r.x[1], rel=1e-6, abs=1e-9)
     assert lin["E"] == pytest.approx(E, rel=1e-9)
+
+
+@pytest.mark.parametrize("f90", ["free", "one"])
+def test_dielectric_profile_is_exact_and_finds_the_best_index(f90):
+    """The isotropic dielectric search profiles η out on per-θd-node sums: its objective must
+    equal the sample-by-sample one at the η it returns, and no index of a fine grid may do
+    better (α off the optimum, so the linear part is not trivially exact)."""
+    from brdffit.fit import analytic as A
+
+    ref = brdffit.synthetic("plastic-beckmann")
+    data = A.sample_set(ref, False)
+    E, eta = A._dielectric_at("beckmann", 0.25, data, f90)
+    direct = A._evaluate("beckmann", (0.25, 0.25, 0.0, eta), data, "dielectric", f90)[0]
+    assert E == pytest.approx(direct, rel=1e-9)
+    grid = [A._evaluate("beckmann", (0.25, 0.25, 0.0, e), data, "dielectric", f90)[0]
+            for e in np.linspace(A.ETA_BOUNDS[0], A.ETA_BOUNDS[1], 601)]
+    assert E <= min(grid) * (1 + 1e-9), (E, min(grid), eta)
+
+
+def test_dielectric_search_moves_its_bracket_to_a_distant_roughness():
+    """Started from a Schlick α four times too small, the α bracket (a factor 2) must move
+    to the true roughness instead of stopping on its edge."""
+    from brdffit.fit import analytic as A
+
+    data = A.sample_set(brdffit.synthetic("plastic-beckmann"), False)
+    best, tried = A._search_dielectric("beckmann", data, "free", 0.18 / 4)
+    assert best[1][0] == pytest.approx(0.18, rel=1e-3)
+    assert best[1][3] == pytest.approx(1.5, rel=1e-3)
+    assert tried[0]["params"][0] == best[1][0]

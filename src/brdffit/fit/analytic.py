@@ -66,6 +66,15 @@ quadratic problem, so only the distribution parameters are searched:
   (``scipy.optimize.least_squares``, TRF) from the slope-moment (αx, αy, ρ), the best
   isotropic α and its 3 best scan minima (ρ = 0, αx = αy).
 
+* dielectric (one index η), isotropic: for each α, η is profiled out on per-θd-node sums
+  (a 17-node scan of ln(η − 1) and a bounded Brent search; (ρd, ks) exact for each η, as for
+  the conductor below), and ln α by a bounded Brent search within a factor 2 of the Schlick
+  α (the bracket moved, at most twice, when the minimum lands on its edge). Anisotropic: TRF
+  on (ln αx, ln αy, ρ, η) from the Schlick optimum (η from its F0, and η = 1.5).
+  (Until session 10 the isotropic case also ran that TRF, with a finite-difference Jacobian
+  over all residuals: 60 % of the fit time; the profile search reaches the same or a lower
+  objective on all 100 MERL materials at 0.53-0.70× the CPU of the whole fit,
+  ``bench/bench_fit_times.py``.)
 * conductor: per channel, (ln η, ln(k + 0.01)) by bounded L-BFGS-B from the best 3 of the
   (η, k) matching the Schlick F0 and a coarse (η, k) grid, (ρd, ks) solved exactly inside;
   the objective is summed per θd node (the samples lie on MERL θd nodes, where F is one
@@ -329,18 +338,24 @@ def _box_qp_small(H, g, lo, hi):
     return (None, np.inf) if best is None else (np.array(best), best_v)
 
 
-def _fresnel_values(fresnel: str, eta, data) -> np.ndarray | None:
-    """Exact dielectric F(θd; η) at the samples (``None`` for Schlick): Walter et al. 2007
-    Eq. 22, the formula of :class:`~brdffit.microfacet.DielectricFresnel` for one index."""
-    if fresnel != "dielectric":
-        return None
-    c = data["cos_d"]
+def _dielectric_reflectance(cos_d, eta) -> np.ndarray:
+    """Exact dielectric F(θd; η) of one index: Walter et al. 2007 Eq. 22, the formula of
+    :class:`~brdffit.microfacet.DielectricFresnel`."""
+    c = cos_d
     g = np.sqrt(np.maximum(float(eta) ** 2 - 1.0 + c * c, 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
         a = (g - c) / (g + c)
         b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
         F = 0.5 * a * a * (1.0 + b * b)
     return np.clip(np.where(np.isfinite(F), F, 1.0), 0.0, 1.0)
+
+
+def _fresnel_values(fresnel: str, eta, data) -> np.ndarray | None:
+    """Dielectric F(θd; η) at the samples (:func:`_dielectric_reflectance`; ``None`` for
+    Schlick)."""
+    if fresnel != "dielectric":
+        return None
+    return _dielectric_reflectance(data["cos_d"], eta)
 
 
 def _weighted_sums(data) -> tuple:
@@ -480,8 +495,10 @@ def _conductor_starts(f0: float) -> list[tuple[float, float]]:
 def _node_sums(S, data):
     """Sums over the samples of each θd node (the samples lie on MERL θd nodes, so F(θd) is
     one value per node): ``cos θd`` of the nodes, and per node and channel Σw, ΣwS, ΣwS²,
-    Σwz, ΣwSz, Σwz². The conductor objective is then exact in O(nodes), not O(samples)."""
-    cos_nodes, inv = np.unique(np.round(data["cos_d"], 12), return_inverse=True)
+    Σwz, ΣwSz, Σwz². A Fresnel objective is then exact in O(nodes), not O(samples)."""
+    if "_nodes" not in data:
+        data["_nodes"] = np.unique(np.round(data["cos_d"], 12), return_inverse=True)
+    cos_nodes, inv = data["_nodes"]
     n = cos_nodes.size
     w, wz = _weighted_sums(data)[:2]
     z = data["z"]
@@ -493,6 +510,28 @@ def _node_sums(S, data):
     return cos_nodes, sums
 
 
+def _node_linear(sm, c: int, F, f90: str):
+    """Channel ``c`` of ``ρd/π + ks S F`` with the per-node Fresnel values ``F``: ``(E, x)``,
+    ``x`` = the exact box-constrained (ρd, ks) (``f90="one"``: (ρd,), ks = 1) and ``E`` its
+    objective, from the node sums of :func:`_node_sums`; ``(inf, None)`` when not finite."""
+    W, S1, SS, Z1, SZ, Z2 = (sm[k][:, c] for k in ("W", "S1", "SS", "Z1", "SZ", "Z2"))
+    ip = 1.0 / np.pi
+    if f90 == "one":              # ks = 1: E(ρd) = Σ w (ρd/π + S F − z)²
+        H = np.array([[W.sum() * ip * ip]])
+        g = np.array([(Z1 - F * S1).sum() * ip])
+        const = float((F * F * SS).sum() - 2.0 * (F * SZ).sum())
+        x, v = _box_qp(H, g, [0.0], [ALBEDO_MAX])
+    else:
+        fs1 = float((F * S1).sum()) * ip
+        H = np.array([[W.sum() * ip * ip, fs1], [fs1, float((F * F * SS).sum())]])
+        g = np.array([Z1.sum() * ip, float((F * SZ).sum())])
+        const = 0.0
+        x, v = _box_qp(H, g, [0.0, 0.0], [ALBEDO_MAX, KS_MAX])
+    if x is None:
+        return np.inf, None
+    return max(float(Z2.sum()) + const + 2.0 * v, 0.0), x
+
+
 def _conductor_channel(nodes, c: int, f90: str, starts):
     """Channel ``c`` of ``ρd/π + ks S F_conductor(θd; η, k)``: ``(E, η, k, ρd, ks)``, the
     best bounded L-BFGS-B descent over (ln η, ln(k + 0.01)) from ``starts``, (ρd, ks)
@@ -500,29 +539,14 @@ def _conductor_channel(nodes, c: int, f90: str, starts):
     from ..microfacet.fresnel import conductor_reflectance
 
     cos_nodes, sm = nodes
-    W, S1, SS, Z1, SZ, Z2 = (sm[k][:, c] for k in ("W", "S1", "SS", "Z1", "SZ", "Z2"))
-    z2 = float(Z2.sum())
+    z2 = float(sm["Z2"][:, c].sum())
     scale = z2 if z2 > 0 else 1.0          # the objective relative to the all-zero model's
-    ip = 1.0 / np.pi
 
     def solve(q):
         eta, k = float(np.exp(q[0])), float(np.exp(q[1])) - _K_SHIFT
         k = k if k > 1e-9 else 0.0        # exp(ln 0.01) − 0.01 is not exactly 0
-        F = conductor_reflectance(cos_nodes, eta, k)
-        if f90 == "one":          # ks = 1: E(ρd) = Σ w (ρd/π + S F − z)²
-            H = np.array([[W.sum() * ip * ip]])
-            g = np.array([(Z1 - F * S1).sum() * ip])
-            const = float((F * F * SS).sum() - 2.0 * (F * SZ).sum())
-            x, v = _box_qp(H, g, [0.0], [ALBEDO_MAX])
-        else:
-            fs1 = float((F * S1).sum()) * ip
-            H = np.array([[W.sum() * ip * ip, fs1], [fs1, float((F * F * SS).sum())]])
-            g = np.array([Z1.sum() * ip, float((F * SZ).sum())])
-            const = 0.0
-            x, v = _box_qp(H, g, [0.0, 0.0], [ALBEDO_MAX, KS_MAX])
-        if x is None:
-            return np.inf, None, eta, k
-        return max(z2 + const + 2.0 * v, 0.0), x, eta, k
+        E, x = _node_linear(sm, c, conductor_reflectance(cos_nodes, eta, k), f90)
+        return E, x, eta, k
 
     lo = np.array([np.log(CONDUCTOR_ETA_MIN), np.log(_K_SHIFT)])
     hi = np.array([np.log(INDEX_MAX), np.log(INDEX_MAX + _K_SHIFT)])
@@ -588,6 +612,76 @@ def _search_conductor(kind, data, f90, schlick_best, anisotropic):
     if lin2 is not None and E2 < E:
         return (E2, (a, a, 0.0, None), lin2), tried
     return (E, (ax, ay, rho, None), best), tried
+
+
+# ------------------------------------------------------------------------------------------
+# dielectric Fresnel, isotropic: η profiled out on the node sums, ln α by Brent
+# ------------------------------------------------------------------------------------------
+#: scan of the dielectric index before its Brent refinement: η − 1 from 1e-3 to 3
+_ETA_SCAN = np.log(np.geomspace(ETA_BOUNDS[0] - 1.0, ETA_BOUNDS[1] - 1.0, 17))
+#: the α bracket of the dielectric search: a factor 2 around the Schlick α, moved (at most
+#: twice) when the minimum lands on its edge
+_DIELECTRIC_BRACKET, _DIELECTRIC_MOVES = np.log(2.0), 2
+
+
+def _dielectric_at(kind, alpha: float, data, f90: str) -> tuple[float, float | None]:
+    """``(E, η)``: the best index for the isotropic roughness ``alpha``, (ρd, ks) exact per
+    channel for each η from the node sums (:func:`_node_linear`); η by a 17-node scan of
+    ln(η − 1) and a bounded Brent search between the neighbours of its best node."""
+    S = _shape_of(kind, (alpha, alpha, 0.0), data)
+    if S is None:
+        return np.inf, None
+    cos_nodes, sm = _node_sums(S, data)
+
+    def cost(q):
+        F = _dielectric_reflectance(cos_nodes, 1.0 + float(np.exp(q)))
+        return sum(_node_linear(sm, c, F, f90)[0] for c in range(3))
+
+    E = np.array([cost(q) for q in _ETA_SCAN])
+    if not np.any(np.isfinite(E)):
+        return np.inf, None
+    i = int(np.nanargmin(np.where(np.isfinite(E), E, np.nan)))
+    best_e, best_q = float(E[i]), float(_ETA_SCAN[i])
+    res = optimize.minimize_scalar(cost, bounds=(_ETA_SCAN[max(i - 1, 0)],
+                                                 _ETA_SCAN[min(i + 1, _ETA_SCAN.size - 1)]),
+                                   method="bounded", options={"xatol": 1e-6})
+    if np.isfinite(res.fun) and res.fun < best_e:
+        best_e, best_q = float(res.fun), float(res.x)
+    return best_e, float(np.clip(1.0 + np.exp(best_q), *ETA_BOUNDS))
+
+
+def _search_dielectric(kind, data, f90, schlick_alpha: float):
+    """Isotropic dielectric fit: ln α by a bounded Brent search within a factor 2 of the
+    Schlick α (the bracket moved when the minimum is on its edge), η profiled out
+    (:func:`_dielectric_at`); ``(best, tried)``, best = (E, params, lin) or ``None``."""
+    lo_all, hi_all = np.log(ALPHA_MIN), np.log(ALPHA_MAX_FIT)
+    centre = float(np.clip(np.log(schlick_alpha), lo_all, hi_all))
+
+    def cost(q):
+        return _dielectric_at(kind, float(np.exp(q)), data, f90)[0]
+
+    q = centre
+    for _ in range(_DIELECTRIC_MOVES + 1):
+        lo = max(centre - _DIELECTRIC_BRACKET, lo_all)
+        hi = min(centre + _DIELECTRIC_BRACKET, hi_all)
+        res = optimize.minimize_scalar(cost, bounds=(lo, hi), method="bounded",
+                                       options={"xatol": 1e-6})
+        q = float(res.x) if np.isfinite(res.fun) else centre
+        edge = 0.05 * _DIELECTRIC_BRACKET
+        if lo + edge < q < hi - edge or q <= lo_all + edge or q >= hi_all - edge:
+            break
+        centre = q
+    alpha = float(np.exp(q))
+    _, eta = _dielectric_at(kind, alpha, data, f90)
+    if eta is None:
+        return None, []
+    e, lin = _evaluate(kind, (alpha, alpha, 0.0, eta), data, "dielectric", f90)
+    tried = [{"fresnel": "dielectric", "start": "schlick optimum",
+              "params_start": [schlick_alpha, schlick_alpha, 0.0, None],
+              "params": [alpha, alpha, 0.0, eta], "objective": e}]
+    if lin is None or not np.isfinite(e):
+        return None, tried
+    return (e, (alpha, alpha, 0.0, eta), lin), tried
 
 
 # ------------------------------------------------------------------------------------------
@@ -703,12 +797,15 @@ def _search(kind, data, fresnel, f90, mom, starts, anisotropic):
         return ({"conductor": b4} if b4 is not None else {}), tried
     if fresnel in ("auto", "dielectric"):
         ax, ay, rho, _ = best[1]
-        f0 = best[2]["F0"] * (1.0 if best[2]["ks"] is None else best[2]["ks"])
-        eta0 = _eta_of_f0(f0)
-        st = [("schlick optimum", (ax, ay, rho, eta0))]
-        if abs(eta0 - 1.5) > 0.05:
-            st.append(("eta 1.5", (ax, ay, rho, 1.5)))
-        b3, t = _least_squares(kind, data, "dielectric", f90, st, anisotropic)
+        if anisotropic:
+            f0 = best[2]["F0"] * (1.0 if best[2]["ks"] is None else best[2]["ks"])
+            eta0 = _eta_of_f0(f0)
+            st = [("schlick optimum", (ax, ay, rho, eta0))]
+            if abs(eta0 - 1.5) > 0.05:
+                st.append(("eta 1.5", (ax, ay, rho, 1.5)))
+            b3, t = _least_squares(kind, data, "dielectric", f90, st, anisotropic)
+        else:
+            b3, t = _search_dielectric(kind, data, f90, ax)
         tried += t
         if b3 is not None:
             results["dielectric"] = b3
