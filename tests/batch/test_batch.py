@@ -165,3 +165,29 @@ def test_progress_display_shows_running_tasks_within_80_columns(monkeypatch):
     assert any("npf alum-bronze: start ones: iteration 41/100" in x for x in lines)
     assert all(len(x) <= 80 for x in lines)
     assert any("0/1 0 failed" in x for x in lines)        # the bars keep their columns
+
+
+def test_tasks_of_one_material_share_its_prepared_metrics(tmp_path, monkeypatch):
+    """The reference side of the BRDF metrics is prepared once per material and worker, not
+    once per model; the numbers are those of a fresh :func:`brdf_metrics`."""
+    from brdffit import batch
+    from brdffit.evaluation import metrics as M
+    from brdffit.io.fitfile import load_fit
+
+    made = []
+    real = M.BRDFMetrics.__init__
+
+    def counting(self, *args, **kwargs):
+        made.append(args[0])
+        real(self, *args, **kwargs)
+
+    monkeypatch.setattr(M.BRDFMetrics, "__init__", counting)
+    batch._reference_metrics.cache_clear()
+    tasks = make_tasks([("plastic", "synthetic:plastic-beckmann")], ["ggx", "beckmann"])
+    recs = [batch.run_task(t, tmp_path) for t in tasks]
+    assert [r["status"] for r in recs] == ["ok", "ok"] and len(made) == 1
+    for task, rec in zip(tasks, recs):
+        fresh = M.brdf_metrics(batch._load_reference(task.spec), load_fit(task.fit_path(tmp_path)))
+        for key in M.BRDFMetrics.ALL:
+            assert rec["metrics"][key] == pytest.approx(fresh[key], rel=1e-12), key
+    batch._reference_metrics.cache_clear()
