@@ -234,6 +234,7 @@ def test_exports_pass_the_khronos_validator(tmp_path):
                                            diffuse=[0.5, 0.2, 0.1], specular=[0.9, 0.7, 0.6],
                                            name='evil "name" </script>\u0000 \U0001F600'),
         "black": MicrofacetBRDF(GGX(0.3), SchlickFresnel(0.0), diffuse=0.0),
+        "coated": _coated(),
     }
     seen = set()
     for key, model in models.items():
@@ -243,7 +244,8 @@ def test_exports_pass_the_khronos_validator(tmp_path):
         report = validate(out)
         assert report["issues"]["numErrors"] == 0, (key, _errors(report))
         assert report["issues"]["numWarnings"] == 0, (key, report["issues"]["messages"])
-    assert seen == {"KHR_materials_anisotropy", "KHR_materials_specular", "KHR_materials_ior"}
+    assert seen == {"KHR_materials_anisotropy", "KHR_materials_specular", "KHR_materials_ior",
+                    "KHR_materials_clearcoat"}
     # the check can fail: the validator reports an out-of-range factor and an undeclared
     # extension as errors
     doc = json.loads((tmp_path / "aniso-dielectric.gltf").read_text())
@@ -294,3 +296,51 @@ def test_metal_keeps_the_fits_mean_albedo_when_its_grazing_reflectance_exceeds_o
     as_f0 = _albedo_on_grid(GLTFBRDF(f0, 1.0, p["roughnessFactor"]))
     assert np.all(np.abs(as_f0 / target - 1) > 0.15)        # what base colour = F0 gave
     assert np.all(np.asarray(p["baseColorFactor"][:3]) > f0)
+
+
+def _coated(w=0.07, a_coat=0.03):
+    """A coated diffuse fit as ggx-diffuse returns it (base lobe + white coat lobe)."""
+    from brdffit.fit.analytic import COAT_F0
+    from brdffit.microfacet import SumBRDF
+
+    base = MicrofacetBRDF(GGX(0.005), SchlickFresnel([0.9, 0.85, 0.8]),
+                          diffuse=[0.25, 0.04, 0.02], specular=[0.004, 0.0035, 0.0035])
+    coat = MicrofacetBRDF(GGX(a_coat), SchlickFresnel(np.full(3, COAT_F0)),
+                          specular=np.full(3, w))
+    return SumBRDF([base, coat], name="coated")
+
+
+def test_clearcoat_follows_the_extension_formula():
+    """GLTFBRDF with a clear coat is KHR_materials_clearcoat's layering of the core BRDF:
+    ``f_base (1 − c Fc) + c Fc D V`` with ``Fc = 0.04 + 0.96 (1 − |N·V|)⁵`` (V = wo) and the
+    coat's core GGX D·V of α = roughness²."""
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=(4000, 3))
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    v[:, 2] = np.abs(v[:, 2]) + 1e-3
+    v /= np.linalg.norm(v, axis=-1, keepdims=True)
+    wi, wo = v[:2000], v[2000:]
+    base = GLTFBRDF([0.3, 0.2, 0.1], 0.0, 0.4)
+    coated = GLTFBRDF([0.3, 0.2, 0.1], 0.0, 0.4, clearcoat=0.6, clearcoat_roughness=0.3)
+    h = wi + wo
+    h /= np.linalg.norm(h, axis=-1, keepdims=True)
+    dv = GLTFBRDF._core_dv(0.09, wi, wo, h)[:, None]
+    fc = (0.04 + 0.96 * (1.0 - wo[:, 2]) ** 5)[:, None]
+    want = base.eval(wi, wo) * (1.0 - 0.6 * fc) + 0.6 * fc * dv
+    np.testing.assert_allclose(coated.eval(wi, wo), want, rtol=1e-12, atol=1e-300)
+    assert coated.as_microfacet() is None
+
+
+def test_coated_fit_maps_to_clearcoat_and_stays_close():
+    fit = _coated()
+    p = gltf_parameters(fit)
+    assert p["clearcoat"]["clearcoatFactor"] == pytest.approx(0.07)
+    assert p["clearcoat"]["clearcoatRoughnessFactor"] == pytest.approx(np.sqrt(0.03))
+    base_only = gltf_parameters(fit.components[0])
+    assert p["baseColorFactor"] == base_only["baseColorFactor"]
+    err = gltf_fidelity(fit, metrics=("cos_rel_error",))["cos_rel_error"]
+    from brdffit.evaluation.metrics import brdf_metrics
+
+    dropped = brdf_metrics(fit, _gltf_brdf(base_only), 1 << 15,
+                           metrics=("cos_rel_error",))["cos_rel_error"]
+    assert err < 0.03 and err < 0.5 * dropped, (err, dropped)

@@ -243,3 +243,31 @@ def test_metal_keeps_the_fits_mean_albedo_when_its_grazing_reflectance_exceeds_o
     np.testing.assert_allclose(_albedo_on_grid(openpbr(p["base_color"])), target, rtol=1e-2)
     as_f0 = _albedo_on_grid(openpbr(np.clip(f0 / p["specular_weight"], 0, 1)))
     assert np.all(np.abs(as_f0 / target - 1) > 0.05)          # what base_color = F0 gave
+
+
+def test_coated_fit_writes_a_valid_coat_with_the_base_lobe_kept(tmp_path):
+    """A coated ggx-diffuse fit: coat_weight = w, coat_roughness = √α_coat, index 1.5,
+    darkening off; the base inputs are chosen so that OpenPBR's coat-roughened roughness and
+    coat-relative index are those of the base lobe exported alone, and the coat lowers the
+    loss against the fit compared with dropping it."""
+    from brdffit.evaluation.metrics import brdf_metrics
+    from brdffit.export.materialx import _brdf_of, _coat_relative_ior, _coat_roughened
+    from tests.export.test_gltf import _coated
+
+    fit = _coated()
+    export(fit, "materialx", tmp_path / "coated.mtlx", fidelity=False)
+    doc = _read(tmp_path / "coated.mtlx")
+    assert validate_document(doc)[0]
+    _, inp = _inputs(doc)
+    assert inp["coat_weight"] == pytest.approx(0.07, rel=1e-6)
+    assert inp["coat_roughness"] == pytest.approx(np.sqrt(0.03), rel=1e-6)
+    assert inp["coat_ior"] == pytest.approx(1.5) and inp["coat_darkening"] == 0.0
+    p, alone = openpbr_parameters(fit), openpbr_parameters(fit.components[0])
+    assert _coat_roughened(p["specular_roughness"], p["coat_roughness"], 0.07) == \
+        pytest.approx(alone["specular_roughness"], rel=1e-9)
+    assert _coat_relative_ior(p["specular_ior"], 1.5, 0.07) == \
+        pytest.approx(alone["specular_ior"], rel=1e-9)
+    err = materialx_fidelity(fit, metrics=("cos_rel_error",))["cos_rel_error"]
+    dropped = brdf_metrics(fit, _brdf_of(alone), 1 << 15,
+                           metrics=("cos_rel_error",))["cos_rel_error"]
+    assert err < dropped, (err, dropped)

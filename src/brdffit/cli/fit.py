@@ -217,7 +217,7 @@ def _figures_summary(fitted) -> dict:
     fig = figures(fitted)
     out = {"alpha": None, "gltf_roughness": None, "alpha_kind": fig.get("alpha_kind"),
            "alpha_rgb": fig.get("alpha_rgb"), "f0": fig.get("f0"), "rho_d": fig.get("rho_d"),
-           "table_bytes": fig.get("table_bytes")}
+           "table_bytes": fig.get("table_bytes"), "coat": fig.get("coat")}
     if fig.get("alpha"):
         ax, ay, rho = fig["alpha"]
         out["alpha"] = {"x": ax, "y": ay, "rho": rho}
@@ -421,6 +421,10 @@ def format_summary(s: dict) -> list[str]:
         row("α", "none (no analytic distribution)")
     row("F0 (ks·F at 0°)", _rgb(s["f0"]) if s.get("f0") else "undefined for this model")
     row("ρd (Lambert)", _rgb(s["rho_d"]) if s.get("rho_d") else "n/a")
+    if s.get("coat"):
+        c = s["coat"]
+        row("coat", f"α {c['alpha']:.4g} (glTF clearcoat roughness {c['alpha'] ** 0.5:.4g}), "
+                    f"weight {c['weight']:.4g}, F0 {c['f0']:g} (white)")
     err = s.get("error")
     if err and err.get("cos_rel_error") is not None:
         row("error vs input", f"{100 * err['cos_rel_error']:.2f} % (cosine-weighted relative "

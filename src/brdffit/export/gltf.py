@@ -105,7 +105,13 @@ class GLTFBRDF(IsotropicBRDF):
     def __init__(self, base_color, metallic: float, roughness: float, name: str = "gltf",
                  anisotropy_strength: float = 0.0, anisotropy_rotation: float = 0.0,
                  specular_factor: float = 1.0, specular_color=(1.0, 1.0, 1.0),
-                 ior: float = 1.5):
+                 ior: float = 1.5, clearcoat: float = 0.0, clearcoat_roughness: float = 0.0):
+        self.clearcoat = float(clearcoat)
+        self.clearcoat_roughness = float(clearcoat_roughness)
+        for nm, v in (("clearcoat", self.clearcoat),
+                      ("clearcoat_roughness", self.clearcoat_roughness)):
+            if not 0.0 <= v <= 1.0:
+                raise ValueError(f"GLTFBRDF: {nm} must be in [0, 1], got {v}")
         self.base_color = np.broadcast_to(np.asarray(base_color, float), (3,)).copy()
         self.specular_factor = float(specular_factor)
         self.specular_color = np.broadcast_to(np.asarray(specular_color, float), (3,)).copy()
@@ -129,18 +135,25 @@ class GLTFBRDF(IsotropicBRDF):
         self.name = name
         self.source = None
 
+    @staticmethod
+    def _core_dv(a, wi, wo, h):
+        """``D · V`` of the core spec's isotropic GGX of α = ``a`` (separable Smith V)."""
+        nl, nv, nh = wi[..., 2], wo[..., 2], h[..., 2]
+        a2 = a * a
+        with np.errstate(divide="ignore", invalid="ignore"):
+            D = a2 * (nh > 0) / (np.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
+            V = ((np.sum(wi * h, -1) > 0) * (np.sum(wo * h, -1) > 0)
+                 / ((np.abs(nl) + np.sqrt(a2 + (1.0 - a2) * nl * nl))
+                    * (np.abs(nv) + np.sqrt(a2 + (1.0 - a2) * nv * nv))))
+            return np.nan_to_num(D * V)
+
     def _specular_dv(self, wi, wo, h):
         """``D · V`` of the core spec (isotropic) or of KHR_materials_anisotropy."""
         nl, nv, nh = wi[..., 2], wo[..., 2], h[..., 2]
         a = self.roughness**2
+        if self.anisotropy_strength == 0.0:
+            return self._core_dv(a, wi, wo, h)
         with np.errstate(divide="ignore", invalid="ignore"):
-            if self.anisotropy_strength == 0.0:
-                a2 = a * a
-                D = a2 * (nh > 0) / (np.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
-                V = ((np.sum(wi * h, -1) > 0) * (np.sum(wo * h, -1) > 0)
-                     / ((np.abs(nl) + np.sqrt(a2 + (1.0 - a2) * nl * nl))
-                        * (np.abs(nv) + np.sqrt(a2 + (1.0 - a2) * nv * nv))))
-                return np.nan_to_num(D * V)
             s2 = self.anisotropy_strength**2
             at, ab = a * (1.0 - s2) + s2, a
             c, s = np.cos(self.anisotropy_rotation), np.sin(self.anisotropy_rotation)
@@ -181,6 +194,10 @@ class GLTFBRDF(IsotropicBRDF):
         F_m = self.base_color + (1.0 - self.base_color) * x5
         m = self.metallic
         f = (1.0 - m) * ((1.0 - F_d) * self.base_color / np.pi + F_d * dv) + m * F_m * dv
+        if self.clearcoat > 0.0:      # KHR_materials_clearcoat: Fresnel of N·V, index 1.5
+            fc = (0.04 + 0.96 * (1.0 - np.abs(wo[..., 2])) ** 5)[..., None]
+            dvc = self._core_dv(self.clearcoat_roughness**2, wi, wo, h)[..., None]
+            f = f * (1.0 - self.clearcoat * fc) + self.clearcoat * fc * dvc
         return np.where(ok[..., None], f, 0.0)
 
     def as_microfacet(self):
@@ -188,7 +205,7 @@ class GLTFBRDF(IsotropicBRDF):
         Schlick F0 = baseColor, uncorrelated Smith G), usable by the closed-form renderers."""
         from ..microfacet import GGX, MicrofacetBRDF, SchlickFresnel
 
-        if self.metallic != 1.0 or self.anisotropy_strength != 0.0:
+        if self.metallic != 1.0 or self.anisotropy_strength != 0.0 or self.clearcoat > 0.0:
             return None
         return MicrofacetBRDF(GGX(max(self.roughness**2, 1e-6)),
                               SchlickFresnel(np.clip(self.base_color, 0, 1)), correlated=False,
@@ -200,7 +217,8 @@ class GLTFBRDF(IsotropicBRDF):
                  roughness=self.roughness, anisotropy_strength=self.anisotropy_strength,
                  anisotropy_rotation=self.anisotropy_rotation,
                  specular_factor=self.specular_factor,
-                 specular_color=self.specular_color.tolist(), ior=self.ior)
+                 specular_color=self.specular_color.tolist(), ior=self.ior,
+                 clearcoat=self.clearcoat, clearcoat_roughness=self.clearcoat_roughness)
         return d
 
 
@@ -303,7 +321,14 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
     (``"anisotropy"`` entry: strength and rotation; exact D, rotation included), else
     α = √(αx αy); with ``specular`` a dielectric carries its F0/F90 in
     ``KHR_materials_specular`` + ``KHR_materials_ior`` (``"specular"`` entry, ``None`` when
-    the core's defaults are exact or for a metal)."""
+    the core's defaults are exact or for a metal). A coated diffuse fit
+    (:func:`brdffit.fit.analytic.coat_parts`) maps its base lobe by these rules and its coat
+    to ``KHR_materials_clearcoat`` (``"clearcoat"`` entry)."""
+    from ..fit.analytic import coat_parts
+
+    parts = coat_parts(model)
+    if parts is not None:
+        return _with_clearcoat(gltf_parameters(parts[0], anisotropy, specular), parts[1])
     m, notes = _ggx_model(model)
     d = m.distribution
     alpha = float(np.sqrt(d.alpha_x * d.alpha_y))
@@ -387,15 +412,37 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
     return out
 
 
+def _with_clearcoat(p: dict, coat) -> dict:
+    """``p`` (the base lobe's parameters) with the coat lobe as ``KHR_materials_clearcoat``:
+    ``clearcoatFactor`` = the coat's weight w, ``clearcoatRoughnessFactor`` = √α_coat."""
+    d = coat.distribution
+    alpha = float(np.sqrt(d.alpha_x * d.alpha_y))
+    w = float(np.max(coat.specular))
+    notes = list(p["notes"])
+    if not is_elliptical(d, ("ggx",)):
+        notes.append("coat: Beckmann distribution replaced by GGX of the same alpha")
+    if alpha > 1.0:
+        notes.append(f"coat: alpha={alpha:.4g} > 1 clipped to glTF's largest roughness 1")
+    notes.append(f"coat (white, F0 0.04, weight {w:.4g}, alpha {alpha:.4g}) via "
+                 "KHR_materials_clearcoat: glTF layers it, the base weighted by 1 - w F(N.V), "
+                 "where the fit adds it; its Fresnel is of N.V, the fit's of V.H")
+    return dict(p, notes=notes, clearcoat={"clearcoatFactor": w,
+                                           "clearcoatRoughnessFactor": float(np.sqrt(min(alpha,
+                                                                                          1.0)))})
+
+
 def _brdf_of(p: dict, name: str = "gltf") -> "GLTFBRDF":
     a = p.get("anisotropy") or {"anisotropyStrength": 0.0, "anisotropyRotation": 0.0}
     sp = p.get("specular") or {"specularFactor": 1.0, "specularColorFactor": [1.0] * 3,
                                "ior": 1.5}
+    cc = p.get("clearcoat") or {"clearcoatFactor": 0.0, "clearcoatRoughnessFactor": 0.0}
     return GLTFBRDF(p["baseColorFactor"][:3], p["metallicFactor"], p["roughnessFactor"],
                     name=name, anisotropy_strength=a["anisotropyStrength"],
                     anisotropy_rotation=a["anisotropyRotation"],
                     specular_factor=sp["specularFactor"],
-                    specular_color=sp["specularColorFactor"], ior=sp["ior"])
+                    specular_color=sp["specularColorFactor"], ior=sp["ior"],
+                    clearcoat=cc["clearcoatFactor"],
+                    clearcoat_roughness=cc["clearcoatRoughnessFactor"])
 
 
 def optimize_parameters(model, p: dict, n: int = 8192, seed: int = 0) -> dict:
@@ -501,6 +548,8 @@ def gltf_material(model, name: str | None = None, fidelity: bool = True,
                                          "specularColorFactor": sp["specularColorFactor"]}
         if abs(sp["ior"] - 1.5) > 1e-9:
             ext["KHR_materials_ior"] = {"ior": sp["ior"]}
+    if p.get("clearcoat"):
+        ext["KHR_materials_clearcoat"] = p["clearcoat"]
     if ext:
         mat["extensions"] = ext
     return mat

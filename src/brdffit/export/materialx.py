@@ -109,7 +109,15 @@ class OpenPBRBRDF(IsotropicBRDF):
     def __init__(self, base_color, base_metalness: float, specular_roughness: float,
                  specular_ior: float = 1.5, specular_color=(1.0, 1.0, 1.0),
                  specular_weight: float = 1.0, specular_roughness_anisotropy: float = 0.0,
-                 tangent_rotation: float = 0.0, name: str = "openpbr"):
+                 tangent_rotation: float = 0.0, coat_weight: float = 0.0,
+                 coat_roughness: float = 0.0, coat_ior: float = 1.5, name: str = "openpbr"):
+        self.coat_weight = float(coat_weight)
+        self.coat_roughness = float(coat_roughness)
+        self.coat_ior = float(coat_ior)
+        if not (0.0 <= self.coat_weight <= 1.0 and 0.0 <= self.coat_roughness <= 1.0
+                and self.coat_ior > 1.0):
+            raise ValueError(f"OpenPBRBRDF: expected coat_weight, coat_roughness in [0, 1] and "
+                             f"coat_ior > 1, found {coat_weight}, {coat_roughness}, {coat_ior}")
         self.tangent_rotation = float(tangent_rotation)
         self.base_color = np.broadcast_to(np.asarray(base_color, float), (3,)).copy()
         self.base_metalness = float(base_metalness)
@@ -119,7 +127,10 @@ class OpenPBRBRDF(IsotropicBRDF):
         self.specular_weight = float(specular_weight)
         self.specular_roughness_anisotropy = float(specular_roughness_anisotropy)
         a = self.specular_roughness_anisotropy
-        r2 = self.specular_roughness ** 2
+        r = self.specular_roughness
+        if self.coat_weight > 0:      # the graph's effective_specular_roughness
+            r = _coat_roughened(r, self.coat_roughness, self.coat_weight)
+        r2 = r ** 2
         ax = r2 * np.sqrt(2.0 / (1.0 + (1.0 - a) ** 2))            # open_pbr_anisotropy
         self.alpha = (float(np.clip(ax, 1e-6, 1.0)), float(np.clip((1.0 - a) * ax, 1e-6, 1.0)))
         self.isotropic = a == 0.0
@@ -129,6 +140,8 @@ class OpenPBRBRDF(IsotropicBRDF):
     def _ior(self) -> float:
         """The specular_weight-modulated index of the node graph (``modulated_eta_s``)."""
         eta = self.specular_ior
+        if self.coat_weight > 0:      # the graph's eta_s: relative to the coat, TIR fix
+            eta = _coat_relative_ior(eta, self.coat_ior, self.coat_weight)
         f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
         s = np.sign(eta - 1.0) * np.sqrt(np.clip(self.specular_weight * f0, 0.0, 0.99999))
         return float((1.0 + s) / (1.0 - s))
@@ -168,7 +181,27 @@ class OpenPBRBRDF(IsotropicBRDF):
         metal = self.specular_weight * lobe * Fm * comp_m
         m = self.base_metalness
         f = (1.0 - m) * diel + m * metal
+        if self.coat_weight > 0:      # coat_layer: dielectric_bsdf(coat_weight) over the base
+            f = self._coat_over(f, nl, nv, h[..., 2], vh)
         return np.where(ok[..., None], np.nan_to_num(f), 0.0)
+
+    def _coat_over(self, f_base, nl, nv, nh, vh):
+        """``mx_layer`` of the isotropic coat (``mx_dielectric_bsdf`` with weight
+        ``coat_weight``, energy compensation) over ``f_base``: the base weighted by one
+        minus the coat's directional albedo at θo (coat_darkening 0, coat_color white)."""
+        a = float(np.clip(self.coat_roughness ** 2, 1e-6, 1.0))
+        a2 = a * a
+        D = a2 / (np.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
+        G = 2.0 * nl * nv / (np.sqrt(a2 + (1 - a2) * nl * nl) * nv
+                             + np.sqrt(a2 + (1 - a2) * nv * nv) * nl)
+        A, B = _dir_albedo_ab(nv, a)
+        Ess = (A + B)[..., None]
+        F = _fresnel_dielectric(vh, self.coat_ior)[..., None]
+        comp = 1.0 + F * (1.0 - Ess) / Ess
+        f0 = ((self.coat_ior - 1.0) / (self.coat_ior + 1.0)) ** 2
+        albedo = self.coat_weight * (f0 * A + B)[..., None] * comp
+        lobe = (D * G / (4.0 * nl * nv))[..., None]
+        return self.coat_weight * lobe * F * comp + (1.0 - albedo) * f_base
 
     def describe(self) -> dict:
         d = super().describe()
@@ -177,7 +210,8 @@ class OpenPBRBRDF(IsotropicBRDF):
                  specular_color=self.specular_color.tolist(),
                  specular_weight=self.specular_weight,
                  specular_roughness_anisotropy=self.specular_roughness_anisotropy,
-                 tangent_rotation=self.tangent_rotation)
+                 tangent_rotation=self.tangent_rotation, coat_weight=self.coat_weight,
+                 coat_roughness=self.coat_roughness, coat_ior=self.coat_ior)
         return d
 
 
@@ -199,9 +233,39 @@ def _schlick_f82(cos_t, f0, f82_tint):
 # ------------------------------------------------------------------------------------------
 def openpbr_parameters(model) -> dict:
     """OpenPBR inputs of a fit by the rules of the module docstring, with ``notes``,
-    ``tangent_rotation_deg`` and the fit's ``F0``, ``F90``, ``rho_d``."""
+    ``tangent_rotation_deg`` and the fit's ``F0``, ``F90``, ``rho_d``. A coated diffuse fit
+    (:func:`brdffit.fit.analytic.coat_parts`): the base lobe by these rules, the coat as
+    ``coat_weight`` = w, ``coat_roughness`` = √α_coat, ``coat_ior`` = 1.5,
+    ``coat_darkening`` = 0."""
+    from ..fit.analytic import coat_parts
     from .gltf import _ggx_model, is_metal, reflectances
 
+    parts = coat_parts(model)
+    if parts is not None:
+        p = openpbr_parameters(parts[0])
+        d = parts[1].distribution
+        alpha = float(np.sqrt(d.alpha_x * d.alpha_y))
+        w = float(np.max(parts[1].specular))
+        c = float(np.sqrt(min(alpha, 1.0)))
+        p.update(coat_weight=w, coat_roughness=c, coat_ior=1.5, coat_darkening=0.0)
+        notes = [f"coat (white, index 1.5, weight {w:.4g}, alpha {alpha:.4g}): OpenPBR layers "
+                 "it over the base (the fit adds it)"]
+        # OpenPBR roughens the base specular under the coat and makes its index relative to
+        # the coat's (both mixed in by coat_weight): invert both so that the effective values
+        # are the base lobe's
+        r, ok_r = _uncoated(lambda x: _coat_roughened(x, c, w), p["specular_roughness"],
+                            0.0, 1.0)
+        eta, ok_e = _uncoated(lambda x: _coat_relative_ior(x, 1.5, w), p["specular_ior"],
+                              1.0 + 1e-9, 10.0)
+        p.update(specular_roughness=r, specular_ior=eta)
+        notes.append("specular_roughness and specular_ior chosen so that OpenPBR's coat-"
+                     "roughened roughness and coat-relative index are the base lobe's"
+                     + ("" if ok_r and ok_e else
+                        " (not reachable: " + ", ".join(k for k, ok in (("roughness", ok_r),
+                                                                         ("index", ok_e))
+                                                        if not ok) + " clipped)"))
+        p["notes"] = p["notes"] + notes
+        return p
     m, notes = _ggx_model(model, "MaterialX")
     d = m.distribution
     au, av, phi = principal_axes(d.alpha_x, d.alpha_y, d.rho)
@@ -252,6 +316,31 @@ def openpbr_parameters(model) -> dict:
     notes.append("MaterialX GLSL: energy compensation and average-alpha G2 on the specular lobe")
     p.update(notes=notes, F0=F0.tolist(), F90=F90.tolist(), rho_d=rd.tolist())
     return p
+
+
+def _coat_roughened(r: float, coat_roughness: float, coat_weight: float) -> float:
+    """OpenPBR's ``effective_specular_roughness`` under a coat."""
+    roughened = min(1.0, 2.0 * coat_roughness ** 4 + r ** 4) ** 0.25
+    return r + coat_weight * (roughened - r)
+
+
+def _coat_relative_ior(eta: float, coat_ior: float, coat_weight: float) -> float:
+    """OpenPBR's ``eta_s`` under a coat (index relative to the coat's, TIR fix)."""
+    rel = eta / coat_ior
+    return eta + coat_weight * ((rel if rel > 1.0 else 1.0 / rel) - eta)
+
+
+def _uncoated(effective, target: float, lo: float, hi: float) -> tuple[float, bool]:
+    """The input x in [lo, hi] whose ``effective(x)`` (increasing) is ``target``, by
+    bisection; ``(x, reachable)`` (the nearest end when not reachable)."""
+    if effective(lo) >= target:
+        return lo, effective(lo) - target <= 1e-12
+    if effective(hi) <= target:
+        return hi, target - effective(hi) <= 1e-12
+    for _ in range(100):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if effective(mid) < target else (lo, mid)
+    return 0.5 * (lo + hi), True
 
 
 def _ior_of_f0(f: float) -> float:
@@ -374,7 +463,10 @@ def _brdf_of(p: dict, name: str = "openpbr") -> OpenPBRBRDF:
                        specular_ior=p["specular_ior"], specular_color=p["specular_color"],
                        specular_weight=p["specular_weight"],
                        specular_roughness_anisotropy=p["specular_roughness_anisotropy"],
-                       tangent_rotation=np.radians(p.get("tangent_rotation_deg", 0.0)), name=name)
+                       tangent_rotation=np.radians(p.get("tangent_rotation_deg", 0.0)),
+                       coat_weight=p.get("coat_weight", 0.0),
+                       coat_roughness=p.get("coat_roughness", 0.0),
+                       coat_ior=p.get("coat_ior", 1.5), name=name)
 
 
 def materialx_fidelity(model, n_samples: int = 1 << 15,
@@ -438,6 +530,9 @@ def materialx_document(model, name: str | None = None):
         shader.addInput(key, "float").setValueString(_num(p[key]))
     for key in ("base_color", "specular_color"):
         shader.addInput(key, "color3").setValueString(", ".join(_num(v) for v in p[key]))
+    if p.get("coat_weight", 0.0) > 0.0:
+        for key in ("coat_weight", "coat_roughness", "coat_ior", "coat_darkening"):
+            shader.addInput(key, "float").setValueString(_num(p[key]))
     if p["tangent_rotation_deg"] != 0.0:
         # MaterialX's rotate3d turns v into v cos + (v × axis) sin + ...: clockwise about the
         # axis for a positive amount, hence the minus sign
@@ -468,7 +563,8 @@ def write_materialx(model, path, fidelity: bool = True, **_ignored) -> dict:
     doc, p = materialx_document(model)
     values = [p[k] for k in ("specular_roughness", "specular_ior", "specular_weight",
                              "specular_roughness_anisotropy", "base_metalness")]
-    values += list(p["base_color"]) + list(p["specular_color"])
+    values += list(p["base_color"]) + list(p["specular_color"]) + [p.get("coat_weight", 0.0),
+                                                                    p.get("coat_roughness", 0.0)]
     if not all(np.isfinite(values)):
         raise ExportError(f"cannot export {type(model).__name__} {getattr(model, 'name', '')!r} "
                           f"to {shown(path)}: expected finite parameters, found NaN or infinity")
@@ -482,7 +578,8 @@ def write_materialx(model, path, fidelity: bool = True, **_ignored) -> dict:
     out = {"files": [str(path)], "target": "materialx", "shader": "open_pbr_surface",
            "parameters": {k: p[k] for k in ("base_color", "base_metalness", "specular_weight",
                                             "specular_color", "specular_roughness",
-                                            "specular_roughness_anisotropy", "specular_ior")},
+                                            "specular_roughness_anisotropy", "specular_ior",
+                                            "coat_weight", "coat_roughness") if k in p},
            "tangent_rotation_deg": p["tangent_rotation_deg"], "notes": p["notes"]}
     if fidelity:
         out["fidelity"] = materialx_fidelity(model)

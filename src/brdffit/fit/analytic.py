@@ -32,6 +32,30 @@ Schlick fit: ss440 33.8 vs 31.7, tungsten-carbide 38.4 vs 34.8, chrome 39.6 vs 3
 40.4 vs 36.8, aluminium 39.4 vs 36.8, brass 38.9 vs 36.6 dB; green-metallic-paint 35.9 vs
 36.3 dB. On ``synthetic:gold-ggx`` (a conductor) it recovers gold's (η, k) within 0.1 %.
 
+**The coat** (``coat="auto"``, the default; isotropic fits with ``f90="free"``). A second,
+white specular lobe of index 1.5 — what glTF's ``KHR_materials_clearcoat`` and OpenPBR's
+coat carry — is added to a Schlick base::
+
+    f_r = ρd/π + ks S_b (F0 + (1 − F0) x⁵) + w S_c (0.04 + 0.96 x⁵),   w ∈ [0, 1]
+
+(``S_b``, ``S_c`` the shapes of the base and coat distributions, one coat weight w for the
+three channels; the coat is *added*, where glTF and OpenPBR layer it over the base — the
+exporters measure that difference). For fixed (α_b, α_c) the model is linear in (ρd, A =
+ks F0, C = ks (1 − F0)) per channel and w, solved exactly with its bounds; (ln α_b, ln α_c)
+by a 24 × 24 scan of [ALPHA_MIN, 1]² and Nelder-Mead (≈ 0.7 s). The coated fit is kept when
+its objective is at least ``COAT_MARGIN`` = 5 % below the best uncoated one (and by more
+than ``COAT_MIN_GAIN`` of the data's energy). Evidence for the margin (a study with this
+model over the 100 Neural-BRDF MERL materials, rendered PSNR on the paper suite with common
+random numbers against the uncoated ggx-diffuse fit): with objective ratio coated / uncoated
+< 0.95 (24 materials) the coat gained +0.08 to +5.9 dB (delrin +5.9, nylon +3.9, pink-plastic
++2.7, black-obsidian +2.3; Σ +34.6 dB) and lost on one (cherry-235 −0.65 dB); between 0.95
+and 1 gains dominate less clearly (4 losses of 14, Σ +9.3 dB); above 1 losses dominate (40
+of 62, Σ −62 dB). The coat takes the heavy tail of plastics, phenolics and lacquered woods
+that one GGX lobe cannot (``bench/bench_database.py --out runs/analytic3`` measures the
+product's fits).
+(The coat search runs on every isotropic fit; ``coat="off"`` skips it, ``coat="on"`` keeps
+any coat that lowers the objective.)
+
 Objective
 ---------
 The compressive-weighted least squares of Bagher, Snyder & Nowrouzezahrai 2016 **Eq. 7-12**
@@ -103,10 +127,10 @@ from ..grid import N_PHI_D, N_THETA_D, N_THETA_H, merl_phi_d, merl_theta_d, merl
 from ..schema import ALBEDO_MAX, INDEX_MAX
 
 if TYPE_CHECKING:
-    from ..microfacet import MicrofacetBRDF
+    from ..microfacet import MicrofacetBRDF, SumBRDF
 
 __all__ = ["fit_analytic_diffuse", "fit_ggx_diffuse", "fit_beckmann_diffuse", "sample_set",
-           "ALPHA_MIN", "ALPHA_MAX_FIT", "summary"]
+           "ALPHA_MIN", "ALPHA_MAX_FIT", "COAT_F0", "COAT_MARGIN", "coat_parts", "summary"]
 
 #: roughness bounds of the fits (α ≤ 1: glTF's roughness √α ≤ 1 keeps the export exact)
 ALPHA_MIN, ALPHA_MAX_FIT = 2e-3, 1.0
@@ -685,6 +709,124 @@ def _search_dielectric(kind, data, f90, schlick_alpha: float):
 
 
 # ------------------------------------------------------------------------------------------
+# the coat: a second, white specular lobe of index 1.5 (glTF clearcoat, OpenPBR coat)
+# ------------------------------------------------------------------------------------------
+#: ``coat="auto"`` keeps the coated candidate only when its objective is this much below the
+#: best uncoated one (module docstring: the evidence for the margin)
+COAT_MARGIN = 0.05
+#: ... and by at least this fraction of the data's energy (Σ w z²: below, an exact fit's noise)
+COAT_MIN_GAIN = 1e-6
+#: normal reflectance of the coat: index 1.5, the fixed index of glTF's clearcoat
+COAT_F0 = 0.04
+_COAT_SCAN = 24
+
+
+def coat_parts(model):
+    """``(base, coat)`` when ``model`` is a coated diffuse fit — a ``SumBRDF`` of a
+    ``MicrofacetBRDF`` and a white coat lobe (Schlick F0 = ``COAT_F0``, no diffuse term, the
+    same grey scale ``w`` ∈ [0, 1] on the three channels) — else ``None``."""
+    from ..microfacet import MicrofacetBRDF, SchlickFresnel, SumBRDF
+
+    comps = getattr(model, "components", None) if isinstance(model, SumBRDF) else None
+    if not comps or len(comps) != 2 or not all(isinstance(c, MicrofacetBRDF) for c in comps):
+        return None
+    base, coat = comps
+    f0 = np.asarray(getattr(coat.fresnel, "f0", np.nan), dtype=float)
+    w = np.asarray(coat.specular if coat.specular is not None else 1.0, dtype=float)
+    if (not isinstance(coat.fresnel, SchlickFresnel) or coat.diffuse is not None
+            or not np.allclose(f0, COAT_F0, rtol=0, atol=1e-12)
+            or not (np.ptp(w) <= 1e-12 and 0.0 <= float(np.max(w)) <= 1.0)):
+        return None
+    return base, coat
+
+
+def _coat_solve(H, g, zz):
+    """Bounded least squares of the coated model for one (α_base, α_coat): per channel
+    (ρd, A, C) and one coat weight w for the three channels (``H`` (10, 10), ``g`` (10,),
+    ``zz`` = Σ w z²): ``(E, x)``, x = (ρd, A, C) × 3 then w; ρd ∈ [0, ALBEDO_MAX], A, C ≥ 0,
+    w ∈ [0, 1]. Bounded-variable least squares on the Cholesky factor of ``H``."""
+    from scipy.optimize import lsq_linear
+
+    n = g.size
+    try:
+        L = np.linalg.cholesky(H + 1e-13 * np.trace(H) / n * np.eye(n))
+    except np.linalg.LinAlgError:
+        return np.inf, None
+    rhs = np.linalg.solve(L, g)
+    hi = np.array([ALBEDO_MAX, np.inf, np.inf] * 3 + [1.0])
+    x = np.clip(lsq_linear(L.T, rhs, bounds=(np.zeros(n), hi), tol=1e-12, method="bvls").x,
+                0.0, hi)
+    E = float(zz - 2.0 * g @ x + x @ H @ x)
+    return (max(E, 0.0), x) if np.isfinite(E) else (np.inf, None)
+
+
+def _coat_system(cols_c, data):
+    """Per channel the normal equations of the columns ``cols_c`` (N, k): ``(H (3, k, k),
+    g (3, k))`` with the sample weights."""
+    w, wz = _weighted_sums(data)[:2]
+    H = np.stack([(cols_c * w[:, c:c + 1]).T @ cols_c for c in range(3)])
+    return H, wz.T @ cols_c
+
+
+def _coat_joint(H, g, ib, ic):
+    """The (10, 10) joint system of base columns ``ib`` (diffuse, S, S x⁵ of one α) per
+    channel and the shared coat column ``ic``."""
+    J = np.zeros((10, 10))
+    v = np.zeros(10)
+    for c in range(3):
+        idx = list(ib) + [ic]
+        loc = [3 * c, 3 * c + 1, 3 * c + 2, 9]
+        J[np.ix_(loc, loc)] += H[c][np.ix_(idx, idx)]
+        v[loc] += g[c][idx]
+    return J, v
+
+
+def _search_coat(kind, data):
+    """Isotropic ``ρd/π + ks S_b Schlick(F0) + w S_c Schlick(COAT_F0)``: the linear part
+    exact for each (α_b, α_c) (:func:`_coat_solve`), (ln α_b, ln α_c) by a 24 × 24 scan of
+    [ALPHA_MIN, 1]² (normal equations of all the scan's columns formed once) then
+    Nelder-Mead; ``(E, (α_b, α_c), x)`` or ``None``."""
+    zz = float(_weighted_sums(data)[4].sum())
+    x5 = data["x5"]
+    coat_fresnel = COAT_F0 + (1.0 - COAT_F0) * x5
+    alphas = np.exp(np.linspace(np.log(ALPHA_MIN), np.log(ALPHA_MAX_FIT), _COAT_SCAN))
+    cols = [np.full(data["n"], 1.0 / np.pi)]
+    for a in alphas:
+        S = _spec_shape(_distribution(kind, a), data)
+        cols += [S, S * x5, S * coat_fresnel]
+    H, g = _coat_system(np.stack(cols, 1), data)
+    best = (np.inf, None)
+    for i in range(_COAT_SCAN):
+        for j in range(_COAT_SCAN):
+            E, _ = _coat_solve(*_coat_joint(H, g, (0, 1 + 3 * i, 2 + 3 * i), 3 + 3 * j), zz)
+            if E < best[0]:
+                best = (E, (i, j))
+    if best[1] is None:
+        return None
+    lo, hi = np.log(ALPHA_MIN), np.log(ALPHA_MAX_FIT)
+
+    def solve(q):
+        ab, ac = (float(v) for v in np.exp(q))
+        Sb = _spec_shape(_distribution(kind, ab), data)
+        Sc = _spec_shape(_distribution(kind, ac), data)
+        Hq, gq = _coat_system(np.stack([cols[0], Sb, Sb * x5, Sc * coat_fresnel], 1), data)
+        return _coat_solve(*_coat_joint(Hq, gq, (0, 1, 2), 3), zz)
+
+    def cost(q):
+        return solve(q)[0] if np.all((q >= lo) & (q <= hi)) else np.inf
+
+    q0 = np.log([alphas[best[1][0]], alphas[best[1][1]]])
+    res = optimize.minimize(cost, q0, method="Nelder-Mead",
+                            options={"xatol": 3e-3, "fatol": 1e-12 * max(best[0], 1e-300),
+                                     "maxiter": 150})
+    q = res.x if np.isfinite(res.fun) and res.fun < best[0] else q0
+    E, x = solve(q)
+    if x is None or not np.isfinite(E):
+        return None
+    return E, tuple(float(v) for v in np.exp(q)), x
+
+
+# ------------------------------------------------------------------------------------------
 # the search over the distribution (and η) parameters
 # ------------------------------------------------------------------------------------------
 def _local_minima(E: np.ndarray) -> list[int]:
@@ -853,8 +995,8 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
                          fresnel: str = "auto", f90: str = "free", starts: int = 3,
                          moments: bool = True, theta_d_stride: int | None = None,
                          phi_d_stride: int | None = None, theta_h_stride: int = 3,
-                         n_phi_h: int = 12, objective=None,
-                         name: str | None = None) -> MicrofacetBRDF:
+                         n_phi_h: int = 12, objective=None, coat: str = "auto",
+                         name: str | None = None) -> MicrofacetBRDF | SumBRDF:
     """Fit ``ρd/π + ks F D G/(4 cos θi cos θo)`` to ``brdf`` (see the module docstring).
 
     Parameters
@@ -879,6 +1021,10 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
         Density of the fitting samples (``theta_h_stride``, ``n_phi_h``: anisotropic only).
     objective:
         :class:`~brdffit.losses.objective.ObjectiveOptions` (default: the paper's).
+    coat:
+        ``"auto"`` (default): also fit a second, white specular lobe of index 1.5 (a clear
+        coat) and keep it when it lowers the objective by ``COAT_MARGIN``; ``"off"``;
+        ``"on"``: keep it whenever it is found. Isotropic fits with ``f90="free"`` only.
     name:
         Name of the fitted model (default ``"<input>-<distribution>-diffuse"``).
 
@@ -887,7 +1033,8 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
     MicrofacetBRDF
         See :func:`fit_ggx_diffuse`.
     """
-    from ..microfacet import ConductorFresnel, DielectricFresnel, MicrofacetBRDF, SchlickFresnel
+    from ..microfacet import (ConductorFresnel, DielectricFresnel, MicrofacetBRDF, SchlickFresnel,
+                              SumBRDF)
 
     t0 = time.perf_counter()
     kind = str(distribution).lower()
@@ -898,9 +1045,13 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
                          f"found {fresnel!r}")
     if f90 not in ("one", "free"):
         raise ValueError(f"f90 must be 'one' or 'free', found {f90!r}")
+    if coat not in ("auto", "off", "on"):
+        raise ValueError(f"coat must be 'auto', 'off' or 'on', found {coat!r}")
     if anisotropic is None:
         anisotropic = not bool(getattr(brdf, "isotropic", False))
     label = getattr(brdf, "name", None) or "brdf"
+    if coat == "on" and (anisotropic or f90 != "free"):
+        raise ValueError(f"{label}: coat='on' needs an isotropic fit with f90='free'")
     if not anisotropic and not getattr(brdf, "isotropic", False):
         raise FitError(f"{label}: an isotropic fit needs an isotropic BRDF (eval_hd); "
                        "use anisotropic=True")
@@ -959,11 +1110,54 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
     model.fit_options = {"model": f"{kind}-diffuse", "distribution": kind,
                          "anisotropic": bool(anisotropic), "fresnel": fresnel, "f90": f90,
                          "starts": int(starts), "moments": bool(moments),
-                         "theta_d_stride": theta_d_stride, "phi_d_stride": phi_d_stride}
-    return model
+                         "theta_d_stride": theta_d_stride, "phi_d_stride": phi_d_stride,
+                         "coat": coat}
+    model.fit_info["coat"] = None
+    if coat == "off" or anisotropic or f90 != "free":
+        return model
+    t3 = time.perf_counter()
+    found = _search_coat(kind, data)
+    if found is None:
+        return model
+    E_coat, (a_base, a_coat), x = found
+    margin = 0.0 if coat == "on" else COAT_MARGIN
+    # a gain below COAT_MIN_GAIN of the data's energy is numerical noise (an exact fit)
+    gain = (E - E_coat) / data["ref_energy"] if data["ref_energy"] > 0 else 0.0
+    coat_info = {"alpha": a_coat, "weight": float(x[9]), "f0": COAT_F0,
+                 "objective": float(E_coat), "objective_without": float(E),
+                 "margin": margin, "kept": bool(E_coat < (1.0 - margin) * E
+                                                and gain > COAT_MIN_GAIN), "time": 0.0}
+    if not coat_info["kept"]:
+        coat_info["time"] = time.perf_counter() - t3
+        model.fit_info["coat"] = coat_info
+        model.fit_info["time"] = time.perf_counter() - t0
+        return model
+    x = x.reshape(-1)
+    rho_d, A, C = x[0:9:3], x[1:9:3], x[2:9:3]
+    ks = A + C
+    F0 = np.where(ks > 0, A / np.where(ks > 0, ks, 1.0), 0.0)
+    base = MicrofacetBRDF(_distribution(kind, a_base), SchlickFresnel(np.clip(F0, 0.0, 1.0)),
+                          diffuse=rho_d, specular=ks, correlated=True, name="base")
+    coat_lobe = MicrofacetBRDF(_distribution(kind, a_coat), SchlickFresnel(np.full(3, COAT_F0)),
+                               specular=np.full(3, float(x[9])), correlated=True, name="coat")
+    coated = SumBRDF([base, coat_lobe], name=model.name, source=model.source)
+    info = model.fit_info
+    info.update(
+        method=f"{kind} + Lambert + coat ({kind}, white, F0 {COAT_F0}), Schlick Fresnel, "
+               "compressive objective (Bagher 2016 Eq. 7-12), variable projection",
+        fresnel="schlick", alpha_x=a_base, alpha_y=a_base, rho=0.0, eta=None, k=None,
+        rho_d=rho_d.tolist(), F0=A.tolist(), ks=ks.tolist(), objective=float(E_coat),
+        objective_normalised=(float(E_coat / data["ref_energy"]) if data["ref_energy"] > 0
+                              else None))
+    info["objective_by_fresnel"]["schlick+coat"] = float(E_coat)
+    coat_info["time"] = time.perf_counter() - t3
+    info["coat"] = coat_info
+    info["time"] = time.perf_counter() - t0
+    coated.fit_info, coated.fit_options = info, model.fit_options
+    return coated
 
 
-def fit_ggx_diffuse(brdf, **kwargs) -> MicrofacetBRDF:
+def fit_ggx_diffuse(brdf, **kwargs) -> MicrofacetBRDF | SumBRDF:
     """GGX + Lambert (ρd/π) with a Schlick (per-channel F0) or dielectric Fresnel, fitted
     over the whole data with the compressive objective (Bagher 2016): the engine-ready model.
 
@@ -974,14 +1168,16 @@ def fit_ggx_diffuse(brdf, **kwargs) -> MicrofacetBRDF:
     **kwargs
         The options of :func:`fit_analytic_diffuse`: ``anisotropic``, ``fresnel``
         (``"auto"``, ``"schlick"``, ``"dielectric"``, ``"conductor"``), ``f90``
-        (``"free"``, ``"one"``),
+        (``"free"``, ``"one"``), ``coat`` (``"auto"``, ``"off"``, ``"on"``),
         ``starts``, ``moments``, sample strides, ``objective``, ``name``.
 
     Returns
     -------
-    MicrofacetBRDF
+    MicrofacetBRDF or SumBRDF
         GGX(αx, αy, ρ), the chosen Fresnel, ``diffuse`` = ρd and ``specular`` = ks, with
-        ``fit_info`` (objective, Fresnel chosen, starts, time).
+        ``fit_info`` (objective, Fresnel chosen, starts, coat, time); when the coat is kept
+        (module docstring), a ``SumBRDF`` of that lobe and the coat lobe
+        (:func:`coat_parts`).
 
     Examples
     --------
@@ -993,7 +1189,7 @@ def fit_ggx_diffuse(brdf, **kwargs) -> MicrofacetBRDF:
     return fit_analytic_diffuse(brdf, "ggx", **kwargs)
 
 
-def fit_beckmann_diffuse(brdf, **kwargs) -> MicrofacetBRDF:
+def fit_beckmann_diffuse(brdf, **kwargs) -> MicrofacetBRDF | SumBRDF:
     """Beckmann + Lambert (ρd/π), fitted like :func:`fit_ggx_diffuse` (same options and
     result, with a Beckmann distribution).
 
@@ -1022,18 +1218,19 @@ def summary(model) -> dict:
             "fresnel": info.get("fresnel"), "eta": info.get("eta"), "k": info.get("k"),
             "rho_d": info.get("rho_d"), "F0": info.get("F0"), "ks": info.get("ks"),
             "objective_normalised": info.get("objective_normalised"),
-            "time_s": info.get("time")}
+            "coat": info.get("coat"), "time_s": info.get("time")}
 
 
 def _register_fitters() -> None:
     from .registry import register_fitter
 
     register_fitter("ggx-diffuse", fit_ggx_diffuse, summary,
-                    "GGX + Lambert, Schlick F0, dielectric η or conductor (η, k) Fresnel, "
-                    "compressive objective (Bagher 2016)")
+                    "GGX + Lambert (+ a white coat lobe where it pays), Schlick F0, dielectric η "
+                    "or conductor (η, k) Fresnel, compressive objective (Bagher 2016)")
     register_fitter("beckmann-diffuse", fit_beckmann_diffuse, summary,
-                    "Beckmann + Lambert, Schlick F0, dielectric η or conductor (η, k) Fresnel, "
-                    "compressive objective (Bagher 2016)")
+                    "Beckmann + Lambert (+ a white coat lobe where it pays), Schlick F0, "
+                    "dielectric η or conductor (η, k) Fresnel, compressive objective (Bagher "
+                    "2016)")
 
 
 _register_fitters()

@@ -108,9 +108,10 @@ MODELS: dict[str, ModelInfo] = {m.name: m for m in (
     _model("ggx", "tabulated", "GGX from the tabulated fit's slope moments", "Dupuy 2015"),
     _model("beckmann", "tabulated", "Beckmann from the tabulated fit's slope moments",
            "Dupuy 2015"),
-    _model("ggx-diffuse", "analytic", "GGX + Lambert, Schlick/dielectric/conductor F",
+    _model("ggx-diffuse", "analytic", "GGX + Lambert (+ coat), Schlick/dielectric/conductor",
            "Dupuy 2015, Bagher 2016"),
-    _model("beckmann-diffuse", "analytic", "Beckmann + Lambert, Schlick/dielectric/conductor F",
+    _model("beckmann-diffuse", "analytic",
+           "Beckmann + Lambert (+ coat), Schlick/diel./conductor",
            "Dupuy 2015, Bagher 2016"),
     _model("sgd", "sgd", "Shifted Gamma Distribution per channel", "Bagher 2012", True),
     _model("beckmann-2s", "sgd", "Beckmann per channel, two-slice fit", "Bagher 2012", True),
@@ -400,12 +401,28 @@ def figures(model) -> dict:
       a scale, Bagher 2016 §4.3).
     * ``rho_d``: per channel, the Lambertian albedo (the term is ρd/π); 0 without a diffuse
       term.
+    * ``coat``: for a coated diffuse fit (:func:`brdffit.fit.analytic.coat_parts`), the coat
+      lobe's ``{"alpha", "weight", "f0"}`` (the other figures are the base lobe's); else
+      ``None``.
     * ``table_bytes``: :func:`table_bytes`.
     """
     import numpy as np
 
     out: dict[str, Any] = {"alpha": None, "alpha_kind": None, "alpha_rgb": None, "f0": None,
-                           "rho_d": None}
+                           "rho_d": None, "coat": None}
+    parts = None
+    if getattr(model, "components", None) is not None:   # (analytic imports SciPy)
+        from .analytic import coat_parts
+
+        parts = coat_parts(model)
+    if parts is not None:
+        base, coat = parts
+        out.update(_lobe_figures(base))
+        out["coat"] = {"alpha": float(coat.distribution.alpha_x),
+                       "weight": float(np.max(coat.specular)),
+                       "f0": float(np.max(coat.fresnel.f0))}
+        out["table_bytes"] = 0
+        return out
     lobes = getattr(model, "lobes", None)
     members = getattr(model, "models", None)
     per_channel = lobes if isinstance(lobes, (list, tuple)) and len(lobes) == 3 else (
