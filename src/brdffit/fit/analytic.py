@@ -818,7 +818,7 @@ def _search_coat(kind, data):
     q0 = np.log([alphas[best[1][0]], alphas[best[1][1]]])
     res = optimize.minimize(cost, q0, method="Nelder-Mead",
                             options={"xatol": 3e-3, "fatol": 1e-12 * max(best[0], 1e-300),
-                                     "maxiter": 150})
+                                     "maxiter": 150, "maxfev": 100})
     q = res.x if np.isfinite(res.fun) and res.fun < best[0] else q0
     E, x = solve(q)
     if x is None or not np.isfinite(E):
