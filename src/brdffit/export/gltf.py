@@ -1,8 +1,8 @@
 """glTF 2.0 metallic-roughness materials of microfacet fits, and the glTF BRDF as a library BRDF.
 
 :class:`GLTFBRDF` is the BRDF of the glTF 2.0 specification, **Appendix B** ("BRDF
-Implementation"), with the ``KHR_materials_specular``, ``KHR_materials_ior`` and
-``KHR_materials_anisotropy`` extensions:
+Implementation"), with the ``KHR_materials_specular``, ``KHR_materials_ior``,
+``KHR_materials_anisotropy`` and ``KHR_materials_clearcoat`` extensions:
 
 * ``α = roughness²`` — glTF's ``roughnessFactor`` is the *perceptual* roughness ``r``; our
   (and Mitsuba's) α is the GGX slope scale, so **glTF roughness = √α**;
@@ -15,7 +15,10 @@ Implementation"), with the ``KHR_materials_specular``, ``KHR_materials_ior`` and
   ``f90_d = specularFactor``, ``F_d = f0_d + (f90_d − f0_d)(1 − |V·H|)⁵`` (the core spec:
   ior 1.5, both factors 1, i.e. ``f0 = 0.04``, ``f90 = 1``); of the metal:
   ``F_m = baseColor + (1 − baseColor)(1 − |V·H|)⁵``;
-* ``f = (1 − metallic) ((1 − F_d) baseColor/π + F_d D V) + metallic F_m D V``.
+* ``f = (1 − metallic) ((1 − F_d) baseColor/π + F_d D V) + metallic F_m D V``;
+* clear coat (``KHR_materials_clearcoat``, "Implementation"): ``f (1 − c Fc) + c Fc D_c V_c``
+  with ``c = clearcoatFactor``, ``Fc = 0.04 + 0.96 (1 − |N·V|)⁵`` and the core's GGX ``D V``
+  of ``α_c = clearcoatRoughnessFactor²``.
 
 Mapping of a fit (:func:`gltf_material`) — one specular lobe (``MicrofacetBRDF``) with a
 GGX or Beckmann distribution (``fit_ggx``, ``fit_ggx_diffuse``, ``fit_beckmann_diffuse``...;
@@ -57,6 +60,11 @@ GGX tails; the loss is measured):
   ρd/π unweighted: κ restores the mean, not the dependence on the directions), its Fresnel
   curve is Schlick's (a dielectric fit's exact curve is replaced), and its Smith V is
   separable (core) or the extension's height-correlated form;
+* a **coated** diffuse fit (base lobe + white coat lobe of index 1.5,
+  :func:`brdffit.fit.analytic.coat_parts`): the base lobe by the rules above, the coat as
+  ``KHR_materials_clearcoat`` (``clearcoatFactor`` = w, ``clearcoatRoughnessFactor`` =
+  √α_coat); glTF layers it — ``f_base (1 − w Fc) + w Fc D V`` with the coat's Fresnel ``Fc``
+  of N·V (:class:`GLTFBRDF`) — where the fit adds ``w S_c Schlick(0.04; V·H)`` (measured);
 * optionally (``optimize=True``, CLI ``--option optimize=true``) baseColor, metallic and
   roughness are refined by least squares in BRDF space (:func:`optimize_parameters`);
 * the loss of fidelity is measured by :func:`gltf_fidelity` (BRDF-space metrics of

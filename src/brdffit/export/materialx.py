@@ -49,8 +49,16 @@ height-correlated G2 of the average α = √(αx αy), and attenuates the diffus
 ``1 − E_F(θo)·comp`` (the dielectric's directional albedo) — the fit adds ρd/π unchanged
 (the base colour restores the mean, not the dependence on θo).
 
-:class:`OpenPBRBRDF` re-implements that GLSL evaluation (reflection only: no coat, fuzz,
-thin film, transmission or subsurface; Lambert base) as a :class:`~brdffit.brdf.BRDF`.
+A **coated** diffuse fit (base lobe + white coat lobe, :func:`brdffit.fit.analytic.coat_parts`):
+the base lobe by the rules above, the coat as ``coat_weight`` = w, ``coat_roughness`` =
+√α_coat, ``coat_ior`` = 1.5, ``coat_darkening`` = 0 (the fit has no darkening). OpenPBR's
+graph mixes, by ``coat_weight``, a coat-roughened base roughness ``(2 r_c⁴ + r⁴)^¼`` and a
+base index relative to the coat's into the base: both are inverted, so the effective base
+lobe is the fit's; the coat is layered (``mx_layer``: the base weighted by one minus the
+coat's directional albedo) where the fit adds it — measured.
+
+:class:`OpenPBRBRDF` re-implements that GLSL evaluation (reflection only: no fuzz, thin film,
+transmission or subsurface; Lambert base; an isotropic coat) as a :class:`~brdffit.brdf.BRDF`.
 """
 
 from __future__ import annotations
@@ -99,8 +107,9 @@ class OpenPBRBRDF(IsotropicBRDF):
 
     Parameters: ``base_color`` (RGB), ``base_metalness``, ``specular_weight``,
     ``specular_color`` (RGB), ``specular_roughness``, ``specular_roughness_anisotropy``,
-    ``specular_ior`` (the other OpenPBR inputs at their defaults: base_weight 1, no coat,
-    fuzz, thin film, transmission, subsurface; base_diffuse_roughness 0 = Lambert). The
+    ``specular_ior``, ``coat_weight``, ``coat_roughness``, ``coat_ior`` (coat_color white,
+    coat_darkening 0; the other OpenPBR inputs at their defaults: base_weight 1, no fuzz,
+    thin film, transmission, subsurface; base_diffuse_roughness 0 = Lambert). The
     anisotropy's rougher axis is the tangent, at ``tangent_rotation`` (radians,
     counter-clockwise about the normal) from the local x axis (``geometry_tangent``
     connected to the rotated mesh tangent). ``wi`` = L (light), ``wo`` = V (viewer).

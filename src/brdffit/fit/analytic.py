@@ -44,15 +44,16 @@ exporters measure that difference). For fixed (α_b, α_c) the model is linear i
 ks F0, C = ks (1 − F0)) per channel and w, solved exactly with its bounds; (ln α_b, ln α_c)
 by a 24 × 24 scan of [ALPHA_MIN, 1]² and Nelder-Mead (≈ 0.7 s). The coated fit is kept when
 its objective is at least ``COAT_MARGIN`` = 5 % below the best uncoated one (and by more
-than ``COAT_MIN_GAIN`` of the data's energy). Evidence for the margin (a study with this
-model over the 100 Neural-BRDF MERL materials, rendered PSNR on the paper suite with common
-random numbers against the uncoated ggx-diffuse fit): with objective ratio coated / uncoated
-< 0.95 (24 materials) the coat gained +0.08 to +5.9 dB (delrin +5.9, nylon +3.9, pink-plastic
-+2.7, black-obsidian +2.3; Σ +34.6 dB) and lost on one (cherry-235 −0.65 dB); between 0.95
-and 1 gains dominate less clearly (4 losses of 14, Σ +9.3 dB); above 1 losses dominate (40
-of 62, Σ −62 dB). The coat takes the heavy tail of plastics, phenolics and lacquered woods
-that one GGX lobe cannot (``bench/bench_database.py --out runs/analytic3`` measures the
-product's fits).
+than ``COAT_MIN_GAIN`` of the data's energy). Evidence for the margin
+(``bench/bench_coat.py``: ``coat="on"`` vs ``"off"`` over the 100 Neural-BRDF MERL
+materials, rendered PSNR on the paper suite with common random numbers): with an objective
+ratio coated / uncoated below 0.95 (24 materials) the coat gained +0.08 to +5.9 dB (delrin
++5.9, nylon +3.9, specular-black-phenolic +2.7, yellow-plastic +2.3; Σ +34 dB)
+and lost on one (cherry-235 −0.65 dB); between 0.95 and 1 it lost on 4 of 14 (Σ +9.3 dB).
+Margin 0 would add +0.09 dB to the mean over the database for four more losses (worst
+−0.78 dB); 0.05 keeps one loss. (A study forcing the coat where it raises the objective
+lost on 40 of 62 materials, Σ −62 dB.) The coat takes the heavy tail of plastics,
+phenolics and lacquered woods that one GGX lobe cannot.
 (The coat search runs on every isotropic fit; ``coat="off"`` skips it, ``coat="on"`` keeps
 any coat that lowers the objective.)
 
@@ -743,8 +744,8 @@ def coat_parts(model):
 def _coat_solve(H, g, zz):
     """Bounded least squares of the coated model for one (α_base, α_coat): per channel
     (ρd, A, C) and one coat weight w for the three channels (``H`` (10, 10), ``g`` (10,),
-    ``zz`` = Σ w z²): ``(E, x)``, x = (ρd, A, C) × 3 then w; ρd ∈ [0, ALBEDO_MAX], A, C ≥ 0,
-    w ∈ [0, 1]. Bounded-variable least squares on the Cholesky factor of ``H``."""
+    ``zz`` = Σ w z²): ``(E, x)``, x = (ρd, A, C) × 3 then w; ρd ∈ [0, ALBEDO_MAX],
+    A, C ≥ 0, w ∈ [0, 1]. Bounded-variable least squares on the Cholesky factor of ``H``."""
     from scipy.optimize import lsq_linear
 
     n = g.size
