@@ -245,6 +245,25 @@ def test_metal_keeps_the_fits_mean_albedo_when_its_grazing_reflectance_exceeds_o
     assert np.all(np.abs(as_f0 / target - 1) > 0.05)          # what base_color = F0 gave
 
 
+def test_coated_fit_with_a_flat_base_fresnel_keeps_its_high_index():
+    """A base lobe whose Fresnel is flat (F0 = F90: the coat took the rise) maps to a high
+    specular_ior; under the coat the index to write is higher still, and it must be reached
+    (a clipped index darkens the base far less than its compensated colour assumes)."""
+    from brdffit.fit.analytic import COAT_F0
+    from brdffit.microfacet import SumBRDF
+
+    base = MicrofacetBRDF(GGX(0.0085), SchlickFresnel(1.0), diffuse=0.0076,
+                          specular=[0.0112, 0.0101, 0.0096])
+    coat = MicrofacetBRDF(GGX(0.058), SchlickFresnel(np.full(3, COAT_F0)),
+                          specular=np.full(3, 0.063))
+    fit = SumBRDF([base, coat])
+    p, alone = openpbr_parameters(fit), openpbr_parameters(base)
+    assert alone["specular_ior"] > 10.0
+    assert not any("not reachable" in n for n in p["notes"]), p["notes"]
+    err = materialx_fidelity(fit, metrics=("cos_rel_error",))["cos_rel_error"]
+    assert err < 2.0 * materialx_fidelity(base, metrics=("cos_rel_error",))["cos_rel_error"]
+
+
 def test_coated_fit_writes_a_valid_coat_with_the_base_lobe_kept(tmp_path):
     """A coated ggx-diffuse fit: coat_weight = w, coat_roughness = √α_coat, index 1.5,
     darkening off; the base inputs are chosen so that OpenPBR's coat-roughened roughness and

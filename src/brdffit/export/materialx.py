@@ -265,7 +265,7 @@ def openpbr_parameters(model) -> dict:
         r, ok_r = _uncoated(lambda x: _coat_roughened(x, c, w), p["specular_roughness"],
                             0.0, 1.0)
         eta, ok_e = _uncoated(lambda x: _coat_relative_ior(x, 1.5, w), p["specular_ior"],
-                              1.0 + 1e-9, 10.0)
+                              1.0 + 1e-9, max(10.0, 4.0 * p["specular_ior"]))
         p.update(specular_roughness=r, specular_ior=eta)
         notes.append("specular_roughness and specular_ior chosen so that OpenPBR's coat-"
                      "roughened roughness and coat-relative index are the base lobe's"
