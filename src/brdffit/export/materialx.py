@@ -240,7 +240,7 @@ def _schlick_f82(cos_t, f0, f82_tint):
 # ------------------------------------------------------------------------------------------
 # mapping
 # ------------------------------------------------------------------------------------------
-def openpbr_parameters(model) -> dict:
+def openpbr_parameters(model, metal: bool | None = None) -> dict:
     """OpenPBR inputs of a fit by the rules of the module docstring, with ``notes``,
     ``tangent_rotation_deg`` and the fit's ``F0``, ``F90``, ``rho_d``. A coated diffuse fit
     (:func:`brdffit.fit.analytic.coat_parts`): the base lobe by these rules, the coat as
@@ -250,8 +250,22 @@ def openpbr_parameters(model) -> dict:
     from .gltf import _ggx_model, is_metal, reflectances
 
     parts = coat_parts(model)
+    if parts is not None and metal is None:
+        # the base lobe of a coated fit can be metal-like with a low grazing reflectance (the
+        # coat took the rise: polyethylene), which OpenPBR's dielectric renders badly: map it
+        # both ways and keep the one closer to the fit
+        from ..evaluation.metrics import brdf_metrics
+
+        cands = [openpbr_parameters(model, metal=False), openpbr_parameters(model, metal=True)]
+        errs = [brdf_metrics(model, _brdf_of(c), 1 << 14, metrics=("cos_rel_error",))
+                ["cos_rel_error"] for c in cands]
+        best = int(np.argmin(errs))
+        cands[best]["notes"].append(f"base as a {('dielectric', 'metal')[best]} (cos_rel_error "
+                                    f"{errs[best]:.4g}; as a {('metal', 'dielectric')[best]}: "
+                                    f"{errs[1 - best]:.4g})")
+        return cands[best]
     if parts is not None:
-        p = openpbr_parameters(parts[0])
+        p = openpbr_parameters(parts[0], metal=metal)
         d = parts[1].distribution
         alpha = float(np.sqrt(d.alpha_x * d.alpha_y))
         w = float(np.max(parts[1].specular))
@@ -299,7 +313,7 @@ def openpbr_parameters(model) -> dict:
     # as for glTF: a fit whose grazing reflectance stays far below 1 is no metal (OpenPBR's
     # metal would drop its diffuse term): +9.4 dB mean (min +5.1) rendered against the fit on
     # the 10 MERL materials this moved (paper suite, CRN)
-    metal = is_metal(m, F0c, rd, F90c)
+    metal = is_metal(m, F0c, rd, F90c) if metal is None else bool(metal)
     p = {"specular_roughness": r, "specular_roughness_anisotropy": float(a),
          "base_weight": 1.0, "base_diffuse_roughness": 0.0,
          "tangent_rotation_deg": float(np.degrees(rot))}
