@@ -344,3 +344,24 @@ def test_coated_fit_maps_to_clearcoat_and_stays_close():
     dropped = brdf_metrics(fit, _gltf_brdf(base_only), 1 << 15,
                            metrics=("cos_rel_error",))["cos_rel_error"]
     assert err < 0.03 and err < 0.5 * dropped, (err, dropped)
+
+
+def test_coated_fit_exported_as_one_lobe_when_that_is_closer():
+    """glTF's clearcoat (Fresnel of N·V, layered) departs from a rough, heavy added coat; the
+    exporter then writes one lobe fitted to the coated fit when that is closer to it (the
+    choice and both errors are in the notes)."""
+    from brdffit.evaluation.metrics import brdf_metrics
+    from brdffit.export.gltf import _with_clearcoat
+    from tests.fit.test_analytic import _coated_material
+
+    fit = brdffit.fit_ggx_diffuse(_coated_material(w=0.6, a_base=0.12, a_coat=0.25))
+    assert fit.fit_info["coat"]["kept"]
+    p = gltf_parameters(fit)
+    coat_only = _with_clearcoat(gltf_parameters(fit.components[0]), fit.components[1])
+
+    def err(q):
+        return brdf_metrics(fit, _gltf_brdf(q), 1 << 15, metrics=("cos_rel_error",))[
+            "cos_rel_error"]
+
+    assert "coated fit exported as" in p["notes"][-1]
+    assert err(p) <= err(coat_only) * 1.05

@@ -192,6 +192,31 @@ def is_elliptical(dist, kinds=("ggx", "beckmann")) -> bool:
     return isinstance(dist, EllipticalSlopeDistribution) and getattr(dist, "kind", "") in kinds
 
 
+def single_lobe_of(coated):
+    """A coated diffuse fit (:func:`brdffit.fit.analytic.coat_parts`) approximated by one lobe:
+    the diffuse fit of its family with ``coat="off"`` fitted to it (≈ 0.7 s). A target whose
+    coat does not behave like the fit's (glTF's clearcoat has a Fresnel of N·V) may carry
+    this closer than the coat (:func:`closer_to`)."""
+    from ..fit.analytic import coat_parts, fit_analytic_diffuse
+
+    base = coat_parts(coated)[0]
+    kind = "beckmann" if is_elliptical(base.distribution, ("beckmann",)) else "ggx"
+    return fit_analytic_diffuse(coated, kind, coat="off", anisotropic=False,
+                                name=getattr(coated, "name", None))
+
+
+def closer_to(model, candidates: dict, make_brdf, n: int = 1 << 14) -> tuple[str, dict, dict]:
+    """``(label, parameters, errors)``: of the exported ``candidates`` (label → parameters),
+    the one whose BRDF (``make_brdf(parameters)``) has the lowest cosine-weighted relative
+    error against ``model`` (:func:`brdffit.evaluation.metrics.brdf_metrics`, ``n`` pairs)."""
+    from ..evaluation.metrics import brdf_metrics
+
+    errors = {k: brdf_metrics(model, make_brdf(p), n, metrics=("cos_rel_error",))
+              ["cos_rel_error"] for k, p in candidates.items()}
+    best = min(errors, key=errors.get)
+    return best, candidates[best], errors
+
+
 def principal_axes(alpha_x: float, alpha_y: float, rho: float) -> tuple[float, float, float]:
     """Principal roughnesses and frame rotation of the slope scale matrix (Dupuy 2015 App. C).
 

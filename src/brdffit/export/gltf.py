@@ -82,8 +82,9 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..brdf import IsotropicBRDF, _as_dirs
-from ._common import (LUMA, base_for_albedo, check_output_path, cosine_weighted_albedo,
-                      diffuse_kept_fraction, fail, is_elliptical, shown, writing)
+from ._common import (LUMA, base_for_albedo, check_output_path, closer_to,
+                      cosine_weighted_albedo, diffuse_kept_fraction, fail, is_elliptical, shown,
+                      single_lobe_of, writing)
 
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material",
            "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0",
@@ -336,7 +337,16 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
 
     parts = coat_parts(model)
     if parts is not None:
-        return _with_clearcoat(gltf_parameters(parts[0], anisotropy, specular), parts[1])
+        # glTF's clearcoat (Fresnel of N·V, layered) departs from the fit's added coat on
+        # rough, heavy coats: export whichever is closer to the fit, the coat or one lobe
+        cands = {"clearcoat": _with_clearcoat(gltf_parameters(parts[0], anisotropy, specular),
+                                              parts[1]),
+                 "one lobe": gltf_parameters(single_lobe_of(model), anisotropy, specular)}
+        label, p, err = closer_to(model, cands, _brdf_of)
+        other = next(k for k in err if k != label)
+        p = dict(p, notes=p["notes"] + [f"coated fit exported as {label} (cos_rel_error vs the "
+                                         f"fit {err[label]:.4g}; as {other}: {err[other]:.4g})"])
+        return p
     m, notes = _ggx_model(model)
     d = m.distribution
     alpha = float(np.sqrt(d.alpha_x * d.alpha_y))

@@ -67,8 +67,9 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..brdf import IsotropicBRDF, _as_dirs
-from ._common import (LUMA, base_for_albedo, check_output_path, cosine_weighted_albedo,
-                      diffuse_kept_fraction, principal_axes, shown, writing)
+from ._common import (LUMA, base_for_albedo, check_output_path, closer_to,
+                      cosine_weighted_albedo, diffuse_kept_fraction, principal_axes, shown,
+                      single_lobe_of, writing)
 
 __all__ = ["OpenPBRBRDF", "openpbr_parameters", "openpbr_equivalent", "materialx_fidelity",
            "materialx_document", "write_materialx", "validate_document"]
@@ -254,16 +255,14 @@ def openpbr_parameters(model, metal: bool | None = None) -> dict:
         # the base lobe of a coated fit can be metal-like with a low grazing reflectance (the
         # coat took the rise: polyethylene), which OpenPBR's dielectric renders badly: map it
         # both ways and keep the one closer to the fit
-        from ..evaluation.metrics import brdf_metrics
-
-        cands = [openpbr_parameters(model, metal=False), openpbr_parameters(model, metal=True)]
-        errs = [brdf_metrics(model, _brdf_of(c), 1 << 14, metrics=("cos_rel_error",))
-                ["cos_rel_error"] for c in cands]
-        best = int(np.argmin(errs))
-        cands[best]["notes"].append(f"base as a {('dielectric', 'metal')[best]} (cos_rel_error "
-                                    f"{errs[best]:.4g}; as a {('metal', 'dielectric')[best]}: "
-                                    f"{errs[1 - best]:.4g})")
-        return cands[best]
+        # ... and, as for glTF, one lobe fitted to the coated fit may be closer than the coat
+        cands = {"coat over a dielectric base": openpbr_parameters(model, metal=False),
+                 "coat over a metal base": openpbr_parameters(model, metal=True),
+                 "one lobe": openpbr_parameters(single_lobe_of(model))}
+        label, p, err = closer_to(model, cands, _brdf_of)
+        others = "; ".join(f"{k}: {v:.4g}" for k, v in err.items() if k != label)
+        return dict(p, notes=p["notes"] + [f"coated fit exported as {label} (cos_rel_error vs "
+                                           f"the fit {err[label]:.4g}; {others})"])
     if parts is not None:
         p = openpbr_parameters(parts[0], metal=metal)
         d = parts[1].distribution
