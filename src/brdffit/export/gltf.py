@@ -64,7 +64,10 @@ GGX tails; the loss is measured):
   :func:`brdffit.fit.analytic.coat_parts`): the base lobe by the rules above, the coat as
   ``KHR_materials_clearcoat`` (``clearcoatFactor`` = w, ``clearcoatRoughnessFactor`` =
   √α_coat); glTF layers it — ``f_base (1 − w Fc) + w Fc D V`` with the coat's Fresnel ``Fc``
-  of N·V (:class:`GLTFBRDF`) — where the fit adds ``w S_c Schlick(0.04; V·H)`` (measured);
+  of N·V (:class:`GLTFBRDF`) — where the fit adds ``w S_c Schlick(0.04; V·H)``, which departs
+  on rough, heavy coats; so one lobe fitted to the coated fit
+  (:func:`~brdffit.export._common.single_lobe_of`) is mapped too, and whichever is closer to
+  the fit (cosine-weighted relative error) is written, the choice in the notes;
 * optionally (``optimize=True``, CLI ``--option optimize=true``) baseColor, metallic and
   roughness are refined by least squares in BRDF space (:func:`optimize_parameters`);
 * the loss of fidelity is measured by :func:`gltf_fidelity` (BRDF-space metrics of

@@ -55,7 +55,10 @@ the base lobe by the rules above, the coat as ``coat_weight`` = w, ``coat_roughn
 graph mixes, by ``coat_weight``, a coat-roughened base roughness ``(2 r_c⁴ + r⁴)^¼`` and a
 base index relative to the coat's into the base: both are inverted, so the effective base
 lobe is the fit's; the coat is layered (``mx_layer``: the base weighted by one minus the
-coat's directional albedo) where the fit adds it — measured.
+coat's directional albedo) where the fit adds it. Three candidates — the coat over the base
+mapped as a dielectric, as a metal (a metal-like base flat at grazing: polyethylene), and one
+lobe fitted to the coated fit (:func:`~brdffit.export._common.single_lobe_of`) — the one
+closest to the fit is written (notes).
 
 :class:`OpenPBRBRDF` re-implements that GLSL evaluation (reflection only: no fuzz, thin film,
 transmission or subsurface; Lambert base; an isotropic coat) as a :class:`~brdffit.brdf.BRDF`.
