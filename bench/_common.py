@@ -14,3 +14,66 @@ def random_direction_pairs(n: int, seed: int = 0) -> list[np.ndarray]:
         v[:, 2] = np.abs(v[:, 2])
         out.append(v / np.linalg.norm(v, axis=1, keepdims=True))
     return out
+
+
+def merl_materials(zip_path, only: str | None = None) -> list[str]:
+    """The Neural-BRDF MERL material names of ``zip_path``, sorted; ``only``: a comma-separated
+    subset."""
+    from brdffit.io.nbrdf import list_materials
+
+    names = sorted(list_materials(str(zip_path)))
+    if only:
+        keep = set(only.split(","))
+        names = [n for n in names if n in keep]
+    return names
+
+
+def read_rows(csv_path) -> list[dict]:
+    """The rows of a resumable per-material CSV (``material`` text, every other field float)."""
+    import csv
+    from pathlib import Path
+
+    if not Path(csv_path).is_file():
+        return []
+    with open(csv_path, newline="") as fh:
+        return [{k: (v if k == "material" else float(v)) for k, v in r.items()}
+                for r in csv.DictReader(fh)]
+
+
+def write_rows(csv_path, fields, rows, summary: dict) -> None:
+    """Write ``rows`` as CSV and ``summary`` as JSON next to it, both atomically."""
+    import csv
+    import io
+    import json
+    from pathlib import Path
+
+    from brdffit._atomic import atomic_write
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fields)
+    w.writeheader()
+    w.writerows(rows)
+    with atomic_write(csv_path, "w") as fh:
+        fh.write(buf.getvalue())
+    with atomic_write(Path(csv_path).with_suffix(".json"), "w") as fh:
+        fh.write(json.dumps(summary, indent=1) + "\n")
+
+
+def resumable_merl_study(doc: str, default_name: str, zip_path, results_dir, argv=None):
+    """The command line of a resumable per-material study over the Neural-BRDF MERL
+    materials (``--only``, ``--name``): ``(todo, csv_path, rows)`` — the materials still to
+    run, the CSV of ``--name`` in ``results_dir`` and the rows it already holds."""
+    import argparse
+    import sys
+    from pathlib import Path
+
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
+    ap.add_argument("--only", default=None, help="comma-separated material names")
+    ap.add_argument("--name", default=default_name, help="results file stem")
+    args = ap.parse_args(argv)
+    if not Path(zip_path).is_file():
+        sys.exit(f"needs {zip_path} (../shared/data)")
+    csv_path = Path(results_dir) / f"{args.name}.csv"
+    rows = read_rows(csv_path)
+    done = {r["material"] for r in rows}
+    return [n for n in merl_materials(zip_path, args.only) if n not in done], csv_path, rows

@@ -15,9 +15,6 @@ every material; re-running resumes.
 
 from __future__ import annotations
 
-import argparse
-import csv
-import io
 import json
 import os
 import sys
@@ -30,7 +27,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from brdffit._atomic import atomic_write  # noqa: E402
+from _common import resumable_merl_study, write_rows  # noqa: E402
 
 ZIP = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
 FIELDS = ["material", "objective_ratio", "psnr_off", "se_off", "psnr_on", "se_on", "delta_db",
@@ -60,30 +57,13 @@ def summarise(rows: list[dict], load0) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--only", default=None, help="comma-separated material names")
-    ap.add_argument("--name", default="coat_margin")
-    args = ap.parse_args(argv)
-    if not ZIP.is_file():
-        sys.exit(f"needs {ZIP} (../shared/data)")
+    todo, csv_path, rows = resumable_merl_study(__doc__, "coat_margin", ZIP,
+                                               ROOT / "bench" / "results", argv)
     import brdffit
     from brdffit.evaluation.compare import compare
-    from brdffit.io.nbrdf import list_materials
 
-    names = sorted(list_materials(str(ZIP)))
-    if args.only:
-        keep = set(args.only.split(","))
-        names = [n for n in names if n in keep]
-    csv_path = ROOT / "bench" / "results" / f"{args.name}.csv"
-    rows = []
-    if csv_path.is_file():
-        rows = [{k: (v if k == "material" else float(v)) for k, v in r.items()}
-                for r in csv.DictReader(csv_path.open())]
-    done = {r["material"] for r in rows}
     load0 = list(os.getloadavg())
-    for name in names:
-        if name in done:
-            continue
+    for name in todo:
         ref = brdffit.load(f"{ZIP}:{name}")
         fits, cpu = {}, {}
         for mode in ("off", "on"):
@@ -116,15 +96,7 @@ def main(argv=None) -> int:
 
 
 def _write(csv_path: Path, rows: list[dict], load0) -> None:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, FIELDS)
-    w.writeheader()
-    w.writerows(rows)
-    with atomic_write(csv_path, "w") as fh:
-        fh.write(buf.getvalue())
-    with atomic_write(csv_path.with_suffix(".json"), "w") as fh:
-        fh.write(json.dumps(summarise(rows, load0), indent=1) + "\n")
-
+    write_rows(csv_path, FIELDS, rows, summarise(rows, load0))
 
 if __name__ == "__main__":
     sys.exit(main())
