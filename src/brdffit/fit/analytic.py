@@ -363,24 +363,14 @@ def _box_qp_small(H, g, lo, hi):
     return (None, np.inf) if best is None else (np.array(best), best_v)
 
 
-def _dielectric_reflectance(cos_d, eta) -> np.ndarray:
-    """Exact dielectric F(θd; η) of one index: Walter et al. 2007 Eq. 22, the formula of
-    :class:`~brdffit.microfacet.DielectricFresnel`."""
-    c = cos_d
-    g = np.sqrt(np.maximum(float(eta) ** 2 - 1.0 + c * c, 0.0))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = (g - c) / (g + c)
-        b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-        F = 0.5 * a * a * (1.0 + b * b)
-    return np.clip(np.where(np.isfinite(F), F, 1.0), 0.0, 1.0)
-
-
 def _fresnel_values(fresnel: str, eta, data) -> np.ndarray | None:
-    """Dielectric F(θd; η) at the samples (:func:`_dielectric_reflectance`; ``None`` for
-    Schlick)."""
+    """Dielectric F(θd; η) of one index at the samples
+    (:func:`~brdffit.microfacet.fresnel.dielectric_reflectance`; ``None`` for Schlick)."""
+    from ..microfacet.fresnel import dielectric_reflectance
+
     if fresnel != "dielectric":
         return None
-    return _dielectric_reflectance(data["cos_d"], eta)
+    return dielectric_reflectance(data["cos_d"], float(eta))
 
 
 def _weighted_sums(data) -> tuple:
@@ -656,10 +646,12 @@ def _dielectric_at(kind, alpha: float, data, f90: str) -> tuple[float, float | N
     S = _shape_of(kind, (alpha, alpha, 0.0), data)
     if S is None:
         return np.inf, None
+    from ..microfacet.fresnel import dielectric_reflectance
+
     cos_nodes, sm = _node_sums(S, data)
 
     def cost(q):
-        F = _dielectric_reflectance(cos_nodes, 1.0 + float(np.exp(q)))
+        F = dielectric_reflectance(cos_nodes, 1.0 + float(np.exp(q)))
         return sum(_node_linear(sm, c, F, f90)[0] for c in range(3))
 
     E = np.array([cost(q) for q in _ETA_SCAN])

@@ -30,7 +30,8 @@ from ..schema import F1_MAX, FRESNEL_MAX, INDEX_MAX, RGB, Array, Integer, Schema
 from .base import Fresnel
 
 __all__ = ["SchlickFresnel", "GeneralizedSchlickFresnel", "DielectricFresnel",
-           "ConductorFresnel", "TabulatedFresnel", "GOLD_ETA", "GOLD_K", "conductor_reflectance"]
+           "ConductorFresnel", "TabulatedFresnel", "GOLD_ETA", "GOLD_K", "conductor_reflectance",
+           "dielectric_reflectance"]
 
 #: Approximate RGB complex index of gold (linear sRGB primaries), as commonly tabulated for
 #: rendering (e.g. from Johnson & Christy 1972 spectral data reduced to RGB).
@@ -128,22 +129,33 @@ class DielectricFresnel(Fresnel):
             raise ValueError(f"DielectricFresnel: eta must be > 0, got {self.eta.tolist()}")
 
     def eval(self, cos_theta_d) -> np.ndarray:
-        c = _cos(cos_theta_d)
-        g2 = self.eta**2 - 1.0 + c * c
-        tir = g2 < 0
-        g = np.sqrt(np.where(tir, 0.0, g2))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            a = (g - c) / (g + c)
-            b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-            F = 0.5 * a * a * (1.0 + b * b)
-        F = np.where(np.isfinite(F), F, 1.0)          # c = 0 and η = 1 corner cases
-        return np.where(tir, 1.0, np.clip(F, 0.0, 1.0))
+        return dielectric_reflectance(_cos(cos_theta_d), self.eta)
 
     def params(self) -> dict:
         return {"eta": self.eta.tolist()}
 
     def __repr__(self) -> str:
         return f"DielectricFresnel(eta={np.round(self.eta, 4).tolist()})"
+
+
+def dielectric_reflectance(c, eta) -> np.ndarray:
+    """Unpolarised Fresnel reflectance of a dielectric of relative index ``eta`` at
+    ``cos θ = c`` (broadcast; ``c`` clamped to [0, 1] by the caller): Walter et al. 2007
+    Eq. 22 (the formula of :class:`DielectricFresnel`), 1 under total internal reflection.
+
+    >>> round(float(dielectric_reflectance(1.0, 1.5)), 4)
+    0.04
+    """
+    c = np.asarray(c, dtype=np.float64)
+    g2 = np.asarray(eta, dtype=np.float64)**2 - 1.0 + c * c
+    tir = g2 < 0
+    g = np.sqrt(np.where(tir, 0.0, g2))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = (g - c) / (g + c)
+        b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+        F = 0.5 * a * a * (1.0 + b * b)
+    F = np.where(np.isfinite(F), F, 1.0)          # c = 0 and η = 1 corner cases
+    return np.where(tir, 1.0, np.clip(F, 0.0, 1.0))
 
 
 def conductor_reflectance(c, eta, k) -> np.ndarray:
