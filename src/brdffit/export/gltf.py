@@ -529,13 +529,16 @@ def gltf_equivalent(model, anisotropy: bool = True, optimize: bool = False,
 
 def gltf_fidelity(model, n_samples: int = 1 << 15,
                   metrics=("cos_rel_error", "normalized_l2"), anisotropy: bool = True,
-                  optimize: bool = False, specular: bool = True) -> dict:
+                  optimize: bool = False, specular: bool = True,
+                  parameters: dict | None = None) -> dict:
     """BRDF-space loss of fidelity of the glTF material vs the fit
-    (:func:`brdffit.evaluation.metrics.brdf_metrics`, the fit as reference)."""
+    (:func:`brdffit.evaluation.metrics.brdf_metrics`, the fit as reference); ``parameters``:
+    the material's, when already mapped (else they are, with the other options)."""
     from ..evaluation.metrics import brdf_metrics
 
-    r = brdf_metrics(model, gltf_equivalent(model, anisotropy, optimize, specular), n_samples,
-                     metrics=metrics)
+    exported = (gltf_equivalent(model, anisotropy, optimize, specular) if parameters is None
+                else _brdf_of(parameters))
+    r = brdf_metrics(model, exported, n_samples, metrics=metrics)
     return {k: r.get(k) for k in metrics}
 
 
@@ -553,8 +556,7 @@ def gltf_material(model, name: str | None = None, fidelity: bool = True,
               "conventions": "roughnessFactor = sqrt(alpha), alpha = GGX slope scale; "
                              "linear RGB of the source data; glTF Appendix B BRDF"}
     if fidelity:
-        extras["fidelity"] = gltf_fidelity(model, anisotropy=anisotropy, optimize=optimize,
-                                           specular=specular)
+        extras["fidelity"] = gltf_fidelity(model, parameters=p)
     mat = {"name": str(name or getattr(model, "name", None) or "material"),
            "pbrMetallicRoughness": {"baseColorFactor": p["baseColorFactor"],
                                     "metallicFactor": p["metallicFactor"],

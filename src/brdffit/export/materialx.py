@@ -495,12 +495,15 @@ def _brdf_of(p: dict, name: str = "openpbr") -> OpenPBRBRDF:
 
 
 def materialx_fidelity(model, n_samples: int = 1 << 15,
-                       metrics=("cos_rel_error", "normalized_l2")) -> dict:
+                       metrics=("cos_rel_error", "normalized_l2"),
+                       parameters: dict | None = None) -> dict:
     """BRDF-space loss of the OpenPBR material vs the fit
-    (:func:`brdffit.evaluation.metrics.brdf_metrics`, the fit as reference)."""
+    (:func:`brdffit.evaluation.metrics.brdf_metrics`, the fit as reference); ``parameters``:
+    the material's inputs, when already mapped (:func:`openpbr_parameters`)."""
     from ..evaluation.metrics import brdf_metrics
 
-    r = brdf_metrics(model, openpbr_equivalent(model), n_samples, metrics=metrics)
+    exported = openpbr_equivalent(model) if parameters is None else _brdf_of(parameters)
+    r = brdf_metrics(model, exported, n_samples, metrics=metrics)
     return {k: r.get(k) for k in metrics}
 
 
@@ -607,5 +610,5 @@ def write_materialx(model, path, fidelity: bool = True, **_ignored) -> dict:
                                             "coat_weight", "coat_roughness") if k in p},
            "tangent_rotation_deg": p["tangent_rotation_deg"], "notes": p["notes"]}
     if fidelity:
-        out["fidelity"] = materialx_fidelity(model)
+        out["fidelity"] = materialx_fidelity(model, parameters=p)
     return out
