@@ -1119,13 +1119,12 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
     coat_info = {"alpha": a_coat, "weight": float(x[9]), "f0": COAT_F0,
                  "objective": float(E_coat), "objective_without": float(E),
                  "margin": margin, "kept": bool(E_coat < (1.0 - margin) * E
-                                                and gain > COAT_MIN_GAIN), "time": 0.0}
+                                                and gain > COAT_MIN_GAIN),
+                 "time": time.perf_counter() - t3}
+    info = model.fit_info
+    info.update(coat=coat_info, time=time.perf_counter() - t0)
     if not coat_info["kept"]:
-        coat_info["time"] = time.perf_counter() - t3
-        model.fit_info["coat"] = coat_info
-        model.fit_info["time"] = time.perf_counter() - t0
         return model
-    x = x.reshape(-1)
     rho_d, A, C = x[0:9:3], x[1:9:3], x[2:9:3]
     ks = A + C
     F0 = np.where(ks > 0, A / np.where(ks > 0, ks, 1.0), 0.0)
@@ -1134,7 +1133,6 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
     coat_lobe = MicrofacetBRDF(_distribution(kind, a_coat), SchlickFresnel(np.full(3, COAT_F0)),
                                specular=np.full(3, float(x[9])), correlated=True, name="coat")
     coated = SumBRDF([base, coat_lobe], name=model.name, source=model.source)
-    info = model.fit_info
     info.update(
         method=f"{kind} + Lambert + coat ({kind}, white, F0 {COAT_F0}), Schlick Fresnel, "
                "compressive objective (Bagher 2016 Eq. 7-12), variable projection",
@@ -1143,9 +1141,6 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
         objective_normalised=(float(E_coat / data["ref_energy"]) if data["ref_energy"] > 0
                               else None))
     info["objective_by_fresnel"]["schlick+coat"] = float(E_coat)
-    coat_info["time"] = time.perf_counter() - t3
-    info["coat"] = coat_info
-    info["time"] = time.perf_counter() - t0
     coated.fit_info, coated.fit_options = info, model.fit_options
     return coated
 
