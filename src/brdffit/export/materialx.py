@@ -106,6 +106,23 @@ def _fresnel_dielectric(c, ior):
     return np.where(g2 < 0, 1.0, np.nan_to_num(F, nan=1.0))
 
 
+def _dielectric_layer(nl, nv, vh, alpha: float, ior: float):
+    """The terms of a GGX dielectric layer as MaterialX's GLSL evaluates it
+    (``mx_dielectric_bsdf`` in ``mx_layer``): the height-correlated G2 of ``alpha``, the
+    directional albedo ``Ess`` of its rational fit, the exact Fresnel of ``ior`` at V·H, the
+    energy compensation ``1 + F (1 − Ess)/Ess`` and the layer's directional albedo
+    ``(f0 A + B)·comp`` that darkens what lies below."""
+    a2 = alpha * alpha
+    G = 2.0 * nl * nv / (np.sqrt(a2 + (1 - a2) * nl * nl) * nv
+                         + np.sqrt(a2 + (1 - a2) * nv * nv) * nl)
+    A, B = _dir_albedo_ab(nv, alpha)
+    Ess = (A + B)[..., None]
+    F = _fresnel_dielectric(vh, ior)[..., None]
+    comp = 1.0 + F * (1.0 - Ess) / Ess
+    f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
+    return G, Ess, F, comp, (f0 * A + B)[..., None] * comp
+
+
 class OpenPBRBRDF(IsotropicBRDF):
     """OpenPBR Surface (``open_pbr_surface``) reflection as MaterialX's GLSL evaluates it.
 
@@ -172,19 +189,10 @@ class OpenPBRBRDF(IsotropicBRDF):
         hx, hy = c * h[..., 0] + s * h[..., 1], -s * h[..., 0] + c * h[..., 1]
         he = np.stack([hx / ax, hy / ay], -1)
         D = 1.0 / (np.pi * ax * ay * (np.sum(he * he, -1) + h[..., 2] ** 2) ** 2)
-        avg = float(np.sqrt(ax * ay))
-        a2 = avg * avg
-        G = 2.0 * nl * nv / (np.sqrt(a2 + (1 - a2) * nl * nl) * nv
-                             + np.sqrt(a2 + (1 - a2) * nv * nv) * nl)
-        A, B = _dir_albedo_ab(nv, avg)
-        Ess = (A + B)[..., None]
-        lobe = (D * G / (4.0 * nl * nv))[..., None]
         # dielectric: tint · F_dielectric, layered over the Lambert base
-        eta = self._ior()
-        Fd = _fresnel_dielectric(vh, eta)[..., None]
-        comp_d = 1.0 + Fd * (1.0 - Ess) / Ess
-        f0_eta = ((eta - 1.0) / (eta + 1.0)) ** 2
-        dir_alb = (f0_eta * A + B)[..., None] * comp_d
+        G, Ess, Fd, comp_d, dir_alb = _dielectric_layer(nl, nv, vh, float(np.sqrt(ax * ay)),
+                                                        self._ior())
+        lobe = (D * G / (4.0 * nl * nv))[..., None]
         diel = lobe * Fd * comp_d * np.maximum(self.specular_color, 0.0) \
             + (1.0 - dir_alb) * np.maximum(self.base_color, 0.0) / np.pi
         # metal: specular_weight · Schlick(base_color, 1) (F82 tint = specular_color)
@@ -205,16 +213,10 @@ class OpenPBRBRDF(IsotropicBRDF):
         a = float(np.clip(self.coat_roughness ** 2, 1e-6, 1.0))
         a2 = a * a
         D = a2 / (np.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
-        G = 2.0 * nl * nv / (np.sqrt(a2 + (1 - a2) * nl * nl) * nv
-                             + np.sqrt(a2 + (1 - a2) * nv * nv) * nl)
-        A, B = _dir_albedo_ab(nv, a)
-        Ess = (A + B)[..., None]
-        F = _fresnel_dielectric(vh, self.coat_ior)[..., None]
-        comp = 1.0 + F * (1.0 - Ess) / Ess
-        f0 = ((self.coat_ior - 1.0) / (self.coat_ior + 1.0)) ** 2
-        albedo = self.coat_weight * (f0 * A + B)[..., None] * comp
+        G, _, F, comp, albedo = _dielectric_layer(nl, nv, vh, a, self.coat_ior)
         lobe = (D * G / (4.0 * nl * nv))[..., None]
-        return self.coat_weight * lobe * F * comp + (1.0 - albedo) * f_base
+        return (self.coat_weight * lobe * F * comp
+                + (1.0 - self.coat_weight * albedo) * f_base)
 
     def describe(self) -> dict:
         d = super().describe()
