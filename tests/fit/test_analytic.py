@@ -210,6 +210,57 @@ def test_linear_part_is_the_bounded_weighted_least_squares_optimum(fresnel, f90)
     assert lin["E"] == pytest.approx(E, rel=1e-9)
 
 
+@pytest.mark.parametrize("anisotropic", [False, True])
+def test_isotropic_lobe_shape_equals_the_direct_formula(anisotropic):
+    """An isotropic lobe's shape ``S = D G2 / (4 cos θi cos θo)`` is computed from the sample
+    set's polar angles (the fast path): it must equal the formula on the directions, for both
+    distributions over the whole α range, on both sample sets; anisotropic lobes keep the
+    direct formula."""
+    from brdffit.fit import analytic as A
+    from brdffit.microfacet import GGX
+
+    data = A.sample_set(brdffit.synthetic("plastic-beckmann"), anisotropic)
+    wi, wo = data["wi"], data["wo"]
+    for kind in ("ggx", "beckmann"):
+        for a in (A.ALPHA_MIN, 0.01, 0.18, 1.0):
+            d = A._distribution(kind, a)
+            direct = d.D(data["h"]) / (4.0 * wi[:, 2] * wo[:, 2]) / (1.0 + d.Lambda(wi)
+                                                                     + d.Lambda(wo))
+            np.testing.assert_allclose(A._spec_shape(d, data), direct, rtol=1e-11,
+                                       atol=1e-300, err_msg=f"{kind} {a}")
+    d = GGX(0.1, 0.3, 0.2)
+    np.testing.assert_allclose(A._spec_shape(d, data), d.D(data["h"]) / (
+        4.0 * wi[:, 2] * wo[:, 2]) / (1.0 + d.Lambda(wi) + d.Lambda(wo)), rtol=1e-14)
+
+
+def test_coat_solve_is_the_bounded_optimum_and_its_bound_is_safe():
+    """`_coat_solve` returns the unconstrained minimum when it is feasible and BVLS
+    otherwise: either way scipy's bounded least squares optimum on the same problem; with a
+    bound below the unconstrained minimum it returns no solution, with one above the bounded
+    optimum the same answer."""
+    from scipy.optimize import lsq_linear
+
+    from brdffit.fit.analytic import ALBEDO_MAX, _coat_solve
+
+    rng = np.random.default_rng(5)
+    hi = np.array([ALBEDO_MAX, np.inf, np.inf] * 3 + [1.0])
+    interior = 0
+    for trial in range(40):
+        X = rng.random((200, 10))
+        truth = rng.random(10) * (0.2 if trial % 2 else 2.0) - (0.0 if trial % 4 < 2 else 0.3)
+        z = X @ truth + 0.01 * rng.standard_normal(200)
+        H, g, zz = X.T @ X, X.T @ z, float(z @ z)
+        E, x = _coat_solve(H, g, zz)
+        ref = lsq_linear(X, z, bounds=(np.zeros(10), hi), method="bvls", tol=1e-12)
+        assert E == pytest.approx(float(np.sum((X @ ref.x - z) ** 2)), rel=1e-8, abs=1e-12)
+        np.testing.assert_allclose(x, ref.x, atol=1e-7)
+        interior += bool(np.all((x > 0) & (x < hi)))
+        unconstrained = float(np.sum((X @ np.linalg.lstsq(X, z, rcond=None)[0] - z) ** 2))
+        assert _coat_solve(H, g, zz, bound=0.5 * unconstrained)[1] is None
+        assert _coat_solve(H, g, zz, bound=1.5 * E)[0] == E
+    assert 0 < interior < 40                  # both branches were taken
+
+
 @pytest.mark.parametrize("f90", ["free", "one"])
 def test_dielectric_profile_is_exact_and_finds_the_best_index(f90):
     """The isotropic dielectric search profiles η out on per-θd-node sums: its objective must

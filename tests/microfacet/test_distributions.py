@@ -304,3 +304,25 @@ def test_beckmann_lambda_cutoff_leaves_shadowing_unchanged(alpha):
     assert np.max(np.abs(lam - closed)) < 1e-18
     np.testing.assert_array_equal(1.0 / (1.0 + lam[:-1] + lam[1:]),
                                   1.0 / (1.0 + closed[:-1] + closed[1:]))
+
+
+@pytest.mark.parametrize("cls", [GGX, Beckmann])
+@pytest.mark.parametrize("alpha", [0.004, 0.2, 1.7])
+def test_isotropic_shortcuts_equal_D_and_Lambda(cls, alpha):
+    """``D_cos4(tan²θm)`` is ``D(m) cos⁴θm`` and ``Lambda_of_tan(tan θ)`` is ``Λ(w)`` for
+    normals / directions of any azimuth of an isotropic distribution (the fits' fast path);
+    an anisotropic distribution refuses both."""
+    rng = np.random.default_rng(11)
+    d = cls(alpha)
+    w = _random_dirs(rng, 20_000)
+    w = w[w[:, 2] > 1e-3]
+    tan2 = (w[:, 0] ** 2 + w[:, 1] ** 2) / w[:, 2] ** 2
+    np.testing.assert_allclose(d.D_cos4(tan2), d.D(w) * w[:, 2] ** 4, rtol=1e-11, atol=1e-300)
+    np.testing.assert_allclose(d.Lambda_of_tan(np.sqrt(tan2)), d.Lambda(w), rtol=1e-12,
+                               atol=1e-300)
+    assert d.Lambda_of_tan(0.0) == 0.0
+    for aniso in (cls(alpha, 2 * alpha), cls(alpha, alpha, 0.3)):
+        with pytest.raises(ValueError, match="isotropic"):
+            aniso.D_cos4(tan2)
+        with pytest.raises(ValueError, match="isotropic"):
+            aniso.Lambda_of_tan(tan2)

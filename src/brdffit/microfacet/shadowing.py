@@ -311,6 +311,28 @@ class EllipticalSlopeDistribution(SlopeDistribution):
     def _lambda_upper(self, wx, wy, wz):  # pragma: no cover - abstract
         raise NotImplementedError
 
+    # -- isotropic distributions: functions of the polar angle alone --------------------------
+    def _require_isotropic(self, what: str) -> None:
+        if not self.isotropic:
+            raise ValueError(f"{type(self).__name__}.{what}: only for an isotropic distribution "
+                             f"(alpha_x == alpha_y, rho == 0), got alpha_x={self.alpha_x}, "
+                             f"alpha_y={self.alpha_y}, rho={self.rho}")
+
+    def D_cos4(self, tan2_m) -> np.ndarray:
+        """``D(m) cos⁴θm`` = ``P22`` of the slope of length ``tan θm`` (Dupuy Eq. 7) from
+        ``tan2_m`` = tan²θm, for an isotropic distribution (whatever the azimuth); the fits
+        evaluate many lobes on fixed directions with it."""
+        self._require_isotropic("D_cos4")
+        a2 = self.alpha_x * self.alpha_x
+        return self._g(np.asarray(tan2_m, dtype=np.float64) / a2) / a2
+
+    def Lambda_of_tan(self, tan_theta) -> np.ndarray:
+        """Smith Λ of a direction of ``tan θ`` = ``tan_theta`` ≥ 0 (above the horizon), for an
+        isotropic distribution (whatever the azimuth): ``Λ`` of ``(tan θ, 0, 1)``."""
+        self._require_isotropic("Lambda_of_tan")
+        with np.errstate(divide="ignore"):
+            return self._lambda_upper(np.asarray(tan_theta, dtype=np.float64), 0.0, 1.0)
+
     def G1(self, w, m=None) -> np.ndarray:
         """Smith ``G1 = 1/(1 + Λ)`` (Heitz 2014 Eq. 43), ``χ⁺(w·m)`` applied when ``m`` given."""
         return super().G1(w, m)
