@@ -313,6 +313,14 @@ def _box_qp(H, g, lo, hi):
     if k <= 2:
         return _box_qp_small(H, g, lo, hi)
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    try:                                  # strictly feasible stationary point: the minimum
+        x = np.linalg.solve(H, g)
+        if np.all((x > lo) & (x < hi)) and np.all(np.linalg.eigvalsh(H) > 0):
+            v = 0.5 * x @ H @ x - g @ x
+            if np.isfinite(v):
+                return x, v
+    except np.linalg.LinAlgError:
+        pass
     best, best_v = None, np.inf
     for code in range(3 ** k):
         state = [(code // 3 ** i) % 3 for i in range(k)]        # 0 free, 1 lo, 2 hi
