@@ -1149,7 +1149,8 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
         return model
     t3 = time.perf_counter()
     found = _search_coat(kind, data)
-    if found is None:
+    if found is None:                     # no finite coated candidate: the search still took time
+        model.fit_info["time"] = time.perf_counter() - t0
         return model
     E_coat, (a_base, a_coat), x = found
     margin = 0.0 if coat == "on" else COAT_MARGIN

@@ -88,8 +88,8 @@ PAPERS = {
 #: digits; tests/cli/test_help_models.py checks they match that file).
 _TYPICAL = {
     "tabulated": (4393, 1800, 0.049), "ggx": (3194, 1080, 0.03),
-    "beckmann": (3208, 1080, 0.029), "ggx-diffuse": (2965, 0, 1.7),
-    "beckmann-diffuse": (3095, 0, 1.5), "sgd": (5957, 0, 0.46),
+    "beckmann": (3208, 1080, 0.029), "ggx-diffuse": (2966, 0, 1.1),
+    "beckmann-diffuse": (3098, 0, 1.0), "sgd": (5957, 0, 0.46),
     "beckmann-2s": (5243, 0, 0.11), "ggx-2s": (5099, 0, 0.064),
     "beckmann-ct": (1547, 0, 0.72), "ggx-ct": (1457, 0, 0.55), "npf": (55318, 3264, 46.0),
     "npf-g-from-d": (6209, 3264, 1.2), "npf-naive": (7182, 4344, 1.0),
