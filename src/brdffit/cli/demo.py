@@ -7,10 +7,14 @@ from pathlib import Path
 
 import typer
 
-DEMO_MODELS = "tabulated,ggx,beckmann,sgd,npf-g-from-d,npf"
+# the paper's models and the engine-ready GGX + Lambert (+ coat) of issue 14
+DEMO_MODELS = "tabulated,ggx,beckmann,ggx-diffuse,sgd,npf-g-from-d,npf"
 # The demo's independent-G NPF runs one start (from the G-from-D fit) for a bounded number of
 # AWLS iterations, to stay within a few minutes; `brdffit fit/compare` run all starts.
 DEMO_FIT_OPTIONS = {"npf": {"starts": ("g-from-d",), "max_iter": 60, "start_max_iter": 60}}
+# what the demo suggests next (brdffit arguments; tests/cli/test_demo.py runs them)
+NEXT_STEP = ("fit synthetic:plastic-beckmann -m ggx-diffuse -o plastic.npz",
+             "export plastic.npz --to gltf -o plastic.gltf")
 
 
 def register(app: typer.Typer) -> None:
@@ -64,5 +68,7 @@ def register(app: typer.Typer) -> None:
                        + "; ".join(rows))
         index = Path(out).resolve() / "index.html"
         typer.echo(f"done in {time.perf_counter() - t0:.0f} s; report: {index}")
+        typer.echo("next, a material for an engine: "
+                   + " && ".join(f"brdffit {step}" for step in NEXT_STEP) + " (docs/tutorial.md)")
         if failures:
             raise typer.Exit(3)
