@@ -436,11 +436,11 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
 def _with_clearcoat(p: dict, coat) -> dict:
     """``p`` (the base lobe's parameters) with the coat lobe as ``KHR_materials_clearcoat``:
     ``clearcoatFactor`` = the coat's weight w, ``clearcoatRoughnessFactor`` = √α_coat."""
-    d = coat.distribution
-    alpha = float(np.sqrt(d.alpha_x * d.alpha_y))
-    w = float(np.max(coat.specular))
+    from ..fit.analytic import coat_alpha_weight
+
+    alpha, w = coat_alpha_weight(coat)
     notes = list(p["notes"])
-    if not is_elliptical(d, ("ggx",)):
+    if not is_elliptical(coat.distribution, ("ggx",)):
         notes.append("coat: Beckmann distribution replaced by GGX of the same alpha")
     if alpha > 1.0:
         notes.append(f"coat: alpha={alpha:.4g} > 1 clipped to glTF's largest roughness 1")

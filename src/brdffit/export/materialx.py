@@ -252,7 +252,7 @@ def openpbr_parameters(model, metal: bool | None = None) -> dict:
     (:func:`brdffit.fit.analytic.coat_parts`): the base lobe by these rules, the coat as
     ``coat_weight`` = w, ``coat_roughness`` = √α_coat, ``coat_ior`` = 1.5,
     ``coat_darkening`` = 0."""
-    from ..fit.analytic import coat_parts
+    from ..fit.analytic import coat_alpha_weight, coat_parts
     from .gltf import _ggx_model, is_metal, reflectances
 
     parts = coat_parts(model)
@@ -270,9 +270,7 @@ def openpbr_parameters(model, metal: bool | None = None) -> dict:
                                            f"the fit {err[label]:.4g}; {others})"])
     if parts is not None:
         p = openpbr_parameters(parts[0], metal=metal)
-        d = parts[1].distribution
-        alpha = float(np.sqrt(d.alpha_x * d.alpha_y))
-        w = float(np.max(parts[1].specular))
+        alpha, w = coat_alpha_weight(parts[1])
         c = float(np.sqrt(min(alpha, 1.0)))
         p.update(coat_weight=w, coat_roughness=c, coat_ior=1.5, coat_darkening=0.0)
         notes = [f"coat (white, index 1.5, weight {w:.4g}, alpha {alpha:.4g}): OpenPBR layers "

@@ -42,7 +42,7 @@ coat carry — is added to a Schlick base::
 three channels; the coat is *added*, where glTF and OpenPBR layer it over the base — the
 exporters measure that difference). For fixed (α_b, α_c) the model is linear in (ρd, A =
 ks F0, C = ks (1 − F0)) per channel and w, solved exactly with its bounds; (ln α_b, ln α_c)
-by a 24 × 24 scan of [ALPHA_MIN, 1]² and Nelder-Mead (≈ 0.7 s). The coated fit is kept when
+by a 24 × 24 scan of [ALPHA_MIN, 1]² and Nelder-Mead (0.3-0.6 s). The coated fit is kept when
 its objective is at least ``COAT_MARGIN`` = 5 % below the best uncoated one (and by more
 than ``COAT_MIN_GAIN`` of the data's energy). Evidence for the margin
 (``bench/bench_coat.py``: ``coat="on"`` vs ``"off"`` over the 100 Neural-BRDF MERL
@@ -132,7 +132,8 @@ if TYPE_CHECKING:
     from ..microfacet import MicrofacetBRDF, SumBRDF
 
 __all__ = ["fit_analytic_diffuse", "fit_ggx_diffuse", "fit_beckmann_diffuse", "sample_set",
-           "ALPHA_MIN", "ALPHA_MAX_FIT", "COAT_F0", "COAT_MARGIN", "coat_parts", "summary"]
+           "ALPHA_MIN", "ALPHA_MAX_FIT", "COAT_F0", "COAT_MARGIN", "coat_parts", "coat_alpha_weight",
+           "summary"]
 
 #: roughness bounds of the fits (α ≤ 1: glTF's roughness √α ≤ 1 keeps the export exact)
 ALPHA_MIN, ALPHA_MAX_FIT = 2e-3, 1.0
@@ -763,6 +764,13 @@ def coat_parts(model):
             or not (np.ptp(w) <= 1e-12 and 0.0 <= float(np.max(w)) <= 1.0)):
         return None
     return base, coat
+
+
+def coat_alpha_weight(coat) -> tuple[float, float]:
+    """``(α, w)`` of the coat lobe of :func:`coat_parts`: its slope scale (√(αx αy), the
+    fits' coat is isotropic) and its grey weight."""
+    d = coat.distribution
+    return float(np.sqrt(d.alpha_x * d.alpha_y)), float(np.max(coat.specular))
 
 
 def _coat_solve(H, g, zz, bound: float = np.inf):

@@ -412,15 +412,14 @@ def figures(model) -> dict:
                            "rho_d": None, "coat": None}
     parts = None
     if getattr(model, "components", None) is not None:   # (analytic imports SciPy)
-        from .analytic import coat_parts
+        from .analytic import coat_alpha_weight, coat_parts
 
         parts = coat_parts(model)
     if parts is not None:
         base, coat = parts
         out.update(_lobe_figures(base))
-        out["coat"] = {"alpha": float(coat.distribution.alpha_x),
-                       "weight": float(np.max(coat.specular)),
-                       "f0": float(np.max(coat.fresnel.f0))}
+        alpha, weight = coat_alpha_weight(coat)
+        out["coat"] = {"alpha": alpha, "weight": weight, "f0": float(np.max(coat.fresnel.f0))}
         out["table_bytes"] = 0
         return out
     lobes = getattr(model, "lobes", None)
