@@ -132,8 +132,8 @@ if TYPE_CHECKING:
     from ..microfacet import MicrofacetBRDF, SumBRDF
 
 __all__ = ["fit_analytic_diffuse", "fit_ggx_diffuse", "fit_beckmann_diffuse", "sample_set",
-           "ALPHA_MIN", "ALPHA_MAX_FIT", "COAT_F0", "COAT_MARGIN", "coat_parts", "coat_alpha_weight",
-           "summary"]
+           "ALPHA_MIN", "ALPHA_MAX_FIT", "COAT_F0", "COAT_MARGIN", "coat_parts",
+           "coat_alpha_weight", "summary"]
 
 #: roughness bounds of the fits (α ≤ 1: glTF's roughness √α ≤ 1 keeps the export exact)
 ALPHA_MIN, ALPHA_MAX_FIT = 2e-3, 1.0
