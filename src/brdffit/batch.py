@@ -73,6 +73,7 @@ from typing import Any, Callable, Iterable, Sequence
 
 from ._atomic import atomic_write
 from ._json import json_default
+from ._malloc import WORKER_MALLOC_ENV  # the local workers' malloc settings
 from .errors import BRDFError
 from .paths import slug
 from .progress import describe
@@ -699,14 +700,6 @@ def lock_output(out_dir, wait: bool = False):
 
 
 # -- the cluster ----------------------------------------------------------------------------
-#: glibc malloc settings of the local workers. Dask's nanny sets ``MALLOC_TRIM_THRESHOLD_``
-#: to 64 KiB, which also switches off glibc's dynamic mmap threshold: every NumPy temporary
-#: above 128 KiB is then mmap'd and unmapped again, and the page faults cost the AWLS fits
-#: 25-35 % of their time (bench: G-from-D 9.0 s vs 6.5 s). Temporaries up to 64 MiB come
-#: from the heap instead, and up to 128 MiB of free heap is kept before trimming.
-WORKER_MALLOC_ENV = {"MALLOC_MMAP_THRESHOLD_": 64 << 20, "MALLOC_TRIM_THRESHOLD_": 128 << 20}
-
-
 def _client(scheduler: str | None, workers: int, memory_limit: str | None,
             retries: int = DEFAULT_RETRIES):
     """A client of ``scheduler``, or of a new local cluster (returned too, to be closed).

@@ -40,6 +40,7 @@ _USAGE = (_click_exceptions.ClickException,)
 
 from ..errors import BRDFError
 from .._blas import single_thread_env
+from .._malloc import tune_this_process
 
 _COMMAND_MODULES = ["info", "convert", "fit", "models", "render", "compare", "batch", "export",
                     "demo"]
@@ -298,6 +299,7 @@ def main(argv: list[str] | None = None) -> int:
     (and raises everything else), so both are turned into a status here."""
     argv = list(sys.argv[1:] if argv is None else argv)
     single_thread_env()         # before NumPy loads: one BLAS thread (brdffit._blas)
+    tune_this_process()         # arrays from the heap, not fresh pages (brdffit._malloc)
     debug = "--debug" in argv
     try:
         code = command(_command_name(argv)).main(args=argv, prog_name="brdffit",
