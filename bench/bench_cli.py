@@ -204,7 +204,7 @@ def breakdown(py, gold, runs) -> dict:
          for k in ("load", "import", "fit", "save", "error")}
     main_ = med(r["main"] for r in rows)
     phases = {"interpreter start (python -c pass)": med(floor),
-              "import brdffit.cli (Typer, command modules)": med(r["import_cli"] for r in rows),
+              "import brdffit.cli (argparse, command modules)": med(r["import_cli"] for r in rows),
               "import NumPy": med(r["import_numpy"] for r in rows),
               "read + validate the MERL file": t["load"],
               "import the fitting module (brdffit.fit.tabulated)": t["import"],

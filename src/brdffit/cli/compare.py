@@ -12,12 +12,14 @@ without ``:MATERIAL`` compares all its materials (``--limit`` keeps the first N)
 
 from __future__ import annotations
 
+import argparse
 import json
+import sys
 from pathlib import Path
 
-import typer
+from . import EXIT_FAILED_TASKS
 
-__all__ = ["register"]
+__all__ = ["register", "compare_cmd"]
 
 
 def _materials(spec: str, limit: int | None) -> list[str]:
@@ -35,97 +37,104 @@ def _materials(spec: str, limit: int | None) -> list[str]:
     return [spec]
 
 
-def register(app: typer.Typer) -> None:
-    from . import models_help
+def register(commands) -> None:
+    from . import add_command, at_least, integer, models_help, number, path
 
-    @app.command("compare", epilog=models_help())
-    def compare_cmd(
-        spec: str = typer.Argument(..., metavar="INPUT[:MATERIAL]",
-                                   help="Reference BRDF: a file, collection.zip[:material], "
-                                        "synthetic:NAME or a fit file."),
-        models: str = typer.Option("tabulated,ggx,beckmann", "--models", "-m", metavar="A,B",
-                                   help="Comma-separated model names to fit (list below), "
-                                        "and/or saved fits as NAME=fit.npz or fit.npz."),
-        out: Path = typer.Option(Path("report"), "--out", "-o", metavar="DIR", help="Report directory."),
-        scenes: str = typer.Option("paper", "--scenes", metavar="SCENES",
-                                   help="Scene suite 'paper' (sphere-courtyard, sphere-studio, "
-                                        "sphere-sunrise, knot-courtyard) or scene names, comma-"
-                                        "separated: sphere-<map>, knot-<map>, sphere-env, knot, "
-                                        "sphere-point, sphere-distant, sphere-svrough."),
-        scene: str = typer.Option(None, "--scene", hidden=True,
-                                  help="One scene (former option; same as --scenes NAME)."),
-        spp: int = typer.Option(64, "--spp", min=1, metavar="N",
-                                help="Samples per pixel per scene, all batches together."),
-        batches: int = typer.Option(8, "--batches", min=1, metavar="N",
-                                    help="Independent batches per scene (≥ 3 for standard "
-                                         "errors)."),
-        resolution: int = typer.Option(256, "--resolution", min=8, metavar="PX", help="Image side in pixels."),
-        seed: int = typer.Option(0, "--seed", metavar="N", help="Seed of the sample streams (all models)."),
-        exposure: str = typer.Option("scene", "--exposure", metavar="EV",
-                                     help="Tone-mapping exposure: 'scene' (fixed per scene), "
-                                          "'auto' (from each scene's reference) or a number."),
-        gamma: float = typer.Option(None, "--gamma", metavar="G", help="Tone-mapping gamma (default: the "
-                                                          "scene's, 2.2)."),
-        noise_floor: bool = typer.Option(True, "--noise-floor/--no-noise-floor", hidden=True,
-                                         help="Ignored: standard errors replace the noise floor."),
-        envmap: str = typer.Option(None, "--envmap", metavar="MAP",
-                                   help="Environment map of the plain sphere-env/knot scenes: a "
-                                        "name of ../shared/data/envmaps or an EXR (default "
-                                        "procedural)."),
-        limit: int = typer.Option(None, "--limit", min=1, metavar="N",
-                                  help="With a collection: only its first N materials."),
-        fit_options: str = typer.Option(None, "--fit-options", metavar="JSON",
-                                        help='Fitter keyword arguments as JSON per model, e.g. '
-                                             '\'{"npf": {"max_iter": 100}}\'.'),
-        quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress messages."),
-    ) -> None:
-        """Fit, render and measure models against a reference (HTML report)."""
-        from ..evaluation.compare import compare, compare_many
-        from ..evaluation.report import write_index
+    cmd = add_command(commands, "compare", compare_cmd, epilog=models_help())
+    cmd.add_argument("spec", metavar="INPUT[:MATERIAL]",
+                     help="Reference BRDF: a file, collection.zip[:material], synthetic:NAME "
+                          "or a fit file.")
+    cmd.add_argument("-m", "--models", default="tabulated,ggx,beckmann", metavar="A,B",
+                     help="Comma-separated model names to fit (list below), and/or saved fits "
+                          "as NAME=fit.npz or fit.npz.")
+    cmd.add_argument("-o", "--out", type=path, default=Path("report"), metavar="DIR",
+                     help="Report directory.")
+    cmd.add_argument("--scenes", default="paper", metavar="SCENES",
+                     help="Scene suite 'paper' (sphere-courtyard, sphere-studio, "
+                          "sphere-sunrise, knot-courtyard) or scene names, comma-separated: "
+                          "sphere-<map>, knot-<map>, sphere-env, knot, sphere-point, "
+                          "sphere-distant, sphere-svrough.")
+    cmd.add_argument("--scene", help=argparse.SUPPRESS)  # former option: --scenes NAME
+    cmd.add_argument("--spp", type=at_least(1), default=64, metavar="N",
+                     help="Samples per pixel per scene, all batches together.")
+    cmd.add_argument("--batches", type=at_least(1), default=8, metavar="N",
+                     help="Independent batches per scene (≥ 3 for standard errors).")
+    cmd.add_argument("--resolution", type=at_least(8), default=256, metavar="PX",
+                     help="Image side in pixels.")
+    cmd.add_argument("--seed", type=integer, default=0, metavar="N",
+                     help="Seed of the sample streams (all models).")
+    cmd.add_argument("--exposure", default="scene", metavar="EV",
+                     help="Tone-mapping exposure: 'scene' (fixed per scene), 'auto' (from "
+                          "each scene's reference) or a number.")
+    cmd.add_argument("--gamma", type=number, metavar="G",
+                     help="Tone-mapping gamma (default: the scene's, 2.2).")
+    # ignored (standard errors replaced the noise floor); accepted for old command lines
+    cmd.add_argument("--noise-floor", action=argparse.BooleanOptionalAction, default=True,
+                     help=argparse.SUPPRESS)
+    cmd.add_argument("--envmap", metavar="MAP",
+                     help="Environment map of the plain sphere-env/knot scenes: a name of "
+                          "../shared/data/envmaps or an EXR (default procedural).")
+    cmd.add_argument("--limit", type=at_least(1), metavar="N",
+                     help="With a collection: only its first N materials.")
+    cmd.add_argument("--fit-options", metavar="JSON",
+                     help='Fitter keyword arguments as JSON per model, e.g. '
+                          '\'{"npf": {"max_iter": 100}}\'.')
+    cmd.add_argument("-q", "--quiet", action="store_true", help="No progress messages.")
 
-        model_list = [m.strip() for m in models.split(",") if m.strip()]
-        if not model_list:
-            raise ValueError(f"--models: expected at least one model name, found {models!r}")
-        from . import check_models  # model names (not saved fits) must be known: exit 2
 
-        check_models([m for m in model_list if "=" not in m and not m.endswith(".npz")])
-        exp = exposure if exposure in ("auto", "scene") else float(exposure)
-        try:
-            fopts = json.loads(fit_options) if fit_options else None
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"--fit-options: expected JSON, found {fit_options!r} ({exc})")
-        if fopts is not None and not (isinstance(fopts, dict)
-                                      and all(isinstance(v, dict) for v in fopts.values())):
-            raise ValueError(f"--fit-options: expected a JSON object {{model: {{option: value}}}}, "
-                             f"found {fit_options!r}")
-        ropts = {"envmap": envmap} if envmap else {}
-        say = (lambda msg: None) if quiet else (lambda msg: typer.echo(msg, err=True))
-        kw = dict(scenes=scene or scenes, spp=spp, batches=batches, resolution=resolution,
-                  seed=seed, exposure=exp, gamma=gamma, render_options=ropts, progress=say,
-                  fit_options=fopts)
-        specs = _materials(spec, limit)
-        if len(specs) == 1:
-            res = compare(specs[0], model_list, out, **kw)
-            results = [res]
-        else:
-            results = compare_many(specs, model_list, out, **kw)
-        write_index(out)
-        for r in results:
-            if "error" in r and "models" not in r:
-                typer.echo(f"{r['material']}: FAILED {r['error']}")
-                continue
-            cells = []
-            for m in r["models"]:
-                if m.get("status") == "ok":
-                    se = m.get("psnr_se")
-                    pm = (f"≥ {m['psnr']:.2f}" if m.get("psnr_bound") == "lower" else
-                          f"{m['psnr']:.2f}" + (f" ± {se:.2f}" if se is not None and se == se else ""))
-                    cells.append(f"{m['name']} {pm} dB / dE {m['mean_de2000']:.2f}")
-                else:
-                    cells.append(f"{m['name']} failed")
-            typer.echo(f"{r['material']}: " + "; ".join(cells))
-        typer.echo(f"report: {(Path(out) / 'index.html').resolve()}")
-        if any(("error" in r and "models" not in r)
-               or any(m.get("status") not in ("ok", "skipped") for m in r.get("models", []))
-               for r in results):
-            raise typer.Exit(3)  # some fits or renders failed; the report has the rest
+def compare_cmd(spec: str, models: str = "tabulated,ggx,beckmann", out: Path = Path("report"),
+                scenes: str = "paper", scene: str | None = None, spp: int = 64,
+                batches: int = 8, resolution: int = 256, seed: int = 0,
+                exposure: str = "scene", gamma: float | None = None, noise_floor: bool = True,
+                envmap: str | None = None, limit: int | None = None,
+                fit_options: str | None = None, quiet: bool = False) -> int | None:
+    """Fit, render and measure models against a reference (HTML report)."""
+    from ..evaluation.compare import compare, compare_many
+    from ..evaluation.report import write_index
+
+    model_list = [m.strip() for m in models.split(",") if m.strip()]
+    if not model_list:
+        raise ValueError(f"--models: expected at least one model name, found {models!r}")
+    from . import check_models  # model names (not saved fits) must be known: exit 2
+
+    check_models([m for m in model_list if "=" not in m and not m.endswith(".npz")])
+    exp = exposure if exposure in ("auto", "scene") else float(exposure)
+    try:
+        fopts = json.loads(fit_options) if fit_options else None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"--fit-options: expected JSON, found {fit_options!r} ({exc})")
+    if fopts is not None and not (isinstance(fopts, dict)
+                                  and all(isinstance(v, dict) for v in fopts.values())):
+        raise ValueError(f"--fit-options: expected a JSON object {{model: {{option: value}}}}, "
+                         f"found {fit_options!r}")
+    ropts = {"envmap": envmap} if envmap else {}
+    say = (lambda msg: None) if quiet else (lambda msg: print(msg, file=sys.stderr))
+    kw = dict(scenes=scene or scenes, spp=spp, batches=batches, resolution=resolution,
+              seed=seed, exposure=exp, gamma=gamma, render_options=ropts, progress=say,
+              fit_options=fopts)
+    specs = _materials(spec, limit)
+    if len(specs) == 1:
+        res = compare(specs[0], model_list, out, **kw)
+        results = [res]
+    else:
+        results = compare_many(specs, model_list, out, **kw)
+    write_index(out)
+    for r in results:
+        if "error" in r and "models" not in r:
+            print(f"{r['material']}: FAILED {r['error']}")
+            continue
+        cells = []
+        for m in r["models"]:
+            if m.get("status") == "ok":
+                se = m.get("psnr_se")
+                pm = (f"≥ {m['psnr']:.2f}" if m.get("psnr_bound") == "lower" else
+                      f"{m['psnr']:.2f}" + (f" ± {se:.2f}" if se is not None and se == se else ""))
+                cells.append(f"{m['name']} {pm} dB / dE {m['mean_de2000']:.2f}")
+            else:
+                cells.append(f"{m['name']} failed")
+        print(f"{r['material']}: " + "; ".join(cells))
+    print(f"report: {(Path(out) / 'index.html').resolve()}")
+    if any(("error" in r and "models" not in r)
+           or any(m.get("status") not in ("ok", "skipped") for m in r.get("models", []))
+           for r in results):
+        return EXIT_FAILED_TASKS  # some fits or renders failed; the report has the rest

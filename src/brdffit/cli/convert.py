@@ -9,11 +9,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import typer
-
 from ..errors import BRDFFormatError
 
-__all__ = ["register", "convert"]
+__all__ = ["register", "convert_cmd", "convert"]
 
 _OUTPUTS = {".binary": "merl", ".bin": "utia"}
 
@@ -42,20 +40,23 @@ def convert(spec, out) -> dict:
             "n_invalid": check.n_invalid, "name": getattr(brdf, "name", None)}
 
 
-def register(app: typer.Typer) -> None:
-    @app.command("convert")
-    def convert_cmd(
-        src: str = typer.Argument(..., metavar="IN",
-                                  help="A BRDF file, collection.zip:material or synthetic:NAME."),
-        dst: Path = typer.Argument(..., metavar="OUT",
-                                   help="Output file: .binary (MERL) or .bin (UTIA)."),
-    ) -> None:
-        """Resample a BRDF to a MERL (.binary) or UTIA (.bin) file."""
-        if dst.suffix.lower() not in _OUTPUTS:
-            from . import usage_error
+def register(commands) -> None:
+    from . import add_command, path
 
-            raise usage_error("OUT", f"expected an output ending in "
-                                     f"{' or '.join(sorted(_OUTPUTS))}, found {dst.name!r}")
-        info = convert(src, dst)
-        typer.echo(f"wrote {info['out']} ({info['format']}, {info['n_samples']} samples, "
-                   f"{info['n_invalid']} invalid) from {src}")
+    cmd = add_command(commands, "convert", convert_cmd)
+    cmd.add_argument("src", metavar="IN",
+                     help="A BRDF file, collection.zip:material or synthetic:NAME.")
+    cmd.add_argument("dst", type=path, metavar="OUT",
+                     help="Output file: .binary (MERL) or .bin (UTIA).")
+
+
+def convert_cmd(src: str, dst: Path) -> None:
+    """Resample a BRDF to a MERL (.binary) or UTIA (.bin) file."""
+    if dst.suffix.lower() not in _OUTPUTS:
+        from . import usage_error
+
+        raise usage_error("OUT", f"expected an output ending in "
+                                 f"{' or '.join(sorted(_OUTPUTS))}, found {dst.name!r}")
+    info = convert(src, dst)
+    print(f"wrote {info['out']} ({info['format']}, {info['n_samples']} samples, "
+          f"{info['n_invalid']} invalid) from {src}")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-import typer
+from . import EXIT_FAILED_TASKS
 
 # the paper's models and the engine-ready GGX + Lambert (+ coat) of issue 14
 DEMO_MODELS = "tabulated,ggx,beckmann,ggx-diffuse,sgd,npf-g-from-d,npf"
@@ -17,58 +17,64 @@ NEXT_STEP = ("fit synthetic:plastic-beckmann -m ggx-diffuse -o plastic.npz",
              "export plastic.npz --to gltf -o plastic.gltf")
 
 
-def register(app: typer.Typer) -> None:
-    from . import models_help
+def register(commands) -> None:
+    from . import add_command, integer, models_help
 
-    @app.command("demo", epilog=models_help())
-    def demo(
-        out: str = typer.Option("demo-out", "--out", "-o", metavar="DIR", help="Report folder."),
-        data: str = typer.Option("", "--data", metavar="SOURCE", help="Run on real data instead: a folder, a "
-                                                     "Neural-BRDF .zip collection or a list file."),
-        limit: int = typer.Option(0, "--limit", metavar="N", help="With --data: first N materials only."),
-        models: str = typer.Option(DEMO_MODELS, "--models", "-m", metavar="A,B",
-                                   help="Models to fit (list below)."),
-        spp: int = typer.Option(64, "--spp", metavar="N", help="Samples per pixel of the renderings."),
-        resolution: int = typer.Option(128, "--resolution", metavar="PX", help="Image size in pixels."),
-    ):
-        """Fit and render built-in synthetic materials; write a report.
+    cmd = add_command(commands, "demo", demo_cmd, epilog=models_help())
+    cmd.add_argument("-o", "--out", default="demo-out", metavar="DIR", help="Report folder.")
+    cmd.add_argument("--data", default="", metavar="SOURCE",
+                     help="Run on real data instead: a folder, a Neural-BRDF .zip collection "
+                          "or a list file.")
+    cmd.add_argument("--limit", type=integer, default=0, metavar="N",
+                     help="With --data: first N materials only.")
+    cmd.add_argument("-m", "--models", default=DEMO_MODELS, metavar="A,B",
+                     help="Models to fit (list below).")
+    cmd.add_argument("--spp", type=integer, default=64, metavar="N",
+                     help="Samples per pixel of the renderings.")
+    cmd.add_argument("--resolution", type=integer, default=128, metavar="PX",
+                     help="Image size in pixels.")
 
-        No external data or network is needed. Example: brdffit demo --out demo-out
-        Exit status: 0 all done, 1 error, 2 usage, 3 some fits failed (the rest is written).
-        """
-        from ..batch import enumerate_materials
-        from ..evaluation.compare import compare
 
-        from . import check_models, usage_error
+def demo_cmd(out: str = "demo-out", data: str = "", limit: int = 0, models: str = DEMO_MODELS,
+             spp: int = 64, resolution: int = 128) -> int | None:
+    """Fit and render built-in synthetic materials; write a report.
 
-        model_list = check_models([m.strip() for m in models.split(",") if m.strip()])
-        if not model_list:
-            raise usage_error("--models", f"expected at least one model name, found {models!r}")
-        source = data or "synthetic:"
-        materials = enumerate_materials(source, limit=limit or None)
-        typer.echo(f"brdffit demo: {len(materials)} materials × {len(model_list)} models "
-                   f"({', '.join(model_list)}) → {out}/")
-        t0 = time.perf_counter()
-        failures = 0
-        for k, (name, spec) in enumerate(materials):
-            t = time.perf_counter()
-            result = compare(spec, model_list, out, name=name, spp=spp, resolution=resolution,
-                             fit_options=DEMO_FIT_OPTIONS, update_index=k == len(materials) - 1)
-            rows = []
-            for m in result.get("models", []):
-                psnr = m.get("psnr")
-                if m.get("status") == "skipped":
-                    rows.append(f"{m['name']}: skipped ({m.get('error')})")
-                elif m.get("status") != "ok":
-                    failures += 1
-                    rows.append(f"{m['name']}: FAILED ({m.get('error', '?')})")
-                else:
-                    rows.append(f"{m['name']} {psnr:.1f} dB" if psnr is not None else m["name"])
-            typer.echo(f"  [{k + 1}/{len(materials)}] {name} ({time.perf_counter() - t:.1f} s): "
-                       + "; ".join(rows))
-        index = Path(out).resolve() / "index.html"
-        typer.echo(f"done in {time.perf_counter() - t0:.0f} s; report: {index}")
-        typer.echo("next, a material for an engine: "
-                   + " && ".join(f"brdffit {step}" for step in NEXT_STEP) + " (docs/tutorial.md)")
-        if failures:
-            raise typer.Exit(3)
+            No external data or network is needed. Example: brdffit demo --out demo-out
+            Exit status: 0 all done, 1 error, 2 usage, 3 some fits failed (the rest is written).
+            """
+    from ..batch import enumerate_materials
+    from ..evaluation.compare import compare
+
+    from . import check_models, usage_error
+
+    model_list = check_models([m.strip() for m in models.split(",") if m.strip()])
+    if not model_list:
+        raise usage_error("--models", f"expected at least one model name, found {models!r}")
+    source = data or "synthetic:"
+    materials = enumerate_materials(source, limit=limit or None)
+    print(f"brdffit demo: {len(materials)} materials × {len(model_list)} models "
+               f"({', '.join(model_list)}) → {out}/")
+    t0 = time.perf_counter()
+    failures = 0
+    for k, (name, spec) in enumerate(materials):
+        t = time.perf_counter()
+        result = compare(spec, model_list, out, name=name, spp=spp, resolution=resolution,
+                         fit_options=DEMO_FIT_OPTIONS, update_index=k == len(materials) - 1)
+        rows = []
+        for m in result.get("models", []):
+            psnr = m.get("psnr")
+            if m.get("status") == "skipped":
+                rows.append(f"{m['name']}: skipped ({m.get('error')})")
+            elif m.get("status") != "ok":
+                failures += 1
+                rows.append(f"{m['name']}: FAILED ({m.get('error', '?')})")
+            else:
+                rows.append(f"{m['name']} {psnr:.1f} dB" if psnr is not None else m["name"])
+        print(f"  [{k + 1}/{len(materials)}] {name} ({time.perf_counter() - t:.1f} s): "
+                   + "; ".join(rows))
+    index = Path(out).resolve() / "index.html"
+    print(f"done in {time.perf_counter() - t0:.0f} s; report: {index}")
+    print("next, a material for an engine: "
+               + " && ".join(f"brdffit {step}" for step in NEXT_STEP) + " (docs/tutorial.md)")
+    if failures:
+        return EXIT_FAILED_TASKS

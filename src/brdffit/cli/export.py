@@ -17,9 +17,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-import typer
-
-__all__ = ["register", "load_model", "run_export", "target_options", "check_options"]
+__all__ = ["register", "export_cmd", "load_model", "run_export", "target_options",
+           "check_options"]
 
 
 def load_model(spec: str):
@@ -102,44 +101,46 @@ def run_export(fits: list[str], to: str, out: Path, options: dict | None = None)
     return export(models[0], to, out, **(options or {}))
 
 
-def register(app: typer.Typer) -> None:
+def register(commands) -> None:
     from ..export import TARGETS
+    from . import add_command, path
+
+    cmd = add_command(commands, "export", export_cmd)
+    cmd.add_argument("fits", nargs="+", metavar="FIT",
+                     help="Fit file (.npz), parameter JSON or synthetic:NAME.")
+    cmd.add_argument("--to", required=True, help=f"Target: {', '.join(TARGETS)}.")
+    cmd.add_argument("-o", "--out", type=path, required=True, help="Output file.")
+    cmd.add_argument("--option", action="append",
+                     help="Target option key=value (JSON values).")
+    cmd.add_argument("--json", dest="as_json", action="store_true",
+                     help="Print the summary as JSON.")
+
+
+def export_cmd(fits: list[str], to: str, out: Path, option: list[str] | None = None,
+               as_json: bool = False) -> None:
+    """Export a fit to Mitsuba 3, glTF, MaterialX, GLSL or JSON."""
+    from ..export import TARGETS
+    from ..export._common import shown
+    from . import usage_error
+    from .fit import parse_options
 
     targets = list(TARGETS)
-
-    @app.command("export")
-    def export_cmd(
-        fits: list[str] = typer.Argument(..., metavar="FIT...",
-                                         help="Fit file (.npz), parameter JSON or synthetic:NAME."),
-        to: str = typer.Option(..., "--to", help=f"Target: {', '.join(targets)}."),
-        out: Path = typer.Option(..., "-o", "--out", help="Output file."),
-        option: list[str] = typer.Option(None, "--option",
-                                         help="Target option key=value (JSON values)."),
-        as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
-    ) -> None:
-        """Export a fit to Mitsuba 3, glTF, MaterialX, GLSL or JSON."""
-        import click
-
-        from ..export._common import shown
-        from .fit import parse_options
-
-        if to not in targets:
-            raise click.BadParameter(f"expected one of {', '.join(targets)}, found {to!r}",
-                                     param_hint="--to")
-        options = parse_options(option)
-        try:
-            check_options(to, options)
-        except ValueError as exc:
-            raise click.BadParameter(str(exc), param_hint="--option") from None
-        summary = run_export(fits, to, out, options)
-        if as_json:
-            typer.echo(json.dumps(summary, default=str))
-            return
-        typer.echo(f"wrote {', '.join(shown(f) for f in summary.get('files', [str(out)]))} ({to})")
-        for note in summary.get("notes", []):
-            typer.echo(f"  approximation: {note}")
-        for key in ("error", "fidelity"):
-            if summary.get(key):
-                typer.echo(f"  {key}: " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float)
-                                                    else f"{k}={v}"
-                                                    for k, v in summary[key].items()))
+    if to not in targets:
+        raise usage_error("--to", f"expected one of {', '.join(targets)}, found {to!r}")
+    options = parse_options(option)
+    try:
+        check_options(to, options)
+    except ValueError as exc:
+        raise usage_error("--option", str(exc)) from None
+    summary = run_export(fits, to, out, options)
+    if as_json:
+        print(json.dumps(summary, default=str))
+        return
+    print(f"wrote {', '.join(shown(f) for f in summary.get('files', [str(out)]))} ({to})")
+    for note in summary.get("notes", []):
+        print(f"  approximation: {note}")
+    for key in ("error", "fidelity"):
+        if summary.get(key):
+            print(f"  {key}: " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float)
+                                           else f"{k}={v}"
+                                           for k, v in summary[key].items()))

@@ -23,9 +23,8 @@ import sys
 import time
 from pathlib import Path
 
-import typer
-
-__all__ = ["register", "parse_options", "run_fit", "accepted_options", "check_options"]
+__all__ = ["register", "fit_cmd", "parse_options", "run_fit", "accepted_options",
+           "check_options"]
 
 
 def parse_options(items: list[str] | None) -> dict:
@@ -33,7 +32,9 @@ def parse_options(items: list[str] | None) -> dict:
     out: dict = {}
     for item in items or []:
         if "=" not in item:
-            raise typer.BadParameter(f"expected key=value, found {item!r}", param_hint="--option")
+            from . import usage_error
+
+            raise usage_error("--option", f"expected key=value, found {item!r}")
         key, val = item.split("=", 1)
         try:
             out[key.strip()] = json.loads(val)
@@ -444,36 +445,40 @@ def format_summary(s: dict) -> list[str]:
     return out
 
 
-def register(app: typer.Typer) -> None:
-    from . import models_help
+def register(commands) -> None:
+    from . import add_command, at_least, models_help, path
 
-    @app.command("fit", epilog=models_help())
-    def fit_cmd(
-        spec: str = typer.Argument(..., metavar="INPUT[:MATERIAL]",
-                                   help="A BRDF file, collection.zip:material or synthetic:NAME."),
-        model: str = typer.Option("tabulated", "--model", "-m", metavar="NAME",
-                                  help="Model to fit (list below)."),
-        out: Path = typer.Option(None, "--output", "-o", metavar="FILE.npz",
-                                 help="Write the fit file here (default: not saved)."),
-        iterations: int = typer.Option(None, "--iterations", min=1, metavar="N",
-                                       help="Power / optimiser iterations (model's default)."),
-        option: list[str] = typer.Option(None, "--option", "-O", metavar="KEY=VALUE",
-                                         help="Extra fitting option (repeatable)."),
-        no_error: bool = typer.Option(False, "--no-error",
-                                      help="Skip the error against the input."),
-        as_json: bool = typer.Option(False, "--json", help="Print the summary as JSON."),
-    ):
-        """Fit a model to a measured BRDF; print its parameters and error."""
-        opts = parse_options(option)
-        if iterations is not None:
-            opts["iterations"] = iterations
-        check_usage(model, opts)
-        with _live_progress(enabled=not as_json and sys.stderr.isatty()):
-            _, summary = run_fit(spec, model, out, opts, error=not no_error)
-        if as_json:
-            from .._json import json_default
+    cmd = add_command(commands, "fit", fit_cmd, epilog=models_help())
+    cmd.add_argument("spec", metavar="INPUT[:MATERIAL]",
+                     help="A BRDF file, collection.zip:material or synthetic:NAME.")
+    cmd.add_argument("-m", "--model", default="tabulated", metavar="NAME",
+                     help="Model to fit (list below).")
+    cmd.add_argument("-o", "--output", dest="out", type=path, metavar="FILE.npz",
+                     help="Write the fit file here (default: not saved).")
+    cmd.add_argument("--iterations", type=at_least(1), metavar="N",
+                     help="Power / optimiser iterations (model's default).")
+    cmd.add_argument("-O", "--option", action="append", metavar="KEY=VALUE",
+                     help="Extra fitting option (repeatable).")
+    cmd.add_argument("--no-error", action="store_true",
+                     help="Skip the error against the input.")
+    cmd.add_argument("--json", dest="as_json", action="store_true",
+                     help="Print the summary as JSON.")
 
-            typer.echo(json.dumps(summary, default=json_default, sort_keys=True))
-            return
-        for line in format_summary(summary):
-            typer.echo(line)
+
+def fit_cmd(spec: str, model: str = "tabulated", out: Path | None = None,
+            iterations: int | None = None, option: list[str] | None = None,
+            no_error: bool = False, as_json: bool = False) -> None:
+    """Fit a model to a measured BRDF; print its parameters and error."""
+    opts = parse_options(option)
+    if iterations is not None:
+        opts["iterations"] = iterations
+    check_usage(model, opts)
+    with _live_progress(enabled=not as_json and sys.stderr.isatty()):
+        _, summary = run_fit(spec, model, out, opts, error=not no_error)
+    if as_json:
+        from .._json import json_default
+
+        print(json.dumps(summary, default=json_default, sort_keys=True))
+        return
+    for line in format_summary(summary):
+        print(line)

@@ -12,11 +12,9 @@ from __future__ import annotations
 import json
 import os
 
-import typer
-
 # NumPy and the readers are imported when the command runs (fast `brdffit --help`).
 
-__all__ = ["register", "summarize", "ALBEDO_ANGLES_DEG"]
+__all__ = ["register", "info_cmd", "summarize", "ALBEDO_ANGLES_DEG"]
 
 ALBEDO_ANGLES_DEG = (0.0, 30.0, 60.0, 75.0)
 
@@ -123,7 +121,7 @@ def _fmt_rgb(v) -> str:
 
 
 def _print_summary(s: dict) -> None:
-    echo = typer.echo
+    echo = print
     echo(f"{s['spec']}")
     echo(f"  format      {s['format']}  ({s['model']})")
     echo(f"  name        {s['name']}")
@@ -149,34 +147,38 @@ def _print_summary(s: dict) -> None:
     echo("  albedo      " + "  ".join(f"{a}°: {_fmt_rgb(v)}" for a, v in s["albedo"].items()))
 
 
-def register(app: typer.Typer) -> None:
-    @app.command("info")
-    def info(
-        spec: str = typer.Argument(..., metavar="FILE[:MATERIAL]",
-                                   help="A BRDF file, collection.zip:material or synthetic:NAME."),
-        as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
-        albedo_samples: int = typer.Option(65536, "--albedo-samples", min=16, metavar="N",
-                                           help="Monte Carlo samples per albedo angle."),
-    ) -> None:
-        """Format, sample counts, value range and albedo of a BRDF file."""
-        from ..io import load, resolve_spec
-        from ..io.nbrdf import list_materials
+def register(commands) -> None:
+    from . import add_command, at_least
 
-        kind, path, member = resolve_spec(spec)
-        if kind == "nbrdf-collection" and not member:
-            names = list_materials(path)
-            if as_json:
-                typer.echo(json.dumps({"spec": spec, "format": "nbrdf-collection",
-                                       "path": os.fspath(path), "materials": names}))
-            else:
-                typer.echo(f"{spec}: Neural-BRDF collection with {len(names)} materials "
-                           f"(use {os.path.basename(spec)}:MATERIAL)")
-                for n in names:
-                    typer.echo(f"  {n}")
-            return
-        brdf = load(spec)
-        summary = summarize(brdf, spec, albedo_samples=albedo_samples)
+    cmd = add_command(commands, "info", info_cmd)
+    cmd.add_argument("spec", metavar="FILE[:MATERIAL]",
+                     help="A BRDF file, collection.zip:material or synthetic:NAME.")
+    cmd.add_argument("--json", dest="as_json", action="store_true",
+                     help="Print one JSON object.")
+    cmd.add_argument("--albedo-samples", type=at_least(16), default=65536, metavar="N",
+                     help="Monte Carlo samples per albedo angle.")
+
+
+def info_cmd(spec: str, as_json: bool = False, albedo_samples: int = 65536) -> None:
+    """Format, sample counts, value range and albedo of a BRDF file."""
+    from ..io import load, resolve_spec
+    from ..io.nbrdf import list_materials
+
+    kind, path, member = resolve_spec(spec)
+    if kind == "nbrdf-collection" and not member:
+        names = list_materials(path)
         if as_json:
-            typer.echo(json.dumps(summary, default=str))
+            print(json.dumps({"spec": spec, "format": "nbrdf-collection",
+                              "path": os.fspath(path), "materials": names}))
         else:
-            _print_summary(summary)
+            print(f"{spec}: Neural-BRDF collection with {len(names)} materials "
+                  f"(use {os.path.basename(spec)}:MATERIAL)")
+            for n in names:
+                print(f"  {n}")
+        return
+    brdf = load(spec)
+    summary = summarize(brdf, spec, albedo_samples=albedo_samples)
+    if as_json:
+        print(json.dumps(summary, default=str))
+    else:
+        _print_summary(summary)

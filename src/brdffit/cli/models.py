@@ -14,10 +14,9 @@ table bytes, the fit's CPU time and the error against the input
 from __future__ import annotations
 
 import json
+import sys
 
-import typer
-
-__all__ = ["register", "model_table", "measure"]
+__all__ = ["register", "models_cmd", "model_table", "measure"]
 
 
 def model_table() -> list[dict]:
@@ -99,48 +98,53 @@ def format_table(rows: list[dict]) -> list[str]:
     return lines
 
 
-def register(app: typer.Typer) -> None:
-    @app.command("models")
-    def models_cmd(
-        as_json: bool = typer.Option(False, "--json", help="Print the rows as JSON."),
-        do_measure: bool = typer.Option(False, "--measure",
-                                        help="Fit each model now and measure its figures."),
-        on: str = typer.Option("synthetic:gold-ggx", "--on", metavar="INPUT",
-                               help="--measure: the input to fit."),
-        models: str = typer.Option("", "--models", "-m", metavar="A,B",
-                                   help="Only these models (comma-separated)."),
-    ) -> None:
-        """List the models: paper, isotropy, fit size and time.
+def register(commands) -> None:
+    from . import add_command
 
-        The sizes and times are typical figures declared in the registry (measured by
-        bench/bench_cli.py --models, see below) unless --measure measures them now.
-        """
-        from ..fit import registry
-        from . import check_models
+    cmd = add_command(commands, "models", models_cmd)
+    cmd.add_argument("--json", dest="as_json", action="store_true",
+                     help="Print the rows as JSON.")
+    cmd.add_argument("--measure", dest="do_measure", action="store_true",
+                     help="Fit each model now and measure its figures.")
+    cmd.add_argument("--on", default="synthetic:gold-ggx", metavar="INPUT",
+                     help="--measure: the input to fit.")
+    cmd.add_argument("-m", "--models", default="", metavar="A,B",
+                     help="Only these models (comma-separated).")
 
-        rows = model_table()
-        if models:
-            keep = check_models([m.strip() for m in models.split(",") if m.strip()])
-            rows = [r for r in rows if r["name"] in keep]
-        if do_measure:
-            rows = measure(rows, on, say=lambda msg: typer.echo(msg, err=True))
-        if as_json:
-            typer.echo(json.dumps({"models": rows, "source": None if do_measure
-                                   else registry.TYPICAL_SOURCE}, indent=1))
-            return
-        import textwrap
 
-        for line in format_table(rows):
-            typer.echo(line)
-        notes = ["ISO: fits isotropic inputs only. FILE B: bytes of the fit file (.npz); "
-                 "TABLE B: bytes of the tables in it; FIT CPU: CPU seconds of one fit.",
-                 f"Measured now on {on}, on this machine." if do_measure else
-                 f"Typical figures (–: not measured): {registry.TYPICAL_SOURCE}; "
-                 "`brdffit models --measure` measures them on this machine.",
-                 "Papers:"]
-        typer.echo("")
-        for note in notes:
-            typer.echo(textwrap.fill(note, 79))
-        for key in sorted({k.strip() for r in rows for k in r["paper"].split(",")}):
-            typer.echo(textwrap.fill(f"{key}: {registry.PAPERS.get(key, key)}", 79,
-                                     initial_indent="  ", subsequent_indent="    "))
+def models_cmd(as_json: bool = False, do_measure: bool = False, on: str = "synthetic:gold-ggx",
+               models: str = "") -> None:
+    """List the models: paper, isotropy, fit size and time.
+
+    The sizes and times are typical figures declared in the registry (measured by
+    bench/bench_cli.py --models, see below) unless --measure measures them now.
+    """
+    from ..fit import registry
+    from . import check_models
+
+    rows = model_table()
+    if models:
+        keep = check_models([m.strip() for m in models.split(",") if m.strip()])
+        rows = [r for r in rows if r["name"] in keep]
+    if do_measure:
+        rows = measure(rows, on, say=lambda msg: print(msg, file=sys.stderr))
+    if as_json:
+        print(json.dumps({"models": rows, "source": None if do_measure
+                          else registry.TYPICAL_SOURCE}, indent=1))
+        return
+    import textwrap
+
+    for line in format_table(rows):
+        print(line)
+    notes = ["ISO: fits isotropic inputs only. FILE B: bytes of the fit file (.npz); "
+             "TABLE B: bytes of the tables in it; FIT CPU: CPU seconds of one fit.",
+             f"Measured now on {on}, on this machine." if do_measure else
+             f"Typical figures (–: not measured): {registry.TYPICAL_SOURCE}; "
+             "`brdffit models --measure` measures them on this machine.",
+             "Papers:"]
+    print("")
+    for note in notes:
+        print(textwrap.fill(note, 79))
+    for key in sorted({k.strip() for r in rows for k in r["paper"].split(",")}):
+        print(textwrap.fill(f"{key}: {registry.PAPERS.get(key, key)}", 79,
+                            initial_indent="  ", subsequent_indent="    "))

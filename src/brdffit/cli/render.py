@@ -11,9 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import typer
-
-__all__ = ["register", "load_brdf"]
+__all__ = ["register", "render_cmd", "load_brdf"]
 
 
 def _UsageError(option: str, message: str):
@@ -36,81 +34,91 @@ def load_brdf(spec: str):
     return load(spec)
 
 
-def register(app: typer.Typer) -> None:
-    @app.command("render")
-    def render_cmd(
-        spec: str = typer.Argument(..., metavar="INPUT_OR_FIT",
-                                   help="BRDF file/spec (io.load) or a fit .npz."),
-        output: Path = typer.Option(..., "-o", "--output", metavar="IMAGE", help="Output image (.exr or .png)."),
-        scene: str = typer.Option("sphere-env", "--scene", metavar="SCENE",
-                                  help="sphere-env, sphere-point, sphere-distant, knot, sphere-svrough."),
-        envmap: str = typer.Option(None, "--envmap", metavar="MAP",
-                                   help="Environment: a name of ../shared/data/envmaps "
-                                        "(studio, city, ...), an EXR path, or 'procedural' (default)."),
-        spp: int = typer.Option(256, "--spp", min=1, metavar="N", help="Samples per pixel."),
-        resolution: int = typer.Option(256, "--resolution", min=8, metavar="PX", help="Image width = height."),
-        seed: int = typer.Option(0, "--seed", metavar="N", help="Sampler seed."),
-        mode: str = typer.Option("auto", "--mode", metavar="MODE",
-                                 help="auto (closed form when available), table, closed."),
-        exposure: str = typer.Option("auto", "--exposure", metavar="EV",
-                                     help="PNG tone-mapping exposure (number or 'auto')."),
-        gamma: float = typer.Option(2.2, "--gamma", metavar="G", help="PNG tone-mapping gamma."),
-        roughness_texture: Path = typer.Option(
-            None, "--roughness-texture", metavar="IMAGE",
-            help="Roughness-scale texture for microfacet models (Dupuy 2015 Eq. 9): an EXR "
-                 "whose first channel is the α multiplier, or a PNG with multiplier "
-                 "2·value/255 (mid-grey = 1). Default for --scene sphere-svrough: built-in."),
-        report_error: bool = typer.Option(False, "--resampling-error",
-                                          help="Also measure the Dr.Jit evaluator's error vs brdf.eval."),
-    ):
-        """Render a BRDF or fit with Mitsuba 3 to an EXR or PNG image."""
-        import numpy as np
+def register(commands) -> None:
+    from . import add_command, at_least, integer, number, path
 
-        from ..errors import BRDFError
-        from ..evaluation.imageio import write_exr, write_png
-        from ..evaluation.render import Renderer
-        from ..evaluation.render.scenes import SCENES
-        from ..evaluation.tonemap import tonemap
+    cmd = add_command(commands, "render", render_cmd)
+    cmd.add_argument("spec", metavar="INPUT_OR_FIT",
+                     help="BRDF file/spec (io.load) or a fit .npz.")
+    cmd.add_argument("-o", "--output", type=path, required=True, metavar="IMAGE",
+                     help="Output image (.exr or .png).")
+    cmd.add_argument("--scene", default="sphere-env", metavar="SCENE",
+                     help="sphere-env, sphere-point, sphere-distant, knot, sphere-svrough.")
+    cmd.add_argument("--envmap", metavar="MAP",
+                     help="Environment: a name of ../shared/data/envmaps (studio, city, ...), "
+                          "an EXR path, or 'procedural' (default).")
+    cmd.add_argument("--spp", type=at_least(1), default=256, metavar="N",
+                     help="Samples per pixel.")
+    cmd.add_argument("--resolution", type=at_least(8), default=256, metavar="PX",
+                     help="Image width = height.")
+    cmd.add_argument("--seed", type=integer, default=0, metavar="N", help="Sampler seed.")
+    cmd.add_argument("--mode", default="auto", metavar="MODE",
+                     help="auto (closed form when available), table, closed.")
+    cmd.add_argument("--exposure", default="auto", metavar="EV",
+                     help="PNG tone-mapping exposure (number or 'auto').")
+    cmd.add_argument("--gamma", type=number, default=2.2, metavar="G",
+                     help="PNG tone-mapping gamma.")
+    cmd.add_argument("--roughness-texture", type=path, metavar="IMAGE",
+                     help="Roughness-scale texture for microfacet models (Dupuy 2015 Eq. 9): "
+                          "an EXR whose first channel is the α multiplier, or a PNG with "
+                          "multiplier 2·value/255 (mid-grey = 1). Default for --scene "
+                          "sphere-svrough: built-in.")
+    cmd.add_argument("--resampling-error", dest="report_error", action="store_true",
+                     help="Also measure the Dr.Jit evaluator's error vs brdf.eval.")
 
-        ext = output.suffix.lower()
-        if ext not in (".exr", ".png"):
-            raise _UsageError("-o", f"expected an output ending in .exr or .png, found {ext!r}")
-        if scene not in SCENES:
-            raise _UsageError("--scene", f"expected one of {', '.join(SCENES)}, found {scene!r}")
-        if mode not in ("auto", "table", "closed"):
-            raise _UsageError("--mode", f"expected auto, table or closed, found {mode!r}")
-        expo = exposure
-        if exposure != "auto":
-            try:
-                expo = float(exposure)
-            except ValueError:
-                raise _UsageError("--exposure", f"expected a number or 'auto', found {exposure!r}") from None
-        brdf = load_brdf(spec)
-        env = None if envmap in (None, "", "procedural", "default") else envmap
-        tex = None
-        if roughness_texture is not None:
-            from ..evaluation.imageio import read_image
 
-            t = read_image(roughness_texture)
-            tex = (t[..., 0].astype(np.float64) if t.dtype != np.uint8
-                   else t[..., 0].astype(np.float64) * (2.0 / 255.0))
-            tex = np.maximum(np.nan_to_num(tex, nan=1.0), 0.05)
-        r = Renderer(brdf, scene=scene, envmap=env, spp=spp, resolution=resolution, mode=mode,
-                     alpha_texture=tex)
-        res = r.render(seed)
-        if not np.all(np.isfinite(res.image)):
-            raise BRDFError(f"{spec}: rendering produced non-finite pixels")
-        if ext == ".exr":
-            write_exr(output, np.concatenate([res.image, res.alpha[..., None]], -1))
-        else:
-            rgb = tonemap(res.image, expo, gamma, mask=res.mask)
-            write_png(output, np.concatenate([rgb, np.clip(res.alpha, 0, 1)[..., None]], -1))
-        typer.echo(f"{output}: {scene} {resolution}x{resolution} {spp} spp, evaluator "
-                   f"{res.info['evaluator']} ({res.info['path']}), set-up {r.setup_seconds:.2f} s, "
-                   f"render {res.seconds:.2f} s")
-        if report_error:
-            from ..evaluation.render.translate import resampling_error
+def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str | None = None,
+               spp: int = 256, resolution: int = 256, seed: int = 0, mode: str = "auto",
+               exposure: str = "auto", gamma: float = 2.2,
+               roughness_texture: Path | None = None, report_error: bool = False) -> None:
+    """Render a BRDF or fit with Mitsuba 3 to an EXR or PNG image."""
+    import numpy as np
 
-            e = resampling_error(brdf, r.evaluator)
-            typer.echo(f"resampling error vs brdf.eval: cosine-weighted relative {e['rel_cos']:.3g}, "
-                       f"RMS {e['rel_rms']:.3g}, albedo {e['albedo_rel']:.3g}")
+    from ..errors import BRDFError
+    from ..evaluation.imageio import write_exr, write_png
+    from ..evaluation.render import Renderer
+    from ..evaluation.render.scenes import SCENES
+    from ..evaluation.tonemap import tonemap
+
+    ext = output.suffix.lower()
+    if ext not in (".exr", ".png"):
+        raise _UsageError("-o", f"expected an output ending in .exr or .png, found {ext!r}")
+    if scene not in SCENES:
+        raise _UsageError("--scene", f"expected one of {', '.join(SCENES)}, found {scene!r}")
+    if mode not in ("auto", "table", "closed"):
+        raise _UsageError("--mode", f"expected auto, table or closed, found {mode!r}")
+    expo = exposure
+    if exposure != "auto":
+        try:
+            expo = float(exposure)
+        except ValueError:
+            raise _UsageError("--exposure", f"expected a number or 'auto', found {exposure!r}") from None
+    brdf = load_brdf(spec)
+    env = None if envmap in (None, "", "procedural", "default") else envmap
+    tex = None
+    if roughness_texture is not None:
+        from ..evaluation.imageio import read_image
+
+        t = read_image(roughness_texture)
+        tex = (t[..., 0].astype(np.float64) if t.dtype != np.uint8
+               else t[..., 0].astype(np.float64) * (2.0 / 255.0))
+        tex = np.maximum(np.nan_to_num(tex, nan=1.0), 0.05)
+    r = Renderer(brdf, scene=scene, envmap=env, spp=spp, resolution=resolution, mode=mode,
+                 alpha_texture=tex)
+    res = r.render(seed)
+    if not np.all(np.isfinite(res.image)):
+        raise BRDFError(f"{spec}: rendering produced non-finite pixels")
+    if ext == ".exr":
+        write_exr(output, np.concatenate([res.image, res.alpha[..., None]], -1))
+    else:
+        rgb = tonemap(res.image, expo, gamma, mask=res.mask)
+        write_png(output, np.concatenate([rgb, np.clip(res.alpha, 0, 1)[..., None]], -1))
+    print(f"{output}: {scene} {resolution}x{resolution} {spp} spp, evaluator "
+               f"{res.info['evaluator']} ({res.info['path']}), set-up {r.setup_seconds:.2f} s, "
+               f"render {res.seconds:.2f} s")
+    if report_error:
+        from ..evaluation.render.translate import resampling_error
+
+        e = resampling_error(brdf, r.evaluator)
+        print(f"resampling error vs brdf.eval: cosine-weighted relative {e['rel_cos']:.3g}, "
+                   f"RMS {e['rel_rms']:.3g}, albedo {e['albedo_rel']:.3g}")
