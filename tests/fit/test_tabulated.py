@@ -207,6 +207,25 @@ def test_fresnel_of_a_merl_table_is_the_direct_mean_of_eq_19_20(case):
     np.testing.assert_allclose(got[rows], ref[rows], rtol=2e-4)
 
 
+@pytest.mark.parametrize("layout", ["planar", "channel-last"])
+@pytest.mark.parametrize("masked", [False, True])
+def test_block_sums_on_the_half_weight_equal_the_mirrored_full_sum(layout, masked):
+    """The θd sums from the φd ≤ π/2 half of the weight, in blocks of θh rows, equal
+    Σ values · mirrored weight over the whole table (float64 rounding)."""
+    from brdffit.fit.tabulated import _mirror_phi_d, _weighted_sums_per_theta_d
+
+    rng = np.random.default_rng(11)
+    values = rng.random((3, 90, 90, 180)).transpose(1, 2, 3, 0)  # channel-planar
+    if layout == "channel-last":
+        values = np.ascontiguousarray(values)
+    half = rng.random((90, 90, 91)).astype(np.float32)
+    ok = rng.random((90, 90, 180)) > 0.1 if masked else None
+    got = _weighted_sums_per_theta_d(values, half, ok)
+    masked_values = values if ok is None else np.where(ok[..., None], values, 0.0)
+    ref = np.einsum("hdpc,hdp->dc", masked_values, _mirror_phi_d(half).astype(np.float64))
+    np.testing.assert_allclose(got, ref, rtol=1e-12)
+
+
 # -- normalisation, non-negativity, robustness ---------------------------------------------------
 class NoisyLambert(BRDF):
     """Lambertian + noise, with negative and NaN samples (a bad measurement)."""
