@@ -97,6 +97,34 @@ def test_quick_error_matches_the_metric():
     assert quick_error(ref, ref)["cos_rel_error"] == 0.0
 
 
+def test_grid_error_directions_are_the_nodes_half_diff_directions():
+    """The quick error's closed-form (wi, wo) of the MERL nodes equal half_diff_to_io at
+    φh = 0, node for node, and weigh exactly the valid nodes above the horizon (of non-zero
+    measure: θh, θd > 0)."""
+    from brdffit.cli.fit import QUICK_ERROR_GRID_STRIDE, _grid_error
+    from brdffit.geometry import half_diff_to_io
+    from brdffit.grid import merl_phi_d, merl_theta_d, merl_theta_h
+
+    si, sj, sk = QUICK_ERROR_GRID_STRIDE
+    th, td, pd = np.meshgrid(merl_theta_h()[::si], merl_theta_d()[::sj], merl_phi_d()[::sk],
+                             indexing="ij")
+    valid = np.random.default_rng(5).random((90, 90, 180)) > 0.2
+    seen = {}
+
+    class Probe:
+        def eval(self, wi, wo):
+            seen["wi"], seen["wo"] = wi, wo
+            return np.zeros(wi.shape[:-1] + (3,))
+
+    _, n = _grid_error(np.ones((90, 90, 180, 3)), valid, Probe())
+    wi, wo = half_diff_to_io(th, 0.0, td, pd)
+    keep = (valid[::si, ::sj, ::sk] & (wi[..., 2] > 0) & (wo[..., 2] > 0) & (th > 0)
+            & (td > 0))
+    assert n == keep.sum() == len(seen["wi"])
+    np.testing.assert_allclose(seen["wi"], wi[keep], atol=1e-15)
+    np.testing.assert_allclose(seen["wo"], wo[keep], atol=1e-15)
+
+
 def test_unknown_model_is_a_usage_error(capsys):
     code = main(["fit", "synthetic:gold-ggx", "--model", "no-such-model"])
     assert code == 2
