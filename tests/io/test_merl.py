@@ -74,6 +74,27 @@ def test_file_round_trip_is_bit_exact(merl_file, tmp_path):
     assert out.read_bytes() == merl_file.read_bytes()
 
 
+def test_round_trip_after_the_source_changed_writes_the_table_read(merl_file, tmp_path):
+    """The table is scaled in its read buffer (the file's numbers are not kept): when the
+    source no longer holds it, the written file is the table itself (values / scales)."""
+    b = read_merl(merl_file)
+    values, valid = (a.copy() for a in b.merl_table())
+    original = merl_file.read_bytes()
+    changed = bytearray(original)
+    changed[12:20] = np.float64(0.123).tobytes()   # R of the first sample
+    merl_file.write_bytes(bytes(changed))
+    try:
+        out = write_merl(b, tmp_path / "copy.binary")
+        assert out.read_bytes() != bytes(changed)
+        back = read_merl(out)
+        np.testing.assert_array_equal(back.merl_table()[1], valid)
+        np.testing.assert_allclose(back.merl_table()[0], values, rtol=4e-16, atol=0)
+        merl_file.unlink()                            # gone: the same
+        assert write_merl(b, tmp_path / "again.binary").read_bytes() == out.read_bytes()
+    finally:
+        merl_file.write_bytes(original)
+
+
 def test_table_round_trip(tmp_path, raw_table):
     rng = np.random.default_rng(3)
     values = rng.random((90, 90, 180, 3))

@@ -10,8 +10,10 @@ multiplied on read by the colour scales ``(1, 1.15, 1.66)/1500``; every value a
 The grid (θh sampled uniformly in ``sqrt(θh/(π/2))``, φd folded into [0, π) by reciprocity)
 is the one of :mod:`brdffit.grid`. Negative entries mark samples that were not measured (a
 sample is invalid when any of its three channels is negative); they are kept as a validity
-mask and never leak out of :meth:`MERLBRDF.eval_hd`. A table read from a file keeps the raw
-numbers too, so that :func:`write_merl` writes it back bit-exactly.
+mask and never leak out of :meth:`MERLBRDF.eval_hd`. A table read from a file is scaled in
+the buffer it was read into (one 35 MB array, not two: fresh memory is the dearest part of a
+read); :func:`write_merl` writes it back bit-exactly by re-reading the file's own numbers when
+they still give exactly this table.
 """
 
 from __future__ import annotations
@@ -240,11 +242,11 @@ class MERLBRDF(IsotropicBRDF):
     format = "merl"
 
     def __init__(self, values, valid=None, *, interpolation: str = "trilinear",
-                 name: str = "merl", source: str | None = None, _raw: np.ndarray | None = None,
+                 name: str = "merl", source: str | None = None, _file: Path | None = None,
                  _validated: bool = False):
         if _validated:              # read_merl: finite, ≥ 0 where valid, 0 elsewhere, shapes ok
             self._init_tables(values, valid)
-            self._raw, self._packed = _raw, None
+            self._file, self._packed = _file, None
             self.interpolation, self.name, self.source = interpolation, name, source
             return
         values = np.asarray(values, dtype=np.float64)
@@ -263,7 +265,7 @@ class MERLBRDF(IsotropicBRDF):
             raise BRDFFormatError(source, f"expected finite non-negative values at valid samples, "
                                           f"found {int(bad.sum())} NaN/inf/negative")
         self._init_tables(np.where(valid[..., None], values, 0.0), valid.copy())
-        self._raw = _raw
+        self._file = _file
         self._packed = None
         self.interpolation = interpolation
         self.name = name
@@ -347,18 +349,9 @@ class MERLBRDF(IsotropicBRDF):
 
 
 # -- reading ------------------------------------------------------------------------------
-def read_merl(path, interpolation: str = "trilinear") -> MERLBRDF:
-    """Read a MERL ``.binary`` file into a :class:`MERLBRDF` (values scaled to MERL units).
-
-    Raises :class:`~brdffit.errors.BRDFFormatError` naming the file for a missing or
-    non-regular file, a bad header (other, absurd or byte-swapped dimensions), a size that
-    does not match the header, NaN/inf values, or values that cannot be reflectance data
-    (magnitude above :data:`~brdffit.io._limits.MAX_ABS_VALUE` or subnormal: typically a
-    byte-swapped file). The header and the file size are checked before the table is read.
-    """
-    if interpolation not in _INTERPOLATIONS:
-        raise ValueError(f"interpolation must be one of {_INTERPOLATIONS}, got {interpolation!r}")
-    path = Path(path)
+def _read_raw(path: Path) -> np.ndarray:
+    """The validated ``(3, N)`` float64 numbers of a MERL file as stored (channel-major,
+    unscaled, negative markers kept): header, size and plausibility checked first."""
     size = regular_file_size(path, "a MERL .binary file")
     if size < _HEADER_BYTES:
         raise BRDFFormatError(path, f"expected a MERL header of {_HEADER_BYTES} bytes, "
@@ -389,18 +382,65 @@ def read_merl(path, interpolation: str = "trilinear") -> MERLBRDF:
         raise BRDFFormatError(path, f"expected {3 * _N} float64 values, found "
                                     f"{0 if raw is None else raw.size} (file changed while read)")
     check_plausible_float64(raw, path, "values")
-    raw = raw.reshape(3, _N)
-    valid = np.all(raw >= 0, axis=0)
+    return raw.reshape(3, _N)
+
+
+def _valid_of(raw: np.ndarray) -> np.ndarray:
+    """Samples with no negative channel (MERL's marker of a sample not measured)."""
+    valid = raw[0] >= 0  # per channel: no (3, N) temporary to page-fault in
+    for channel in raw[1:]:
+        valid &= channel >= 0
+    return valid
+
+
+def _scale_in_place(raw: np.ndarray, valid: np.ndarray) -> np.ndarray:
+    """``raw`` (3, N) turned into scaled MERL units, 0 at invalid samples, in its buffer."""
+    raw *= MERL_SCALE[:, None]
+    if not valid.all():
+        raw[:, ~valid] = 0.0                        # MERL's negative marker: not measured
+    return raw
+
+
+def read_merl(path, interpolation: str = "trilinear") -> MERLBRDF:
+    """Read a MERL ``.binary`` file into a :class:`MERLBRDF` (values scaled to MERL units).
+
+    Raises :class:`~brdffit.errors.BRDFFormatError` naming the file for a missing or
+    non-regular file, a bad header (other, absurd or byte-swapped dimensions), a size that
+    does not match the header, NaN/inf values, or values that cannot be reflectance data
+    (magnitude above :data:`~brdffit.io._limits.MAX_ABS_VALUE` or subnormal: typically a
+    byte-swapped file). The header and the file size are checked before the table is read.
+    """
+    if interpolation not in _INTERPOLATIONS:
+        raise ValueError(f"interpolation must be one of {_INTERPOLATIONS}, got {interpolation!r}")
+    path = Path(path)
+    raw = _read_raw(path)
+    valid = _valid_of(raw)
     # scaled in the file's channel-planar order: values is a (θh, θd, φd, RGB) view whose
     # channels are each contiguous (no transpose copy; the fits read one channel at a time)
-    planar = raw * MERL_SCALE[:, None]
-    if not valid.all():
-        planar[:, ~valid] = 0.0                     # MERL's negative marker: not measured
-    raw.flags.writeable = False
+    planar = _scale_in_place(raw, valid)
     values = planar.reshape((3,) + MERL_SHAPE).transpose(1, 2, 3, 0)
     return MERLBRDF(values, valid.reshape(MERL_SHAPE),
-                    interpolation=interpolation, name=path.stem, source=str(path), _raw=raw,
-                    _validated=True)
+                    interpolation=interpolation, name=path.stem, source=str(path),
+                    _file=path, _validated=True)
+
+
+def _file_numbers(table: MERLBRDF) -> np.ndarray | None:
+    """The ``(3, N)`` numbers of the file ``table`` was read from, when that file still holds
+    exactly this table (same validity, the same scaled values to the bit); else ``None``."""
+    path = getattr(table, "_file", None)
+    if path is None:
+        return None
+    try:
+        raw = _read_raw(path)
+    except BRDFFormatError:  # gone, replaced or damaged since it was read
+        return None
+    valid = _valid_of(raw)
+    values, table_valid = table.merl_table()
+    if not np.array_equal(valid, table_valid.reshape(-1)):
+        return None
+    scaled = _scale_in_place(raw.copy(), valid)
+    same = all(np.array_equal(scaled[c], values[..., c].reshape(-1)) for c in range(3))
+    return raw if same else None
 
 
 # -- writing ------------------------------------------------------------------------------
@@ -436,12 +476,12 @@ def write_merl(brdf_or_table, path) -> Path:
     """Write a MERL ``.binary`` file atomically and return its path.
 
     ``brdf_or_table`` is a :class:`MERLBRDF` (written bit-exactly as read when it came from
-    a file), any isotropic BRDF (tabulated with :func:`brdffit.grid.tabulate_merl_grid`), a
+    a file that still holds that table: its own numbers are re-read), any isotropic BRDF (tabulated with :func:`brdffit.grid.tabulate_merl_grid`), a
     ``(values, valid)`` pair or a ``(90, 90, 180, 3)`` array in scaled MERL units. Values are
     divided by the colour scales; invalid samples are written as ``-1`` in all channels.
     """
     path = Path(path)
-    raw = getattr(brdf_or_table, "_raw", None) if isinstance(brdf_or_table, MERLBRDF) else None
+    raw = _file_numbers(brdf_or_table) if isinstance(brdf_or_table, MERLBRDF) else None
     if raw is None:
         values, valid = _table_of(brdf_or_table)
         raw = (values.reshape(_N, 3) / MERL_SCALE).T
