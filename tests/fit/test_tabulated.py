@@ -208,22 +208,28 @@ def test_fresnel_of_a_merl_table_is_the_direct_mean_of_eq_19_20(case):
 
 
 @pytest.mark.parametrize("layout", ["planar", "channel-last"])
-@pytest.mark.parametrize("masked", [False, True])
-def test_block_sums_on_the_half_weight_equal_the_mirrored_full_sum(layout, masked):
-    """The θd sums from the φd ≤ π/2 half of the weight, in blocks of θh rows, equal
-    Σ values · mirrored weight over the whole table (float64 rounding)."""
-    from brdffit.fit.tabulated import _mirror_phi_d, _weighted_sums_per_theta_d
+@pytest.mark.parametrize("case", ["all-valid", "invalid", "nan"])
+def test_fresnel_sums_do_not_depend_on_the_theta_h_blocks(layout, case, monkeypatch):
+    """The MERL-grid Fresnel sums, accumulated block after block of θh rows, equal the
+    whole-grid computation (one block) to rounding, counts exactly."""
+    import brdffit.fit.tabulated as tab
 
+    dist = fit_tabulated(MicrofacetBRDF(GGX(0.2), SchlickFresnel(0.5))).distribution
     rng = np.random.default_rng(11)
     values = rng.random((3, 90, 90, 180)).transpose(1, 2, 3, 0)  # channel-planar
+    valid = np.ones((90, 90, 180), bool)
+    if case == "invalid":
+        valid = rng.random(valid.shape) > 0.1
+    elif case == "nan":
+        values[rng.random(valid.shape) < 0.01, 2] = np.nan
     if layout == "channel-last":
         values = np.ascontiguousarray(values)
-    half = rng.random((90, 90, 91)).astype(np.float32)
-    ok = rng.random((90, 90, 180)) > 0.1 if masked else None
-    got = _weighted_sums_per_theta_d(values, half, ok)
-    masked_values = values if ok is None else np.where(ok[..., None], values, 0.0)
-    ref = np.einsum("hdpc,hdp->dc", masked_values, _mirror_phi_d(half).astype(np.float64))
-    np.testing.assert_allclose(got, ref, rtol=1e-12)
+    got = tab._merl_fresnel_sums(values, valid, dist, 1e-6, None)
+    monkeypatch.setattr(tab, "_ROWS_PER_BLOCK", 90)
+    whole = tab._merl_fresnel_sums(values, valid, dist, 1e-6, None)
+    np.testing.assert_allclose(got[0], whole[0], rtol=1e-12)
+    np.testing.assert_array_equal(got[1], whole[1])
+    assert np.all(np.isfinite(got[0])) and got[1].min() > 0
 
 
 # -- normalisation, non-negativity, robustness ---------------------------------------------------

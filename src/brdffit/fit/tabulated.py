@@ -299,32 +299,34 @@ def _lookup_uniform(table, x):
     return table[i0] * (1.0 - f) + table[i0 + 1] * f
 
 
-_MERL_GEOMETRY: dict = {}
 _SIGMA_M = 16384
 _N_PHI_HALF = 91  # φd ≤ π/2: the MERL samples 0..90 (π − φd of sample k is sample 180 − k)
+#: θh rows per block of :func:`_merl_fresnel_sums`: the geometry and the float64 weight of a
+#: block (≈ 2 MB together) are made, used and reused block after block, where whole-grid
+#: arrays (≈ 27 MB) were page-faulted in by every process (a cold tabulated fit of a MERL
+#: file: 52 → 23 ms)
+_ROWS_PER_BLOCK = 10
 
 
-def _merl_geometry():
-    """Cached geometry of the MERL grid for ``φd ≤ π/2`` (shape ``(90, 90, 91)``): ``cos θi``,
-    ``cos θo`` (float32, φh = 0), lookup indices into a uniform ``cos θ`` table, and the
-    above-horizon mask. The other half follows by symmetry (:func:`_mirror_phi_d`)."""
-    if not _MERL_GEOMETRY:
-        th, td, pd = merl_theta_h(), merl_theta_d(), merl_phi_d()[:_N_PHI_HALF]
-        # cos θi,o = cos θh cos θd ∓ sin θh sin θd cos φd computed in float32 (the stored
-        # type; faster than float64): |Δ| ≤ 1.2e-7 moves a lookup index by one on 0.04 % of
-        # the samples
-        a = (np.cos(th)[:, None] * np.cos(td)[None, :]).astype(np.float32)[:, :, None]
-        bb = ((np.sin(th)[:, None] * np.sin(td)[None, :]).astype(np.float32)[:, :, None]
-              * np.cos(pd).astype(np.float32)[None, None, :])
-        geo = {"ci": a - bb, "co": np.add(a, bb, out=bb)}
-        for key in ("i", "o"):
-            # nearest sample of a dense uniform table of σ(cos θ) (|Δcos| ≤ 3e-5)
-            x = np.clip(geo["c" + key], 0.0, 1.0)
-            x *= _SIGMA_M - 1
-            geo["i" + key] = np.rint(x, out=x).astype(np.int16)
-        geo["up"] = (geo["ci"] > 0) & (geo["co"] > 0)
-        _MERL_GEOMETRY.update(geo)
-    return _MERL_GEOMETRY
+def _merl_geometry(rows: slice) -> dict:
+    """Geometry of the MERL θh rows ``rows`` for ``φd ≤ π/2`` (shape ``(rows, 90, 91)``):
+    ``cos θi``, ``cos θo`` (float32, φh = 0), lookup indices into a uniform ``cos θ``
+    table, and the above-horizon mask. The other half follows by symmetry
+    (:func:`_mirror_phi_d`)."""
+    th, td, pd = merl_theta_h()[rows], merl_theta_d(), merl_phi_d()[:_N_PHI_HALF]
+    # cos θi,o = cos θh cos θd ∓ sin θh sin θd cos φd computed in float32 (faster than
+    # float64): |Δ| ≤ 1.2e-7 moves a lookup index by one on 0.04 % of the samples
+    a = (np.cos(th)[:, None] * np.cos(td)[None, :]).astype(np.float32)[:, :, None]
+    bb = ((np.sin(th)[:, None] * np.sin(td)[None, :]).astype(np.float32)[:, :, None]
+          * np.cos(pd).astype(np.float32)[None, None, :])
+    geo = {"ci": a - bb, "co": np.add(a, bb, out=bb)}
+    for key in ("i", "o"):
+        # nearest sample of a dense uniform table of σ(cos θ) (|Δcos| ≤ 3e-5)
+        x = np.clip(geo["c" + key], 0.0, 1.0)
+        x *= _SIGMA_M - 1
+        geo["i" + key] = np.rint(x, out=x).astype(np.int16)
+    geo["up"] = (geo["ci"] > 0) & (geo["co"] > 0)
+    return geo
 
 
 def _mirror_phi_d(half: np.ndarray) -> np.ndarray:
@@ -336,37 +338,15 @@ def _mirror_phi_d(half: np.ndarray) -> np.ndarray:
     return full
 
 
-#: θh rows per block of :func:`_weighted_sums_per_theta_d`: a float64 block of the weight is
-#: 1.3 MB, reused, where the whole 12 MB cast was page-faulted in by every process (half
-#: the cold CPU time of a tabulated fit of a MERL file: 52 → 27 ms)
-_ROWS_PER_BLOCK = 10
-
-
-def _weighted_sums_per_theta_d(values, half_weight, data_ok=None) -> np.ndarray:
-    """``Σ_{θh, φd} values · weight`` per θd, ``(90, 3)``, for a weight symmetric under
-    ``φd → π − φd`` given on its ``φd ≤ π/2`` half (:func:`_mirror_phi_d` of it is the full
-    weight; sample ``k > 90`` takes weight ``180 − k``), counting only ``data_ok`` samples
-    when given (a sample left out may hold NaN). Accumulated over blocks of θh rows: no
-    full-size temporary."""
-    n_h, n_d = values.shape[:2]
-    planar = all(values[..., c].flags["C_CONTIGUOUS"] for c in range(3))
-    sums = np.zeros((n_d, 3))
-    block = np.empty((_ROWS_PER_BLOCK, n_d, N_PHI_D))  # the float64 weight of a few θh rows
-    for h0 in range(0, n_h, _ROWS_PER_BLOCK):
-        rows = slice(h0, min(h0 + _ROWS_PER_BLOCK, n_h))
-        w = block[:rows.stop - h0]
-        w[..., :_N_PHI_HALF] = half_weight[rows]
-        w[..., _N_PHI_HALF:] = half_weight[rows, :, _N_PHI_HALF - 2:0:-1]
-        ok = None if data_ok is None else data_ok[rows]
-        if planar:  # channel-planar storage: one contiguous product per channel
-            for c in range(3):
-                v = values[rows, :, :, c]
-                sums[:, c] += np.einsum("hdp,hdp->d", v if ok is None else
-                                        np.where(ok, v, 0.0), w)
-        else:       # channel-last: one (1 × Nφ) @ (Nφ × 3) per (θh, θd)
-            v = values[rows] if ok is None else np.where(ok[..., None], values[rows], 0.0)
-            sums += np.matmul(w[:, :, None, :], v)[:, :, 0, :].sum(0)
-    return sums
+def _weighted_sums_per_theta_d(values, weight, data_ok=None) -> np.ndarray:
+    """``Σ_{θh, φd} values · weight`` per θd, ``(90, 3)``, counting only ``data_ok``
+    samples when given (a sample left out may hold NaN)."""
+    if all(values[..., c].flags["C_CONTIGUOUS"] for c in range(3)):  # channel-planar
+        return np.stack([np.einsum("hdp,hdp->d", values[..., c] if data_ok is None
+                                   else np.where(data_ok, values[..., c], 0.0), weight)
+                         for c in range(3)], -1)
+    v = values if data_ok is None else np.where(data_ok[..., None], values, 0.0)
+    return np.matmul(weight[:, :, None, :], v)[:, :, 0, :].sum(0)  # channel-last
 
 
 def _merl_fresnel_sums(values, valid, dist, p_floor, max_theta_deg):
@@ -375,37 +355,49 @@ def _merl_fresnel_sums(values, valid, dist, p_floor, max_theta_deg):
     ``f/f_id = f · 4 cos⁴θh (σi co + σo ci − ci co) / P(θh)`` (Eq. 19-20; the
     height-correlated Smith ``G = 1/(1 + Λi + Λo)`` with ``σ = cos θ (1 + Λ)``, as the
     anisotropic branch). The geometric weight is symmetric under ``φd → π − φd``
-    (θi ↔ θo), so it is computed on half the grid and mirrored. A NaN/inf sample makes the
-    sums non-finite: they are then recomputed without the non-finite samples.
+    (θi ↔ θo), so it is computed on half the grid and mirrored, block after block of θh
+    rows. A NaN/inf sample makes the sums non-finite: they are then recomputed without the
+    non-finite samples.
     """
     th = merl_theta_h()
-    geo = _merl_geometry()
     sigma_tab = _sigma_of_cos(dist, _SIGMA_M).astype(np.float32)
-    ci, co = geo["ci"], geo["co"]
     p_h = dist._p_unit_polar(np.tan(th))
     usable_h = p_h >= p_floor * p_h.max()
-    scale = np.where(usable_h, 4.0 * np.cos(th) ** 4 / np.where(usable_h, p_h, 1.0), 0.0)
-    weight = sigma_tab[geo["ii"]] * co
-    weight += sigma_tab[geo["io"]] * ci
-    weight -= ci * co
-    weight *= scale.astype(np.float32)[:, None, None]
-    usable = geo["up"] & usable_h[:, None, None]
-    if max_theta_deg is not None:
-        c_min = np.float32(np.cos(np.radians(max_theta_deg)))
-        usable &= (ci >= c_min) & (co >= c_min)
-    weight[~usable] = 0.0
+    scale = np.where(usable_h, 4.0 * np.cos(th) ** 4 / np.where(usable_h, p_h, 1.0),
+                     0.0).astype(np.float32)
+    c_min = None if max_theta_deg is None else np.float32(np.cos(np.radians(max_theta_deg)))
     values = np.asarray(values)
+    n_h, n_d = values.shape[:2]
+
+    def accumulate(data_ok):
+        sums, counts = np.zeros((n_d, 3)), np.zeros(n_d, dtype=np.int64)
+        for h0 in range(0, n_h, _ROWS_PER_BLOCK):
+            rows = slice(h0, min(h0 + _ROWS_PER_BLOCK, n_h))
+            geo = _merl_geometry(rows)
+            ci, co = geo["ci"], geo["co"]
+            weight = sigma_tab[geo["ii"]] * co
+            weight += sigma_tab[geo["io"]] * ci
+            weight -= ci * co
+            weight *= scale[rows, None, None]
+            usable = geo["up"] & usable_h[rows, None, None]
+            if c_min is not None:
+                usable &= (ci >= c_min) & (co >= c_min)
+            weight[~usable] = 0.0
+            ok = None if data_ok is None else data_ok[rows]
+            sums += _weighted_sums_per_theta_d(values[rows],
+                                               _mirror_phi_d(weight.astype(np.float64)), ok)
+            if ok is None:  # every sample counts: twice each interior φd of the half grid
+                per_phi = usable.sum(axis=0)
+                counts += 2 * per_phi.sum(-1) - per_phi[:, 0] - per_phi[:, -1]
+            else:
+                counts += (_mirror_phi_d(usable) & ok).sum(axis=(0, 2))
+        return sums, counts
+
     data_ok = None if valid is None or np.all(valid) else np.asarray(valid, dtype=bool)
-    sums = _weighted_sums_per_theta_d(values, weight, data_ok)
+    sums, counts = accumulate(data_ok)
     if not np.all(np.isfinite(sums)):  # NaN/inf samples (they propagate): invalid, not zeros
         finite = np.all(np.isfinite(values), axis=-1)
-        data_ok = finite if data_ok is None else data_ok & finite
-        sums = _weighted_sums_per_theta_d(values, weight, data_ok)
-    if data_ok is None:  # every sample counts: twice each interior φd of the half grid
-        per_phi = usable.sum(axis=0)
-        counts = 2 * per_phi.sum(-1) - per_phi[:, 0] - per_phi[:, -1]
-    else:
-        counts = (_mirror_phi_d(usable) & data_ok).sum(axis=(0, 2))
+        sums, counts = accumulate(finite if data_ok is None else data_ok & finite)
     return sums, counts
 
 
