@@ -138,6 +138,9 @@ def _r4_pairs(n: int):
     return cos_hemi(u[:, 0], u[:, 1]), cos_hemi(u[:, 2], u[:, 3])
 
 
+#: Direction pairs per model evaluation of :func:`_grid_error`.
+_EVAL_CHUNK = 8192
+
 #: MERL-grid subsampling of :func:`quick_error` (every θh node, every 3rd θd, every 8th φd).
 QUICK_ERROR_GRID_STRIDE = (1, 3, 8)
 
@@ -178,12 +181,16 @@ def _grid_error(values, valid, model) -> tuple[float, int]:
     y = np.broadcast_to(std * spd, shape)[keep]              # sin θd sin φd
     wi = np.stack([x_h + x_d, y, ci[keep]], -1)
     wo = np.stack([x_h - x_d, -y, co[keep]], -1)
-    ft = np.nan_to_num(np.asarray(model.eval(wi, wo), dtype=np.float64))
     wk = w[keep][:, None]
     den = float((np.abs(fr) * wk).sum())
     if den <= 0:
         raise ValueError("the input BRDF is 0 everywhere: no relative error")
-    return float((np.abs(ft - fr) * wk).sum() / den), int(keep.sum())
+    num = 0.0
+    for k in range(0, len(wk), _EVAL_CHUNK):  # the model's temporaries stay small and reused
+        part = slice(k, k + _EVAL_CHUNK)
+        ft = np.nan_to_num(np.asarray(model.eval(wi[part], wo[part]), dtype=np.float64))
+        num += float((np.abs(ft - fr[part]) * wk[part]).sum())
+    return num / den, int(keep.sum())
 
 
 def quick_error(reference, model, n_pairs: int = QUICK_ERROR_PAIRS) -> dict:
