@@ -109,14 +109,16 @@ def test_grid_error_directions_are_the_nodes_half_diff_directions():
     th, td, pd = np.meshgrid(merl_theta_h()[::si], merl_theta_d()[::sj], merl_phi_d()[::sk],
                              indexing="ij")
     valid = np.random.default_rng(5).random((90, 90, 180)) > 0.2
-    seen = {}
+    seen = {"wi": [], "wo": []}
 
     class Probe:
         def eval(self, wi, wo):
-            seen["wi"], seen["wo"] = wi, wo
+            seen["wi"].append(wi)
+            seen["wo"].append(wo)
             return np.zeros(wi.shape[:-1] + (3,))
 
     _, n = _grid_error(np.ones((90, 90, 180, 3)), valid, Probe())
+    seen = {k: np.concatenate(v) for k, v in seen.items()}
     wi, wo = half_diff_to_io(th, 0.0, td, pd)
     keep = (valid[::si, ::sj, ::sk] & (wi[..., 2] > 0) & (wo[..., 2] > 0) & (th > 0)
             & (td > 0))
