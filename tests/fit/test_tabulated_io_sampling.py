@@ -212,3 +212,19 @@ def test_anisotropic_visible_sampling_matches_analytic():
     np.testing.assert_allclose((m**2).mean(0), (m0**2).mean(0), atol=4e-3)
     # deterministic for given (w, u) although the rejection draws extra numbers
     np.testing.assert_array_equal(d.sample_visible(w, u[:100]), d.sample_visible(w, u[:100]))
+
+
+def test_sampling_tables_are_built_on_first_use_with_the_same_samples():
+    """The fit builds its sampling tables on first use; prepare_sampling builds them now:
+    the same samples either way."""
+    brdf = MicrofacetBRDF(GGX(0.3), SchlickFresnel(0.9))
+    lazy = fit_tabulated(brdf).distribution
+    eager = fit_tabulated(brdf).distribution
+    assert lazy._sampling is None and lazy._visible is None   # a saved fit never needs them
+    eager.prepare_sampling()
+    assert eager._sampling is not None and eager._visible is not None
+    u = np.random.default_rng(2).random((1000, 2))
+    w = np.array([0.3, 0.1, 0.9]) / np.linalg.norm([0.3, 0.1, 0.9])
+    np.testing.assert_array_equal(lazy.sample(u), eager.sample(u))
+    np.testing.assert_array_equal(lazy.sample_visible(w, u), eager.sample_visible(w, u))
+    np.testing.assert_array_equal(lazy.sigma_visible(w), eager.sigma_visible(w))

@@ -472,7 +472,7 @@ def _make_model(dist, F, name, source):
 
 
 def _fit_one(brdf, channel, *, n, n_phi, rule, iterations, tol, max_iterations, anisotropic,
-             hotspot, merl, fresnel_kwargs, build_sampling=True):
+             hotspot, merl, fresnel_kwargs):
     t0 = time.perf_counter()
     u, theta, _, _ = radial_rule(n, rule)
     if anisotropic:
@@ -491,11 +491,7 @@ def _fit_one(brdf, channel, *, n, n_phi, rule, iterations, tol, max_iterations, 
     t1 = time.perf_counter()
     p, lam, changes = solve_slope_pdf(b, rule=rule, iterations=iterations, tol=tol,
                                       max_iterations=max_iterations, hotspot=hotspot)
-    dist = TabulatedSlopeDistribution(p, rule=rule)
-    if build_sampling:  # the sampling tables are otherwise built on first use
-        if dist.table_isotropic:
-            dist._visible_tables()
-        dist._sampling_tables()
+    dist = TabulatedSlopeDistribution(p, rule=rule)  # sampling tables: on first use
     t2 = time.perf_counter()
     F = extract_fresnel(brdf, dist, merl=merl, **fresnel_kwargs)
     t3 = time.perf_counter()
@@ -591,6 +587,8 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
     :func:`convergence_info`: ``converged``, ``success``, ``status``, ``message``,
     ``criterion``, ``tol``, ``iterations``/``nit``, ``max_iterations``, ``cap_reached``,
     ``final_relative_change``, ``relative_change`` per iteration) and ``fit_options``.
+    The distribution's sampling tables are built on first use
+    (:meth:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution.prepare_sampling`).
     """
     t0 = time.perf_counter()
     if anisotropic is None:

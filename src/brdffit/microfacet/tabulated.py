@@ -482,6 +482,15 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         return np.where(ok, np.maximum(lam, 0.0), np.inf)
 
     # -- sampling ----------------------------------------------------------------------------
+    def prepare_sampling(self) -> None:
+        """Build the sampling tables now (the polar quantile tables and, for an isotropic
+        table, the visible-slope tables; 10-15 ms). They are otherwise built by the first
+        :meth:`sample`, :meth:`sample_visible` or :meth:`sigma_visible`: a fit that is only
+        saved or evaluated never needs them (the fit file stores the slope table only)."""
+        if self.table_isotropic:
+            self._visible_tables()
+        self._sampling_tables()
+
     def _sampling_tables(self):
         """Polar quantile tables (Appendix A, polar form) for sampling slopes from P."""
         if self._sampling is not None:
