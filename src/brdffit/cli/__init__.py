@@ -32,6 +32,7 @@ import functools
 import gc
 import importlib
 import inspect
+import os
 import sys
 import textwrap
 from pathlib import Path
@@ -129,16 +130,24 @@ def path(text: str) -> Path:
 
 
 # -- the parser -------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=8)
+def _help_width(columns: str | None) -> int:
+    """Help text width for the terminal (``COLUMNS`` first, also the cache key), at most 80
+    columns. argparse makes a formatter for every ``add_argument``: the terminal is asked
+    once per ``COLUMNS`` value."""
+    import shutil
+
+    return min(shutil.get_terminal_size((_WIDTH, 24)).columns, _WIDTH) - 1
+
+
 class _HelpFormatter(argparse.HelpFormatter):
     """``--help`` at most 80 columns; option lines as ``-m, --model NAME``; each option's
     default and range as ``[default: 2; x>=1]``; description and epilog paragraphs re-wrapped,
     except those that start with a ``\\b`` line (kept as written: examples, the model list)."""
 
     def __init__(self, prog: str):
-        import shutil
-
-        width = min(shutil.get_terminal_size((_WIDTH, 24)).columns, _WIDTH) - 1
-        super().__init__(prog, width=width, max_help_position=26)
+        super().__init__(prog, width=_help_width(os.environ.get("COLUMNS")),
+                         max_help_position=26)
 
     def _format_action_invocation(self, action) -> str:
         if not action.option_strings or action.nargs == 0:
