@@ -180,9 +180,12 @@ def test_invalid_samples_never_leak(merl_file, rng):
     assert np.all(b.with_interpolation("nearest").eval_hd(th, td, 11 * np.pi / 180) == 0)
 
 
-def test_compiled_kernel_matches_numpy_reference():
+def test_compiled_kernel_matches_numpy_reference(monkeypatch):
     if merl_mod._numba is None:
         pytest.skip("numba not installed: only the NumPy path exists")
+    import brdffit._jit
+
+    monkeypatch.setattr(brdffit._jit, "COMPILE_AFTER", -1)  # compiled from the first call
     rng = np.random.default_rng(2)
     values = rng.random((90, 90, 180, 3))
     valid = rng.random((90, 90, 180)) > 0.2
@@ -284,9 +287,15 @@ def test_resample_to_merl(tmp_path):
     assert not (tmp_path / "x.binary").exists()
 
 
-def test_fast_half_diff_matches_geometry_and_base_eval(rng):
+@pytest.mark.parametrize("compiled", [True, False])
+def test_fast_half_diff_matches_geometry_and_base_eval(rng, compiled, monkeypatch):
+    import brdffit._jit
     from brdffit.geometry import io_to_half_diff
     from brdffit.io.merl import fast_half_diff
+
+    if compiled and merl_mod._numba is None:
+        pytest.skip("numba not installed: only the NumPy path exists")
+    monkeypatch.setattr(brdffit._jit, "COMPILE_AFTER", -1 if compiled else 1 << 40)
 
     wi = rng.normal(size=(20000, 3))
     wo = rng.normal(size=(20000, 3))

@@ -136,8 +136,9 @@ if _numba is not None:
 
 
 def _merl_trilinear(table, u, v, w):
-    """Trilinear lookup on continuous MERL indices (compiled when numba is available)."""
-    if _numba is None:
+    """Trilinear lookup on continuous MERL indices (compiled when numba is available and
+    the work pays for loading it: :meth:`brdffit._jit.LazyDispatcher.worth_compiling`)."""
+    if _numba is None or not _merl_trilinear_kernel.worth_compiling(np.size(u)):
         return _merl_trilinear_numpy(table, u, v, w)
     shape = u.shape
     out = np.empty((u.size, 3))
@@ -187,13 +188,14 @@ if _numba is not None:
 
 def fast_half_diff(wi, wo):
     """``(θh, θd, φd, above)`` of direction pairs, as :func:`brdffit.geometry.io_to_half_diff`
-    (compiled when numba is available); ``above`` is ``wi_z > 0 and wo_z > 0``."""
+    (compiled when numba is available and the work pays for loading it); ``above`` is
+    ``wi_z > 0 and wo_z > 0``."""
     from ..brdf import _as_dirs
 
     wi, wo = _as_dirs(wi, wo)
     shape = wi.shape[:-1]
     above = (wi[..., 2] > 0) & (wo[..., 2] > 0)
-    if _numba is None:  # pragma: no cover
+    if _numba is None or not _half_diff_kernel.worth_compiling(int(np.prod(shape))):
         from ..geometry import io_to_half_diff
 
         th, _, td, pd = io_to_half_diff(wi, wo)
