@@ -159,6 +159,13 @@ def time_commands(py, src, gold, bad, runs, baseline=False, reference=None) -> d
         out[REFERENCE]["command"] = reference
         out[REFERENCE]["fit_over_reference"] = {
             k: out[FIT][k]["median"] / out[REFERENCE][k]["median"] for k in ("wall_s", "cpu_s")}
+        # the ratio within each interleaved round (same moment of the machine), then the median
+        for name in (FIT, "fit tabulated -o, with error figure"):
+            if name in res:
+                out[REFERENCE].setdefault("per_round_ratio_median", {})[name] = {
+                    k: statistics.median(a / b for a, b in zip(res[name][k.split("_")[0]],
+                                                               res[REFERENCE][k.split("_")[0]]))
+                    for k in ("wall_s", "cpu_s")}
     return out
 
 
@@ -357,6 +364,9 @@ def main() -> None:
                     **r["fit_over_reference"])
             print(f"{name:<40}{r['wall_s']['median']:>9.3f}{r['cpu_s']['median']:>9.3f}   "
                   f"{bt}{status}")
+            for fit_name, ratio in r.get("per_round_ratio_median", {}).items():
+                print(f"    {fit_name} / reference, median of the per-round ratios: "
+                      f"{ratio['wall_s']:.3f} wall, {ratio['cpu_s']:.3f} CPU")
         print("\nfit process, where the time goes (median wall s):")
         for k, v in result["fit_breakdown"]["phases_s"].items():
             print(f"  {k:<58}{v:8.3f}")
