@@ -47,6 +47,7 @@ def test_info_text(merl_with_holes, capsys):
     assert main(["info", str(path), "--albedo-samples", "1024"]) == 0
     text = capsys.readouterr().out
     assert "merl" in text and f"invalid: {int((~valid).sum())}" in text and "75°" in text
+    assert all(len(line) <= 80 for line in text.splitlines()), text
 
 
 def test_convert_merl_to_utia_and_back_errors(merl_with_holes, tmp_path, capsys):

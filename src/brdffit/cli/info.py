@@ -144,7 +144,8 @@ def _print_summary(s: dict) -> None:
     r = s["value_range"]
     echo(f"  value range min RGB {_fmt_rgb(r['min'])}, max RGB {_fmt_rgb(r['max'])}")
     echo(f"              ({s['value_range_of']})")
-    echo("  albedo      " + "  ".join(f"{a}°: {_fmt_rgb(v)}" for a, v in s["albedo"].items()))
+    for k, (angle, rgb) in enumerate(s["albedo"].items()):  # one incidence per line: 80 columns
+        echo(f"  {'albedo' if k == 0 else '':<11} {angle:>2}°: {_fmt_rgb(rgb)}")
 
 
 def register(commands) -> None:
