@@ -19,3 +19,16 @@ def test_errors_are_short_and_have_a_status(argv, code, capsys):
 def test_debug_shows_the_traceback():
     with pytest.raises(Exception, match="no such file"):
         main(["--debug", "info", "/nonexistent/file.binary"])
+
+
+def test_an_unknown_option_is_reported_under_its_command(capsys):
+    assert main(["fit", "synthetic:gold-ggx", "--mod", "ggx"]) == 2  # no abbreviations
+    err = capsys.readouterr().err
+    assert "usage: brdffit fit" in err and "unrecognized arguments: --mod ggx" in err
+
+
+def test_version(capsys):
+    from brdffit import __version__
+
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"brdffit {__version__}"

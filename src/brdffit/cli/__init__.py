@@ -254,10 +254,12 @@ def models_help(title: str = "Models") -> str:
 def build_parser(commands=None) -> tuple[_Parser, dict[str, _Parser]]:
     """The ``brdffit`` parser with the commands of ``commands`` (module names of
     ``_COMMAND_MODULES``; default: all of them), and each command's parser by name."""
-    root = _Parser(prog="brdffit", usage="brdffit [-h] [--debug] COMMAND [ARGS]...",
+    root = _Parser(prog="brdffit", usage="brdffit [-h] [--version] [--debug] COMMAND [ARGS]...",
                    description=_SUMMARY, epilog=models_help(), add_help=False)
     root.add_argument("-h", "--help", action="help", help="Show this message and exit.")
     root.add_argument("--debug", action="store_true", help="Show full tracebacks on errors.")
+    root.add_argument("--version", action="version", version=f"brdffit {_version()}",
+                      help="Show the version and exit.")
     sub = root.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser,
                               required=True, help=argparse.SUPPRESS)
     for name in _COMMAND_MODULES if commands is None else commands:
@@ -267,6 +269,12 @@ def build_parser(commands=None) -> tuple[_Parser, dict[str, _Parser]]:
             for name, parser in parsers.items()]
     root.description = "\n\n".join([_SUMMARY, _EXIT_TEXT, "\b\nCommands:\n" + "\n".join(rows)])
     return root, parsers
+
+
+def _version() -> str:
+    from .. import __version__
+
+    return __version__
 
 
 def _command_name(argv: list[str]) -> str | None:
@@ -289,7 +297,11 @@ def main(argv: list[str] | None = None) -> int:
         if not argv:
             root.print_help()
             return EXIT_USAGE
-        options = vars(root.parse_args(argv))
+        parsed, extra = root.parse_known_args(argv)
+        if extra:  # reported under the command's usage, not the root's
+            raise UsageError(f"unrecognized arguments: {' '.join(extra)}",
+                             parser=parsers.get(parsed.command))
+        options = vars(parsed)
         run_command = options.pop("_run")
         options.pop("command")
         options.pop("debug", None)
