@@ -213,6 +213,26 @@ def add_command(commands, name: str, fn, *, epilog: str | None = None) -> _Parse
     return parser
 
 
+def add_render_options(command, when: str = "") -> None:
+    """``--scenes``, ``--spp``, ``--batches``, ``--resolution``: how ``compare`` and ``batch
+    --render`` render (:class:`brdffit.batch.RenderSettings`); ``when`` prefixes each help
+    (e.g. ``"--render: "``)."""
+    def text(help_: str) -> str:
+        return when + help_ if when else help_[0].upper() + help_[1:]
+
+    command.add_argument("--scenes", default="paper", metavar="SCENES", help=text(
+        "the scene suite 'paper' (Bagher 2016 §5: sphere-courtyard, sphere-studio, "
+        "sphere-sunrise, knot-courtyard) or scene names, comma-separated: sphere-<map>, "
+        "knot-<map>, sphere-env, knot, sphere-point, sphere-distant, sphere-svrough."))
+    command.add_argument("--spp", type=at_least(1), default=64, metavar="N",
+                         help=text("samples per pixel per scene, all batches together."))
+    command.add_argument("--batches", type=at_least(1), default=8, metavar="N",
+                         help=text("independent batches per scene (the PSNR standard error "
+                                   "needs ≥ 3)."))
+    command.add_argument("--resolution", type=at_least(8), default=256, metavar="PX",
+                         help=text("image side in pixels."))
+
+
 def check_models(names, option: str = "--models") -> list[str]:
     """``names`` if every one is a known model, else a usage error listing the known ones
     (an empty list passes: callers that need a model say so).

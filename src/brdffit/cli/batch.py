@@ -13,7 +13,7 @@ from . import EXIT_ERROR, EXIT_FAILED_TASKS, EXIT_USAGE
 
 
 def register(commands) -> None:
-    from . import add_command, at_least, models_help
+    from . import add_command, add_render_options, at_least, models_help
 
     cmd = add_command(commands, "batch", batch_cmd, epilog=models_help())
     cmd.add_argument("source", metavar="SOURCE",
@@ -42,17 +42,7 @@ def register(commands) -> None:
     cmd.add_argument("--render", action="store_true",
                      help="Also render every material and its fits (Mitsuba 3) and write the "
                           "HTML report to OUT/report/.")
-    cmd.add_argument("--scenes", default="paper", metavar="SCENES",
-                     help="--render: the scene suite 'paper' (Bagher 2016 §5: a sphere under "
-                          "three environment maps and a knot), one scene or a comma-separated "
-                          "list.")
-    cmd.add_argument("--spp", type=at_least(1), default=64, metavar="N",
-                     help="--render: samples per pixel per scene, all batches.")
-    cmd.add_argument("--batches", type=at_least(1), default=8, metavar="N",
-                     help="--render: independent batches per scene (the PSNR standard error "
-                          "needs ≥ 3).")
-    cmd.add_argument("--resolution", type=at_least(8), default=256, metavar="PX",
-                     help="--render: image size.")
+    add_render_options(cmd, when="--render: ")
     cmd.add_argument("--retry-failed", action="store_true",
                      help="Redo tasks recorded as failed.")
     cmd.add_argument("--wait-lock", action="store_true",

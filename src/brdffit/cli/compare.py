@@ -38,7 +38,7 @@ def _materials(spec: str, limit: int | None) -> list[str]:
 
 
 def register(commands) -> None:
-    from . import add_command, at_least, integer, models_help, number, path
+    from . import add_command, add_render_options, at_least, integer, models_help, number, path
 
     cmd = add_command(commands, "compare", compare_cmd, epilog=models_help())
     cmd.add_argument("spec", metavar="INPUT[:MATERIAL]",
@@ -49,18 +49,8 @@ def register(commands) -> None:
                           "as NAME=fit.npz or fit.npz.")
     cmd.add_argument("-o", "--out", type=path, default=Path("report"), metavar="DIR",
                      help="Report directory.")
-    cmd.add_argument("--scenes", default="paper", metavar="SCENES",
-                     help="Scene suite 'paper' (sphere-courtyard, sphere-studio, "
-                          "sphere-sunrise, knot-courtyard) or scene names, comma-separated: "
-                          "sphere-<map>, knot-<map>, sphere-env, knot, sphere-point, "
-                          "sphere-distant, sphere-svrough.")
+    add_render_options(cmd)
     cmd.add_argument("--scene", help=argparse.SUPPRESS)  # former option: --scenes NAME
-    cmd.add_argument("--spp", type=at_least(1), default=64, metavar="N",
-                     help="Samples per pixel per scene, all batches together.")
-    cmd.add_argument("--batches", type=at_least(1), default=8, metavar="N",
-                     help="Independent batches per scene (≥ 3 for standard errors).")
-    cmd.add_argument("--resolution", type=at_least(8), default=256, metavar="PX",
-                     help="Image side in pixels.")
     cmd.add_argument("--seed", type=integer, default=0, metavar="N",
                      help="Seed of the sample streams (all models).")
     cmd.add_argument("--exposure", default="scene", metavar="EV",
