@@ -152,7 +152,8 @@ class _HelpFormatter(argparse.HelpFormatter):
     def _format_action_invocation(self, action) -> str:
         if not action.option_strings or action.nargs == 0:
             return super()._format_action_invocation(action)
-        return f"{', '.join(action.option_strings)} {self._format_args(action, action.dest.upper())}"
+        value = self._format_args(action, action.dest.upper())
+        return f"{', '.join(action.option_strings)} {value}"
 
     def _get_help_string(self, action) -> str:
         text = action.help or ""

@@ -151,10 +151,11 @@ def _grid_error(values, valid, model) -> tuple[float, int]:
     the measure of its cell, ``dωi dωo = 4 cos θd sin θd sin θh dθh dφh dθd dφd`` (φh
     integrated out; θh = θ'h² π/2 so dθh = π θ'h dθ'h).
 
-    The directions of a node at φh = 0 in closed form (:func:`brdffit.geometry.half_diff_to_io`:
-    ``d`` rotated by θh about y): ``wi = (cos θh sin θd cos φd + sin θh cos θd,
-    sin θd sin φd, cos θi)`` and ``wo`` its mirror image ``(sin θh cos θd − cos θh sin θd
-    cos φd, −sin θd sin φd, cos θo)``, with ``cos θi,o = cos θh cos θd ∓ sin θh sin θd cos φd``.
+    The directions of a node at φh = 0 in closed form (``d`` rotated by θh about y, as
+    :func:`brdffit.geometry.half_diff_to_io`): ``wi = (cos θh sin θd cos φd + sin θh cos θd,
+    sin θd sin φd, cos θi)`` and its mirror image ``wo = (sin θh cos θd − cos θh sin θd
+    cos φd, −sin θd sin φd, cos θo)``, with ``cos θi,o = cos θh cos θd ∓ sin θh sin θd
+    cos φd``.
     """
     import numpy as np
 

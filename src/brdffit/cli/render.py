@@ -92,7 +92,8 @@ def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str |
         try:
             expo = float(exposure)
         except ValueError:
-            raise _UsageError("--exposure", f"expected a number or 'auto', found {exposure!r}") from None
+            raise _UsageError("--exposure",
+                              f"expected a number or 'auto', found {exposure!r}") from None
     brdf = load_brdf(spec)
     env = None if envmap in (None, "", "procedural", "default") else envmap
     tex = None

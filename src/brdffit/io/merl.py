@@ -478,9 +478,10 @@ def write_merl(brdf_or_table, path) -> Path:
     """Write a MERL ``.binary`` file atomically and return its path.
 
     ``brdf_or_table`` is a :class:`MERLBRDF` (written bit-exactly as read when it came from
-    a file that still holds that table: its own numbers are re-read), any isotropic BRDF (tabulated with :func:`brdffit.grid.tabulate_merl_grid`), a
-    ``(values, valid)`` pair or a ``(90, 90, 180, 3)`` array in scaled MERL units. Values are
-    divided by the colour scales; invalid samples are written as ``-1`` in all channels.
+    a file that still holds that table: its own numbers are re-read), any isotropic BRDF
+    (tabulated with :func:`brdffit.grid.tabulate_merl_grid`), a ``(values, valid)`` pair or
+    a ``(90, 90, 180, 3)`` array in scaled MERL units. Values are divided by the colour
+    scales; invalid samples are written as ``-1`` in all channels.
     """
     path = Path(path)
     raw = _file_numbers(brdf_or_table) if isinstance(brdf_or_table, MERLBRDF) else None
