@@ -49,3 +49,19 @@ def test_slope_matches_dupuy_eq5():
     m = spherical_to_cartesian(theta, phi)
     np.testing.assert_allclose(normal_to_slope(m),
                                [-np.tan(theta) * np.cos(phi), -np.tan(theta) * np.sin(phi)])
+
+
+def test_half_diff_to_io_at_phi_h_zero_equals_the_general_rotation():
+    """The φh = 0 shortcut (no rotation about the normal) gives the general path's numbers,
+    including at θh = 0, θd = 0 and φd ∈ {0, π}."""
+    from brdffit.geometry.rusinkiewicz import half_diff_to_io
+
+    rng = np.random.default_rng(4)
+    th, td, pd = rng.random(5000) * 1.6, rng.random(5000) * 1.6, rng.random(5000) * 6.3
+    th[:50], td[50:100], pd[100:150], pd[150:200] = 0.0, 0.0, 0.0, np.pi
+    fast = half_diff_to_io(th, 0.0, td, pd)
+    general = half_diff_to_io(th, np.zeros_like(th), td, pd)
+    for a, b in zip(fast, general):
+        np.testing.assert_array_equal(a, b)
+    wi, wo = half_diff_to_io(0.3, 0, 0.2, 1.0)  # scalars
+    assert wi.shape == wo.shape == (3,)

@@ -45,7 +45,20 @@ def io_to_half_diff(wi, wo):
 
 
 def half_diff_to_io(theta_h, phi_h, theta_d, phi_d):
-    """Inverse of :func:`io_to_half_diff`: return ``(wi, wo)`` unit vectors ``(..., 3)``."""
+    """Inverse of :func:`io_to_half_diff`: return ``(wi, wo)`` unit vectors ``(..., 3)``.
+
+    With a scalar ``φh = 0`` (how isotropic BRDFs are evaluated at Rusinkiewicz coordinates)
+    the rotation about the normal is the identity and is skipped, and ``wo``'s rotation reuses
+    ``wi``'s products: the same numbers, up to the sign of zero components."""
+    if np.ndim(phi_h) == 0 and float(phi_h) == 0.0:
+        theta_h, theta_d, phi_d = np.broadcast_arrays(
+            *(np.asarray(a, dtype=np.float64) for a in (theta_h, theta_d, phi_d)))
+        d = spherical_to_cartesian(theta_d, phi_d)
+        x, y, z = d[..., 0], d[..., 1], d[..., 2]
+        c, s = np.cos(theta_h), np.sin(theta_h)
+        cx, sz, sx, cz = c * x, s * z, s * x, c * z   # rotation by θh about y (_rot_y)
+        return (np.stack([cx + sz, y, -sx + cz], axis=-1),
+                np.stack([-cx + sz, -y, sx + cz], axis=-1))
     theta_h, phi_h, theta_d, phi_d = np.broadcast_arrays(
         *(np.asarray(a, dtype=np.float64) for a in (theta_h, phi_h, theta_d, phi_d)))
     d = spherical_to_cartesian(theta_d, phi_d)
