@@ -30,6 +30,8 @@ def test_help_reads_well_at_80_columns(command, monkeypatch, capsys):
         [ln for ln in lines if len(ln) > 80]
     for noise in ("<bool>", "<str>", "<int", "<path>", "<list", "<float>"):
         assert noise not in text, noise
+    broken = [ln for ln in lines if ln.rstrip().endswith("-") and ln.rstrip()[-2:-1].isalpha()]
+    assert not broken, broken  # names such as sphere-courtyard are not cut at the hyphen
     assert "..." not in "".join(ln for ln in lines if ln.startswith("  ") and
                                 ln.strip().split(" ")[0] in COMMANDS)  # no cut summaries
 

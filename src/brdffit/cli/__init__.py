@@ -171,6 +171,10 @@ class _HelpFormatter(argparse.HelpFormatter):
             text = f"{text}  [{'; '.join(notes)}]"
         return text.replace("%", "%%")  # argparse %-formats help texts
 
+    def _split_lines(self, text: str, width: int) -> list[str]:
+        # names such as sphere-courtyard are never broken at their hyphen
+        return textwrap.wrap(" ".join(text.split()), width, break_on_hyphens=False)
+
     def _fill_text(self, text: str, width: int, indent: str) -> str:
         blocks = []
         for block in text.strip("\n").split("\n\n"):
@@ -178,7 +182,8 @@ class _HelpFormatter(argparse.HelpFormatter):
                 blocks.append("\n".join(indent + line for line in block[2:].splitlines()))
             else:
                 blocks.append(textwrap.fill(" ".join(block.split()), width,
-                                            initial_indent=indent, subsequent_indent=indent))
+                                            initial_indent=indent, subsequent_indent=indent,
+                                            break_on_hyphens=False))
         return "\n\n".join(blocks)
 
 
