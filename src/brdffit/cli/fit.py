@@ -149,16 +149,10 @@ def _grid_error(values, valid, model) -> tuple[float, int]:
     """``(error, nodes)``: the cosine-weighted relative L1 error on the valid nodes of a
     MERL table (:data:`QUICK_ERROR_GRID_STRIDE`), each weighted by ``cos θi cos θo`` times
     the measure of its cell, ``dωi dωo = 4 cos θd sin θd sin θh dθh dφh dθd dφd`` (φh
-    integrated out; θh = θ'h² π/2 so dθh = π θ'h dθ'h).
-
-    The directions of a node at φh = 0 in closed form (``d`` rotated by θh about y, as
-    :func:`brdffit.geometry.half_diff_to_io`): ``wi = (cos θh sin θd cos φd + sin θh cos θd,
-    sin θd sin φd, cos θi)`` and its mirror image ``wo = (sin θh cos θd − cos θh sin θd
-    cos φd, −sin θd sin φd, cos θo)``, with ``cos θi,o = cos θh cos θd ∓ sin θh sin θd
-    cos φd``.
-    """
+    integrated out; θh = θ'h² π/2 so dθh = π θ'h dθ'h)."""
     import numpy as np
 
+    from ..geometry import half_diff_to_io
     from ..grid import N_PHI_D, N_THETA_D, N_THETA_H, merl_phi_d, merl_theta_d, merl_theta_h
 
     si, sj, sk = QUICK_ERROR_GRID_STRIDE
@@ -168,7 +162,7 @@ def _grid_error(values, valid, model) -> tuple[float, int]:
     dtd, dpd = np.pi / 2 / N_THETA_D * sj, np.pi / N_PHI_D * sk
     cth, sth = np.cos(th)[:, None, None], np.sin(th)[:, None, None]
     ctd, std = np.cos(td)[None, :, None], np.sin(td)[None, :, None]
-    cpd, spd = np.cos(pd), np.sin(pd)
+    cpd = np.cos(pd)
     along = cth * ctd                                        # (θh, θd, 1)
     across = (sth * std) * cpd                               # (θh, θd, φd)
     ci, co = along - across, along + across
@@ -176,12 +170,9 @@ def _grid_error(values, valid, model) -> tuple[float, int]:
          * (4 * ctd * std * dtd * dpd) * (sth * dth[:, None, None]))
     keep = np.asarray(valid)[::si, ::sj, ::sk] & (w > 0)
     fr = np.asarray(values, dtype=np.float64)[::si, ::sj, ::sk][keep]
-    shape = keep.shape
-    x_d = np.broadcast_to((cth * std) * cpd, shape)[keep]    # cos θh sin θd cos φd
-    x_h = np.broadcast_to(sth * ctd, shape)[keep]            # sin θh cos θd
-    y = np.broadcast_to(std * spd, shape)[keep]              # sin θd sin φd
-    wi = np.stack([x_h + x_d, y, ci[keep]], -1)
-    wo = np.stack([x_h - x_d, -y, co[keep]], -1)
+    th_k, td_k, pd_k = (np.broadcast_to(a, keep.shape)[keep]
+                        for a in (th[:, None, None], td[None, :, None], pd))
+    wi, wo = half_diff_to_io(th_k, 0.0, td_k, pd_k)
     wk = w[keep][:, None]
     den = float((np.abs(fr) * wk).sum())
     if den <= 0:
