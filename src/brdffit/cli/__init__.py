@@ -81,11 +81,6 @@ def usage_error(option: str | None, message: str) -> UsageError:
     return UsageError(message, option)
 
 
-def echo(message: str = "", err: bool = False) -> None:
-    """Print a line to stdout (``err``: stderr)."""
-    print(message, file=sys.stderr if err else sys.stdout)
-
-
 # -- value types (their errors are usage errors naming the option) ------------------------------
 def at_least(low: int):
     """The ``type=`` of an integer option ≥ ``low`` (``--help`` shows ``x>=low``)."""

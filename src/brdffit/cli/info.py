@@ -121,31 +121,30 @@ def _fmt_rgb(v) -> str:
 
 
 def _print_summary(s: dict) -> None:
-    echo = print
-    echo(f"{s['spec']}")
-    echo(f"  format      {s['format']}  ({s['model']})")
-    echo(f"  name        {s['name']}")
-    echo(f"  isotropic   {'yes' if s['isotropic'] else 'no'}")
+    print(f"{s['spec']}")
+    print(f"  format      {s['format']}  ({s['model']})")
+    print(f"  name        {s['name']}")
+    print(f"  isotropic   {'yes' if s['isotropic'] else 'no'}")
     c = s["samples"]
     if "grid" in c:
-        echo(f"  grid        {c['grid']}")
+        print(f"  grid        {c['grid']}")
     if c.get("n_samples") is not None:
         inv = "" if c.get("n_invalid") is None else f"  (invalid: {c['n_invalid']})"
-        echo(f"  samples     {c['n_samples']}{inv}")
+        print(f"  samples     {c['n_samples']}{inv}")
     if "n_parameters" in c:
-        echo(f"  parameters  {c['n_parameters']}  (network; no stored samples)")
+        print(f"  parameters  {c['n_parameters']}  (network; no stored samples)")
     if "valid_field" in c:
-        echo(f"  valid field {c['valid_field']}")
+        print(f"  valid field {c['valid_field']}")
     if "field_shapes" in c:
-        echo("  fields      " + ", ".join(f"{k}{tuple(v)}" for k, v in c["field_shapes"].items()))
+        print("  fields      " + ", ".join(f"{k}{tuple(v)}" for k, v in c["field_shapes"].items()))
     for key in ("interpolation", "precision"):
         if key in s:
-            echo(f"  {key:<11} {s[key]}")
+            print(f"  {key:<11} {s[key]}")
     r = s["value_range"]
-    echo(f"  value range min RGB {_fmt_rgb(r['min'])}, max RGB {_fmt_rgb(r['max'])}")
-    echo(f"              ({s['value_range_of']})")
+    print(f"  value range min RGB {_fmt_rgb(r['min'])}, max RGB {_fmt_rgb(r['max'])}")
+    print(f"              ({s['value_range_of']})")
     for k, (angle, rgb) in enumerate(s["albedo"].items()):  # one incidence per line: 80 columns
-        echo(f"  {'albedo' if k == 0 else '':<11} {angle:>2}°: {_fmt_rgb(rgb)}")
+        print(f"  {'albedo' if k == 0 else '':<11} {angle:>2}°: {_fmt_rgb(rgb)}")
 
 
 def register(commands) -> None:

@@ -11,14 +11,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from . import usage_error
+
 __all__ = ["register", "render_cmd", "load_brdf"]
-
-
-def _UsageError(option: str, message: str):
-    """A bad option value: a usage error (``brdffit.cli.main`` prints it and exits 2)."""
-    from . import usage_error
-
-    return usage_error(option, message)
 
 
 def load_brdf(spec: str):
@@ -82,17 +77,17 @@ def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str |
 
     ext = output.suffix.lower()
     if ext not in (".exr", ".png"):
-        raise _UsageError("-o", f"expected an output ending in .exr or .png, found {ext!r}")
+        raise usage_error("-o", f"expected an output ending in .exr or .png, found {ext!r}")
     if scene not in SCENES:
-        raise _UsageError("--scene", f"expected one of {', '.join(SCENES)}, found {scene!r}")
+        raise usage_error("--scene", f"expected one of {', '.join(SCENES)}, found {scene!r}")
     if mode not in ("auto", "table", "closed"):
-        raise _UsageError("--mode", f"expected auto, table or closed, found {mode!r}")
+        raise usage_error("--mode", f"expected auto, table or closed, found {mode!r}")
     expo = exposure
     if exposure != "auto":
         try:
             expo = float(exposure)
         except ValueError:
-            raise _UsageError("--exposure",
+            raise usage_error("--exposure",
                               f"expected a number or 'auto', found {exposure!r}") from None
     brdf = load_brdf(spec)
     env = None if envmap in (None, "", "procedural", "default") else envmap
