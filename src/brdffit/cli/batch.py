@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 
-from . import EXIT_ERROR, EXIT_FAILED_TASKS, EXIT_USAGE
+from . import DEFAULT_MODELS, EXIT_ERROR, EXIT_FAILED_TASKS, EXIT_USAGE
 
 
 def register(commands) -> None:
@@ -19,7 +19,7 @@ def register(commands) -> None:
     cmd.add_argument("source", metavar="SOURCE",
                      help="Folder of measured files, a Neural-BRDF .zip collection, a list "
                           "file, or synthetic:[a,b].")
-    cmd.add_argument("-m", "--models", default="tabulated,ggx,beckmann", metavar="A,B",
+    cmd.add_argument("-m", "--models", default=DEFAULT_MODELS, metavar="A,B",
                      help="Comma-separated model names (list below).")
     cmd.add_argument("-o", "--out", required=True, metavar="DIR",
                      help="Output folder (created; re-runs resume).")
@@ -51,7 +51,7 @@ def register(commands) -> None:
     cmd.add_argument("-q", "--quiet", action="store_true", help="No progress bar.")
 
 
-def batch_cmd(source: str, out: str, models: str = "tabulated,ggx,beckmann", only: str = "",
+def batch_cmd(source: str, out: str, models: str = DEFAULT_MODELS, only: str = "",
               limit: int = 0, scheduler: str = "", workers: int = 2, memory_limit: str = "",
               retries: int = 2, no_metrics: bool = False, render: bool = False,
               scenes: str = "paper", spp: int = 64, batches: int = 8, resolution: int = 256,

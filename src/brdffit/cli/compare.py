@@ -17,7 +17,7 @@ import json
 import sys
 from pathlib import Path
 
-from . import EXIT_FAILED_TASKS
+from . import DEFAULT_MODELS, EXIT_FAILED_TASKS
 
 __all__ = ["register", "compare_cmd"]
 
@@ -44,7 +44,7 @@ def register(commands) -> None:
     cmd.add_argument("spec", metavar="INPUT[:MATERIAL]",
                      help="Reference BRDF: a file, collection.zip[:material], synthetic:NAME "
                           "or a fit file.")
-    cmd.add_argument("-m", "--models", default="tabulated,ggx,beckmann", metavar="A,B",
+    cmd.add_argument("-m", "--models", default=DEFAULT_MODELS, metavar="A,B",
                      help="Comma-separated model names to fit (list below), and/or saved fits "
                           "as NAME=fit.npz or fit.npz.")
     cmd.add_argument("-o", "--out", type=path, default=Path("report"), metavar="DIR",
@@ -72,7 +72,7 @@ def register(commands) -> None:
     cmd.add_argument("-q", "--quiet", action="store_true", help="No progress messages.")
 
 
-def compare_cmd(spec: str, models: str = "tabulated,ggx,beckmann", out: Path = Path("report"),
+def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("report"),
                 scenes: str = "paper", scene: str | None = None, spp: int = 64,
                 batches: int = 8, resolution: int = 256, seed: int = 0,
                 exposure: str = "scene", gamma: float | None = None, noise_floor: bool = True,
