@@ -37,6 +37,7 @@ import sys
 import textwrap
 from pathlib import Path
 
+from .. import __version__
 from ..errors import BRDFError
 from .._blas import single_thread_env
 from .._malloc import tune_this_process
@@ -281,7 +282,7 @@ def build_parser(commands=None) -> tuple[_Parser, dict[str, _Parser]]:
                    description=_SUMMARY, epilog=models_help(), add_help=False)
     root.add_argument("-h", "--help", action="help", help="Show this message and exit.")
     root.add_argument("--debug", action="store_true", help="Show full tracebacks on errors.")
-    root.add_argument("--version", action="version", version=f"brdffit {_version()}",
+    root.add_argument("--version", action="version", version=f"brdffit {__version__}",
                       help="Show the version and exit.")
     sub = root.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser,
                               required=True, help=argparse.SUPPRESS)
@@ -292,12 +293,6 @@ def build_parser(commands=None) -> tuple[_Parser, dict[str, _Parser]]:
             for name, parser in parsers.items()]
     root.description = "\n\n".join([_SUMMARY, _EXIT_TEXT, "\b\nCommands:\n" + "\n".join(rows)])
     return root, parsers
-
-
-def _version() -> str:
-    from .. import __version__
-
-    return __version__
 
 
 def _command_name(argv: list[str]) -> str | None:
