@@ -36,9 +36,11 @@ from brdffit._atomic import atomic_write  # noqa: E402
 
 ZIP = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
 #: model → (variant, options); ``npf-g-from-d-plain`` is G-from-D without the over-relaxed
-#: sweeps (the default before session 8), run side by side with ``--models``
+#: sweeps and the polish (the default before session 8), ``npf-g-from-d-awls`` without the
+#: polish (the default of sessions 8-12), run side by side with ``--models``
 VARIANTS = {"npf": ("independent-g", {}), "npf-g-from-d": ("g-from-d", {}),
-            "npf-g-from-d-plain": ("g-from-d", {"extrapolate": False})}
+            "npf-g-from-d-awls": ("g-from-d", {"polish": 0}),
+            "npf-g-from-d-plain": ("g-from-d", {"extrapolate": False, "polish": 0})}
 DEFAULT_MODELS = ("npf", "npf-g-from-d")
 FIELDS = ["material", "model", "cpu_s", "wall_s", "objective", "converged", "nit",
           "stop_reason", "continuation_iterations", "reference_objective", "ratio_to_reference",
@@ -73,6 +75,22 @@ def summarise(rows, args, load0):
             "above_reference_by_more_than_1e-3": sum(x > 1.001 for x in ratios),
             "not_converged": [r["material"] for r in rs if r["converged"] != "True"],
         }
+    # side by side in this run: objective and CPU of each model against each other, per material
+    by = {(r["material"], r["model"]): r for r in rows}
+    models = [m for m in VARIANTS if m in out["per_model"]]
+    for i, a in enumerate(models):
+        for b in models[i + 1:]:
+            both = [m for (m, mod) in by if mod == a and (m, b) in by]
+            if not both:
+                continue
+            ratio = [float(by[m, a]["objective"]) / float(by[m, b]["objective"]) for m in both]
+            cpu_a = sum(float(by[m, a]["cpu_s"]) for m in both)
+            cpu_b = sum(float(by[m, b]["cpu_s"]) for m in both)
+            out.setdefault("side_by_side", {})[f"{a} / {b}"] = {
+                "materials": len(both), "objective_ratio": _stats(ratio),
+                "above": sum(x > 1.0 for x in ratio), "above_materials":
+                    {m: x for m, x in zip(both, ratio) if x > 1.0},
+                "cpu_total_ratio": cpu_a / cpu_b if cpu_b else None}
     return out
 
 
@@ -125,7 +143,7 @@ def main(argv=None) -> int:
                    "objective": fi["objective"], "converged": fi["converged"],
                    "nit": fi["nit"], "stop_reason": fi["stop_reason"],
                    "continuation_iterations": fi.get("continuation", {}).get("iterations", 0)}
-            ref_model = "npf-g-from-d" if model == "npf-g-from-d-plain" else model
+            ref_model = "npf-g-from-d" if model.startswith("npf-g-from-d") else model
             ref = ref_dir / "fits" / name / f"{ref_model}.npz" if ref_dir else None
             if ref is not None and ref.exists():
                 rfi = load_fit(ref).fit_info

@@ -175,6 +175,34 @@ def test_g_from_d_public_fit(gfromd_truth):
     assert np.all(fit.D >= 0) and fit.variant == "g-from-d"
 
 
+def test_g_from_d_polish_continues_where_the_awls_stops(indep_truth):
+    """Data G-from-D cannot fit exactly (an independent G): the AWLS sweeps stop (Eq. 14's D
+    step holds G fixed although G depends on D, so its stopping points are not stationary
+    points of Eq. 7); the Gauss–Newton polish in (D, F, ρd, ρs), G following D, goes on
+    lowering the objective, never raising it, and G stays the Smith G of D."""
+    _, data = indep_truth
+    awls = fit_npf(data=data, variant="g-from-d", polish=0)
+    polished = fit_npf(data=data, variant="g-from-d", polish=8)
+    e0, e1 = awls.fit_info["objective"], polished.fit_info["objective"]
+    assert awls.fit_info["converged"]                        # the AWLS criterion is met...
+    assert e1 < (1 - 1e-3) * e0                              # ...yet the objective goes down
+    info = polished.fit_info
+    assert info["awls_stop_reason"] == awls.fit_info["stop_reason"]
+    assert info["stop_reason"] == info["polish"]["stop_reason"]
+    assert info["nit"] == awls.fit_info["nit"] + info["polish"]["iterations"]
+    if info["stop_reason"] == "max_iter":                     # the polish's cap is reported
+        assert not info["converged"] and info["cap_reached"]
+        assert "polish cap of 8 iterations" in info["message"]
+    h = np.array(polished.fit_info["history"])
+    assert np.all(np.diff(h) <= 1e-12 * h[0])
+    n_awls = len(awls.fit_info["history"])
+    np.testing.assert_allclose(h[:n_awls], awls.fit_info["history"], rtol=1e-12)
+    assert polished.fit_info["polish"]["iterations"] >= 1
+    assert polished.fit_options["polish"] == 8
+    np.testing.assert_allclose(polished.G.T, smith_g_from_d(polished.D).T, rtol=1e-12)
+    assert np.all(polished.D >= 0) and np.all(polished.F >= 0)
+
+
 def test_options_and_determinism(indep_truth):
     _, data = indep_truth
     kw = dict(variant="independent-g", starts=("random", "ones"), n_random=2, max_iter=6,
@@ -211,7 +239,7 @@ def test_fit_info_reports_convergence(indep_truth, gfromd_truth):
     keys = ("converged", "success", "status", "message", "criterion", "tol", "nit",
             "max_iterations", "cap_reached", "final_relative_change")
     _, data = gfromd_truth
-    capped = fit_npf(data=data, variant="g-from-d", max_iter=3)
+    capped = fit_npf(data=data, variant="g-from-d", max_iter=3, polish=0)
     info = capped.fit_info
     assert all(k in info for k in keys)
     assert info["cap_reached"] and not info["converged"] and info["status"] == 1
@@ -222,10 +250,18 @@ def test_fit_info_reports_convergence(indep_truth, gfromd_truth):
     assert li["converged"] and li["success"] and not li["cap_reached"]
     assert li["nit"] < 300 and "relative decrease" in li["criterion"]
     _, data = indep_truth
-    ind = fit_npf(data=data, variant="independent-g", starts=("ones",), max_iter=4,
+    ind = fit_npf(data=data, variant="independent-g", starts=("ones",), max_iter=4, polish=0,
                   start_max_iter=2)
     ii = ind.fit_info
     assert all(k in ii for k in keys) and ii["cap_reached"] and not ii["converged"]
+    # by default the AWLS is followed by the Levenberg–Marquardt polish, whose stop is the fit's
+    pol = fit_npf(data=data, variant="independent-g", starts=("ones",), max_iter=4,
+                  start_max_iter=2).fit_info
+    assert pol["polish"]["max_iterations"] == 30 and pol["awls_stop_reason"] == "max_iter"
+    assert pol["stop_reason"] == pol["polish"]["stop_reason"]
+    assert pol["objective"] < ii["objective"]
+    assert pol["converged"] == pol["stop_reason"].startswith(("relative", "damping", "exact"))
+    assert pol["nit"] == 4 + pol["polish"]["iterations"]
     biv = fit_npf(data=data, variant="bivariate")
     assert biv.fit_info["converged"] and not biv.fit_info["cap_reached"]
 

@@ -16,7 +16,8 @@ from brdffit.geometry import half_diff_to_io
 from brdffit.io.fitfile import load_fit, save_fit, table_bytes
 from brdffit.microfacet.npf_model import (D_THETA_H, F_THETA_D, G_THETA, H_PHI_D,
                                           NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF,
-                                          normalise_d, smith_g_from_d)
+                                          _smith_lambda, normalise_d, smith_g_from_d,
+                                          smith_g_jacobian)
 
 
 def beckmann_d(alpha):
@@ -163,6 +164,40 @@ def test_smith_g_from_d_matches_beckmann():
         ref = np.concatenate([[1.0], 1 / (1 + lam)])
         np.testing.assert_allclose(G, ref, atol=1e-2)
         assert G[0] == 1.0 and np.all(np.diff(G) <= 1e-9)
+
+
+def test_smith_g_from_d_is_the_quadrature_of_each_table():
+    """The linear operator behind smith_g_from_d gives the quadrature's G for any table,
+    including tables with zeros and identically zero ones (G = 1)."""
+    rng = np.random.default_rng(3)
+    D = rng.uniform(0.0, 2.0, (90, 4)) ** 3
+    D[60:, 1] = 0.0
+    D[:, 3] = 0.0
+    dbar, dt = normalise_d(D)
+    direct = np.ones_like(D)
+    direct[1:] = 1.0 / (1.0 + np.maximum(_smith_lambda(dt), 0.0))
+    np.testing.assert_allclose(smith_g_from_d(D), direct, rtol=1e-13, atol=0)
+    assert np.all(smith_g_from_d(D)[:, 3] == 1.0)
+    np.testing.assert_allclose(smith_g_from_d(D[:, 0]), direct[:, 0], rtol=1e-13)
+
+
+def test_smith_g_jacobian_matches_central_differences():
+    rng = np.random.default_rng(4)
+    D = rng.uniform(0.05, 1.0, (3, 90))
+    D[1, 50:] = 0.0                              # a zero tail: the one-sided derivative
+    G, J = smith_g_jacobian(D)
+    np.testing.assert_array_equal(G, smith_g_from_d(D.T).T)
+    h = 1e-6
+    for k in (0, 7, 45, 70, 89):
+        up, down = D.copy(), D.copy()
+        up[:, k] += h
+        down[:, k] -= h
+        down = np.maximum(down, 0.0)
+        num = (smith_g_from_d(up.T).T - smith_g_from_d(down.T).T) / (up[:, k] - down[:, k])[:, None]
+        np.testing.assert_allclose(J[:, :, k], num, rtol=1e-5, atol=1e-9)
+    assert np.all(J[:, 0] == 0.0)                # G(0) = 1 whatever D
+    # scale-free: D and 3 D give the same G, so J · D = 0 (Euler)
+    np.testing.assert_allclose(np.einsum("cgk,ck->cg", J, D), 0.0, atol=1e-12)
 
 
 def test_sizes_and_save_load_identity(tmp_path):

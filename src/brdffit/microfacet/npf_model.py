@@ -147,20 +147,9 @@ def normalise_d(D) -> tuple[np.ndarray, np.ndarray]:
     return (dbar[0], dtilde[:, 0]) if squeeze else (dbar, dtilde)
 
 
-def smith_g_from_d(D) -> np.ndarray:
-    """G on the 90 G samples from a tabulated D (Bagher et al. 2016, §4.3).
-
-    ``D̃ = D/D̄`` (Eq. 19); ``G(θ) = 1/(1 + Λ(cot θ))`` with
-    ``Λ(μ) = 1/μ ∫_{atan μ}^{π/2} (tan ω − μ)(1 + tan² ω) p2(tan ω) dω``,
-    ``p2(r) = 2 ∫_0^{π/2} p22(r² + tan² ψ)(tan² ψ + 1) dψ``,
-    ``p22(u) = D̃(atan √u) cos⁴(atan √u)``, each integral by 15-point Gauss–Legendre
-    quadrature (as the paper), D̃ linearly interpolated (in θ'h). ``D`` is (90,) or (90, C);
-    the result has the same shape. ``G(0) = 1``. A D that is identically 0 gives G = 1.
-    """
-    D = np.maximum(np.asarray(D, dtype=np.float64), 0.0)
-    squeeze = D.ndim == 1
-    D2 = D[:, None] if squeeze else D
-    _, dt = normalise_d(D2)                                                # (90, C)
+def _smith_lambda(dt) -> np.ndarray:
+    """Smith's Λ at the G samples 1..89 for normalised tables ``dt`` = D̃ (90, C): the
+    quadrature of :func:`smith_g_from_d`, linear in ``dt``."""
     theta = G_THETA[1:]                                                     # (89,)
     mu = 1.0 / np.tan(theta)
     a = np.arctan(mu)
@@ -174,10 +163,69 @@ def smith_g_from_d(D) -> np.ndarray:
     p2 = 2.0 * (np.pi / 4) * np.einsum("abgc,g->abc", p22 * (q2 + 1.0)[None, None, :, None],
                                       _GL_W)                              # (89, 15, C)
     integrand = ((r - mu[:, None]) * (1.0 + r**2))[..., None] * p2
-    lam = np.einsum("abc,b->ac", integrand, _GL_W) * ((np.pi / 2 - a) * 0.5 / mu)[:, None]
+    return np.einsum("abc,b->ac", integrand, _GL_W) * ((np.pi / 2 - a) * 0.5 / mu)[:, None]
+
+
+_SMITH_OPERATOR: tuple[np.ndarray, np.ndarray] | None = None
+
+
+def _smith_operator() -> tuple[np.ndarray, np.ndarray]:
+    """``(L (89, 90), w (90,))`` with ``Λ = L D / (w·D)`` for a table D (both integrals are
+    linear in D: ``w·D`` is D̄ of Eq. 19, ``L`` the Λ quadrature applied to each unit table).
+    Built once per process (one quadrature of 90 columns, ≈ 20 ms)."""
+    global _SMITH_OPERATOR
+    if _SMITH_OPERATOR is None:
+        unit = np.eye(N_THETA_H)
+        dbar, _ = normalise_d(unit)
+        _SMITH_OPERATOR = (_smith_lambda(unit), dbar)
+    return _SMITH_OPERATOR
+
+
+def smith_g_from_d(D) -> np.ndarray:
+    """G on the 90 G samples from a tabulated D (Bagher et al. 2016, §4.3).
+
+    ``D̃ = D/D̄`` (Eq. 19); ``G(θ) = 1/(1 + Λ(cot θ))`` with
+    ``Λ(μ) = 1/μ ∫_{atan μ}^{π/2} (tan ω − μ)(1 + tan² ω) p2(tan ω) dω``,
+    ``p2(r) = 2 ∫_0^{π/2} p22(r² + tan² ψ)(tan² ψ + 1) dψ``,
+    ``p22(u) = D̃(atan √u) cos⁴(atan √u)``, each integral by 15-point Gauss–Legendre
+    quadrature (as the paper), D̃ linearly interpolated (in θ'h). ``D`` is (90,) or (90, C);
+    the result has the same shape. ``G(0) = 1``. A D that is identically 0 gives G = 1.
+
+    Λ is linear in D̃ and D̄ linear in D, so the quadrature is applied once to the 90 unit
+    tables (:func:`_smith_operator`) and G follows from a matrix product (the same numbers
+    to rounding, ≈ 1e-16).
+    """
+    D = np.maximum(np.asarray(D, dtype=np.float64), 0.0)
+    squeeze = D.ndim == 1
+    D2 = D[:, None] if squeeze else D
+    lam, _ = _smith_lambda_of(D2)
     G = np.ones_like(D2)
-    G[1:] = 1.0 / (1.0 + np.maximum(lam, 0.0))
+    G[1:] = 1.0 / (1.0 + lam)
     return G[:, 0] if squeeze else G
+
+
+def _smith_lambda_of(D2) -> tuple[np.ndarray, np.ndarray]:
+    """Λ (89, C) ≥ 0 of non-negative tables D2 (90, C), and D̄ (C,) (1 where D̄ = 0)."""
+    L, w = _smith_operator()
+    dbar = w @ D2
+    dbar = np.where(dbar > 0, dbar, 1.0)
+    return np.maximum((L @ D2) / dbar, 0.0), dbar
+
+
+def smith_g_jacobian(D) -> tuple[np.ndarray, np.ndarray]:
+    """``(G (C, 90), ∂G/∂D (C, 90, 90))`` for tables ``D`` (C, 90) ≥ 0 (channels first, as
+    the NPF solver holds them): from ``Λ = L D / (w·D)``, ``∂Λ/∂D = (L − Λ wᵀ)/(w·D)`` and
+    ``∂G/∂D = −G² ∂Λ/∂D`` (G(0) = 1 is constant; L ≥ 0, so the clamp of Λ at 0 only
+    removes rounding and is not differentiated)."""
+    L, w = _smith_operator()
+    D2 = np.maximum(np.asarray(D, dtype=np.float64), 0.0).T             # (90, C)
+    lam, dbar = _smith_lambda_of(D2)                                    # (89, C), (C,)
+    G = np.ones_like(D2)
+    G[1:] = 1.0 / (1.0 + lam)
+    dlam = (L[None] - lam.T[:, :, None] * w[None, None, :]) / dbar[:, None, None]
+    J = np.zeros((D2.shape[1], N_THETA_H, N_THETA_H))
+    J[:, 1:] = -(G[1:].T ** 2)[:, :, None] * dlam
+    return G.T, J
 
 
 # -- importance sampling ----------------------------------------------------------------------

@@ -25,7 +25,7 @@ from scipy.linalg import solve_banded
 from scipy.ndimage import gaussian_filter1d
 
 from ...losses.objective import ObjectiveData
-from ...microfacet.npf_model import smith_g_from_d
+from ...microfacet.npf_model import smith_g_from_d, smith_g_jacobian
 from . import _kernels
 
 NH = ND = NG = 90
@@ -744,37 +744,64 @@ def _normal_matrix(st: MFState, smp: Samples, S):
     return A, g
 
 
+def _chain_g_from_d(A, g, J):
+    """JᵀWJ and JᵀWr of :func:`_normal_matrix` in the G-from-D parameters (D, F, ρd, ρs):
+    with ``dG = ∂G/∂D dD`` (``J`` (3, 90, 90), :func:`smith_g_jacobian`) the parameter map is
+    ``P = [[I, 0], [0, I], [J, 0], [0, I₂]]`` and the system becomes ``Pᵀ A P``, ``Pᵀ g``."""
+    n = NH + ND + 2
+    P = np.zeros((3, A.shape[1], n))
+    P[:, :NH + ND, :NH + ND] = np.eye(NH + ND)
+    P[:, NH + ND:NH + ND + NG, :NH] = J
+    P[:, -2:, -2:] = np.eye(2)
+    Pt = np.swapaxes(P, 1, 2)
+    return Pt @ A @ P, (Pt @ g[:, :, None])[:, :, 0]
+
+
 def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
-              callback=None) -> RunResult:
-    """Levenberg–Marquardt refinement of an AWLS independent-G solution (an extension, not in
-    the paper): Gauss–Newton steps on all 272 parameters per channel at once, which crosses
-    the long, nearly flat valleys of Eq. 7 (the near-ambiguity between F(θd), G(θi)G(θo) and
-    D(θh) away from the specular peak) where alternating updates crawl. Steps are accepted
-    per channel only if the exact objective decreases; factors stay clamped at ``eps`` and
-    max-normalised. No smoothing is applied to G."""
+              g_from_d=False, callback=None) -> RunResult:
+    """Levenberg–Marquardt refinement of an AWLS solution (an extension, not in the paper):
+    Gauss–Newton steps on all parameters of a channel at once, which crosses the long,
+    nearly flat valleys of Eq. 7 (the near-ambiguity between F(θd), G(θi)G(θo) and D(θh)
+    away from the specular peak) where alternating updates crawl. Steps are accepted per
+    channel only if the exact objective decreases; factors stay clamped at ``eps`` and
+    max-normalised. No smoothing is applied to G.
+
+    Independent-G: 272 parameters (D, F, G, ρd, ρs). ``g_from_d``: 182 (D, F, ρd, ρs), G
+    following D through Smith's integrals (Eq. 19), differentiated exactly
+    (:func:`smith_g_jacobian`). G-from-D's AWLS D step (Eq. 14) holds G fixed although G
+    depends on D, so the points where it stops are not stationary points of Eq. 7; this
+    polish continues from there."""
     t0 = time.perf_counter()
+    if g_from_d:
+        st.G, _ = smith_g_jacobian(st.D)
     X = st.rho_s[:, None] * outer_df(st.D, st.F)
     E, S = smp.stats(st.G, X, st.rho_d)
     mon = Monitor(smp.sum_wzz, tol, max_iter, patience=2)
     mon.history.append(float(E.sum()))
     lam = np.full(3, 1e-12)
-    n = NH + ND + NG + 2
+    iG = slice(NH + ND, NH + ND + (0 if g_from_d else NG))
+    n = iG.stop + 2
     n_eval = 0
     while True:
         A, g = _normal_matrix(st, smp, S)
+        if g_from_d:
+            A, g = _chain_g_from_d(A, g, smith_g_jacobian(st.D)[1])
         # multiplicative (log) parameters for D, F, G and ρs: the near-ambiguity
         # F(θd)·G(θi)G(θo) ≈ F(θd)e^{-2kθd}·G(θi)e^{kθi}·G(θo)e^{kθo} is a straight line in
         # log space, so Gauss–Newton crosses it in few steps
-        sc = np.concatenate([st.D, st.F, st.G, np.ones((3, 1)), st.rho_s[:, None]], axis=1)
+        sc = np.concatenate([st.D, st.F] + ([] if g_from_d else [st.G])
+                            + [np.ones((3, 1)), st.rho_s[:, None]], axis=1)
         sc = np.maximum(sc, 1e-300)
         A = A * sc[:, :, None] * sc[:, None, :]
         g = g * sc
         free = np.ones((3, n), bool)
         for c in range(3):
-            # gauge: the max components of D, F and G stay fixed, removing the three scale
+            # gauge: the max components of D, F (and G) stay fixed, removing the scale
             # ambiguities (ρs absorbs the scale) from the system
-            free[c, [int(np.argmax(st.D[c])), NH + int(np.argmax(st.F[c])),
-                     NH + ND + int(np.argmax(st.G[c]))]] = False
+            fixed = [int(np.argmax(st.D[c])), NH + int(np.argmax(st.F[c]))]
+            if not g_from_d:
+                fixed.append(NH + ND + int(np.argmax(st.G[c])))
+            free[c, fixed] = False
         todo = np.ones(3, bool)
         for _attempt in range(8):                 # raise the damping until the step helps
             step = np.zeros((3, n))
@@ -789,12 +816,14 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
             mult = np.exp(np.clip(step, -5.0, 5.0))
             cand = MFState(np.maximum(st.D * mult[:, :NH], eps),
                            np.maximum(st.F * mult[:, NH:NH + ND], eps),
-                           np.maximum(st.G * mult[:, NH + ND:NH + ND + NG], eps),
+                           st.G if g_from_d else np.maximum(st.G * mult[:, iG], eps),
                            np.maximum(st.rho_d + step[:, -2], 0.0),
                            np.maximum(st.rho_s * mult[:, -1], 1e-300))
-            for nm, pw in (("D", 1), ("F", 1), ("G", 2)):
+            for nm, pw in (("D", 1), ("F", 1), ("G", 2))[:2 if g_from_d else 3]:
                 f, cand.rho_s = normalise(getattr(cand, nm), cand.rho_s, eps, pw)
                 setattr(cand, nm, f)
+            if g_from_d:
+                cand.G, _ = smith_g_jacobian(cand.D)
             Xc = cand.rho_s[:, None] * outer_df(cand.D, cand.F)
             Ec, Sc = smp.stats(cand.G, Xc, cand.rho_d)
             n_eval += 1
