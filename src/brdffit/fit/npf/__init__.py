@@ -37,7 +37,7 @@ Deviations from the paper (deliberate, documented):
   polish converges in ≈ 10-15 iterations and lowers the objective by up to ≈ 13 % (MERL
   fabrics); for G-from-D the paper's D update (Eq. 14) even holds G fixed although G is a
   function of D, and the polish in (D, F, ρd, ρs), G following D through Smith's integrals
-  with their exact derivative, lowers the objective by 0-25 % (median ≈ 1 %) but descends
+  with their exact derivative, lowers the objective by 0-18 % (median ≈ 1 %) but descends
   slowly, so its cap is often reached — ``fit_info`` then says "NOT converged" with the cap
   (bench/bench_npf_defaults.py). ``polish=0`` is the paper's AWLS only.
 * Objective weights at cell centres (see :mod:`brdffit.losses.objective`).
@@ -83,7 +83,7 @@ DEFAULT_MAX_ITER = {"independent-g": 4000, "g-from-d": 300, "naive": 3000}
 #: converges in ≈ 10-15 iterations (≈ 1 s) and lowers the objective by up to ≈ 13 % on MERL
 #: fabrics. G-from-D (whose D step holds G fixed although G depends on D): with G
 #: differentiated through Smith's integrals it descends slowly; ten iterations (≈ 1.7 s) lower
-#: the objective by 0-25 % (median 1 %) and the fit reports the cap when it is reached
+#: the objective by 0-18 % (median 1 %) and the fit reports the cap when it is reached
 #: (bench/bench_npf_defaults.py --models npf-g-from-d,npf-g-from-d-awls,npf-g-from-d-plain)
 DEFAULT_POLISH = {"independent-g": 30, "g-from-d": 10}
 #: G-from-D over-relaxes its sweeps (``extrapolate``) from this iteration on: by then the

@@ -12,7 +12,9 @@ over the 90 × 90 bins. G updates need a second pass (:func:`._kernels.g_normal_
 
 Stopping rule (all variants): stop after ``patience`` (3) consecutive iterations whose
 relative decrease of the total objective ``(E_prev − E)/E`` is below ``tol``, or when
-``E ≤ 1e-14 · Σ w ρ*²`` (exact fit), or after ``max_iter`` iterations.
+``E ≤ 1e-14 · Σ w ρ*²`` (exact fit), or after ``max_iter`` iterations. The
+Levenberg–Marquardt polish (:func:`polish_lm`) stops after 2 such iterations, when no damped
+step lowers the objective, or after its own cap.
 """
 
 from __future__ import annotations
