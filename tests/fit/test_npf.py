@@ -203,6 +203,27 @@ def test_g_from_d_polish_continues_where_the_awls_stops(indep_truth):
     assert np.all(polished.D >= 0) and np.all(polished.F >= 0)
 
 
+def test_polish_keeps_the_model_storable(indep_truth, monkeypatch):
+    """The polish takes no step that would make ρ exceed what a fit file holds
+    (FACTOR_MAX): with the limit just above the AWLS ρs, ρs stays below it."""
+    _, data = indep_truth
+    smp = _solver.Samples.from_objective(prepare_objective(*data))
+    st = _solver.MFState(D=np.ones((3, 90)), F=np.ones((3, 90)), G=np.ones((3, 90)),
+                         rho_d=np.zeros(3), rho_s=np.ones(3))
+    awls = _solver.run_independent_g(st, smp, max_iter=5)
+    free = _solver.polish_lm(_copy_state(awls.state), smp, max_iter=5)
+    limit = float(awls.state.rho_s.max()) * 1.001
+    assert np.any(free.state.rho_s > limit)                      # the polish raises ρs here...
+    monkeypatch.setattr(_solver, "FACTOR_MAX", limit)
+    capped = _solver.polish_lm(_copy_state(awls.state), smp, max_iter=5)
+    assert np.all(capped.state.rho_s <= limit)                   # ...but not beyond the limit
+    assert np.all(capped.E <= awls.E * (1 + 1e-12))
+
+
+def _copy_state(st):
+    return _solver.MFState(*(np.array(a) for a in _solver._state_arrays(st)))
+
+
 def test_options_and_determinism(indep_truth):
     _, data = indep_truth
     kw = dict(variant="independent-g", starts=("random", "ones"), n_random=2, max_iter=6,
@@ -250,13 +271,14 @@ def test_fit_info_reports_convergence(indep_truth, gfromd_truth):
     assert li["converged"] and li["success"] and not li["cap_reached"]
     assert li["nit"] < 300 and "relative decrease" in li["criterion"]
     _, data = indep_truth
-    ind = fit_npf(data=data, variant="independent-g", starts=("ones",), max_iter=4, polish=0,
+    ind = fit_npf(data=data, variant="independent-g", starts=("ones",), max_iter=4,
                   start_max_iter=2)
     ii = ind.fit_info
     assert all(k in ii for k in keys) and ii["cap_reached"] and not ii["converged"]
-    # by default the AWLS is followed by the Levenberg–Marquardt polish, whose stop is the fit's
+    assert ind.fit_options["polish"] == 0 and "polish" not in ii      # the default: AWLS only
+    # with the Levenberg–Marquardt polish, the polish's stop is the fit's
     pol = fit_npf(data=data, variant="independent-g", starts=("ones",), max_iter=4,
-                  start_max_iter=2).fit_info
+                  start_max_iter=2, polish=30).fit_info
     assert pol["polish"]["max_iterations"] == 30 and pol["awls_stop_reason"] == "max_iter"
     assert pol["stop_reason"] == pol["polish"]["stop_reason"]
     assert pol["objective"] < ii["objective"]

@@ -30,16 +30,15 @@ Deviations from the paper (deliberate, documented):
   started from the previous accepted step (``_solver.run_g_from_d``), and from its 50th
   sweep on over-relaxes each sweep as independent-G does (accepted only if better; the
   G-from-D *start* of independent-G runs the plain sweeps).
-* Both AWLS variants are followed by Levenberg–Marquardt iterations on all factors of a
-  channel at once (``polish``, :data:`DEFAULT_POLISH`: independent-G up to 30, G-from-D 10;
-  ``_solver.polish_lm``). AWLS stops (relative decrease below ``tol``) where its alternating
-  updates no longer help, which is not a minimum of Eq. 7: independent-G's Gauss–Newton
-  polish converges in ≈ 10-15 iterations and lowers the objective by up to ≈ 13 % (MERL
-  fabrics); for G-from-D the paper's D update (Eq. 14) even holds G fixed although G is a
-  function of D, and the polish in (D, F, ρd, ρs), G following D through Smith's integrals
-  with their exact derivative, lowers the objective by 0-18 % (median ≈ 1 %) but descends
-  slowly, so its cap is often reached — ``fit_info`` then says "NOT converged" with the cap
-  (bench/bench_npf_defaults.py). ``polish=0`` is the paper's AWLS only.
+* G-from-D's AWLS is followed by Levenberg–Marquardt iterations on all its parameters at once
+  (``polish``, :data:`DEFAULT_POLISH`: 10; ``_solver.polish_lm``). AWLS stops (relative
+  decrease below ``tol``) where its alternating updates no longer help, which is not a
+  minimum of Eq. 7 — and the paper's D update (Eq. 14) even holds G fixed although G is a
+  function of D. The polish in (D, F, ρd, ρs), G following D through Smith's integrals with
+  their exact derivative, lowers the objective by 0-18 % (median ≈ 1 %) but descends slowly,
+  so its cap is often reached: ``fit_info`` then says "NOT converged" with the cap
+  (bench/bench_npf_defaults.py). ``polish=0`` is the paper's AWLS only, the independent-G
+  default (its polish, an option, see :data:`DEFAULT_POLISH`).
 * Objective weights at cell centres (see :mod:`brdffit.losses.objective`).
 * The start "from the SGD fit" uses :func:`brdffit.fit.sgd.fit_sgd` when that module exists
   (the paper used its authors' earlier Bagher et al. 2012 fits); otherwise it is skipped and
@@ -77,15 +76,17 @@ __all__ = ["fit_npf", "VARIANTS", "ALL_STARTS", "summary"]
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
 ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
 DEFAULT_MAX_ITER = {"independent-g": 4000, "g-from-d": 300, "naive": 3000}
-#: Levenberg–Marquardt iterations after AWLS by default (``polish``; caps: the polish stops
-#: earlier on its criterion). Both AWLS variants stop where their alternating updates no
-#: longer help, not at a minimum of Eq. 7. Independent-G: Gauss–Newton on all factors
-#: converges in ≈ 10-15 iterations (≈ 1 s) and lowers the objective by up to ≈ 13 % on MERL
-#: fabrics. G-from-D (whose D step holds G fixed although G depends on D): with G
-#: differentiated through Smith's integrals it descends slowly; ten iterations (≈ 1.7 s) lower
-#: the objective by 0-18 % (median 1 %) and the fit reports the cap when it is reached
-#: (bench/bench_npf_defaults.py --models npf-g-from-d,npf-g-from-d-awls,npf-g-from-d-plain)
-DEFAULT_POLISH = {"independent-g": 30, "g-from-d": 10}
+#: Levenberg–Marquardt iterations after AWLS by default (``polish``; a cap: the polish stops
+#: earlier on its criterion). G-from-D's sweeps stop where Eq. 14's D step (G held fixed
+#: although G depends on D) no longer helps, not at a minimum of Eq. 7; ten Gauss–Newton
+#: iterations with G differentiated through Smith's integrals (≈ 1-2 s) lower the objective
+#: by 0-18 % (median 1 %) and the fit reports the cap when it is reached
+#: (bench/bench_npf_defaults.py --models npf-g-from-d,npf-g-from-d-awls,npf-g-from-d-plain).
+#: Independent-G: 0 (the paper's AWLS only). Its polish lowers the objective of MERL fits by
+#: 5 % on average (up to 28 %) in ≈ 2 s, but on 3 of 100 materials (chrome, steel,
+#: silver-metallic-paint2) it drove ρs past 1e8 — G samples the data barely determine run
+#: away — so it stays an option until those are regularised.
+DEFAULT_POLISH = {"independent-g": 0, "g-from-d": 10}
 #: G-from-D over-relaxes its sweeps (``extrapolate``) from this iteration on: by then the
 #: materials whose plain sweeps converge have mostly done so at their own point, and the
 #: others (a third of MERL, which plain sweeps leave at the cap) converge in 100-200
@@ -254,10 +255,11 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         Levenberg–Marquardt iterations run after AWLS (all factors of a channel at once, in
         log-parameters; accepted only where they lower the objective; they stop early when
         the relative decrease stays below ``tol`` for 2 iterations or no damped step lowers
-        the objective). Default per variant (:data:`DEFAULT_POLISH`): independent-G 30,
-        G-from-D 10 (G following D through Smith's integrals, differentiated exactly); 0 is
-        the paper's AWLS only. AWLS stops where alternating updates no longer help, not at a
-        minimum of Eq. 7; the polish goes on from there (see the module notes).
+        the objective; no step makes ρ exceed what a fit file holds). Default per variant
+        (:data:`DEFAULT_POLISH`): G-from-D 10 (G following D through Smith's integrals,
+        differentiated exactly), independent-G 0 (the paper's AWLS only). AWLS stops where
+        alternating updates no longer help, not at a minimum of Eq. 7; the polish goes on
+        from there (see the module notes).
     extrapolate:
         Over-relaxation of all factors after each AWLS sweep, accepted only if it lowers the
         objective (extension, default on; off = the paper's sweeps). Independent-G: from the

@@ -27,6 +27,7 @@ from scipy.linalg import solve_banded
 from scipy.ndimage import gaussian_filter1d
 
 from ...losses.objective import ObjectiveData
+from ...schema import FACTOR_MAX
 from ...microfacet.npf_model import smith_g_from_d, smith_g_jacobian
 from . import _kernels
 
@@ -829,14 +830,18 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
             Xc = cand.rho_s[:, None] * outer_df(cand.D, cand.F)
             Ec, Sc = smp.stats(cand.G, Xc, cand.rho_d)
             n_eval += 1
-            acc = todo & np.isfinite(Ec) & (Ec < E)
+            # a step is taken only if it lowers the objective and the model stays storable
+            # (a fit file holds factors ≤ FACTOR_MAX; the factors are max-normalised)
+            storable = (cand.rho_s <= FACTOR_MAX) & (cand.rho_d <= FACTOR_MAX)
+            acc = todo & np.isfinite(Ec) & (Ec < E) & storable
             for nm in ("D", "F", "G"):
                 setattr(st, nm, np.where(acc[:, None], getattr(cand, nm), getattr(st, nm)))
             for nm in ("rho_d", "rho_s"):
                 setattr(st, nm, np.where(acc, getattr(cand, nm), getattr(st, nm)))
             S = tuple(np.where(acc[:, None], x, y) for x, y in zip(Sc, S))
             E = np.where(acc, Ec, E)
-            lam = np.where(acc, np.maximum(lam / 10.0, 1e-12), np.where(todo, lam * 100.0, lam))
+            lam = np.where(acc, np.maximum(lam / 10.0, 1e-12),
+                           np.where(todo, np.minimum(lam * 100.0, 1e30), lam))
             todo &= ~acc
             if not np.any(todo):
                 break
