@@ -335,9 +335,12 @@ def main() -> None:
                      else [m for m in args.models.split(",") if m])
             print(f"fitting {what} with {', '.join(names)} ...", flush=True)
             figs = dict(previous.get("models", {}).get("figures", {}))
-            figs.update(model_figures(gold, names))
+            rev = _git("rev-parse", "--short", "HEAD")
+            for name, fig in model_figures(gold, names).items():
+                figs[name] = dict(fig, revision=rev, load_average=list(os.getloadavg()))
             result["models"] = {"input": what, "figures": figs,
-                                "measured_at_revision": _git("rev-parse", "--short", "HEAD"),
+                                "measured_at_revision": rev + " (the last --models run; each "
+                                "figure carries its own revision when measured since)",
                                 "load_average": os.getloadavg()}
         elif "models" in previous:
             result["models"] = previous["models"]
