@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from brdffit.errors import FitError
-from brdffit.fit.npf import fit_npf
+from brdffit.fit.npf import fit_npf, summary
 from brdffit.fit.npf import _solver
 from brdffit.losses.objective import prepare_objective
 from brdffit.grid import tabulate_merl_grid
@@ -201,6 +201,12 @@ def test_g_from_d_polish_continues_where_the_awls_stops(indep_truth):
     assert polished.fit_options["polish"] == 8
     np.testing.assert_allclose(polished.G.T, smith_g_from_d(polished.D).T, rtol=1e-12)
     assert np.all(polished.D >= 0) and np.all(polished.F >= 0)
+    # the CLI's summary says how far the polish went and whether the fit converged
+    shown = summary(polished)
+    assert shown["polish_iterations"] == info["polish"]["iterations"]
+    assert shown["converged"] == info["converged"]
+    assert ("message" in shown) == (not info["converged"])
+    assert summary(awls)["polish_iterations"] is None and summary(awls)["converged"]
 
 
 def test_polish_keeps_the_model_storable(indep_truth, monkeypatch):

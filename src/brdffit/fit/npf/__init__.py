@@ -556,13 +556,18 @@ def _start_state(init, values, valid, rng) -> MFState:
 
 
 def summary(model) -> dict:
-    """Key figures of a fitted NPF model (for the CLI)."""
+    """Key figures of a fitted NPF model (for the CLI): objective, AWLS iterations, the
+    Levenberg–Marquardt polish's iterations, whether the fit converged (and why not)."""
     info = model.fit_info or {}
-    return {"model": model.fit_kind, "variant": getattr(model, "variant", None),
-            "objective": info.get("objective"),
-            "normalised_objective": info.get("normalised_objective"),
-            "iterations": info.get("iterations"), "line_searches": info.get("line_searches"),
-            "time_s": info.get("time_s")}
+    out = {"model": model.fit_kind, "variant": getattr(model, "variant", None),
+           "objective": info.get("objective"),
+           "normalised_objective": info.get("normalised_objective"),
+           "iterations": info.get("iterations"), "line_searches": info.get("line_searches"),
+           "polish_iterations": (info.get("polish") or {}).get("iterations"),
+           "converged": info.get("converged"), "time_s": info.get("time_s")}
+    if info.get("converged") is False:
+        out["message"] = info.get("message")
+    return out
 
 
 def _register_cli() -> None:
