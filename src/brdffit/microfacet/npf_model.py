@@ -31,6 +31,7 @@ returned with pdf 0 (invalid samples), so ``pdf`` integrates to the valid fracti
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
@@ -166,19 +167,14 @@ def _smith_lambda(dt) -> np.ndarray:
     return np.einsum("abc,b->ac", integrand, _GL_W) * ((np.pi / 2 - a) * 0.5 / mu)[:, None]
 
 
-_SMITH_OPERATOR: tuple[np.ndarray, np.ndarray] | None = None
-
-
+@functools.cache
 def _smith_operator() -> tuple[np.ndarray, np.ndarray]:
     """``(L (89, 90), w (90,))`` with ``Λ = L D / (w·D)`` for a table D (both integrals are
     linear in D: ``w·D`` is D̄ of Eq. 19, ``L`` the Λ quadrature applied to each unit table).
     Built once per process (one quadrature of 90 columns, ≈ 20 ms)."""
-    global _SMITH_OPERATOR
-    if _SMITH_OPERATOR is None:
-        unit = np.eye(N_THETA_H)
-        dbar, _ = normalise_d(unit)
-        _SMITH_OPERATOR = (_smith_lambda(unit), dbar)
-    return _SMITH_OPERATOR
+    unit = np.eye(N_THETA_H)
+    dbar, _ = normalise_d(unit)
+    return _smith_lambda(unit), dbar
 
 
 def smith_g_from_d(D) -> np.ndarray:

@@ -776,7 +776,7 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
     polish continues from there."""
     t0 = time.perf_counter()
     if g_from_d:
-        st.G, _ = smith_g_jacobian(st.D)
+        st.G = smith_g_from_d(st.D.T).T
     X = st.rho_s[:, None] * outer_df(st.D, st.F)
     E, S = smp.stats(st.G, X, st.rho_d)
     mon = Monitor(smp.sum_wzz, tol, max_iter, patience=2)
@@ -826,7 +826,7 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
                 f, cand.rho_s = normalise(getattr(cand, nm), cand.rho_s, eps, pw)
                 setattr(cand, nm, f)
             if g_from_d:
-                cand.G, _ = smith_g_jacobian(cand.D)
+                cand.G = smith_g_from_d(cand.D.T).T
             Xc = cand.rho_s[:, None] * outer_df(cand.D, cand.F)
             Ec, Sc = smp.stats(cand.G, Xc, cand.rho_d)
             n_eval += 1
