@@ -27,24 +27,31 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
+
+from brdffit._blas import single_thread_env  # noqa: E402
+
+single_thread_env()          # one BLAS thread, as the CLI and batch fits (brdffit._blas)
+
+import numpy as np  # noqa: E402
 
 from brdffit._atomic import atomic_write  # noqa: E402
 
 ZIP = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
-#: model → (variant, options); ``npf-g-from-d-plain`` is G-from-D without the over-relaxed
+#: model → (variant, options); ``npf-awls`` is independent-G without the Newton polish (the
+#: default before session 14); ``npf-g-from-d-plain`` is G-from-D without the over-relaxed
 #: sweeps and the polish (the default before session 8), ``npf-g-from-d-awls`` without the
 #: polish (the default of sessions 8-12), run side by side with ``--models``
-VARIANTS = {"npf": ("independent-g", {}), "npf-g-from-d": ("g-from-d", {}),
+VARIANTS = {"npf": ("independent-g", {}), "npf-awls": ("independent-g", {"polish": 0}),
+            "npf-g-from-d": ("g-from-d", {}),
             "npf-g-from-d-awls": ("g-from-d", {"polish": 0}),
             "npf-g-from-d-plain": ("g-from-d", {"extrapolate": False, "polish": 0})}
 DEFAULT_MODELS = ("npf", "npf-g-from-d")
 FIELDS = ["material", "model", "cpu_s", "wall_s", "objective", "converged", "nit",
-          "stop_reason", "continuation_iterations", "reference_objective", "ratio_to_reference",
-          "reference_converged", "reference_time_s"]
+          "stop_reason", "continuation_iterations", "polish_iterations", "awls_objective",
+          "ratio_to_awls", "reference_objective", "ratio_to_reference", "reference_converged",
+          "reference_time_s"]
 
 
 def _stats(xs):
@@ -73,6 +80,10 @@ def summarise(rows, args, load0):
             "ratio_to_reference": _stats(ratios),
             "above_reference": sum(x > 1.0 for x in ratios),
             "above_reference_by_more_than_1e-3": sum(x > 1.001 for x in ratios),
+            "ratio_to_awls": _stats(float(r["ratio_to_awls"]) for r in rs
+                                    if r.get("ratio_to_awls")),
+            "polish_iterations": _stats(r["polish_iterations"] for r in rs
+                                        if r.get("polish_iterations")),
             "not_converged": [r["material"] for r in rs if r["converged"] != "True"],
         }
     # side by side in this run: objective and CPU of each model against each other, per material
@@ -143,6 +154,10 @@ def main(argv=None) -> int:
                    "objective": fi["objective"], "converged": fi["converged"],
                    "nit": fi["nit"], "stop_reason": fi["stop_reason"],
                    "continuation_iterations": fi.get("continuation", {}).get("iterations", 0)}
+            if "polish" in fi:
+                awls = float(fi["polish"]["awls_objective"])   # where AWLS stopped
+                row.update(polish_iterations=fi["polish"]["iterations"], awls_objective=awls,
+                           ratio_to_awls=fi["objective"] / awls)
             ref_model = "npf-g-from-d" if model.startswith("npf-g-from-d") else model
             ref = ref_dir / "fits" / name / f"{ref_model}.npz" if ref_dir else None
             if ref is not None and ref.exists():

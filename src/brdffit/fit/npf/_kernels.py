@@ -95,10 +95,15 @@ def g_normal_equations(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
 
 @njit(cache=True, nogil=True)
 def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_s,
-                      GG, DG, FG, Grd, Grs, gG):  # pragma: no cover
-    """Blocks of JᵀWJ and JᵀWr involving G for the Gauss–Newton polish of Eq. 3 (per
-    channel): ``GG`` (3, 90, 90), ``DG`` (3, 90 θh, 90 G), ``FG`` (3, 90 θd, 90 G), ``Grd``,
-    ``Grs``, ``gG`` (3, 90). The blocks not involving G follow from the bin statistics."""
+                      GG, DG, FG, Grd, Grs, gG, curvature,
+                      HGG, HDG, HFG, HsG):  # pragma: no cover
+    """Blocks of JᵀWJ and JᵀWr involving G for the polish of Eq. 3 (per channel): ``GG``
+    (3, 90, 90), ``DG`` (3, 90 θh, 90 G), ``FG`` (3, 90 θd, 90 G), ``Grd``, ``Grs``, ``gG``
+    (3, 90). The blocks not involving G follow from the bin statistics.
+
+    With ``curvature``, in the same pass, the blocks involving G of the residual-curvature
+    term ``Σ w r ∇²m`` that Newton's Hessian adds to JᵀWJ: ``HGG`` (G enters twice, as
+    G(θi)G(θo)), ``HDG``, ``HFG``, ``HsG`` (with ρs), shaped as their JᵀWJ counterparts."""
     n = hd.shape[0]
     nd = F.shape[1]
     GG[:] = 0.0
@@ -107,8 +112,13 @@ def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_
     Grd[:] = 0.0
     Grs[:] = 0.0
     gG[:] = 0.0
+    if curvature:
+        HGG[:] = 0.0
+        HDG[:] = 0.0
+        HFG[:] = 0.0
+        HsG[:] = 0.0
     idx = np.empty(4, dtype=np.int64)
-    gv = np.empty(4)
+    dp = np.empty(4)
     for j in range(n):
         k = hd[j]
         h = k // nd
@@ -127,18 +137,19 @@ def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_
             g_o = _lerp(G, c, b, s)
             P = g_i * g_o * ic
             df = D[c, h] * F[c, d]
-            q = rho_s[c] * df * ic
-            gv[0] = q * g_o * (1.0 - t)
-            gv[1] = q * g_o * t
-            gv[2] = q * g_i * (1.0 - s)
-            gv[3] = q * g_i * s
+            # ∂P/∂G_u, P = G(θi) G(θo) / (cos θi cos θo); ∂m/∂G_u = ρs D F ∂P/∂G_u
+            dp[0] = ic * g_o * (1.0 - t)
+            dp[1] = ic * g_o * t
+            dp[2] = ic * g_i * (1.0 - s)
+            dp[3] = ic * g_i * s
+            q = rho_s[c] * df
             wj = w[c, j]
             r = rho_d[c] + rho_s[c] * df * P - z[c, j]
             jd = rho_s[c] * F[c, d] * P
             jf = rho_s[c] * D[c, h] * P
             js = df * P
             for u in range(4):
-                e = wj * gv[u]
+                e = wj * q * dp[u]
                 iu = idx[u]
                 DG[c, h, iu] += e * jd
                 FG[c, d, iu] += e * jf
@@ -146,7 +157,24 @@ def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_
                 Grd[c, iu] += e
                 gG[c, iu] += e * r
                 for v in range(4):
-                    GG[c, iu, idx[v]] += e * gv[v]
+                    GG[c, iu, idx[v]] += e * q * dp[v]
+            if curvature:
+                # ∂²m/∂D_h∂G_u = ρs F_d ∂P/∂G_u, likewise F_d and ρs; ∂²P/∂G_u∂G_v between
+                # the θi cell (u) and the θo cell (v), in both orders
+                wr = wj * r
+                for u in range(4):
+                    e = wr * dp[u]
+                    iu = idx[u]
+                    HDG[c, h, iu] += e * rho_s[c] * F[c, d]
+                    HFG[c, d, iu] += e * rho_s[c] * D[c, h]
+                    HsG[c, iu] += e * df
+                e_io = wr * q * ic
+                for u in range(2):
+                    wu = (1.0 - t) if u == 0 else t
+                    for v in range(2, 4):
+                        e = e_io * wu * ((1.0 - s) if v == 2 else s)
+                        HGG[c, idx[u], idx[v]] += e
+                        HGG[c, idx[v], idx[u]] += e
 
 
 @njit(cache=True, nogil=True)
@@ -182,3 +210,4 @@ def p_stats_line(hd, gi0, gti, go0, gto, inv_cc, w, z, G, dG, Q):  # pragma: no 
             q[8] += wz * p0
             q[9] += wz * p1
             q[10] += wz * p2
+
