@@ -811,8 +811,8 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
     polish continues from there.
 
     ``bound`` (> 1): a trust region around the starting point — every factor sample and ρs
-    stays within ``[x₀/bound, x₀·bound]`` (a box in the log parameters; parameters at a
-    face whose gradient points outwards are held, the others' step is cut at the faces).
+    stays within ``[x₀/bound, x₀·bound]`` (a box in the log parameters, relative to the
+    gauge samples; see :func:`_damped_step_in_box` for how steps respect it).
     Independent-G needs it: the near-ambiguity F(θd)·G(θi)G(θo) ≈ F(θd)/h(θd)²·G(θi)h(θi)
     ·G(θo)h(θo) is broken only weakly by the data, and the unbounded polish runs along it to
     degenerate factors (F(0) at the clamp ``eps``, ρs grown 10-10⁶×: 49 of 97 MERL fits
@@ -876,10 +876,10 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
         # pushed out by the clamp may only move back in): the factors' floor ``eps`` (the
         # gauge samples stay 1, so the floor is the AWLS's dynamic-range clamp) and, with
         # ``bound``, the trust region around the start; ρd ≥ 0 (Eq. 18; its step is additive,
-        # and unbounded above). A parameter at a face whose descent
-        # direction (−g) leaves the box is held: steps into the clamp were cut by it, and
-        # Newton's model then promised decreases the step could not give (aluminium: a
-        # predicted 1.5e-3 for an actual 5e-5, every iteration)
+        # and unbounded above). A parameter at a face whose descent direction (−g) leaves
+        # the box is held: steps into the clamp were cut by it, and the quadratic model
+        # then promised decreases the step could not give (aluminium: a predicted 1.5e-3
+        # for an actual 5e-5, every iteration)
         log_p = np.log(sc)
         room_down = np.full((3, n), np.inf)
         room_up = np.full((3, n), np.inf)
