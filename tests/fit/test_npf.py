@@ -266,6 +266,8 @@ def test_newton_hessian_is_the_derivative_of_the_gradient(indep_truth):
         assert np.abs(A[:, :, k] + H[:, :, k] - col).max() < 1e-5 * scale, k
         gauss_newton_errors.append(np.abs(A[:, :, k] - col).max() / scale)
     assert max(gauss_newton_errors) > 1e-2
+    with pytest.raises(ValueError, match="newton"):
+        _solver.polish_lm(_copy_state(st), smp, g_from_d=True, newton=True)
     no_curvature = _solver._normal_matrix(st, smp, stats(st))
     assert no_curvature[2] is None
     np.testing.assert_array_equal(no_curvature[0], A)
@@ -372,6 +374,7 @@ def test_fit_info_reports_convergence(indep_truth, gfromd_truth):
                   start_max_iter=2).fit_info
     assert pol["polish"]["max_iterations"] == 100 and pol["awls_stop_reason"] == "max_iter"
     assert pol["polish"]["method"] == "Newton" and pol["polish"]["bound"] == 2.0
+    assert "(Newton within a factor 2 of the AWLS factors" in pol["criterion"]
     assert pol["stop_reason"] == pol["polish"]["stop_reason"]
     assert pol["objective"] < ii["objective"]
     assert pol["converged"] == pol["stop_reason"].startswith(("relative", "damping", "exact"))

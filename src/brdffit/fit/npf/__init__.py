@@ -550,9 +550,12 @@ def _convergence(extra: dict, tol, max_iter, variant) -> dict:
     if polish is not None:
         cap, phase = int(polish["max_iterations"]), "Levenberg–Marquardt polish"
         nit += int(polish["iterations"])
-        criterion += (f"; then the Levenberg–Marquardt polish until its relative decrease is "
-                      f"< tol for 2 consecutive iterations or no damped step lowers the "
-                      f"objective; safety cap polish = {cap}")
+        method = polish.get("method", "Gauss–Newton")
+        where = (f" within a factor {polish['bound']:g} of the AWLS factors (polish_bound)"
+                 if polish.get("bound") else "")
+        criterion += (f"; then the Levenberg–Marquardt polish ({method}{where}) until its "
+                      f"relative decrease is < tol for 2 consecutive iterations or no damped "
+                      f"step lowers the objective; safety cap polish = {cap}")
     converged = reason.startswith(_CONVERGED_REASONS)
     cap_reached = reason == "max_iter"
     if converged:

@@ -825,7 +825,10 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
     problem for most materials (the model cannot fit them), where Gauss–Newton converges
     linearly and slowly (aluminium: relative decreases of 1e-6-1e-5 per iteration after 60
     iterations); Newton's steps converge on the same materials in ≈ 10-20 iterations.
-    G-from-D keeps Gauss–Newton (its Newton step would need Smith's second derivative)."""
+    G-from-D keeps Gauss–Newton: its Newton step needs Smith's second derivative, and
+    without it (the curvature of the product only, chained through ∂G/∂D; tried on 26 MERL
+    materials) the polish converged on 11 in 30 iterations and 13 in 50 (2.7 and 4.1 s),
+    against Gauss–Newton's 7 in 10 (0.7 s), with ρs moving up to 35× from the AWLS value."""
     t0 = time.perf_counter()
     newton = (not g_from_d) if newton is None else bool(newton)
     if newton and g_from_d:
