@@ -59,6 +59,28 @@ def write_rows(csv_path, fields, rows, summary: dict) -> None:
         fh.write(json.dumps(summary, indent=1) + "\n")
 
 
+def write_csv_and_summary(csv_path, json_path, fields, rows, summarise) -> list[dict]:
+    """Write ``rows`` (missing fields empty) as CSV and ``summarise(rows)`` as JSON, both
+    atomically; returns the rows as read back (all fields text), as a resumed run sees them."""
+    import csv
+    import io
+    import json
+
+    from brdffit._atomic import atomic_write
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fields)
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: r.get(k, "") for k in fields})
+    with atomic_write(csv_path, "w") as fh:
+        fh.write(buf.getvalue())
+    rows = list(csv.DictReader(io.StringIO(buf.getvalue())))
+    with atomic_write(json_path, "w") as fh:
+        json.dump(summarise(rows), fh, indent=1, default=float)
+    return rows
+
+
 def resumable_merl_study(doc: str, default_name: str, zip_path, results_dir, argv=None):
     """The command line of a resumable per-material study over the Neural-BRDF MERL
     materials (``--only``, ``--name``): ``(todo, csv_path, rows)`` — the materials still to

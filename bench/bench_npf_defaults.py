@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import io
 import json
 import os
 import sys
@@ -36,7 +35,7 @@ single_thread_env()          # one BLAS thread, as the CLI and batch fits (brdff
 
 import numpy as np  # noqa: E402
 
-from brdffit._atomic import atomic_write  # noqa: E402
+from _common import write_csv_and_summary  # noqa: E402
 
 ZIP = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
 #: model → (variant, options); ``npf-awls`` is independent-G without the Newton polish (the
@@ -170,16 +169,8 @@ def main(argv=None) -> int:
             print(f"{name:28s} {model:13s} cpu {row['cpu_s']:6.1f} s  wall {row['wall_s']:6.1f} s"
                   f"  conv {fi['converged']!s:5s} it {fi['nit']:5d}"
                   f"  ratio {row.get('ratio_to_reference', float('nan')):.5f}", flush=True)
-        buf = io.StringIO()
-        w = csv.DictWriter(buf, FIELDS)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: r.get(k, "") for k in FIELDS})
-        with atomic_write(csv_path, "w") as fh:
-            fh.write(buf.getvalue())
-        rows = list(csv.DictReader(io.StringIO(buf.getvalue())))
-        with atomic_write(json_path, "w") as fh:
-            json.dump(summarise(rows, args, load0), fh, indent=1)
+        rows = write_csv_and_summary(csv_path, json_path, FIELDS, rows,
+                                     lambda rs: summarise(rs, args, load0))
     print(json.dumps(summarise(rows, args, load0)["per_model"], indent=1))
     return 0
 

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import io
 import json
 import os
 import sys
@@ -37,7 +36,7 @@ single_thread_env()          # one BLAS thread, as the CLI and batch fits (brdff
 
 import numpy as np  # noqa: E402
 
-from brdffit._atomic import atomic_write  # noqa: E402
+from _common import write_csv_and_summary  # noqa: E402
 
 ZIP = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
 FIELDS = ["material", "config", "ratio", "iterations", "stop_reason", "converged", "cpu_s",
@@ -151,16 +150,8 @@ def main(argv=None) -> int:
             print(f"{name:28s} {cfg:22s} ratio {r['ratio']:.4f} it {r['iterations']:3d} "
                   f"cpu {r['cpu_s']:5.1f} s  ρs×{r['rho_s_ratio_max']:.3g}  "
                   f"F(0) {r['f0_start_min']:.2g} → {r['f0_min']:.2g}", flush=True)
-        buf = io.StringIO()
-        w = csv.DictWriter(buf, FIELDS)
-        w.writeheader()
-        for r in rows:
-            w.writerow({k: r.get(k, "") for k in FIELDS})
-        with atomic_write(csv_path, "w") as fh:
-            fh.write(buf.getvalue())
-        rows = list(csv.DictReader(io.StringIO(buf.getvalue())))
-        with atomic_write(json_path, "w") as fh:
-            json.dump(summarise(rows, args, load0), fh, indent=1, default=float)
+        rows = write_csv_and_summary(csv_path, json_path, FIELDS, rows,
+                                     lambda rs: summarise(rs, args, load0))
     print(json.dumps(summarise(rows, args, load0)["per_config"], indent=1, default=float))
     return 0
 
