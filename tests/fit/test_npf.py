@@ -309,8 +309,9 @@ def test_bounded_polish_stays_in_its_trust_region(indep_truth):
     for res in (boxed, free):                                      # max-normalised at the end
         for nm in "DFG":
             np.testing.assert_allclose(getattr(res.state, nm).max(axis=1), 1.0)
-    with pytest.raises(ValueError, match="polish_bound"):
-        fit_npf(data=data, variant="independent-g", polish_bound=0.5)
+    for bad in (0.5, -2, float("inf"), "wide"):
+        with pytest.raises(ValueError, match="polish_bound"):
+            fit_npf(data=data, variant="independent-g", polish_bound=bad)
 
 
 def _copy_state(st):
