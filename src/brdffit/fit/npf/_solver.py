@@ -400,14 +400,11 @@ def _extrapolate(st: MFState, prev: MFState, beta, smp: Samples, eps, E, g_from_
     ``(accepted (3,), S or None, E)``; ``st`` is updated in place where accepted."""
     b = beta[:, None]
     cand = MFState(*(np.array(x) for x in _state_arrays(st)))
-    factors = (("D", 1), ("F", 1)) if g_from_d else (("D", 1), ("F", 1), ("G", 2))
-    for nm, _ in factors:
+    for nm in ("D", "F") if g_from_d else ("D", "F", "G"):
         x = getattr(st, nm) + b * (getattr(st, nm) - getattr(prev, nm))
         setattr(cand, nm, np.maximum(x, eps))
     cand.rho_s = np.maximum(st.rho_s + beta * (st.rho_s - prev.rho_s), 1e-300)
-    for nm, pw in factors:
-        f, cand.rho_s = normalise(getattr(cand, nm), cand.rho_s, eps, pw)
-        setattr(cand, nm, f)
+    _normalise_factors(cand, eps, g_from_d)
     if g_from_d:
         cand.G = smith_g_from_d(cand.D.T).T
     X = cand.rho_s[:, None] * outer_df(cand.D, cand.F)
@@ -437,9 +434,7 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
     With ``extrapolate`` each sweep is followed by an accepted-if-better over-relaxation step (:func:`_extrapolate`), which shortens the long AWLS "swamps"
     caused by the near-ambiguity between F(θd) and G(θi)G(θo)."""
     t0 = time.perf_counter()
-    for name in ("D", "F", "G"):
-        f, st.rho_s = normalise(getattr(st, name), st.rho_s, eps, 2 if name == "G" else 1)
-        setattr(st, name, f)
+    _normalise_factors(st, eps, g_from_d=False)
     X = st.rho_s[:, None] * outer_df(st.D, st.F)
     E, S = smp.stats(st.G, X, st.rho_d)
     _rho_update(st, smp, S)
