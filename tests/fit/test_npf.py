@@ -18,7 +18,7 @@ from brdffit.losses.objective import prepare_objective
 from brdffit.grid import tabulate_merl_grid
 from brdffit.microfacet.npf_model import (D_THETA_H, F_THETA_D, G_THETA, H_PHI_D,
                                           NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF,
-                                          smith_g_from_d)
+                                          smith_g_from_d, smith_g_jacobian)
 
 RHO_D = np.array([0.05, 0.08, 0.02])
 RHO_S = np.array([0.6, 0.4, 0.9])
@@ -267,11 +267,47 @@ def test_newton_hessian_is_the_derivative_of_the_gradient(indep_truth):
         assert np.abs(A[:, :, k] + H[:, :, k] - col).max() < 1e-5 * scale, k
         gauss_newton_errors.append(np.abs(A[:, :, k] - col).max() / scale)
     assert max(gauss_newton_errors) > 1e-2
-    with pytest.raises(ValueError, match="newton"):
-        _solver.polish_lm(_copy_state(st), smp, g_from_d=True, newton=True)
     no_curvature = _solver._normal_matrix(st, smp, stats(st))
     assert no_curvature[2] is None
     np.testing.assert_array_equal(no_curvature[0], A)
+
+
+def test_g_from_d_newton_hessian_is_the_derivative_of_the_gradient(indep_truth):
+    """G-from-D: the chained JᵀWJ + residual curvature + Smith's second derivative
+    (:func:`smith_g_curvature`) equals the derivative of the chained JᵀWr in (D, F, ρd, ρs),
+    G following D, column by column (central differences); without Smith's term it does not."""
+    _, data = indep_truth
+    smp = _solver.Samples.from_objective(prepare_objective(*data))
+    rng = np.random.default_rng(2)
+    truth = indep_truth[0]
+
+    def system(v, smith_term=True):
+        D = v[:, :90]
+        st = _solver.MFState(D, v[:, 90:180], smith_g_from_d(D.T).T, v[:, 180], v[:, 181])
+        S = smp.stats(st.G, st.rho_s[:, None] * _solver.outer_df(st.D, st.F), st.rho_d)[1]
+        A, g, H = _solver._normal_matrix(st, smp, S, curvature=True)
+        J = smith_g_jacobian(D)[1]
+        Hc = (_solver._g_from_d_curvature(st, H, g, J) if smith_term
+              else _solver._chain_g_from_d(H, None, J)[0])
+        Ac, gc = _solver._chain_g_from_d(A, g, J)
+        return Ac, gc, Hc
+
+    p = np.concatenate([truth.D.T * rng.uniform(0.7, 1.3, (3, 90)),
+                        truth.F.T * rng.uniform(0.7, 1.3, (3, 90)),
+                        (RHO_D * 1.3)[:, None], (RHO_S * 0.8)[:, None]], axis=1)
+    A, _, H = system(p)
+    H_product_only = system(p, smith_term=False)[2]
+    without_smith = []
+    for k in (0, 7, 45, 89, 95, 150, 180, 181):                   # D, F, ρd, ρs
+        h = 1e-5 * abs(p[0, k])
+        up, down = p.copy(), p.copy()
+        up[:, k] += h
+        down[:, k] -= h
+        col = (system(up)[1] - system(down)[1]) / (2 * h)
+        scale = np.abs(col).max()
+        assert np.abs(A[:, :, k] + H[:, :, k] - col).max() < 1e-5 * scale, k
+        without_smith.append(np.abs(A[:, :, k] + H_product_only[:, :, k] - col).max() / scale)
+    assert max(without_smith) > 1e-3
 
 
 def test_bounded_polish_stays_in_its_trust_region(indep_truth):

@@ -17,7 +17,7 @@ from brdffit.io.fitfile import load_fit, save_fit, table_bytes
 from brdffit.microfacet.npf_model import (D_THETA_H, F_THETA_D, G_THETA, H_PHI_D,
                                           NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF,
                                           _smith_lambda, normalise_d, smith_g_from_d,
-                                          smith_g_jacobian)
+                                          smith_g_jacobian, smith_g_curvature)
 
 
 def beckmann_d(alpha):
@@ -198,6 +198,31 @@ def test_smith_g_jacobian_matches_central_differences():
     assert np.all(J[:, 0] == 0.0)                # G(0) = 1 whatever D
     # scale-free: D and 3 D give the same G, so J · D = 0 (Euler)
     np.testing.assert_allclose(np.einsum("cgk,ck->cg", J, D), 0.0, atol=1e-12)
+
+
+def test_smith_g_curvature_matches_central_differences_of_the_jacobian():
+    """Σ_k e_k ∂²G_k/∂D∂D (Newton's term through G = G(D)) against central differences of
+    eᵀ ∂G/∂D, column by column; symmetric; zero for e = 0."""
+    rng = np.random.default_rng(5)
+    D = rng.uniform(0.05, 1.0, (3, 90))
+    e = rng.normal(size=(3, 90))
+    T = smith_g_curvature(D, e)
+    np.testing.assert_allclose(T, np.swapaxes(T, 1, 2), rtol=1e-12, atol=1e-14)
+    h = 1e-4                                # central differences: error O(h²) ≈ 1e-12 here
+    scale = np.abs(T).max()
+    assert scale > 1e-3                                          # not trivially zero
+    for k in (0, 7, 45, 70, 89):
+        up, down = D.copy(), D.copy()
+        up[:, k] += h
+        down[:, k] -= h
+        num = (np.einsum("cg,cgi->ci", e, smith_g_jacobian(up)[1])
+               - np.einsum("cg,cgi->ci", e, smith_g_jacobian(down)[1])) / (2 * h)
+        np.testing.assert_allclose(T[:, :, k], num, rtol=1e-6, atol=1e-8 * scale)
+    np.testing.assert_array_equal(smith_g_curvature(D, np.zeros((3, 90))), 0.0)
+    # scale-free G: G(t D) = G(D), so the curvature along D itself is −(Jᵀe) (Euler, degree 0)
+    Je = np.einsum("cg,cgi->ci", e, smith_g_jacobian(D)[1])
+    np.testing.assert_allclose(np.einsum("cij,cj->ci", T, D), -Je, rtol=1e-9,
+                               atol=1e-9 * np.abs(Je).max())
 
 
 def test_sizes_and_save_load_identity(tmp_path):

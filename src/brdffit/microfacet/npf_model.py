@@ -52,7 +52,8 @@ _RHO = Array((2, 3), ge=0, le=FACTOR_MAX)
 _META = {"name": Opt(Text()), "layout": Opt(Text())}
 
 __all__ = ["NPFMicrofacetBRDF", "NPFNaiveBRDF", "NPFBivariateBRDF", "smith_g_from_d",
-           "normalise_d", "G_THETA", "D_THETA_H", "F_THETA_D", "H_PHI_D"]
+           "smith_g_jacobian", "smith_g_curvature", "normalise_d", "G_THETA", "D_THETA_H",
+           "F_THETA_D", "H_PHI_D"]
 
 N_G = 90
 #: θh of the D samples (the MERL θh grid, uniform in θ'h = sqrt(θh), Eq. 6)
@@ -222,6 +223,27 @@ def smith_g_jacobian(D) -> tuple[np.ndarray, np.ndarray]:
     J = np.zeros((D2.shape[1], N_THETA_H, N_THETA_H))
     J[:, 1:] = -(G[1:].T ** 2)[:, :, None] * dlam
     return G.T, J
+
+
+def smith_g_curvature(D, e) -> np.ndarray:
+    """``Σ_k e_k ∂²G_k/∂D ∂D`` (C, 90, 90) for tables ``D`` (C, 90) ≥ 0 and weights ``e``
+    (C, 90) (e.g. an objective's gradient in G: Newton's Hessian through G = G(D) needs it).
+
+    With ``s = w·D``, ``Λ = L D / s`` (:func:`smith_g_jacobian`) and ``Λ' = ∂Λ/∂D``:
+    ``∂²Λ_k/∂D_i∂D_j = −(w_j Λ'_ki + w_i Λ'_kj)/s`` and, G = 1/(1 + Λ),
+    ``∂²G_k/∂D_i∂D_j = 2 G_k³ Λ'_ki Λ'_kj + G_k² (w_j Λ'_ki + w_i Λ'_kj)/s``, so the sum is
+    ``2 Λ'ᵀ diag(e G³) Λ' + (u wᵀ + w uᵀ)/s`` with ``u = Λ'ᵀ (e G²)``. G(0) = 1 is
+    constant (``e_0`` is ignored)."""
+    L, w = _smith_operator()
+    D2 = np.maximum(np.asarray(D, dtype=np.float64), 0.0).T             # (90, C)
+    e = np.asarray(e, dtype=np.float64)[:, 1:]                          # (C, 89)
+    lam, dbar = _smith_lambda_of(D2)
+    G = 1.0 / (1.0 + lam.T)                                             # (C, 89)
+    dlam = (L[None] - lam.T[:, :, None] * w[None, None, :]) / dbar[:, None, None]
+    u = np.einsum("ck,cki->ci", e * G**2, dlam)
+    cross = u[:, :, None] * w[None, None, :] / dbar[:, None, None]
+    return (2.0 * np.einsum("cki,ck,ckj->cij", dlam, e * G**3, dlam)
+            + cross + np.swapaxes(cross, 1, 2))
 
 
 # -- importance sampling ----------------------------------------------------------------------

@@ -28,7 +28,7 @@ from scipy.ndimage import gaussian_filter1d
 
 from ...losses.objective import ObjectiveData
 from ...schema import FACTOR_MAX
-from ...microfacet.npf_model import smith_g_from_d, smith_g_jacobian
+from ...microfacet.npf_model import smith_g_curvature, smith_g_from_d, smith_g_jacobian
 from . import _kernels
 
 NH = ND = NG = 90
@@ -771,14 +771,25 @@ def _residual_curvature(st: MFState, R, HGG, HDG, HFG, HsG) -> np.ndarray:
 def _chain_g_from_d(A, g, J):
     """JᵀWJ and JᵀWr of :func:`_normal_matrix` in the G-from-D parameters (D, F, ρd, ρs):
     with ``dG = ∂G/∂D dD`` (``J`` (3, 90, 90), :func:`smith_g_jacobian`) the parameter map is
-    ``P = [[I, 0], [0, I], [J, 0], [0, I₂]]`` and the system becomes ``Pᵀ A P``, ``Pᵀ g``."""
+    ``P = [[I, 0], [0, I], [J, 0], [0, I₂]]`` and the system becomes ``Pᵀ A P``, ``Pᵀ g``
+    (``g`` may be None: the residual curvature is chained the same way)."""
     n = NH + ND + 2
     P = np.zeros((3, A.shape[1], n))
     P[:, :NH + ND, :NH + ND] = np.eye(NH + ND)
     P[:, NH + ND:NH + ND + NG, :NH] = J
     P[:, -2:, -2:] = np.eye(2)
     Pt = np.swapaxes(P, 1, 2)
-    return Pt @ A @ P, (Pt @ g[:, :, None])[:, :, 0]
+    return Pt @ A @ P, (None if g is None else (Pt @ g[:, :, None])[:, :, 0])
+
+
+def _g_from_d_curvature(st: MFState, curvature, g, J):
+    """Newton's residual curvature in the G-from-D parameters: the product's
+    (:func:`_residual_curvature`, chained like JᵀWJ) plus, G being a function of D, the
+    gradient in G times Smith's second derivative (:func:`smith_g_curvature`) in the D
+    block — the term without which session 14's G-from-D Newton steps stalled."""
+    chained, _ = _chain_g_from_d(curvature, None, J)
+    chained[:, :NH, :NH] += smith_g_curvature(st.D, g[:, NH + ND:NH + ND + NG])
+    return chained
 
 
 def _log_params(st: MFState, g_from_d: bool) -> np.ndarray:
@@ -826,8 +837,6 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
     against Gauss–Newton's 7 in 10 (0.7 s), with ρs moving up to 35× from the AWLS value."""
     t0 = time.perf_counter()
     newton = (not g_from_d) if newton is None else bool(newton)
-    if newton and g_from_d:
-        raise ValueError("polish_lm: newton=True needs independent G (g_from_d=False)")
     log_bound = None if bound is None else float(np.log(bound))
     start = np.log(np.maximum(_log_params(st, g_from_d), 1e-300))
     if g_from_d:
@@ -853,7 +862,10 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
     while True:
         A, g, curvature = _normal_matrix(st, smp, S, curvature=newton)
         if g_from_d:
-            A, g = _chain_g_from_d(A, g, smith_g_jacobian(st.D)[1])
+            J = smith_g_jacobian(st.D)[1]
+            if newton:
+                curvature = _g_from_d_curvature(st, curvature, g, J)
+            A, g = _chain_g_from_d(A, g, J)
         # multiplicative (log) parameters for D, F, G and ρs: the near-ambiguity
         # F(θd)·G(θi)G(θo) ≈ F(θd)e^{-2kθd}·G(θi)e^{kθi}·G(θo)e^{kθo} is a straight line in
         # log space, so Gauss–Newton crosses it in few steps
