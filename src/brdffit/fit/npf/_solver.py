@@ -831,10 +831,13 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
     problem for most materials (the model cannot fit them), where Gauss–Newton converges
     linearly and slowly (aluminium: relative decreases of 1e-6-1e-5 per iteration after 60
     iterations); Newton's steps converge on the same materials in ≈ 10-20 iterations.
-    G-from-D keeps Gauss–Newton: its Newton step needs Smith's second derivative, and
-    without it (the curvature of the product only, chained through ∂G/∂D; tried on 26 MERL
-    materials) the polish converged on 11 in 30 iterations and 13 in 50 (2.7 and 4.1 s),
-    against Gauss–Newton's 7 in 10 (0.7 s), with ρs moving up to 35× from the AWLS value."""
+    G-from-D defaults to Gauss–Newton. Its Newton matrix adds, G being a function of D, the
+    gradient in G times Smith's second derivative (:func:`_g_from_d_curvature`,
+    :func:`smith_g_curvature`); with it (``newton=True``; 20 MERL materials,
+    bench/bench_npf_polish.py, session 15) the unbounded polish drifts like independent-G's
+    (ρs up to 55× in 30 iterations), and within a trust region (``bound`` 2-4) it converges
+    on 19 / 20 in a median of 6 iterations but at the box's faces: above Gauss–Newton's 10
+    iterations on 13-16 of 20 materials (by up to 4 %), so the default stays Gauss–Newton."""
     t0 = time.perf_counter()
     newton = (not g_from_d) if newton is None else bool(newton)
     log_bound = None if bound is None else float(np.log(bound))
