@@ -99,6 +99,44 @@ def test_the_script_entry_point_writes_and_flushes_everything(merl_file, tmp_pat
     assert scripts["project"]["scripts"]["brdffit"] == "brdffit.cli:run"
 
 
+def test_the_script_raises_the_collectors_young_threshold_and_main_does_not():
+    """:func:`brdffit.cli.run` (the script) raises the young-generation threshold for the
+    process (start-up collections); :func:`main` (a library caller) leaves the collector as
+    it found it; the collector stays enabled."""
+    code = ("import gc, sys\n"
+            "from brdffit.cli import GC_YOUNG_THRESHOLD, main, run\n"
+            "before = gc.get_threshold()\n"
+            "main(['--version'])\n"
+            "assert gc.get_threshold() == before, gc.get_threshold()\n"
+            "sys.argv = ['brdffit', '--version']\n"
+            "assert run() == 0\n"
+            "print(gc.get_threshold()[0] == GC_YOUNG_THRESHOLD > before[0],"
+            " gc.get_threshold()[1:] == before[1:], gc.isenabled())")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split()[-3:] == ["True", "True", "True"], proc.stdout
+
+
+def test_the_fit_file_records_the_inputs_sha256_hashed_without_numpy(merl_file, tmp_path):
+    """``brdffit fit -o`` hashes its input on a thread started before NumPy is imported: the
+    hashing module imports no NumPy, and the fit file holds the input's SHA-256."""
+    import hashlib
+
+    from brdffit.io.fitfile import read_fit_header
+
+    _, mods = _modules_after("import brdffit.io._checksum")
+    assert "numpy" not in mods and "brdffit.io._checksum" in mods
+    out = tmp_path / "f.npz"
+    proc = subprocess.run([sys.executable, "-m", "brdffit", "fit", str(merl_file), "--model",
+                           "tabulated", "-o", str(out), "--no-error"], capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    header = read_fit_header(out)
+    assert header["source"]["sha256"] == hashlib.sha256(merl_file.read_bytes()).hexdigest()
+    assert header["source"]["spec"] == str(merl_file)
+
+
 def test_a_rejected_input_fails_before_the_fitting_stack_is_imported(merl_file, tmp_path):
     bad = tmp_path / "bad.binary"
     bad.write_bytes(merl_file.read_bytes()[:1000])  # truncated

@@ -289,15 +289,9 @@ def _live_progress(enabled: bool):
                 live["status"].stop()
 
 
-def _source_checksum(spec: str) -> str | None:
-    from ..io.fitfile import source_checksum
-
-    return source_checksum(spec)
-
-
 def _in_background(fn, *args):
     """Run ``fn(*args)`` on a thread now; the returned callable waits for its result (or
-    re-raises its error). Hashing the input (hashlib releases the GIL) overlaps the fit."""
+    re-raises its error). Hashing the input (hashlib releases the GIL) overlaps the imports."""
     import threading
 
     box: dict = {}
@@ -331,12 +325,14 @@ def run_fit(spec: str, model: str = "tabulated", out: Path | None = None,
     ``output`` (``None`` when not saved), and the model's own summary under ``details``.
     """
     from ..io import load
+    from ..io._checksum import source_checksum
 
     timings: dict[str, float] = {}
+    # the input's hash for the fit file, on a thread while NumPy is imported (no NumPy in it)
+    checksum = _in_background(source_checksum, spec) if out is not None else None
     t0 = time.perf_counter()
     brdf = load(spec)  # read and validated before the fitting stack is imported
     timings["load"] = time.perf_counter() - t0
-    checksum = _in_background(_source_checksum, spec) if out is not None else None
     t0 = time.perf_counter()
     entry = _entry(model)
     timings["import"] = time.perf_counter() - t0

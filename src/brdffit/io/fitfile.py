@@ -39,7 +39,6 @@ not load is not written.
 from __future__ import annotations
 
 import datetime as _dt
-import hashlib
 import json
 import zipfile
 import os
@@ -55,6 +54,7 @@ from .._json import strict_json_default
 if TYPE_CHECKING:
     from ..brdf import BRDF
 from ..errors import BRDFFormatError
+from ._checksum import source_checksum
 from ..schema import ArrayHeader, StateError, show
 from ..serialization import SerializableModel, model_registry, resolve_kind
 
@@ -93,21 +93,6 @@ def _fail(path, problem: str) -> BRDFFormatError:
 def _why(exc: BaseException) -> str:
     text = " ".join(str(exc).split())[:300]
     return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
-
-
-def source_checksum(spec) -> str | None:
-    """SHA-256 of the file behind a load spec (``path`` or ``archive.zip:member``)."""
-    if spec is None:
-        return None
-    path = Path(str(spec).split(":", 1)[0] if ":" in str(spec) and not Path(str(spec)).exists()
-                else str(spec))
-    if not path.is_file():
-        return None
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 # ------------------------------------------------------------------------------------------
