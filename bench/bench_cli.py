@@ -37,6 +37,7 @@ import argparse
 import json
 import os
 import platform
+import random
 import re
 import shlex
 import statistics
@@ -138,23 +139,46 @@ def _commands(py: str, gold: Path, bad: Path, out: Path, baseline: bool,
     return cmds
 
 
-def time_commands(py, src, gold, bad, runs, baseline=False, reference=None) -> dict:
+BASELINE_FIT = "baseline: " + FIT
+
+
+def time_commands(py, src, gold, bad, runs, baseline=False, reference=None,
+                  baseline_src=None) -> dict:
+    """Median (and min) wall and CPU of each command over ``runs`` rounds; every round runs
+    each command once, in an order shuffled per round (a fixed order moved medians by up to
+    10 %: the command after a heavy one pays for it). With ``baseline_src``, the baseline
+    tree's fit joins the same rounds (``BASELINE_FIT``): before/after at the same moments."""
     env = _env(src)
     no_error = _has_no_error(py, env)
+    rng = random.Random(0)
     with tempfile.TemporaryDirectory() as tmp:
-        cmds = _commands(py, gold, bad, Path(tmp) / "f.npz", baseline, no_error, reference)
+        cmds = {k: (argv, env) for k, argv in
+                _commands(py, gold, bad, Path(tmp) / "f.npz", baseline, no_error,
+                          reference).items()}
+        if baseline_src is not None:
+            base_env = _env(baseline_src)
+            base_fit = _commands(py, gold, bad, Path(tmp) / "b.npz", True,
+                                 _has_no_error(py, base_env))[FIT]
+            cmds[BASELINE_FIT] = (base_fit, base_env)
         res = {k: {"wall": [], "cpu": [], "status": None} for k in cmds}
-        for argv in cmds.values():  # warm-up: bytecode caches, page cache
-            _run(argv, env)
+        for argv, cmd_env in cmds.values():  # warm-up: bytecode caches, page cache
+            _run(argv, cmd_env)
         for _ in range(runs):  # interleaved: the load drifts, every command sees it
-            for name, argv in cmds.items():
-                wall, cpu, status = _run(argv, env)
+            order = list(cmds.items())
+            rng.shuffle(order)
+            for name, (argv, cmd_env) in order:
+                wall, cpu, status = _run(argv, cmd_env)
                 res[name]["wall"].append(wall)
                 res[name]["cpu"].append(cpu)
                 res[name]["status"] = status
     out = {k: {"wall_s": _stats(v["wall"]), "cpu_s": _stats(v["cpu"]), "exit": v["status"]}
            for k, v in res.items()}
     out[FIT]["no_error"] = no_error
+    if BASELINE_FIT in out:
+        out[BASELINE_FIT]["current_over_baseline_per_round_median"] = {
+            k: statistics.median(a / b for a, b in zip(res[FIT][k.split("_")[0]],
+                                                       res[BASELINE_FIT][k.split("_")[0]]))
+            for k in ("wall_s", "cpu_s")}
     if REFERENCE in out:
         out[REFERENCE]["command"] = reference
         out[REFERENCE]["fit_over_reference"] = {
@@ -176,6 +200,8 @@ def cpu():
 t0, c0 = time.perf_counter(), cpu()
 from brdffit.cli import main
 t1, c1 = time.perf_counter(), cpu()
+from brdffit._blas import single_thread_env
+single_thread_env()  # as main() does before NumPy loads (else the fit goes through threadpoolctl)
 import numpy  # timed apart: reading the input would import it first
 tn = time.perf_counter() - t1
 t1, c1 = time.perf_counter(), cpu()
@@ -309,17 +335,21 @@ def main() -> None:
         gold, bad, what = _make_inputs(tmp)
         result["input"] = what
         if not args.no_commands:
-            print(f"timing {args.runs} runs of each command (current tree) ...", flush=True)
-            result["commands"] = time_commands(py, None, gold, bad, args.runs,
-                                               reference=args.reference)
-            print("breakdown of the fit process ...", flush=True)
-            result["fit_breakdown"] = breakdown(py, gold, args.runs)
+            base = None
             if args.baseline:
                 rev = _git("rev-parse", "--short", args.baseline)
                 base = tmp / "baseline"
                 base.mkdir()
                 subprocess.run(f"git archive {rev} src | tar -x -C {base}", shell=True,
                                cwd=REPO, check=True)
+            print(f"timing {args.runs} runs of each command (current tree) ...", flush=True)
+            result["commands"] = time_commands(py, None, gold, bad, args.runs,
+                                               reference=args.reference,
+                                               baseline_src=None if base is None
+                                               else base / "src")
+            print("breakdown of the fit process ...", flush=True)
+            result["fit_breakdown"] = breakdown(py, gold, args.runs)
+            if args.baseline:
                 print(f"timing the baseline {rev} ...", flush=True)
                 result["baseline"] = {"revision": rev, "commands": time_commands(
                     py, base / "src", gold, bad, args.runs, baseline=True)}
@@ -370,6 +400,10 @@ def main() -> None:
             for fit_name, ratio in r.get("per_round_ratio_median", {}).items():
                 print(f"    {fit_name} / reference, median of the per-round ratios: "
                       f"{ratio['wall_s']:.3f} wall, {ratio['cpu_s']:.3f} CPU")
+            if "current_over_baseline_per_round_median" in r:
+                print("    current / baseline fit, median of the per-round ratios: "
+                      "{wall_s:.3f} wall, {cpu_s:.3f} CPU".format(
+                          **r["current_over_baseline_per_round_median"]))
         print("\nfit process, where the time goes (median wall s):")
         for k, v in result["fit_breakdown"]["phases_s"].items():
             print(f"  {k:<58}{v:8.3f}")
