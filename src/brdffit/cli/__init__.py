@@ -349,8 +349,8 @@ def main(argv: list[str] | None = None) -> int:
 #: The cyclic collector's youngest-generation threshold in a ``brdffit`` process (Python's
 #: default: 700 allocations). Start-up (NumPy and the command's modules: ~160,000 objects
 #: that live until exit) otherwise triggers hundreds of young collections, each promoting
-#: survivors that the older generations then scan again: 6 ms of a 0.145 s tabulated fit
-#: process (the same as disabling the collector; bench/bench_cli.py, session 15). Cyclic
+#: survivors that the older generations then scan again: 3-6 ms of a 0.15 s tabulated fit
+#: process, as much as disabling the collector (interleaved A/B runs, session 15). Cyclic
 #: garbage is still collected, after at most this many allocations.
 GC_YOUNG_THRESHOLD = 50_000
 

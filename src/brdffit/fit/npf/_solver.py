@@ -786,7 +786,7 @@ def _g_from_d_curvature(st: MFState, curvature, g, J):
     """Newton's residual curvature in the G-from-D parameters: the product's
     (:func:`_residual_curvature`, chained like JᵀWJ) plus, G being a function of D, the
     gradient in G times Smith's second derivative (:func:`smith_g_curvature`) in the D
-    block — the term without which session 14's G-from-D Newton steps stalled."""
+    block (the term session 14's trial of a G-from-D Newton step lacked)."""
     chained, _ = _chain_g_from_d(curvature, None, J)
     chained[:, :NH, :NH] += smith_g_curvature(st.D, g[:, NH + ND:NH + ND + NG])
     return chained
