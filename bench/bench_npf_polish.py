@@ -44,7 +44,7 @@ FIELDS = ["material", "config", "ratio", "iterations", "stop_reason", "converged
 
 
 def parse_config(text: str) -> dict:
-    out = {"bound": None, "newton": None, "cap": 100}
+    out = {"bound": None, "newton": None, "cap": 100, "bounded": None}
     for item in text.split("+"):
         key, val = item.split("=")
         if key == "bound":
@@ -53,6 +53,8 @@ def parse_config(text: str) -> dict:
             out["newton"] = bool(int(val))
         elif key == "cap":
             out["cap"] = int(val)
+        elif key == "bounded":          # the factor groups the bound applies to, e.g. F/rho_s
+            out["bounded"] = tuple(val.split("/"))
         else:
             raise SystemExit(f"--configs: unknown key {key!r} in {text!r}")
     return out
@@ -136,7 +138,8 @@ def main(argv=None) -> int:
             kw = parse_config(cfg)
             c0 = time.process_time()
             res = _solver.polish_lm(start(), smp, eps=eps, max_iter=kw["cap"], tol=args.tol,
-                                    g_from_d=g_from_d, bound=kw["bound"], newton=kw["newton"])
+                                    g_from_d=g_from_d, bound=kw["bound"], newton=kw["newton"],
+                                    bounded=kw["bounded"])
             st = res.state
             rows.append({
                 "material": name, "config": cfg, "ratio": float(res.E.sum() / E0.sum()),

@@ -186,7 +186,7 @@ def test_g_from_d_public_fit(gfromd_truth):
 def test_g_from_d_polish_continues_where_the_awls_stops(indep_truth):
     """Data G-from-D cannot fit exactly (an independent G): the AWLS sweeps stop (Eq. 14's D
     step holds G fixed although G depends on D, so its stopping points are not stationary
-    points of Eq. 7); the Gauss–Newton polish in (D, F, ρd, ρs), G following D, goes on
+    points of Eq. 7); the Newton polish in (D, F, ρd, ρs), G following D, goes on
     lowering the objective, never raising it, and G stays the Smith G of D."""
     _, data = indep_truth
     awls = fit_npf(data=data, variant="g-from-d", polish=0)
@@ -351,6 +351,36 @@ def test_bounded_polish_stays_in_its_trust_region(indep_truth):
             fit_npf(data=data, variant="independent-g", polish_bound=bad)
 
 
+def test_g_from_d_polish_bounds_only_f_by_default(indep_truth):
+    """G-from-D's default trust region (``POLISH_BOUNDED``) bounds F alone: every F sample
+    relative to F's gauge sample stays within ``bound`` of the start, D is not held by it, G
+    stays Smith's G of D, and the objective does not rise."""
+    from brdffit.fit.npf import POLISH_BOUNDED
+
+    _, data = indep_truth
+    smp = _solver.Samples.from_objective(prepare_objective(*data))
+    st = _solver.MFState(D=np.ones((3, 90)), F=np.ones((3, 90)), G=np.ones((3, 90)),
+                         rho_d=np.zeros(3), rho_s=np.ones(3))
+    start = _solver.run_g_from_d(st, smp, max_iter=5).state
+    bound = 1.2
+    res = _solver.polish_lm(_copy_state(start), smp, max_iter=15, g_from_d=True, bound=bound,
+                            bounded=POLISH_BOUNDED["g-from-d"])
+    assert POLISH_BOUNDED["g-from-d"] == ("F",)
+
+    def relative(x, x0):           # each sample over the start's max sample, as the gauge
+        k0 = np.argmax(x0, axis=1)[:, None]
+        return (x / np.take_along_axis(x, k0, 1)) / (x0 / np.take_along_axis(x0, k0, 1))
+
+    r_f = relative(res.state.F, start.F)
+    assert np.all(r_f <= bound * (1 + 1e-9)) and np.all(r_f >= (1 - 1e-9) / bound)
+    r_d = relative(res.state.D, start.D)
+    assert np.any(np.abs(np.log(r_d)) > np.log(bound) * 1.01)       # D left F's box
+    np.testing.assert_allclose(res.state.G.T, smith_g_from_d(res.state.D.T), rtol=1e-12)
+    E0 = smp.stats(start.G, start.rho_s[:, None] * _solver.outer_df(start.D, start.F),
+                   start.rho_d)[0]
+    assert np.all(res.E <= E0 * (1 + 1e-12))
+
+
 def _copy_state(st):
     return _solver.MFState(*(np.array(a) for a in _solver._state_arrays(st)))
 
@@ -401,6 +431,10 @@ def test_fit_info_reports_convergence(indep_truth, gfromd_truth):
     li = loose.fit_info
     assert li["converged"] and li["success"] and not li["cap_reached"]
     assert li["nit"] < 300 and "relative decrease" in li["criterion"]
+    # G-from-D's default polish: Newton, F alone within a factor 2, 60 iterations at most
+    assert li["polish"]["max_iterations"] == 60 and li["polish"]["method"] == "Newton"
+    assert li["polish"]["bound"] == 2.0 and li["polish"]["bounded"] == ["F"]
+    assert "(Newton within a factor 2 of the AWLS values of F (polish_bound)" in li["criterion"]
     _, data = indep_truth
     ind = fit_npf(data=data, variant="independent-g", starts=("ones",), max_iter=4,
                   start_max_iter=2, polish=0)
@@ -412,7 +446,8 @@ def test_fit_info_reports_convergence(indep_truth, gfromd_truth):
                   start_max_iter=2).fit_info
     assert pol["polish"]["max_iterations"] == 100 and pol["awls_stop_reason"] == "max_iter"
     assert pol["polish"]["method"] == "Newton" and pol["polish"]["bound"] == 2.0
-    assert "(Newton within a factor 2 of the AWLS factors" in pol["criterion"]
+    assert "(Newton within a factor 2 of the AWLS values of D/F/G/rho_s" in pol["criterion"]
+    assert pol["polish"]["bounded"] == ["D", "F", "G", "rho_s"]
     assert pol["stop_reason"] == pol["polish"]["stop_reason"]
     assert pol["objective"] < ii["objective"]
     assert pol["converged"] == pol["stop_reason"].startswith(("relative", "damping", "exact"))

@@ -30,14 +30,16 @@ Deviations from the paper (deliberate, documented):
   started from the previous accepted step (``_solver.run_g_from_d``), and from its 50th
   sweep on over-relaxes each sweep as independent-G does (accepted only if better; the
   G-from-D *start* of independent-G runs the plain sweeps).
-* G-from-D's AWLS is followed by Levenberg–Marquardt iterations on all its parameters at once
-  (``polish``, :data:`DEFAULT_POLISH`: 10; ``_solver.polish_lm``). AWLS stops (relative
-  decrease below ``tol``) where its alternating updates no longer help, which is not a
-  minimum of Eq. 7 — and the paper's D update (Eq. 14) even holds G fixed although G is a
-  function of D. The polish in (D, F, ρd, ρs), G following D through Smith's integrals with
-  their exact derivative, lowers the objective by 0-18 % (median ≈ 1 %) but descends slowly,
-  so its cap is often reached: ``fit_info`` then says "NOT converged" with the cap
-  (bench/bench_npf_defaults.py). ``polish=0`` is the paper's AWLS only.
+* G-from-D's AWLS is followed by damped Newton iterations on all its parameters at once
+  (``polish``, :data:`DEFAULT_POLISH`: 60 at most; ``_solver.polish_lm``). AWLS stops
+  (relative decrease below ``tol``) where its alternating updates no longer help, which is
+  not a minimum of Eq. 7 — and the paper's D update (Eq. 14) even holds G fixed although G
+  is a function of D. The polish in (D, F, ρd, ρs), G following D through Smith's integrals
+  with their exact first and second derivatives, F kept within a factor 2 of its AWLS value
+  (``polish_bound``, :data:`POLISH_BOUNDED`), converged on 18 of 20 MERL materials and
+  lowered the objective by 0-23 % (mean 4.7 %); when the cap is reached ``fit_info`` says
+  "NOT converged" with the cap (bench/bench_npf_polish.py, bench/bench_npf_defaults.py).
+  ``polish=0`` is the paper's AWLS only.
 * Independent-G's AWLS is followed by damped Newton iterations (``polish``, 100 at most;
   JᵀWJ plus the residual curvature ``Σ w r ∇²m``: Eq. 7 is a large-residual problem, where
   Gauss–Newton crawls) on all 272 parameters of a channel at once, each factor sample and ρs
@@ -84,24 +86,31 @@ VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
 ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
 DEFAULT_MAX_ITER = {"independent-g": 4000, "g-from-d": 300, "naive": 3000}
 #: Levenberg–Marquardt iterations after AWLS by default (``polish``; a cap: the polish stops
-#: earlier on its criterion). G-from-D's sweeps stop where Eq. 14's D step (G held fixed
-#: although G depends on D) no longer helps, not at a minimum of Eq. 7; ten Gauss–Newton
-#: iterations with G differentiated through Smith's integrals (≈ 1-2 s) lower the objective
-#: by 0-18 % (median 1 %) and the fit reports the cap when it is reached
-#: (bench/bench_npf_defaults.py --models npf-g-from-d,npf-g-from-d-awls,npf-g-from-d-plain).
-#: Independent-G: damped Newton within the trust region :data:`DEFAULT_POLISH_BOUND`, which
-#: converges (relative decrease < tol for 2 iterations) on 99 of the 100 MERL fits in a
-#: median of 14 iterations (2.7 s CPU mean); 100 is a safety cap, reported when reached
-#: (bench/bench_npf_defaults.py, bench/bench_npf_polish.py).
-DEFAULT_POLISH = {"independent-g": 100, "g-from-d": 10}
+#: earlier on its criterion, relative decrease < tol for 2 iterations; the cap is reported
+#: when reached). Both variants take damped Newton steps within a trust region
+#: (:data:`DEFAULT_POLISH_BOUND`, :data:`POLISH_BOUNDED`).
+#: Independent-G converges on 99 of the 100 MERL fits in a median of 14 iterations (2.7 s
+#: CPU mean). G-from-D's sweeps stop where Eq. 14's D step (G held fixed although G depends
+#: on D) no longer helps, not at a minimum of Eq. 7; Newton with Smith's second derivative
+#: converged on 18 of 20 MERL materials (every 5th) within 60 iterations (median 23, 2.6 s
+#: CPU mean), lowering the AWLS objective by 4.7 % on average, against 7 of 20 and 2.4 % for
+#: session 14's 10 Gauss–Newton iterations (bench/bench_npf_polish.py, session 15).
+DEFAULT_POLISH = {"independent-g": 100, "g-from-d": 60}
 #: Trust region of the polish by default (``polish_bound``): each factor sample and ρs within
 #: this factor of its AWLS value. Independent-G's Eq. 7 is nearly flat along
 #: F(θd)/h(θd)²·G(θi)h(θi)·G(θo)h(θo) for any smooth h; unbounded, the polish follows it to
 #: F(0) at the dynamic-range clamp and ρs 10-10⁶× the AWLS value (ρs moved > 10× on 73 of 100
 #: MERL materials, F(0) < 1e-3 of max F on 52; within the bound: 0 and 8, 7 at the start;
 #: bench/bench_npf_polish.py): better objectives, but factors that are no longer a Fresnel
-#: and a shadowing term. G-from-D's G is Smith's of D: no such direction, no bound.
-DEFAULT_POLISH_BOUND = {"independent-g": 2.0}
+#: and a shadowing term. G-from-D has a weaker direction of the same kind, F's grazing
+#: samples (F's max) rising against the rest with ρs: its unbounded Newton polish moved ρs
+#: up to 55× and F(0)/max F down 10-50× on 3 of 20 MERL materials; there only F is bounded
+#: (:data:`POLISH_BOUNDED`), D stays free.
+DEFAULT_POLISH_BOUND = {"independent-g": 2.0, "g-from-d": 2.0}
+#: The factors the trust region bounds, per variant (``None``: D, F, G and ρs). G-from-D
+#: bounds F only: bounding D too stopped its Newton polish on the box's faces, above 10
+#: Gauss–Newton iterations on 13-16 of 20 materials (bench/bench_npf_polish.py, session 15).
+POLISH_BOUNDED = {"independent-g": None, "g-from-d": ("F",)}
 #: G-from-D over-relaxes its sweeps (``extrapolate``) from this iteration on: by then the
 #: materials whose plain sweeps converge have mostly done so at their own point, and the
 #: others (a third of MERL, which plain sweeps leave at the cap) converge in 100-200
@@ -271,17 +280,18 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         log-parameters; accepted only where they lower the objective; they stop early when
         the relative decrease stays below ``tol`` for 2 iterations or no damped step lowers
         the objective; no step makes ρ exceed what a fit file holds). Default per variant
-        (:data:`DEFAULT_POLISH`): G-from-D 10 (Gauss–Newton, G following D through Smith's
-        integrals, differentiated exactly), independent-G 100 (damped Newton within
-        ``polish_bound``). AWLS stops where alternating updates no longer help, not at a
+        (:data:`DEFAULT_POLISH`): G-from-D 60 (G following D through Smith's integrals,
+        differentiated exactly twice), independent-G 100; both damped Newton within
+        ``polish_bound``. AWLS stops where alternating updates no longer help, not at a
         minimum of Eq. 7; the polish goes on from there (see the module notes). ``0``: the
         paper's AWLS only.
     polish_bound:
-        Trust region of the polish: every factor sample and ρs stays within a factor
-        ``polish_bound`` of its AWLS value (``0``: unbounded). Default per variant
-        (:data:`DEFAULT_POLISH_BOUND`): independent-G 2, whose Eq. 7 runs, along the
-        near-ambiguity of F(θd) and G(θi)G(θo), to factors that are no longer a Fresnel and
-        a shadowing term; G-from-D unbounded (its G is Smith's of D).
+        Trust region of the polish: every sample of the bounded factors stays within a
+        factor ``polish_bound`` of its AWLS value (``0``: unbounded). Default per variant
+        (:data:`DEFAULT_POLISH_BOUND`) 2: independent-G bounds D, F, G and ρs (its Eq. 7
+        runs, along the near-ambiguity of F(θd) and G(θi)G(θo), to factors that are no
+        longer a Fresnel and a shadowing term), G-from-D bounds F only (its grazing samples
+        otherwise rise against the rest) (:data:`POLISH_BOUNDED`).
     extrapolate:
         Over-relaxation of all factors after each AWLS sweep, accepted only if it lowers the
         objective (extension, default on; off = the paper's sweeps). Independent-G: from the
@@ -519,13 +529,15 @@ def _polish(st: MFState, E, smp: Samples, extra: dict, *, eps, polish, tol, g_fr
     """The Levenberg–Marquardt polish after AWLS (``_solver.polish_lm``): returns the state
     and objective, records ``extra["polish"]``, appends to ``extra["history"]``; the polish's
     stop becomes the fit's ``stop_reason`` (the AWLS's is kept in ``awls_stop_reason``)."""
+    bounded = POLISH_BOUNDED["g-from-d" if g_from_d else "independent-g"]
     pol = _solver.polish_lm(st, smp, eps=eps, max_iter=polish, tol=tol, g_from_d=g_from_d,
-                            bound=bound, callback=step_callback(callback, "LM polish", polish))
+                            bound=bound, newton=True, bounded=bounded,
+                            callback=step_callback(callback, "LM polish", polish))
     awls_objective = float(np.sum(E))
     st, E = pol.state, np.minimum(pol.E, E)              # only decreasing steps are taken
     extra["polish"] = {"iterations": pol.iterations, "max_iterations": polish,
-                       "awls_objective": awls_objective,
-                       "method": "Gauss–Newton" if g_from_d else "Newton", "bound": bound,
+                       "awls_objective": awls_objective, "method": "Newton", "bound": bound,
+                       "bounded": list(bounded or ("D", "F", "G", "rho_s")),
                        "stop_reason": pol.reason, "run_time_s": pol.seconds}
     extra["history"] = list(extra.get("history", [])) + [float(h) for h in pol.history[1:]]
     extra["awls_stop_reason"], extra["stop_reason"] = extra.get("stop_reason"), pol.reason
@@ -564,8 +576,9 @@ def _convergence(extra: dict, tol, max_iter, variant) -> dict:
         cap, phase = int(polish["max_iterations"]), "Levenberg–Marquardt polish"
         nit += int(polish["iterations"])
         method = polish.get("method", "Gauss–Newton")
-        where = (f" within a factor {polish['bound']:g} of the AWLS factors (polish_bound)"
-                 if polish.get("bound") else "")
+        bounded = "/".join(polish.get("bounded") or ("D", "F", "G", "rho_s"))
+        where = (f" within a factor {polish['bound']:g} of the AWLS values of {bounded} "
+                 f"(polish_bound)" if polish.get("bound") else "")
         criterion += (f"; then the Levenberg–Marquardt polish ({method}{where}) until its "
                       f"relative decrease is < tol for 2 consecutive iterations or no damped "
                       f"step lowers the objective; safety cap polish = {cap}")

@@ -800,7 +800,7 @@ def _log_params(st: MFState, g_from_d: bool) -> np.ndarray:
 
 def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
               g_from_d=False, bound: float | None = None, newton: bool | None = None,
-              callback=None) -> RunResult:
+              bounded: tuple[str, ...] | None = None, callback=None) -> RunResult:
     """Levenberg–Marquardt refinement of an AWLS solution (an extension, not in the paper):
     (Gauss–)Newton steps on all parameters of a channel at once, which crosses the long,
     nearly flat valleys of Eq. 7 (the near-ambiguity between F(θd), G(θi)G(θo) and D(θh)
@@ -825,22 +825,24 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
     with 30 iterations) that fit Eq. 7 better but are no longer a Fresnel and a shadowing
     term. ρd is additive and not bounded.
 
-    ``newton`` (default: independent-G): the residual-curvature term ``Σ w r ∇²m``
+    ``newton`` (default on; off: Gauss–Newton): the residual-curvature term ``Σ w r ∇²m``
     (:func:`_residual_curvature`) is added to JᵀWJ, i.e. Newton's method damped à la
     Levenberg–Marquardt (the damping scaled by JᵀWJ's diagonal). Eq. 7 is a large-residual
     problem for most materials (the model cannot fit them), where Gauss–Newton converges
     linearly and slowly (aluminium: relative decreases of 1e-6-1e-5 per iteration after 60
     iterations); Newton's steps converge on the same materials in ≈ 10-20 iterations.
-    G-from-D defaults to Gauss–Newton. Its Newton matrix adds, G being a function of D, the
+    ``bounded``: the factor groups the trust region applies to (``"D"``, ``"F"``, ``"G"``,
+    ``"rho_s"``; default all). G-from-D's Newton matrix adds, G being a function of D, the
     gradient in G times Smith's second derivative (:func:`_g_from_d_curvature`,
-    :func:`smith_g_curvature`); with it (``newton=True``; 20 MERL materials,
-    bench/bench_npf_polish.py, session 15) the unbounded polish drifts like independent-G's
-    (ρs up to 55× in 30 iterations), and within a trust region (``bound`` 2-4) it converges
-    on 19 / 20 in a median of 6 iterations but at the box's faces: above Gauss–Newton's 10
-    iterations on 13-16 of 20 materials (by up to 4 %), so the default stays Gauss–Newton."""
+    :func:`smith_g_curvature`). On 20 MERL materials (bench/bench_npf_polish.py, session 15)
+    its unbounded polish drifts like independent-G's (F's grazing samples rise against the
+    rest, ρs up to 55× in 30 iterations); bounding every factor stops it on the box's faces
+    (above 10 Gauss–Newton iterations on 13-16 of 20); bounding F alone (``bounded=("F",)``,
+    ``bound`` 2, 60 iterations) converged on 18 / 20 with ρs within 4× and the lowest
+    objectives (mean 0.953 of the AWLS value, against 0.976 for 10 Gauss–Newton
+    iterations)."""
     t0 = time.perf_counter()
-    newton = (not g_from_d) if newton is None else bool(newton)
-    log_bound = None if bound is None else float(np.log(bound))
+    newton = True if newton is None else bool(newton)
     start = np.log(np.maximum(_log_params(st, g_from_d), 1e-300))
     if g_from_d:
         st.G = smith_g_from_d(st.D.T).T
@@ -851,6 +853,15 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
     lam = np.full(3, 1e-12)
     iG = slice(NH + ND, NH + ND + (0 if g_from_d else NG))
     n = iG.stop + 2
+    log_bound = None
+    if bound is not None:           # per parameter; inf for the groups not in ``bounded``
+        groups = {"D": slice(0, NH), "F": slice(NH, NH + ND), "G": iG, "rho_s": slice(n - 1, n)}
+        log_bound = np.full(n, np.inf)
+        for name in (groups if bounded is None else bounded):
+            if name not in groups:
+                raise ValueError(f"polish_lm: bounded expects names among {tuple(groups)}, "
+                                 f"found {name!r}")
+            log_bound[groups[name]] = np.log(bound)
     # gauge: the starting max components of D, F (and G) stay fixed throughout, removing the
     # scale ambiguities (ρs absorbs the scale) from the system; the factors are
     # max-normalised once, at the end (re-normalising every step moved the gauge from one
