@@ -315,9 +315,7 @@ def test_bounded_polish_stays_in_its_trust_region(indep_truth):
     and ρs stay within a factor ``bound`` of the start; unbounded, the same polish leaves
     that box and lowers the objective further; neither raises it."""
     _, data = indep_truth
-    smp = _solver.Samples.from_objective(prepare_objective(*data))
-    st = _solver.MFState(D=np.ones((3, 90)), F=np.ones((3, 90)), G=np.ones((3, 90)),
-                         rho_d=np.zeros(3), rho_s=np.ones(3))
+    smp, st = _samples_and_ones(data)
     start = _solver.run_independent_g(st, smp, max_iter=5).state
     bound = 1.5
 
@@ -358,9 +356,7 @@ def test_g_from_d_polish_bounds_only_f_by_default(indep_truth):
     from brdffit.fit.npf import POLISH_BOUNDED
 
     _, data = indep_truth
-    smp = _solver.Samples.from_objective(prepare_objective(*data))
-    st = _solver.MFState(D=np.ones((3, 90)), F=np.ones((3, 90)), G=np.ones((3, 90)),
-                         rho_d=np.zeros(3), rho_s=np.ones(3))
+    smp, st = _samples_and_ones(data)
     start = _solver.run_g_from_d(st, smp, max_iter=5).state
     bound = 1.2
     res = _solver.polish_lm(_copy_state(start), smp, max_iter=15, g_from_d=True, bound=bound,
@@ -379,6 +375,13 @@ def test_g_from_d_polish_bounds_only_f_by_default(indep_truth):
     E0 = smp.stats(start.G, start.rho_s[:, None] * _solver.outer_df(start.D, start.F),
                    start.rho_d)[0]
     assert np.all(res.E <= E0 * (1 + 1e-12))
+
+
+def _samples_and_ones(data):
+    """The solver's samples of ``data`` and an all-ones state (ρd 0, ρs 1)."""
+    smp = _solver.Samples.from_objective(prepare_objective(*data))
+    return smp, _solver.MFState(D=np.ones((3, 90)), F=np.ones((3, 90)), G=np.ones((3, 90)),
+                                rho_d=np.zeros(3), rho_s=np.ones(3))
 
 
 def _copy_state(st):
