@@ -4,6 +4,21 @@ Mitsuba's LLVM back-end crashes with the machine's default LLVM 15; it needs Deb
 libLLVM 19. :func:`load` sets ``DRJIT_LIBLLVM_PATH`` (when unset) to the first existing of
 ``/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1`` and ``/usr/lib/*/libLLVM.so.19*`` *before*
 importing drjit/mitsuba, then selects the variant. Nothing here runs at ``import brdffit``.
+
+Two environment variables, read once by :func:`load` and inherited by every worker process
+(``demo``, ``batch``, the isolated renderer of :mod:`.isolated`):
+
+``BRDFFIT_DRJIT_DEBUG=1``
+    Dr.Jit's debug mode: every ``gather``/``scatter`` is bounds-checked and an out-of-bounds
+    access is reported on stderr (``drjit.gather(): out-of-bounds read ...``) and skipped
+    instead of reading or writing stray memory. Packet operations are switched off with it:
+    Dr.Jit 1.5's debug check of *packet* scatters reports in-bounds writes of Mitsuba's
+    8-channel image blocks as out of bounds and drops them (``bench/repro/drjit_debug_packet_scatter.py``).
+    ``make test`` runs the suite this way.
+``BRDFFIT_LLVM_TARGET=avx2``
+    Compile the kernels for an AVX2 CPU without AVX-512 (Haswell's instruction set, 8 lanes)
+    instead of the host: the code path of most users' machines, where a masked gather is
+    scalarised and an out-of-bounds index faults. ``native`` (or unset) is the host.
 """
 
 from __future__ import annotations
@@ -13,12 +28,15 @@ import os
 
 from ...errors import BRDFError
 
-__all__ = ["load", "available", "VARIANT", "MitsubaUnavailable"]
+__all__ = ["load", "available", "configuration", "VARIANT", "LLVM_TARGETS", "MitsubaUnavailable"]
 
 VARIANT = "llvm_ad_rgb"
 _LLVM_CANDIDATES = ("/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1", "/usr/lib/*/libLLVM.so.19*",
                     "/usr/lib/*/libLLVM-19.so")
 _cache: tuple | None = None
+#: LLVM targets of ``BRDFFIT_LLVM_TARGET``: (CPU, features, vector width).
+LLVM_TARGETS = {"avx2": ("haswell", "+avx2,+fma,+f16c,+bmi,+bmi2,+lzcnt,+popcnt,+sse4.2,"
+                                    "-avx512f,-avx512vl,-avx512bw,-avx512dq,-avx512cd", 8)}
 
 
 class MitsubaUnavailable(BRDFError):
@@ -57,8 +75,45 @@ def load():
         raise MitsubaUnavailable(
             f"Mitsuba variant {VARIANT!r} unavailable ({exc}); Mitsuba's LLVM back-end needs "
             "Debian's libllvm19; run make install as root")
+    _configure(dr)
     _cache = (mi, dr)
     return _cache
+
+
+def _set_llvm_target(dr, cpu: str, features: str, width: int) -> None:
+    """Dr.Jit's ``jit_llvm_set_target`` (exported by libdrjit-core, not bound in Python)."""
+    import ctypes
+
+    lib = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
+    try:
+        fn = lib._Z19jit_llvm_set_targetPKcS0_j  # jit_llvm_set_target(const char*, const char*, uint32_t)
+    except AttributeError:
+        raise MitsubaUnavailable("BRDFFIT_LLVM_TARGET: this Dr.Jit does not export "
+                                 "jit_llvm_set_target") from None
+    fn.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_uint32]
+    fn.restype = None
+    fn(cpu.encode(), features.encode(), int(width))
+
+
+def _configure(dr) -> None:
+    """Apply ``BRDFFIT_DRJIT_DEBUG`` and ``BRDFFIT_LLVM_TARGET`` (module docstring)."""
+    target = os.environ.get("BRDFFIT_LLVM_TARGET", "").strip().lower()
+    if target and target != "native":
+        if target not in LLVM_TARGETS:
+            raise MitsubaUnavailable(f"BRDFFIT_LLVM_TARGET: expected one of native, "
+                                     f"{', '.join(LLVM_TARGETS)}, found {target!r}")
+        _set_llvm_target(dr, *LLVM_TARGETS[target])
+    if os.environ.get("BRDFFIT_DRJIT_DEBUG", "").strip() not in ("", "0"):
+        dr.set_flag(dr.JitFlag.Debug, True)
+        dr.set_flag(dr.JitFlag.PacketOps, False)
+
+
+def configuration() -> dict:
+    """What :func:`load` applied: ``{"variant", "llvm_target", "debug"}`` (for logs and tests)."""
+    mi, dr = load()
+    return {"variant": mi.variant(),
+            "llvm_target": os.environ.get("BRDFFIT_LLVM_TARGET", "").strip().lower() or "native",
+            "debug": bool(dr.flag(dr.JitFlag.Debug))}
 
 
 def available() -> bool:

@@ -65,11 +65,49 @@ def to_numpy(v) -> np.ndarray:
     return np.asarray(v, dtype=np.float64)
 
 
+def half_vector(wi, wo):
+    """``normalize(wi + wo)``, and ``+z`` where ``wi + wo`` is zero or not finite.
+
+    Lanes that a kernel carries but does not use (paths that left the scene, directions below
+    the horizon) can hold ``wi = wo = 0`` (Mitsuba's invalid surface interaction) or
+    ``wi = −wo``; a plain ``normalize`` gives NaN there, and NaN must never become a table
+    index (``UInt32(NaN)`` is 2³¹ or 2³² − 1 depending on the CPU)."""
+    s = wi + wo
+    n2 = dr.squared_norm(s)
+    good = (n2 > 1e-30) & (n2 < 1e30)
+    return dr.select(good, s * dr.rsqrt(dr.select(good, n2, 1.0)), mi.Vector3f(0.0, 0.0, 1.0))
+
+
+def table_coordinate(x, hi):
+    """``x`` limited to ``[0, hi]`` for a table lookup, NaN → 0 (±∞ → the nearest end).
+
+    ``dr.clip`` is ``min(max(x, lo), hi)``, whose result for NaN depends on the instruction
+    set; a comparison is false for NaN on every CPU, so select on it. Every index that
+    reaches ``dr.gather`` in this module goes through here; the gathers are also masked with
+    the lanes in use wherever the caller knows them."""
+    return dr.select(x > 0.0, dr.minimum(x, hi), 0.0)
+
+
+def table_cell(x, n):
+    """Lower node ``i0 ∈ [0, n − 2]`` and weight ``t ∈ [0, 1]`` of linear interpolation at
+    continuous index ``x`` on ``n ≥ 2`` nodes (NaN-safe, :func:`table_coordinate`)."""
+    x = table_coordinate(x, n - 1.0)
+    i0 = dr.minimum(mi.UInt32(dr.floor(x)), n - 2)
+    return i0, x - mi.Float(i0)
+
+
+def periodic_coordinate(x, period, n):
+    """Continuous index in ``[0, n)`` of angle ``x`` on a periodic axis of ``n`` nodes over
+    ``period`` (NaN → 0)."""
+    u = (x - period * dr.floor(x / period)) * (n / period)
+    return table_coordinate(u, n - 1e-4)
+
+
 def half_diff(wi, wo):
     """Rusinkiewicz (θh, θd, φd) of Dr.Jit directions (MERL convention, as
     :func:`brdffit.geometry.io_to_half_diff`; φh is not needed by isotropy). Also returns
     ``h`` and φh for the anisotropic table."""
-    h = dr.normalize(wi + wo)
+    h = half_vector(wi, wo)
     sh = dr.sqrt(dr.square(h.x) + dr.square(h.y))
     small = sh < 1e-7
     cph = dr.select(small, 1.0, h.x / dr.select(small, 1.0, sh))
@@ -138,7 +176,7 @@ def _reflect(w, m):
 def _ggx_reflect_pdf(wi, wo, ax, ay):
     """Solid-angle density of ``wo = reflect(wi, m)`` with ``m`` a visible GGX normal:
     ``G1(wi) D(h) / (4 cos θi)`` (Heitz 2018 Eq. 17 with the reflection Jacobian)."""
-    h = dr.normalize(wi + wo)
+    h = half_vector(wi, wo)
     g1 = 1.0 / (1.0 + ggx_lambda(wi, ax, ay))
     p = g1 * ggx_D(h, ax, ay) / (4.0 * dr.maximum(wi.z, 1e-7))
     return dr.select((wi.z > 0) & (wo.z > 0) & (dr.dot(wi, h) > 0), p, 0.0)
@@ -247,13 +285,11 @@ class MERLTableEval(_ProxySampling):
     def eval(self, wi, wo, alpha_scale=1.0, active=True):
         th, td, pd, _ = half_diff(wi, wo)
         n_phi, period = self.n_phi, self.period
-        xh = dr.clip(dr.sqrt(th * (2.0 / dr.pi)) * 90.0, 0.0, 89.0)
-        xd = dr.clip(td * (180.0 / dr.pi), 0.0, 89.0)
-        pdm = pd - period * dr.floor(pd / period)
-        xp = dr.clip(pdm * (n_phi / period), 0.0, n_phi - 1e-4)
-        ih0 = mi.UInt32(dr.floor(xh)); fh = xh - mi.Float(ih0); ih1 = dr.minimum(ih0 + 1, 89)
-        id0 = mi.UInt32(dr.floor(xd)); fd = xd - mi.Float(id0); id1 = dr.minimum(id0 + 1, 89)
-        ip0 = mi.UInt32(dr.floor(xp)); fp = xp - mi.Float(ip0)
+        ih0, fh = table_cell(dr.sqrt(th * (2.0 / dr.pi)) * 90.0, 90)
+        id0, fd = table_cell(td * (180.0 / dr.pi), 90)
+        ih1, id1 = ih0 + 1, id0 + 1
+        xp = periodic_coordinate(pd, period, n_phi)
+        ip0 = dr.minimum(mi.UInt32(dr.floor(xp)), n_phi - 1); fp = xp - mi.Float(ip0)
         ip1 = dr.select(ip0 + 1 >= n_phi, 0, ip0 + 1)
         ok = active & (wi.z > 0) & (wo.z > 0)
         out = mi.Color3f(0.0)
@@ -354,13 +390,13 @@ class Table4DEval(_ProxySampling):
         nth, nph, ntd, npd = self.shape
         th, td, pd, ph = half_diff(wi, wo)
         two_pi = 2.0 * dr.pi
-        xh = dr.clip(dr.sqrt(th * (2.0 / dr.pi)) * nth, 0.0, nth - 1.0)
-        xd = dr.clip(td * (2.0 / dr.pi) * ntd, 0.0, ntd - 1.0)
-        xph = dr.clip((ph - two_pi * dr.floor(ph / two_pi)) / two_pi * nph, 0.0, nph - 1e-4)
-        xpd = dr.clip((pd - two_pi * dr.floor(pd / two_pi)) / two_pi * npd, 0.0, npd - 1e-4)
+        xh = table_coordinate(dr.sqrt(th * (2.0 / dr.pi)) * nth, nth - 1.0)
+        xd = table_coordinate(td * (2.0 / dr.pi) * ntd, ntd - 1.0)
+        xph = periodic_coordinate(ph, two_pi, nph)
+        xpd = periodic_coordinate(pd, two_pi, npd)
 
         def axis(x, n, periodic):
-            i0 = mi.UInt32(dr.floor(x))
+            i0 = dr.minimum(mi.UInt32(dr.floor(x)), n - 1)
             f = x - mi.Float(i0)
             i1 = dr.select(i0 + 1 >= n, 0 if periodic else n - 1, i0 + 1)
             return ((i0, 1.0 - f), (i1, f))
@@ -563,9 +599,7 @@ class RadialTableDist:
         return cls(D, lam)
 
     def _lookup(self, buf, theta):
-        x = dr.clip(dr.sqrt(theta * (2.0 / dr.pi)) * (self.n - 1), 0.0, self.n - 1.0001)
-        i0 = mi.UInt32(dr.floor(x))
-        f = x - mi.Float(i0)
+        i0, f = table_cell(dr.sqrt(theta * (2.0 / dr.pi)) * (self.n - 1), self.n)
         return dr.lerp(dr.gather(mi.Float, buf, i0), dr.gather(mi.Float, buf, i0 + 1), f)
 
     def D(self, m, s=1.0):
@@ -615,7 +649,7 @@ class SchlickFresnelDJ:
         f0 = np.broadcast_to(np.asarray(f0, np.float64), (3,))
         self.f0 = mi.ScalarColor3f(*map(float, f0))
 
-    def eval(self, c):
+    def eval(self, c, active=True):
         k = dr.square(dr.square(1.0 - c)) * (1.0 - c)
         return mi.Color3f(self.f0) + (1.0 - mi.Color3f(self.f0)) * k
 
@@ -629,7 +663,7 @@ class ConstantFresnelDJ:
         v = np.broadcast_to(np.asarray(value, np.float64), (3,))
         self.v = mi.ScalarColor3f(*map(float, v))
 
-    def eval(self, c):
+    def eval(self, c, active=True):
         return mi.Color3f(self.v) + 0.0 * c
 
 
@@ -650,11 +684,10 @@ class TableFresnelDJ:
         c = np.linspace(0.0, 1.0, n)
         return cls(np.broadcast_to(np.asarray(fresnel.eval(c), np.float64), (n, 3)))
 
-    def eval(self, c):
-        x = dr.clip(c, 0.0, 1.0) * (self.n - 1)
-        i0 = mi.UInt32(dr.minimum(dr.floor(x), self.n - 2))
-        f = x - mi.Float(i0)
-        return dr.lerp(dr.gather(mi.Color3f, self.buf, i0), dr.gather(mi.Color3f, self.buf, i0 + 1), f)
+    def eval(self, c, active=True):
+        i0, f = table_cell(c * (self.n - 1), self.n)
+        return dr.lerp(dr.gather(mi.Color3f, self.buf, i0, active),
+                       dr.gather(mi.Color3f, self.buf, i0 + 1, active), f)
 
 
 # -- microfacet model -----------------------------------------------------------------------
@@ -694,13 +727,13 @@ class MicrofacetEval:
 
     def eval(self, wi, wo, alpha_scale=1.0, active=True):
         ok = active & (wi.z > 0) & (wo.z > 0)
-        h = dr.normalize(wi + wo)
+        h = half_vector(wi, wo)
         li, lo = self.dist.Lambda(wi, alpha_scale), self.dist.Lambda(wo, alpha_scale)
         if self.g_mode == "correlated":
             g = 1.0 / (1.0 + li + lo)
         else:
             g = 1.0 / ((1.0 + li) * (1.0 + lo))
-        F = self.fresnel.eval(dr.clip(dr.dot(wi, h), 0.0, 1.0))
+        F = self.fresnel.eval(dr.clip(dr.dot(wi, h), 0.0, 1.0), ok)
         denom = 4.0 * dr.maximum(wi.z, 1e-7) * dr.maximum(wo.z, 1e-7)
         f = mi.Color3f(self.ks) * F * (self.dist.D(h, alpha_scale) * g / denom)
         if self.has_diffuse:
@@ -709,7 +742,7 @@ class MicrofacetEval:
 
     def pdf(self, wi, wo, alpha_scale=1.0, active=True):
         ok = active & (wi.z > 0) & (wo.z > 0)
-        h = dr.normalize(wi + wo)
+        h = half_vector(wi, wo)
         # wo = reflect(wi, m): density of m times the Jacobian 1/(4 |wo·h|)
         pm = self.dist.pdf_m(wi, h, alpha_scale) / (4.0 * dr.maximum(dr.abs(dr.dot(wo, h)), 1e-7))
         pm = dr.select(dr.dot(wi, h) > 0, pm, 0.0)
@@ -780,13 +813,11 @@ class PerChannelEval(SumEval):
 
 
 # -- NPF (Bagher, Snyder, Nowrouzezahrai 2016) ----------------------------------------------
-def _lerp1(buf, u, n):
+def _lerp1(buf, u, n, active=True):
     """Linear interpolation of an RGB table (n entries, flat) at continuous index ``u``
     (clamped to [0, n−1]), like ``brdffit.microfacet.npf_model._lerp``."""
-    u = dr.clip(u, 0.0, n - 1.0)
-    i0 = mi.UInt32(dr.minimum(dr.floor(u), n - 2))
-    t = u - mi.Float(i0)
-    return dr.lerp(dr.gather(mi.Color3f, buf, i0), dr.gather(mi.Color3f, buf, i0 + 1), t)
+    i0, t = table_cell(u, n)
+    return dr.lerp(dr.gather(mi.Color3f, buf, i0, active), dr.gather(mi.Color3f, buf, i0 + 1, active), t)
 
 
 class NPFEval(_ProxySampling):
@@ -830,27 +861,23 @@ class NPFEval(_ProxySampling):
         uh = dr.sqrt(th * (2.0 / dr.pi)) * 90.0
         ud = td * (180.0 / dr.pi)
         if self.variant == "bivariate":
-            uh = dr.clip(uh, 0.0, 89.0)
-            ud = dr.clip(ud, 0.0, 89.0)
-            i0 = mi.UInt32(dr.minimum(dr.floor(uh), 88))
-            j0 = mi.UInt32(dr.minimum(dr.floor(ud), 88))
-            s, t = uh - mi.Float(i0), ud - mi.Float(j0)
+            i0, s = table_cell(uh, 90)
+            j0, t = table_cell(ud, 90)
             g = lambda i, j: dr.gather(mi.Color3f, self.B, i * 90 + j, ok)  # noqa: E731
             v = ((1 - s) * (1 - t) * g(i0, j0) + s * (1 - t) * g(i0 + 1, j0)
                  + (1 - s) * t * g(i0, j0 + 1) + s * t * g(i0 + 1, j0 + 1))
             return dr.select(ok, v, 0.0)
-        spec = _lerp1(self.D, uh, 90) * _lerp1(self.F, ud, 90)
+        spec = _lerp1(self.D, uh, 90, ok) * _lerp1(self.F, ud, 90, ok)
         if self.variant == "npf":
             ti = dr.safe_acos(wi.z) * (180.0 / dr.pi)
             to = dr.safe_acos(wo.z) * (180.0 / dr.pi)
-            spec *= _lerp1(self.G, ti, 91) * _lerp1(self.G, to, 91) / (
+            spec *= _lerp1(self.G, ti, 91, ok) * _lerp1(self.G, to, 91, ok) / (
                 dr.maximum(wi.z, 1e-7) * dr.maximum(wo.z, 1e-7))
         else:
-            pdm = pd - dr.pi * dr.floor(pd / dr.pi)
-            up = dr.clip(pdm * (180.0 / dr.pi), 0.0, 179.9999)
-            i0 = mi.UInt32(dr.floor(up))
+            up = periodic_coordinate(pd, dr.pi, 180)
+            i0 = dr.minimum(mi.UInt32(dr.floor(up)), 179)
             t = up - mi.Float(i0)
             i1 = dr.select(i0 + 1 >= 180, 0, i0 + 1)
-            spec *= dr.lerp(dr.gather(mi.Color3f, self.H, i0), dr.gather(mi.Color3f, self.H, i1), t)
+            spec *= dr.lerp(dr.gather(mi.Color3f, self.H, i0, ok), dr.gather(mi.Color3f, self.H, i1, ok), t)
         f = mi.Color3f(self.rho_d) + mi.Color3f(self.rho_s) * spec
         return dr.select(ok, f, 0.0)
