@@ -542,10 +542,13 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
                                                                 "psnr_se", "mean_de2000",
                                                                 "render_time")}
                             for m in result["models"]}
-        failed = [n for n, m in record["models"].items() if m["status"] != "ok"]
+        failed = [f"{n}: {m['error']}" for n, m in record["models"].items()
+                  if m["status"] != "ok"]
+        failed += [f"{sc.get('name')}: {sc['error']}" for sc in result.get("scenes", [])
+                   if isinstance(sc, dict) and sc.get("error")]
         record["status"] = "failed" if failed else "ok"
         if failed:
-            record["error"] = "; ".join(f"{n}: {record['models'][n]['error']}" for n in failed)
+            record["error"] = "; ".join(failed)
     except Exception as exc:  # noqa: BLE001 – recorded, the batch goes on
         _record_failure(record, exc)
     return _finish(record, t0, task.record_path(out))

@@ -41,6 +41,10 @@ def _printable(text: str) -> str:
                    for c in text)
 
 
+#: ``text`` made safe for one line of a terminal or a log (control characters escaped).
+printable = _printable
+
+
 class FitError(BRDFError, RuntimeError):
     """A fit could not produce a valid model (no convergence, no valid data, NaN...)."""
 

@@ -98,7 +98,9 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
         raise ValueError(f"--fit-options: expected a JSON object {{model: {{option: value}}}}, "
                          f"found {fit_options!r}")
     ropts = {"envmap": envmap} if envmap else {}
-    say = (lambda msg: None) if quiet else (lambda msg: print(msg, file=sys.stderr))
+    from ..errors import printable
+
+    say = (lambda msg: None) if quiet else (lambda msg: print(printable(msg), file=sys.stderr))
     kw = dict(scenes=scene or scenes, spp=spp, batches=batches, resolution=resolution,
               seed=seed, exposure=exp, gamma=gamma, render_options=ropts, progress=say,
               fit_options=fopts)
@@ -111,7 +113,7 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
     write_index(out)
     for r in results:
         if "error" in r and "models" not in r:
-            print(f"{r['material']}: FAILED {r['error']}")
+            print(printable(f"{r['material']}: FAILED {r['error']}"))
             continue
         cells = []
         for m in r["models"]:
@@ -122,9 +124,14 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
                 cells.append(f"{m['name']} {pm} dB / dE {m['mean_de2000']:.2f}")
             else:
                 cells.append(f"{m['name']} failed")
-        print(f"{r['material']}: " + "; ".join(cells))
+        failed_scenes = [s for s in r.get("scenes", []) if s.get("error")]
+        if failed_scenes:
+            cells.append("not rendered: " + ", ".join(f"{s.get('name')} ({s['error']})"
+                                                      for s in failed_scenes))
+        print(printable(f"{r['material']}: " + "; ".join(cells)))
     print(f"report: {(Path(out) / 'index.html').resolve()}")
     if any(("error" in r and "models" not in r)
            or any(m.get("status") not in ("ok", "skipped") for m in r.get("models", []))
+           or any(s.get("error") for s in r.get("scenes", []))
            for r in results):
         return EXIT_FAILED_TASKS  # some fits or renders failed; the report has the rest

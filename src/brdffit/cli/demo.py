@@ -37,15 +37,19 @@ def register(commands) -> None:
                      help="Materials at a time, each in its own process (0: one per CPU).")
 
 
-def _one_material(k: int, name: str, spec: str, model_list: list[str], out: str, spp: int,
-                  resolution: int) -> tuple[int, str, float, list[str], int]:
-    """Fit, render and compare one material (in a worker process): ``(k, name, seconds,
-    per-model texts, failed models)``."""
+def _one_material(name: str, spec: str, model_list: list[str], out: str, spp: int,
+                  resolution: int) -> tuple[float, list[str], int]:
+    """Fit, render and compare one material (in a worker process): ``(seconds, per-model
+    and per-scene texts, failures)``; what it is doing goes out as progress stages (a crash
+    message names the last one)."""
     from ..evaluation.compare import compare
+    from ..progress import report
 
     t = time.perf_counter()
     result = compare(spec, model_list, out, name=name, spp=spp, resolution=resolution,
-                     fit_options=DEMO_FIT_OPTIONS, update_index=False)
+                     fit_options=DEMO_FIT_OPTIONS, update_index=False,
+                     progress=lambda msg: report(stage=msg.removeprefix(f"{name}: "),
+                                                 final=True))
     rows, failures = [], 0
     for m in result.get("models", []):
         psnr = m.get("psnr")
@@ -56,7 +60,24 @@ def _one_material(k: int, name: str, spec: str, model_list: list[str], out: str,
             rows.append(f"{m['name']}: FAILED ({m.get('error', '?')})")
         else:
             rows.append(f"{m['name']} {psnr:.1f} dB" if psnr is not None else m["name"])
-    return k, name, time.perf_counter() - t, rows, failures
+    for s in result.get("scenes", []):
+        if s.get("error") and not result.get("render_error"):
+            failures += 1
+            rows.append(f"{s.get('name', 'a scene')}: FAILED ({s['error']})")
+    return time.perf_counter() - t, rows, failures
+
+
+def _record_crash(out: str, name: str, model_list: list[str], error: str) -> None:
+    """The material's result and page when its worker died: every model failed with
+    ``error``, so that the index shows the row."""
+    from ..evaluation import report as R
+
+    slug = R.slugify(name)
+    result = {"material": name, "slug": slug, "error": error,
+              "models": [{"name": m, "status": "failed", "error": error} for m in model_list],
+              "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    R.write_result(Path(out) / slug, result)
+    R.write_material_page(out, result)
 
 
 def demo_cmd(out: str = "demo-out", data: str = "", limit: int = 0, models: str = DEMO_MODELS,
@@ -67,11 +88,13 @@ def demo_cmd(out: str = "demo-out", data: str = "", limit: int = 0, models: str 
     Exit status: 0 all done, 1 error, 2 usage, 3 some fits failed (the rest is written).
     """
     import os
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-    from multiprocessing import get_context
+    import queue
+    from concurrent.futures import ThreadPoolExecutor, as_completed
 
+    from .._isolation import ChildCrashed, IsolatedProcess
     from ..batch import enumerate_materials
     from ..evaluation.report import write_index
+    from ..errors import printable as safe
     from . import check_models, usage_error
 
     model_list = check_models([m.strip() for m in models.split(",") if m.strip()])
@@ -84,16 +107,40 @@ def demo_cmd(out: str = "demo-out", data: str = "", limit: int = 0, models: str 
           f"({', '.join(model_list)}) → {out}/ ({jobs} at a time)")
     t0 = time.perf_counter()
     failures = 0
-    # materials in worker processes (the fits are single-threaded); "spawn": the renderer's
-    # threads must not be forked
-    with ProcessPoolExecutor(jobs, mp_context=get_context("spawn")) as pool:
-        tasks = [pool.submit(_one_material, k, name, spec, model_list, out, spp, resolution)
-                 for k, (name, spec) in enumerate(materials)]
-        for done, task in enumerate(as_completed(tasks), 1):
-            k, name, seconds, rows, failed = task.result()
-            failures += failed
-            print(f"  [{done}/{len(materials)}] {name} ({seconds:.1f} s): " + "; ".join(rows),
-                  flush=True)
+    # one worker process per job slot (the fits are single-threaded), each running materials
+    # one after the other; a worker that dies (a signal in native code) fails its material
+    # only, and the slot starts a new worker for the next one
+    workers: queue.SimpleQueue = queue.SimpleQueue()
+    for _ in range(jobs):
+        workers.put(IsolatedProcess())
+
+    def run(name: str, spec: str):
+        child = workers.get()
+        child.what, child.stage = f"the worker of {name}", None
+        try:
+            return child.call(_one_material, name, spec, model_list, out, spp, resolution)
+        finally:
+            workers.put(child)
+
+    try:
+        with ThreadPoolExecutor(jobs) as pool:
+            tasks = {pool.submit(run, name, spec): name for name, spec in materials}
+            for done, task in enumerate(as_completed(tasks), 1):
+                name = tasks[task]
+                try:
+                    seconds, rows, failed = task.result()
+                except ChildCrashed as exc:
+                    _record_crash(out, name, model_list, str(exc))
+                    failures += 1
+                    print(f"  [{done}/{len(materials)}] {safe(name)}: FAILED: {safe(str(exc))}",
+                          flush=True)
+                    continue
+                failures += failed
+                print(f"  [{done}/{len(materials)}] {safe(name)} ({seconds:.1f} s): "
+                      + "; ".join(safe(r) for r in rows), flush=True)
+    finally:
+        while not workers.empty():
+            workers.get().close()
     write_index(out)
     index = Path(out).resolve() / "index.html"
     print(f"done in {time.perf_counter() - t0:.0f} s; report: {index}")

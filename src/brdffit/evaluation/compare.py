@@ -44,6 +44,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from .._isolation import ChildCrashed
 from ..errors import BRDFError
 from ..fit.registry import fit_model, is_isotropic_only, model_params, small_json
 from . import metrics as M
@@ -181,7 +182,6 @@ def _exports(model, folder: Path, stem: str) -> list[str]:
     where the model has that form): paths relative to the material folder. An export a model
     cannot have is skipped, never an error of the comparison. (Mitsuba XML is left out: its
     RGL tensor is ~3.5 MB per model; ``brdffit export FIT --to mitsuba-xml`` writes it.)"""
-    from ..errors import BRDFError
     from ..export import export
 
     done = []
@@ -206,7 +206,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
             exports: bool = True,
             write_exr: bool | str = "reference", renderer: Callable | None = None,
             render_options: Mapping | None = None, update_index: bool = True,
-            progress: Callable[[str], None] | None = None) -> dict:
+            progress: Callable[[str], None] | None = None, isolate_renders: bool = True) -> dict:
     """Compare models against one reference BRDF and write its report page.
 
     Parameters
@@ -248,6 +248,11 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
     exports:
         Write JSON, glTF and MaterialX exports of every fitted or loaded model under
         ``<slug>/exports/`` and link them (and the fit files) from the material page.
+    isolate_renders:
+        Render in a child process (default): a renderer that dies from a signal fails the
+        scene it was rendering (``scenes[i]["error"]``, one line through ``progress``) and
+        the other scenes go on in a new child. BRDFs that cannot be pickled are rendered in
+        this process, with a note.
     brdf_metric_samples, brdf_metrics:
         Sample pairs of the cosine-weighted relative error and which BRDF-space metrics to
         compute (:class:`.metrics.BRDFMetrics`; the reference is prepared once).
@@ -363,34 +368,49 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
 
     # ---- render: every scene, every batch, reference and models with CRN --------------
     ok_labels = [r["name"] for r in records if r["status"] == "ok"]
-    t_all, c_all = time.perf_counter(), time.process_time()
+    t_all, c_all = time.perf_counter(), time.process_time()  # the child's CPU starts at 0
     renderer = renderer or _default_renderer()
-    if renderer is None:
-        engine = _CRNEngine(reference, {k: fitted[k] for k in ok_labels}, records, say, mat_name)
-        result["proposal"] = engine.proposal.as_dict()
-    else:
-        engine = _CallbackEngine(renderer, reference, {k: fitted[k] for k in ok_labels}, ropts)
-    ok_labels = list(engine.labels)   # without the models whose translation failed
     result["scenes"] = []
+    try:
+        if renderer is None:
+            engine, note = _make_engine(reference, {k: fitted[k] for k in ok_labels}, records,
+                                        say, mat_name, isolate_renders)
+            if note:
+                result.setdefault("notes", []).append(note)
+            result["proposal"] = engine.proposal_dict
+        else:
+            engine = _CallbackEngine(renderer, reference, {k: fitted[k] for k in ok_labels},
+                                     ropts)
+    except ChildCrashed as exc:  # the renderer died while being prepared: nothing renders
+        engine = None
+        result["render_error"] = str(exc)
+        say(f"{mat_name}: {exc}")
+        for spec in specs:
+            result["scenes"].append(spec.as_dict() | {"error": str(exc)})
+        for rec in records:
+            if rec["status"] == "ok":
+                rec.update(status="failed", error=f"render failed: {exc}")
+    ok_labels = list(engine.labels) if engine is not None else []  # translation may fail
     per_model_scenes: dict[str, list] = {k: [] for k in ok_labels}
     write_all_exr = write_exr is True
     write_ref_exr = write_exr in (True, "reference")
-    for i, spec in enumerate(specs):
+    for i, spec in enumerate(specs if engine is not None else ()):
         seeds = [int(seed) + i * batches + k for k in range(batches)]
         say(f"{mat_name}: rendering {spec.name} ({batches} × {spp_batch} spp, "
             f"{len(engine.labels)} models)")
         srec: dict[str, Any] = spec.as_dict() | {"seeds": seeds}
         result["scenes"].append(srec)
-        t0, c0 = time.perf_counter(), time.process_time()
+        t0, c0 = time.perf_counter(), _cpu_seconds(engine)
         try:
             stacks, alpha, failures = engine.render_scene(spec, seeds, spp_batch, resolution)
         except Exception as exc:  # noqa: BLE001 – the reference of this scene cannot be rendered
-            srec["error"] = f"{type(exc).__name__}: {exc}"
+            srec["error"] = str(exc) if isinstance(exc, ChildCrashed) else \
+                f"{type(exc).__name__}: {exc}"
             for k in ok_labels:
                 per_model_scenes[k].append({"scene": spec.name, "error": srec["error"]})
             continue
         srec["render_seconds"] = time.perf_counter() - t0
-        srec["render_cpu_seconds"] = time.process_time() - c0
+        srec["render_cpu_seconds"] = _cpu_seconds(engine) - c0
         ref_stack = stacks.pop(None)
         mask = alpha >= 0.999
         ref_mean = ref_stack.mean(0)
@@ -414,11 +434,17 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
         ref_png = f"{_safe_name(spec.name)}-reference.png"
         _write_png(mdir / ref_png, tm(ref_mean))
         srec["reference"] = {"png": ref_png, "foreground_pixels": int(mask.sum())}
-        t1, c1 = time.perf_counter(), time.process_time()
-        srec["reference"] |= engine.peak(spec, ref_stack, mask, resolution,
-                                         seed=int(seed) + 100000 + 16 * i)
+        t1, c1 = time.perf_counter(), _cpu_seconds(engine)
+        try:
+            srec["reference"] |= engine.peak(spec, ref_stack, mask, resolution,
+                                             seed=int(seed) + 100000 + 16 * i)
+        except Exception as exc:  # noqa: BLE001 – the batches' own peak is the fallback
+            srec["reference"] |= _peak_from_batches(ref_stack, mask)
+            srec.setdefault("warnings", []).append(
+                f"the peak was not converged ({type(exc).__name__}: {exc}); the batches' "
+                "maximum is used")
         srec["peak_seconds"] = time.perf_counter() - t1
-        srec["peak_cpu_seconds"] = time.process_time() - c1
+        srec["peak_cpu_seconds"] = _cpu_seconds(engine) - c1
         if write_ref_exr and _write_exr(mdir / ref_png.replace(".png", ".exr"), ref_mean) is not None:
             srec["reference"]["exr"] = ref_png.replace(".png", ".exr")
         peak_se = float(srec["reference"].get("peak_psnr_se", 0.0))
@@ -450,9 +476,12 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
                     entry["exr"] = f"{fn}.exr"
             except Exception as exc:  # noqa: BLE001
                 entry["error"] = f"{type(exc).__name__}: {exc}"
-    t_render, c_render = time.perf_counter() - t_all, time.process_time() - c_all
+    t_render, c_render = time.perf_counter() - t_all, _cpu_seconds(engine) - c_all
+    if engine is not None and hasattr(engine, "close"):
+        engine.close()
     result["timing"] = {"render_seconds": t_render, "render_cpu_seconds": c_render,
-                        "setup_seconds": getattr(engine, "setup_seconds", None)}
+                        "setup_seconds": getattr(engine, "setup_seconds", None),
+                        "renders_isolated": isinstance(engine, _IsolatedCRNEngine)}
     first = next((s for s in result["scenes"] if "reference" in s), None)
     result["reference"] = {"png": first["reference"]["png"] if first else None,
                            "render_time": t_render,
@@ -584,7 +613,9 @@ class _CRNEngine:
                                  error=f"render failed: {type(exc).__name__}: {exc}")
                 by[label]["traceback"] = traceback.format_exc(limit=4)
         self.labels = [k for k in self.models if k != self.REF]
+        self.records = [by[k] for k in models]
         self.proposal = proposal_for(reference)
+        self.proposal_dict = self.proposal.as_dict()
         self.setup_seconds = time.perf_counter() - t0
 
     #: Converging the reference's peak: samples, number of windows, window side.
@@ -684,6 +715,98 @@ class _CRNEngine:
                     failures[label] = f"render failed: {type(exc).__name__}: {exc}"
         stacks[None] = stacks.pop(self.REF)
         return stacks, alpha, failures
+
+
+# -- the renders in a child process ------------------------------------------------------------
+_CHILD_ENGINE: "_CRNEngine | None" = None
+
+
+def _child_engine_init(reference, models: Mapping, mat_name: str) -> None:
+    """In the renderer's child process: build the :class:`_CRNEngine` that the following
+    :func:`_child_engine_call` use."""
+    from ..progress import report
+
+    global _CHILD_ENGINE
+    records = [{"name": label, "status": "ok"} for label in models]
+    _CHILD_ENGINE = _CRNEngine(reference, models, records, lambda msg: report(stage=msg),
+                               mat_name)
+
+
+def _child_engine_info() -> dict:
+    """What the parent's :class:`_IsolatedCRNEngine` mirrors of the child's engine."""
+    e = _CHILD_ENGINE
+    return {"labels": list(e.labels), "records": e.records, "proposal_dict": e.proposal_dict,
+            "setup_seconds": e.setup_seconds}
+
+
+def _child_engine_call(method: str, *args):
+    return getattr(_CHILD_ENGINE, method)(*args)
+
+
+class _IsolatedCRNEngine:
+    """:class:`_CRNEngine` in a child process (:class:`brdffit._isolation.IsolatedProcess`):
+    a renderer that dies from a signal fails the scene it was rendering, with one line
+    (``the renderer crashed (SIGSEGV) while rendering knot-courtyard for gold-ggx``), and the
+    next scene starts a new child. Same interface as :class:`_CRNEngine`."""
+
+    def __init__(self, reference, models: Mapping, records, say, mat_name):
+        from .._isolation import IsolatedProcess
+
+        self.mat_name, self.say = mat_name, say
+        say(f"{mat_name}: preparing the renderer (evaluators, proposal)")
+        self.child = IsolatedProcess("the renderer", track_stages=False,
+                                     init=[(_child_engine_init, (reference, dict(models),
+                                                                 mat_name), {})])
+        self.child.stage = f"preparing the renderer for {mat_name}"
+        info = self.child.call(_child_engine_info)
+        by = {r["name"]: r for r in records}
+        for rec in info["records"]:
+            by[rec["name"]].update(rec)
+        self.labels, self.proposal_dict = info["labels"], info["proposal_dict"]
+        self.setup_seconds = info["setup_seconds"]
+
+    def _call(self, stage: str, method: str, *args):
+        from .._isolation import ChildCrashed
+
+        self.child.stage = stage
+        try:
+            return self.child.call(_child_engine_call, method, *args)
+        except ChildCrashed as exc:
+            self.say(f"{self.mat_name}: {exc}")
+            raise
+
+    def render_scene(self, spec, seeds, spp, resolution):
+        return self._call(f"rendering {spec.name} for {self.mat_name}", "render_scene", spec,
+                          seeds, spp, resolution)
+
+    def peak(self, spec, ref_stack, mask, resolution, seed) -> dict:
+        return self._call(f"converging the peak of {spec.name} for {self.mat_name}", "peak",
+                          spec, ref_stack, mask, resolution, seed)
+
+    def close(self) -> None:
+        self.child.close()
+
+
+def _cpu_seconds(engine) -> float:
+    """CPU time of this process and of the engine's renderer child (if any)."""
+    child = getattr(getattr(engine, "child", None), "cpu_seconds", 0.0)
+    return time.process_time() + child
+
+
+def _make_engine(reference, models: Mapping, records, say, mat_name, isolate: bool):
+    """The Mitsuba engine, in a child process when ``isolate`` and the BRDFs can be sent
+    there (pickled); otherwise in this process, with the reason. Returns ``(engine, note)``."""
+    if isolate:
+        import pickle
+
+        try:
+            pickle.dumps((reference, dict(models)))
+        except Exception as exc:  # noqa: BLE001 – e.g. a class defined in __main__
+            note = (f"renders ran in this process, not isolated: the BRDFs cannot be sent to "
+                    f"a child process ({type(exc).__name__}: {exc})")
+            return _CRNEngine(reference, models, records, say, mat_name), note
+        return _IsolatedCRNEngine(reference, models, records, say, mat_name), None
+    return _CRNEngine(reference, models, records, say, mat_name), None
 
 
 class _CallbackEngine:

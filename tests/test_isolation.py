@@ -1,0 +1,87 @@
+"""brdffit._isolation: a crash in the child process is an exception in the parent."""
+
+from __future__ import annotations
+
+import operator
+import os
+import signal
+
+import pytest
+
+from brdffit._isolation import ChildCrashed, IsolatedProcess, crash_text
+from brdffit.progress import listening, report
+
+
+def _segfault():
+    os.kill(os.getpid(), signal.SIGSEGV)
+
+
+def _exit(status):
+    os._exit(status)
+
+
+def _fail():
+    raise ValueError("a bad value")
+
+
+def _noisy(x):
+    print("printed to stdout")  # must not corrupt the pipe
+    report(stage="working on x", final=True)
+    return {"x": x, "pid": os.getpid()}
+
+
+class _Unpicklable(Exception):
+    def __reduce__(self):
+        raise TypeError("no")
+
+
+def _fail_unpicklable():
+    raise _Unpicklable("odd")
+
+
+def test_results_exceptions_and_output_of_the_child():
+    with IsolatedProcess() as child:
+        assert child.call(operator.mul, 6, 7) == 42
+        got = child.call(_noisy, [1, 2])
+        assert got["x"] == [1, 2] and got["pid"] != os.getpid()
+        with pytest.raises(ValueError, match="a bad value"):
+            child.call(_fail)
+        with pytest.raises(RuntimeError, match="_Unpicklable: odd"):
+            child.call(_fail_unpicklable)
+        assert child.call(operator.add, 1, 1) == 2 and child.starts == 1
+        assert child.cpu_seconds >= 0.0
+
+
+def test_a_signal_in_the_child_names_the_signal_and_the_stage_and_the_next_call_restarts():
+    with IsolatedProcess("the renderer") as child:
+        first = child.call(_noisy, 1)["pid"]
+        child.stage = "rendering knot-courtyard for gold-ggx"
+        with pytest.raises(ChildCrashed) as info:
+            child.call(_segfault)
+        assert str(info.value) == ("the renderer crashed (SIGSEGV) while rendering "
+                                   "knot-courtyard for gold-ggx")
+        assert info.value.signal_name == "SIGSEGV"
+        again = child.call(_noisy, 2)["pid"]
+        assert again != first and child.starts == 2
+
+
+def test_an_exit_is_reported_with_its_status_and_init_calls_are_replayed():
+    calls = [(operator.add, (1, 2), {})]
+    with IsolatedProcess("the worker", init=calls) as child:
+        with pytest.raises(ChildCrashed, match=r"the worker stopped \(exit status 7\)") as info:
+            child.call(_exit, 7)
+        assert info.value.exit_status == 7 and info.value.signal_name is None
+        assert child.call(operator.neg, 3) == -3 and child.starts == 2
+
+
+def test_progress_events_of_the_child_reach_the_parent_and_name_the_stage():
+    seen = []
+    with IsolatedProcess() as child, listening(seen.append, min_interval=0.0):
+        child.call(_noisy, 0)
+        assert child.stage == "working on x"
+    assert any(e.get("stage") == "working on x" for e in seen)
+
+
+def test_crash_text():
+    assert crash_text(-signal.SIGSEGV) == "SIGSEGV" and crash_text(-signal.SIGKILL) == "SIGKILL"
+    assert crash_text(3) == "exit status 3"
