@@ -1,13 +1,38 @@
-"""Shared fixtures: random unit directions, and the location of ../shared/data."""
+"""Shared fixtures: random unit directions, and the location of ../shared/data; Dr.Jit's
+debug mode for the whole suite.
+
+Every render of the suite runs in Dr.Jit's debug mode (``BRDFFIT_DRJIT_DEBUG=1``, set here
+unless the environment says otherwise, inherited by every child process): each gather and
+scatter is bounds-checked and a stray one is reported on stderr instead of reading memory
+that may or may not be mapped on the machine at hand. A test whose captured output holds
+such a report fails, whatever it asserted itself.
+"""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 SHARED_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
+os.environ.setdefault("BRDFFIT_DRJIT_DEBUG", "1")
+_OUT_OF_BOUNDS = "out-of-bounds"
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """Fail a test during which Dr.Jit reported an out-of-bounds access (module docstring)."""
+    outcome = yield
+    report = outcome.get_result()
+    err = "".join(text for name, text in report.sections
+                  if name == f"Captured stderr {report.when}")
+    if report.passed and _OUT_OF_BOUNDS in err:
+        lines = [ln for ln in err.splitlines() if _OUT_OF_BOUNDS in ln]
+        report.outcome = "failed"
+        report.longrepr = (f"Dr.Jit's debug mode reported {len(lines)} out-of-bounds "
+                           "access(es) during this test:\n" + "\n".join(lines[:10]))
 
 
 def shared_data_path(*parts) -> Path:

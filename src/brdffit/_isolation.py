@@ -78,6 +78,17 @@ def _receive(stream):
     return pickle.loads(data)
 
 
+def _reap(proc: subprocess.Popen) -> int:
+    """Wait for the child (killed after 30 s), close its output; its return code."""
+    try:
+        proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    proc.stdout.close()
+    return proc.returncode
+
+
 class IsolatedProcess:
     """A child Python process running calls one at a time (module docstring).
 
@@ -120,12 +131,7 @@ class IsolatedProcess:
             proc.stdin.close()
         except OSError:
             pass
-        try:
-            proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        proc.stdout.close()
+        _reap(proc)
 
     def __enter__(self):
         return self
@@ -171,13 +177,7 @@ class IsolatedProcess:
                     and proc.poll() is None:
                 raise
             self._proc = None
-            try:
-                proc.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
-            proc.stdout.close()
-            rc = proc.returncode
+            rc = _reap(proc)
             how = crash_text(rc)
             crashed = "crashed" if rc is not None and rc < 0 else "stopped"
             where = f" while {self.stage}" if self.stage else ""
