@@ -225,7 +225,8 @@ def test_parent_is_a_file(tmp_path, capsys):
     out = tmp_path / "file.txt" / "x.glsl"
     rc = main(["export", "synthetic:gold-ggx", "--to", "glsl", "-o", str(out)])
     err = capsys.readouterr().err
-    assert rc == 1 and err.startswith(f"brdffit: error: {out}: could not write"), err
+    assert rc == 1 and err.startswith(f"brdffit: error: {out}: expected a folder "
+                                      f"{out.parent}, found a regular file"), err
     assert len(err.strip().splitlines()) == 1 and "Errno" not in err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file.txt"]
     assert (tmp_path / "file.txt").read_text() == "keep"

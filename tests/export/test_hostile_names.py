@@ -434,8 +434,9 @@ def test_nul_in_output_name_is_one_clean_error(tmp_path, capsys):
 
 def test_unrepresentable_model_is_one_line(tmp_path, capsys):
     # (anisotropic models go to rgl since issue 14.4: phi_i slices)
-    for to, model in (("materialx", "sgd-paint"), ("gltf", "sgd-paint"), ("merl", "aniso-ggx")):
-        rc = main(["export", f"synthetic:{model}", "--to", to, "-o", str(tmp_path / f"x.{to}")])
+    for to, model, out in (("materialx", "sgd-paint", "x.mtlx"), ("gltf", "sgd-paint", "x.gltf"),
+                           ("merl", "aniso-ggx", "x.binary")):
+        rc = main(["export", f"synthetic:{model}", "--to", to, "-o", str(tmp_path / out)])
         err = capsys.readouterr().err
         assert rc == 1 and len(err.strip().splitlines()) == 1 and err.startswith("brdffit: error:")
         assert "cannot export" in err

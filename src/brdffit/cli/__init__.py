@@ -79,6 +79,25 @@ class UsageError(Exception):
         file.write(f"Try '{prog} -h' for help.\n")
 
 
+def output_file(path: Path, suffixes: tuple[str, ...], option: str = "-o",
+                hint: str = "") -> str:
+    """Check ``-o FILE`` before any work; returns its kind (:func:`brdffit._atomic.destination_kind`).
+
+    A new path or a regular file must end in one of ``suffixes`` (else a usage error,
+    exit 2, with ``hint``); a character device or a FIFO (``/dev/null``) is written
+    through in the command's format; a directory, socket or block device, a missing folder
+    or a folder where no file can be created is an :class:`~brdffit._atomic.OutputError`
+    (exit 1). Nothing is created here."""
+    from .._atomic import WRITE_THROUGH, check_writable, destination_kind
+
+    kind = destination_kind(path)
+    if kind in ("new", "regular file") and path.suffix.lower() not in suffixes:
+        raise usage_error(option, f"expected a file name ending in {' or '.join(suffixes)}, "
+                                  f"found {str(path.name)!r}{hint}")
+    check_writable(path)
+    return kind
+
+
 def usage_error(option: str | None, message: str) -> UsageError:
     """A bad command-line value: ``raise usage_error("--model", "...")`` exits with status 2."""
     return UsageError(message, option)

@@ -20,8 +20,11 @@ def convert(spec, out) -> dict:
     """Load ``spec`` and write it to ``out`` (format from the extension); return a summary."""
     from ..io import load
 
+    from .._atomic import WRITE_THROUGH, destination_kind
+
     out = Path(out)
-    kind = _OUTPUTS.get(out.suffix.lower())
+    # a device or FIFO has no extension: MERL, the format every tool reads
+    kind = "merl" if destination_kind(out) in WRITE_THROUGH else _OUTPUTS.get(out.suffix.lower())
     if kind is None:
         raise BRDFFormatError(out, f"expected an output extension in {sorted(_OUTPUTS)} "
                                    f"(MERL .binary, UTIA .bin), found {out.suffix or 'none'!r}")
@@ -52,11 +55,9 @@ def register(commands) -> None:
 
 def convert_cmd(src: str, dst: Path) -> None:
     """Resample a BRDF to a MERL (.binary) or UTIA (.bin) file."""
-    if dst.suffix.lower() not in _OUTPUTS:
-        from . import usage_error
+    from . import output_file
 
-        raise usage_error("OUT", f"expected an output ending in "
-                                 f"{' or '.join(sorted(_OUTPUTS))}, found {dst.name!r}")
+    output_file(dst, tuple(_OUTPUTS), option="OUT")
     info = convert(src, dst)
     print(f"wrote {info['out']} ({info['format']}, {info['n_samples']} samples, "
           f"{info['n_invalid']} invalid) from {src}")

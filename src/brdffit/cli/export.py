@@ -132,6 +132,12 @@ def export_cmd(fits: list[str], to: str, out: Path, option: list[str] | None = N
         check_options(to, options)
     except ValueError as exc:
         raise usage_error("--option", str(exc)) from None
+    from ..export import SUFFIXES
+    from . import output_file
+
+    others = [t for t, ends in SUFFIXES.items() if out.suffix.lower() in ends and t != to]
+    output_file(out, SUFFIXES[to], hint=f" (the file name of --to {others[0]})" if others
+                else "")
     summary = run_export(fits, to, out, options)
     if as_json:
         print(json.dumps(summary, default=str))

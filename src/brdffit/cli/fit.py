@@ -480,6 +480,11 @@ def fit_cmd(spec: str, model: str = "tabulated", out: Path | None = None,
     if iterations is not None:
         opts["iterations"] = iterations
     check_usage(model, opts)
+    if out is not None:
+        from . import output_file
+
+        output_file(out, (".npz",), hint=" (fit files are .npz; for an engine: brdffit "
+                                         "export FIT --to gltf|materialx|mitsuba|glsl|json)")
     with _live_progress(enabled=not as_json and sys.stderr.isatty()):
         _, summary = run_fit(spec, model, out, opts, error=not no_error)
     if as_json:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import usage_error
+from . import output_file, usage_error
 
 __all__ = ["register", "render_cmd", "load_brdf"]
 
@@ -69,15 +69,13 @@ def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str |
     """Render a BRDF or fit with Mitsuba 3 to an EXR or PNG image."""
     import numpy as np
 
+    from .._atomic import WRITE_THROUGH
     from ..errors import BRDFError
     from ..evaluation.imageio import write_exr, write_png
     from ..evaluation.render import Renderer
     from ..evaluation.render.scenes import SCENES
     from ..evaluation.tonemap import tonemap
 
-    ext = output.suffix.lower()
-    if ext not in (".exr", ".png"):
-        raise usage_error("-o", f"expected an output ending in .exr or .png, found {ext!r}")
     if scene not in SCENES:
         raise usage_error("--scene", f"expected one of {', '.join(SCENES)}, found {scene!r}")
     if mode not in ("auto", "table", "closed"):
@@ -89,6 +87,9 @@ def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str |
         except ValueError:
             raise usage_error("--exposure",
                               f"expected a number or 'auto', found {exposure!r}") from None
+    # a device or FIFO (no extension) gets a PNG
+    ext = ".png" if output_file(output, (".exr", ".png")) in WRITE_THROUGH else \
+        output.suffix.lower()
     brdf = load_brdf(spec)
     env = None if envmap in (None, "", "procedural", "default") else envmap
     tex = None

@@ -31,7 +31,7 @@ from importlib import import_module
 
 from ..errors import ExportError
 
-__all__ = ["export", "TARGETS", "load_json", "ExportError", "load_sgd_table", "load_npf_table",
+__all__ = ["export", "TARGETS", "SUFFIXES", "load_json", "ExportError", "load_sgd_table", "load_npf_table",
            "pack_npf_uber_texture", "GLTFBRDF"]
 
 _LAZY = {"load_sgd_table": ".tables", "load_npf_table": ".tables",
@@ -56,6 +56,11 @@ TARGETS = {
     # one NPF fit or a list of them, packed as Bagher 2016's uber-texture (Fig. 16)
     "npf-uber": (".glsl", "pack_npf_uber_texture"),
 }
+
+#: target name -> the file-name endings of its main output (``brdffit export -o``)
+SUFFIXES = {"json": (".json",), "mitsuba": (".py",), "mitsuba-xml": (".xml",),
+            "gltf": (".gltf",), "materialx": (".mtlx",), "glsl": (".glsl",),
+            "merl": (".binary",), "rgl": (".bsdf",), "npf-uber": (".npy",)}
 
 
 def export(model, to: str, path, **options) -> dict:

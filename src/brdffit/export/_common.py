@@ -97,8 +97,9 @@ class StagedFiles:
     ``with StagedFiles(main) as st:`` creates a hidden temporary folder next to ``main``
     (same filesystem); ``st.path(final)`` is where a writer writes the file that belongs at
     ``final`` (same suffix: some writers append one), ``st.open(final)`` opens it. When the
-    block ends without error every file is moved into place with ``os.replace`` (``main``
-    last, so a script never appears before the data it loads); if a move fails, the files
+    block ends without error every file is put in place with :func:`brdffit._atomic.place`
+    (``main`` last, so a script never appears before the data it loads; a device or FIFO is
+    written through, and refused when the export has several files); if a move fails, the files
     already moved are restored to their previous content (or removed when they did not
     exist). On any error the temporary folder is removed: a failed export leaves the output
     folder as it was. Every ``OSError`` becomes a one-line :class:`ExportError` naming the
@@ -111,7 +112,11 @@ class StagedFiles:
         self._files: list[tuple[Path, Path]] = []
 
     def __enter__(self) -> "StagedFiles":
-        parent = self.main.parent
+        from .._atomic import WRITE_THROUGH, destination_kind
+
+        # a device or FIFO is written through: stage in the temporary folder, not in /dev
+        special = destination_kind(self.main) in WRITE_THROUGH
+        parent = Path(tempfile.gettempdir()) if special else self.main.parent
         with writing(self.main):
             parent.mkdir(parents=True, exist_ok=True)
             self.dir = Path(tempfile.mkdtemp(prefix=f".{self.main.name[:48]}.",
@@ -143,7 +148,15 @@ class StagedFiles:
         return False
 
     def _commit(self) -> None:
+        from .._atomic import WRITE_THROUGH, destination_kind, place
+
         order = sorted(self._files, key=lambda ft: ft[0] == self.main)   # main file last
+        special = [(f, k) for f, _ in order if (k := destination_kind(f)) in WRITE_THROUGH]
+        if special and len(order) > 1:
+            final, kind = special[0]
+            raise ExportError(f"{shown(final)}: this export writes {len(order)} files "
+                              f"({', '.join(shown(f.name) for f, _ in order)}); expected a "
+                              f"file name in a folder, found a {kind}")
         done: list[tuple[Path, Path | None, bool]] = []
         try:
             for i, (final, tmp) in enumerate(order):
@@ -152,14 +165,14 @@ class StagedFiles:
                                       "nothing")
                 existed = os.path.lexists(final)
                 backup = None
-                if existed and not final.is_dir():
+                if existed and destination_kind(final) == "regular file":
                     backup = self.dir / f"previous{i}"
                     try:
                         os.link(final, backup, follow_symlinks=False)
                     except OSError:
                         backup = None
                 with writing(final):
-                    os.replace(tmp, final)
+                    place(tmp, final)
                 done.append((final, backup, existed))
         except BaseException:
             for final, backup, existed in reversed(done):
