@@ -97,6 +97,22 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
                                   and all(isinstance(v, dict) for v in fopts.values())):
         raise ValueError(f"--fit-options: expected a JSON object {{model: {{option: value}}}}, "
                          f"found {fit_options!r}")
+    if fopts:
+        from ..fit.options import OptionError, check_options
+        from . import usage_error
+
+        labels = [m.split("=", 1)[0] if "=" in m else Path(m).stem if m.endswith(".npz")
+                  else m for m in model_list]
+        for label, opts in fopts.items():
+            if label not in labels:
+                raise usage_error("--fit-options", f"{label!r} is not one of --models "
+                                                   f"({', '.join(model_list)})")
+            try:
+                fopts[label] = check_options(label, opts, command_line=True)
+            except OptionError as exc:
+                raise usage_error("--fit-options", f"{label}: {exc}") from None
+            except KeyError:  # a saved fit (label=path.npz) takes no fitting options
+                raise usage_error("--fit-options", f"{label!r} is not a model name") from None
     ropts = {"envmap": envmap} if envmap else {}
     from ..errors import printable
 

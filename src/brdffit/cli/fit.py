@@ -43,68 +43,25 @@ def parse_options(items: list[str] | None) -> dict:
     return out
 
 
-def accepted_options(fn, _seen: frozenset = frozenset(), _skip: int = 1) -> tuple[set, bool]:
-    """``(names, open_ended)``: the keyword options a fitting function accepts.
+def accepted_options(fn) -> tuple[set, bool]:
+    """``(names, open_ended)``: the keyword options a fitting function accepts
+    (:func:`brdffit.fit.options.fitter_parameters`)."""
+    from ..fit.options import NOT_OPTIONS, fitter_parameters
 
-    The named parameters after the BRDF (private ``_x`` ones excluded); when the function
-    takes ``**kwargs``, those of the module-level functions it forwards them to
-    (``f(brdf, **kwargs)`` in its source), recursively. ``open_ended`` is True when some
-    ``**kwargs`` could not be followed: then unknown names cannot be ruled out up front.
-    """
-    import ast
-    import inspect
-    import textwrap
-
-    fn = inspect.unwrap(fn)
-    if fn in _seen:
-        return set(), False
-    try:
-        params = list(inspect.signature(fn).parameters.values())
-    except (TypeError, ValueError):
-        return set(), True
-    names, var_kw = set(), None
-    for i, p in enumerate(params):
-        if p.kind is p.VAR_KEYWORD:
-            var_kw = p.name
-        elif (p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and i >= _skip
-              and not p.name.startswith("_")):
-            names.add(p.name)
-    if var_kw is None:
-        return names, False
-    try:
-        tree = ast.parse(textwrap.dedent(inspect.getsource(fn)))
-    except (OSError, TypeError, SyntaxError):
-        return names, True
-    open_ended, forwarded = False, False
-    for node in ast.walk(tree):
-        if not (isinstance(node, ast.Call) and any(
-                k.arg is None and isinstance(k.value, ast.Name) and k.value.id == var_kw
-                for k in node.keywords)):
-            continue
-        forwarded = True
-        callee = getattr(fn, "__globals__", {}).get(node.func.id) \
-            if isinstance(node.func, ast.Name) else None
-        if not callable(callee):
-            open_ended = True
-            continue
-        sub, sub_open = accepted_options(callee, _seen | {fn}, len(node.args))
-        names |= sub - {k.arg for k in node.keywords if k.arg}
-        open_ended |= sub_open
-    return names, open_ended or not forwarded
+    params, open_ended = fitter_parameters(fn)
+    return set(params) - NOT_OPTIONS, open_ended
 
 
-def check_options(model: str, options: dict) -> None:
-    """Usage error (exit 2) naming an option ``model``'s fitter does not take, and the
-    accepted ones."""
-    from ..fit import registry
+def check_options(model: str, options: dict) -> dict:
+    """The options checked (:func:`brdffit.fit.options.check_options`): names, types and
+    ranges; a bad one is a usage error (exit 2) naming it and what is accepted."""
+    from ..fit.options import OptionError, check_options as check
     from . import usage_error
 
-    names, open_ended = accepted_options(registry.get(model).fit)
-    unknown = sorted(set(options) - names)
-    if unknown and not open_ended:
-        raise usage_error("--option", f"model {model!r} has no option "
-                                      f"{', '.join(map(repr, unknown))}; accepted: "
-                                      f"{', '.join(sorted(names)) or 'none'}")
+    try:
+        return check(model, options, command_line=True)
+    except OptionError as exc:
+        raise usage_error("--option", str(exc)) from None
 
 
 def _unexpected_option(exc: TypeError, options: dict) -> str | None:
@@ -253,13 +210,14 @@ def _entry(model: str):
 def check_usage(model: str, options: dict) -> None:
     """Usage errors (exit 2) of a fit request, before any work: an unknown model (from the
     registry's declared names: no fitting module imported) and, only when there are
-    options, an option the model's fitter does not take (imports its module)."""
+    options, an option the model's fitter does not take or a value of the wrong type or
+    range (imports its module); ``options`` are updated with the checked values."""
     from . import check_models
 
     check_models([model], "--model")
     if options:
         _entry(model)
-        check_options(model, options)
+        options.update(check_options(model, options))
 
 
 @contextlib.contextmanager

@@ -80,7 +80,9 @@ def fit(brdf: BRDF | str, model: str = "tabulated", **options) -> BRDF:
     Raises
     ------
     ValueError
-        Unknown model name (the message lists the known ones).
+        Unknown model name (the message lists the known ones), or an option the fitter
+        does not take or a value of the wrong type or range
+        (:class:`brdffit.fit.options.OptionError`, checked before the input is read).
     brdffit.FitError
         The fit failed on this input.
 
@@ -97,6 +99,9 @@ def fit(brdf: BRDF | str, model: str = "tabulated", **options) -> BRDF:
     if not isinstance(model, str) or (model not in known_names()
                                       and model not in list_fitters()):
         raise ValueError(f"unknown model {model!r}; expected one of {', '.join(known_names())}")
+    from .options import check_options
+
+    options = check_options(model, options)
     if isinstance(brdf, str):
         from ..io import load
 

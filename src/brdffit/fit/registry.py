@@ -327,10 +327,14 @@ def is_isotropic_only(name: str) -> bool:
 
 
 def fit_model(name: str, reference, options: Mapping | None = None):
-    """Fit model ``name`` to ``reference``; returns ``(model, seconds)``."""
+    """Fit model ``name`` to ``reference`` with ``options`` checked
+    (:func:`brdffit.fit.options.check_options`); returns ``(model, seconds)``."""
+    from .options import check_options
+
     fitter = get(name).fit
+    options = check_options(name, dict(options or {}))
     t0 = time.perf_counter()
-    model = fitter(reference, **dict(options or {}))
+    model = fitter(reference, **options)
     return model, time.perf_counter() - t0
 
 
