@@ -120,6 +120,71 @@ def at_least(low: int):
     return parse
 
 
+def between(low: int, high: int):
+    """The ``type=`` of an integer option in ``[low, high]`` (``--help`` shows the range)."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{text!r} is not in the range {low}..{high}")
+        return value
+
+    parse.range_text = f"{low}..{high}"
+    parse.__name__ = "integer"
+    return parse
+
+
+def positive(high: float = 1e6):
+    """The ``type=`` of a real option in ``(0, high]`` (finite; not NaN)."""
+    def parse(text: str) -> float:
+        value = number(text)
+        if not 0.0 < value <= high:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number in (0, {high:g}]")
+        return value
+
+    parse.range_text = f"0<x<={high:g}"
+    parse.__name__ = "number"
+    return parse
+
+
+def positive_or(*words: str, high: float = 1e6):
+    """The ``type=`` of an option that is one of ``words`` or a number in ``(0, high]``."""
+    as_number = positive(high)
+
+    def parse(text: str):
+        if text in words:
+            return text
+        try:
+            return as_number(text)
+        except argparse.ArgumentTypeError:
+            raise argparse.ArgumentTypeError(
+                f"{text!r} is not {', '.join(words)} or a number in (0, {high:g}]") from None
+
+    parse.__name__ = "value"
+    return parse
+
+
+#: Upper bounds of the render options (``render``, ``compare``, ``batch --render``,
+#: ``demo``): the image side (a 4096² film of 4 channels is 0.27 GB per copy), samples per
+#: pixel, and the seed (Mitsuba's sampler takes 32 bits; a comparison adds up to 2²⁰ for
+#: its batches and peaks).
+MAX_RESOLUTION, MAX_SPP, MAX_SEED = 4096, 1 << 16, (1 << 31) - 1
+#: Samples one render pass may hold: Dr.Jit arrays have at most 2³² entries.
+MAX_SAMPLES_PER_PASS = (1 << 32) - 1
+
+
+def check_render_size(resolution: int, spp_per_pass: int, option: str = "--spp") -> None:
+    """Usage error (exit 2) when ``resolution² × spp_per_pass`` exceeds what one Dr.Jit
+    render pass can hold (:data:`MAX_SAMPLES_PER_PASS`)."""
+    n = int(resolution) ** 2 * int(spp_per_pass)
+    if n > MAX_SAMPLES_PER_PASS:
+        raise usage_error(option, f"{resolution}² pixels × {spp_per_pass} samples = {n:,} "
+                                  f"samples in one pass; at most {MAX_SAMPLES_PER_PASS:,} "
+                                  "(lower --spp or --resolution)")
+
+
 def number(text: str) -> float:
     """The ``type=`` of a real-valued option (finite or infinite, not NaN)."""
     try:
@@ -247,13 +312,24 @@ def add_render_options(command, when: str = "") -> None:
         "the scene suite 'paper' (Bagher 2016 §5: sphere-courtyard, sphere-studio, "
         "sphere-sunrise, knot-courtyard) or scene names, comma-separated: sphere-<map>, "
         "knot-<map>, sphere-env, knot, sphere-point, sphere-distant, sphere-svrough."))
-    command.add_argument("--spp", type=at_least(1), default=64, metavar="N",
-                         help=text("samples per pixel per scene, all batches together."))
-    command.add_argument("--batches", type=at_least(1), default=8, metavar="N",
+    command.add_argument("--spp", type=between(1, MAX_SPP), default=64, metavar="N",
+                         help=text("samples per pixel per scene, all batches together (a "
+                                   "multiple of --batches)."))
+    command.add_argument("--batches", type=between(1, 256), default=8, metavar="N",
                          help=text("independent batches per scene (the PSNR standard error "
-                                   "needs ≥ 3)."))
-    command.add_argument("--resolution", type=at_least(8), default=256, metavar="PX",
-                         help=text("image side in pixels."))
+                                   "needs ≥ 3; as many as --spp when it is smaller)."))
+    command.add_argument("--resolution", type=between(8, MAX_RESOLUTION), default=256,
+                         metavar="PX", help=text("image side in pixels."))
+
+
+def check_batches(spp: int, batches: int, batches_option: str | None = "--batches") -> None:
+    """Usage error (exit 2) unless ``spp`` is a multiple of ``batches`` (every batch renders
+    ``spp / batches`` samples per pixel: no silent rounding)."""
+    if spp % batches:
+        lower, upper = spp // batches * batches, -(-spp // batches) * batches
+        options = " or ".join(f"--spp {v}" for v in dict.fromkeys((lower, upper)) if v > 0)
+        of = f"--batches {batches}" if batches_option else f"the {batches} batches"
+        raise usage_error("--spp", f"{spp} is not a multiple of {of}; use {options}")
 
 
 def check_models(names, option: str = "--models") -> list[str]:

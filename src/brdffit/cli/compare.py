@@ -38,7 +38,8 @@ def _materials(spec: str, limit: int | None) -> list[str]:
 
 
 def register(commands) -> None:
-    from . import add_command, add_render_options, at_least, integer, models_help, number, path
+    from . import (MAX_SEED, add_command, add_render_options, at_least, between, models_help,
+                   path, positive, positive_or)
 
     cmd = add_command(commands, "compare", compare_cmd, epilog=models_help())
     cmd.add_argument("spec", metavar="INPUT[:MATERIAL]",
@@ -51,12 +52,13 @@ def register(commands) -> None:
                      help="Report directory.")
     add_render_options(cmd)
     cmd.add_argument("--scene", help=argparse.SUPPRESS)  # former option: --scenes NAME
-    cmd.add_argument("--seed", type=integer, default=0, metavar="N",
+    cmd.add_argument("--seed", type=between(0, MAX_SEED - (1 << 20)), default=0, metavar="N",
                      help="Seed of the sample streams (all models).")
-    cmd.add_argument("--exposure", default="scene", metavar="EV",
+    cmd.add_argument("--exposure", type=positive_or("scene", "auto"), default="scene",
+                     metavar="EV",
                      help="Tone-mapping exposure: 'scene' (fixed per scene), 'auto' (from "
-                          "each scene's reference) or a number.")
-    cmd.add_argument("--gamma", type=number, metavar="G",
+                          "each scene's reference) or a positive number.")
+    cmd.add_argument("--gamma", type=positive(10.0), metavar="G",
                      help="Tone-mapping gamma (default: the scene's, 2.2).")
     # ignored (standard errors replaced the noise floor); accepted for old command lines
     cmd.add_argument("--noise-floor", action=argparse.BooleanOptionalAction, default=True,
@@ -88,7 +90,12 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
     from . import check_models  # model names (not saved fits) must be known: exit 2
 
     check_models([m for m in model_list if "=" not in m and not m.endswith(".npz")])
-    exp = exposure if exposure in ("auto", "scene") else float(exposure)
+    from . import check_batches, check_render_size
+
+    batches = min(batches, spp)  # as compare(): fewer samples than batches, one each
+    check_batches(spp, batches)
+    check_render_size(resolution, spp // batches)
+    exp = exposure
     try:
         fopts = json.loads(fit_options) if fit_options else None
     except json.JSONDecodeError as exc:

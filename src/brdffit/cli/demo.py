@@ -18,22 +18,23 @@ NEXT_STEP = ("fit synthetic:plastic-beckmann -m ggx-diffuse -o plastic.npz",
 
 
 def register(commands) -> None:
-    from . import add_command, at_least, integer, models_help
+    from . import MAX_RESOLUTION, MAX_SPP, add_command, at_least, between, models_help
 
     cmd = add_command(commands, "demo", demo_cmd, epilog=models_help())
     cmd.add_argument("-o", "--out", default="demo-out", metavar="DIR", help="Report folder.")
     cmd.add_argument("--data", default="", metavar="SOURCE",
                      help="Run on real data instead: a folder, a Neural-BRDF .zip collection "
                           "or a list file.")
-    cmd.add_argument("--limit", type=integer, default=0, metavar="N",
+    cmd.add_argument("--limit", type=at_least(0), default=0, metavar="N",
                      help="With --data: first N materials only.")
     cmd.add_argument("-m", "--models", default=DEMO_MODELS, metavar="A,B",
                      help="Models to fit (list below).")
-    cmd.add_argument("--spp", type=integer, default=64, metavar="N",
-                     help="Samples per pixel of the renderings.")
-    cmd.add_argument("--resolution", type=integer, default=128, metavar="PX",
-                     help="Image size in pixels.")
-    cmd.add_argument("-j", "--jobs", type=at_least(0), default=0, metavar="N",
+    cmd.add_argument("--spp", type=between(1, MAX_SPP), default=64, metavar="N",
+                     help="Samples per pixel of the renderings (in up to 8 batches: a "
+                          "multiple of 8, or fewer than 8).")
+    cmd.add_argument("--resolution", type=between(8, MAX_RESOLUTION), default=128,
+                     metavar="PX", help="Image size in pixels.")
+    cmd.add_argument("-j", "--jobs", type=between(0, 64), default=0, metavar="N",
                      help="Materials at a time, each in its own process (0: one per CPU).")
 
 
@@ -100,6 +101,11 @@ def demo_cmd(out: str = "demo-out", data: str = "", limit: int = 0, models: str 
     model_list = check_models([m.strip() for m in models.split(",") if m.strip()])
     if not model_list:
         raise usage_error("--models", f"expected at least one model name, found {models!r}")
+    from ..evaluation.compare import DEFAULT_BATCHES
+    from . import check_batches, check_render_size
+
+    check_batches(spp, min(DEFAULT_BATCHES, spp), None)
+    check_render_size(resolution, spp // min(DEFAULT_BATCHES, spp))
     source = data or "synthetic:"
     materials = enumerate_materials(source, limit=limit or None)
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(materials)))

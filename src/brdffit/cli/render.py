@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import output_file, usage_error
+from . import check_render_size, output_file, usage_error
 
 __all__ = ["register", "render_cmd", "load_brdf"]
 
@@ -30,7 +30,8 @@ def load_brdf(spec: str):
 
 
 def register(commands) -> None:
-    from . import add_command, at_least, integer, number, path
+    from . import (MAX_RESOLUTION, MAX_SEED, MAX_SPP, add_command, between, path, positive,
+                   positive_or)
 
     cmd = add_command(commands, "render", render_cmd)
     cmd.add_argument("spec", metavar="INPUT_OR_FIT",
@@ -42,16 +43,17 @@ def register(commands) -> None:
     cmd.add_argument("--envmap", metavar="MAP",
                      help="Environment: a name of ../shared/data/envmaps (studio, city, ...), "
                           "an EXR path, or 'procedural' (default).")
-    cmd.add_argument("--spp", type=at_least(1), default=256, metavar="N",
+    cmd.add_argument("--spp", type=between(1, MAX_SPP), default=256, metavar="N",
                      help="Samples per pixel.")
-    cmd.add_argument("--resolution", type=at_least(8), default=256, metavar="PX",
-                     help="Image width = height.")
-    cmd.add_argument("--seed", type=integer, default=0, metavar="N", help="Sampler seed.")
+    cmd.add_argument("--resolution", type=between(8, MAX_RESOLUTION), default=256,
+                     metavar="PX", help="Image width = height.")
+    cmd.add_argument("--seed", type=between(0, MAX_SEED), default=0, metavar="N",
+                     help="Sampler seed.")
     cmd.add_argument("--mode", default="auto", metavar="MODE",
                      help="auto (closed form when available), table, closed.")
-    cmd.add_argument("--exposure", default="auto", metavar="EV",
-                     help="PNG tone-mapping exposure (number or 'auto').")
-    cmd.add_argument("--gamma", type=number, default=2.2, metavar="G",
+    cmd.add_argument("--exposure", type=positive_or("auto"), default="auto", metavar="EV",
+                     help="PNG tone-mapping exposure (a positive number or 'auto').")
+    cmd.add_argument("--gamma", type=positive(10.0), default=2.2, metavar="G",
                      help="PNG tone-mapping gamma.")
     cmd.add_argument("--roughness-texture", type=path, metavar="IMAGE",
                      help="Roughness-scale texture for microfacet models (Dupuy 2015 Eq. 9): "
@@ -81,12 +83,7 @@ def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str |
     if mode not in ("auto", "table", "closed"):
         raise usage_error("--mode", f"expected auto, table or closed, found {mode!r}")
     expo = exposure
-    if exposure != "auto":
-        try:
-            expo = float(exposure)
-        except ValueError:
-            raise usage_error("--exposure",
-                              f"expected a number or 'auto', found {exposure!r}") from None
+    check_render_size(resolution, spp)
     # a device or FIFO (no extension) gets a PNG
     ext = ".png" if output_file(output, (".exr", ".png")) in WRITE_THROUGH else \
         output.suffix.lower()

@@ -280,6 +280,9 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
     batches = max(1, min(int(batches), int(spp)))
     spp_batch = max(1, -(-int(spp) // batches))
     specs, scene_notes = scene_suite(scene if scene is not None else scenes, ropts.get("envmap"))
+    if spp_batch * batches != int(spp):
+        scene_notes = [*scene_notes, f"{int(spp)} samples per pixel asked, {spp_batch * batches} "
+                       f"rendered: {batches} batches of {spp_batch}"]
 
     # ---- resolve / fit models --------------------------------------------------------
     entries: list[tuple[str, Any]] = []
