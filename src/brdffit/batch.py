@@ -642,10 +642,12 @@ def write_summary(out_dir, records: list[dict] | None = None) -> tuple[Path, Pat
     fields = list(COLUMNS)
     for row in rows:
         fields += [k for k in row if k not in fields]
+    from .errors import csv_cell
+
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=fields)
     writer.writeheader()
-    writer.writerows(rows)
+    writer.writerows({k: csv_cell(v) for k, v in row.items()} for row in rows)
     with atomic_write(out / "summary.csv", "w") as fh:
         fh.write(buf.getvalue())
     return out / "summary.json", out / "summary.csv"
@@ -1010,10 +1012,12 @@ class _BatchLog:
     def _write(self, line: str) -> None:
         if self._f is None:
             return
+        from .errors import printable
+
         stamp = time.strftime("%Y-%m-%dT%H:%M:%S")
         with self._lock:
-            try:
-                self._f.write(f"{stamp} {line}\n")
+            try:  # names and errors come from files and users: one escaped line each
+                self._f.write(f"{stamp} {printable(line)}\n")
             except (OSError, ValueError):
                 pass
 

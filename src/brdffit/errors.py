@@ -41,8 +41,24 @@ def _printable(text: str) -> str:
                    for c in text)
 
 
-#: ``text`` made safe for one line of a terminal or a log (control characters escaped).
+#: ``text`` made safe for one line of a terminal or a log: control characters, line
+#: separators, bidirectional overrides and other invisible format characters escaped.
 printable = _printable
+
+
+def csv_cell(value):
+    """A value for a CSV file opened by people: text :func:`printable`, and a cell that a
+    spreadsheet would run as a formula (``=``, ``+``, ``-``, ``@`` first, then not a
+    number) prefixed with ``'``; numbers and ``None`` unchanged."""
+    if not isinstance(value, str):
+        return value
+    text = _printable(value)
+    if text[:1] in ("=", "+", "-", "@"):
+        try:
+            float(text)
+        except ValueError:
+            return "'" + text
+    return text
 
 
 class FitError(BRDFError, RuntimeError):

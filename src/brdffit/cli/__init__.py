@@ -38,7 +38,7 @@ import textwrap
 from pathlib import Path
 
 from .. import __version__
-from ..errors import BRDFError
+from ..errors import BRDFError, printable
 from .._blas import single_thread_env
 from .._malloc import tune_this_process
 
@@ -75,7 +75,7 @@ class UsageError(Exception):
             file.write(self.parser.format_usage())
             prog = self.parser.prog
         where = f"{self.option}: " if self.option else ""
-        file.write(f"{prog}: error: {where}{self.message}\n")
+        file.write(f"{prog}: error: {where}{printable(self.message)}\n")
         file.write(f"Try '{prog} -h' for help.\n")
 
 
@@ -433,10 +433,10 @@ def main(argv: list[str] | None = None) -> int:
         if debug:
             raise
         if isinstance(exc, (BRDFError, OSError, ValueError)):
-            print(f"brdffit: error: {exc}", file=sys.stderr)
+            print(f"brdffit: error: {printable(str(exc))}", file=sys.stderr)
         else:
-            print(f"brdffit: error: {type(exc).__name__}: {exc} (--debug shows the traceback)",
-                  file=sys.stderr)
+            print(f"brdffit: error: {type(exc).__name__}: {printable(str(exc))} (--debug shows "
+                  "the traceback)", file=sys.stderr)
         return EXIT_ERROR
     return code if isinstance(code, int) else EXIT_OK
 

@@ -106,7 +106,9 @@ def batch_cmd(source: str, out: str, models: str = DEFAULT_MODELS, only: str = "
                            if render else None, retry_failed=retry_failed,
                            progress=not quiet, retries=retries, wait_lock=wait_lock)
     except OutputLocked as exc:
-        print(f"brdffit: {exc}", file=sys.stderr)
+        from ..errors import printable
+
+        print(f"brdffit: {printable(str(exc))}", file=sys.stderr)
         return EXIT_USAGE
     n_render = f" + {result['render_tasks']} render" if render else ""
     print(f"{len(tasks)} fit{n_render} tasks: {result['ran']} run ({result['failed']} failed), "

@@ -59,5 +59,7 @@ def convert_cmd(src: str, dst: Path) -> None:
 
     output_file(dst, tuple(_OUTPUTS), option="OUT")
     info = convert(src, dst)
-    print(f"wrote {info['out']} ({info['format']}, {info['n_samples']} samples, "
-          f"{info['n_invalid']} invalid) from {src}")
+    from ..errors import printable
+
+    print(printable(f"wrote {info['out']} ({info['format']}, {info['n_samples']} samples, "
+                    f"{info['n_invalid']} invalid) from {src}"))

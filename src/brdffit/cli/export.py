@@ -142,9 +142,11 @@ def export_cmd(fits: list[str], to: str, out: Path, option: list[str] | None = N
     if as_json:
         print(json.dumps(summary, default=str))
         return
+    from ..errors import printable
+
     print(f"wrote {', '.join(shown(f) for f in summary.get('files', [str(out)]))} ({to})")
     for note in summary.get("notes", []):
-        print(f"  approximation: {note}")
+        print(f"  approximation: {printable(str(note))}")
     for key in ("error", "fidelity"):
         if summary.get(key):
             print(f"  {key}: " + ", ".join(f"{k}={v:.4g}" if isinstance(v, float)

@@ -450,5 +450,7 @@ def fit_cmd(spec: str, model: str = "tabulated", out: Path | None = None,
 
         print(json.dumps(summary, default=json_default, sort_keys=True))
         return
+    from ..errors import printable
+
     for line in format_summary(summary):
-        print(line)
+        print(printable(line))

@@ -9,6 +9,7 @@ lists its materials.
 
 from __future__ import annotations
 
+import builtins
 import json
 import os
 
@@ -121,6 +122,13 @@ def _fmt_rgb(v) -> str:
 
 
 def _print_summary(s: dict) -> None:
+    """The summary, one line per figure; every string from the file or the user escaped
+    (:func:`brdffit.errors.printable`)."""
+    from ..errors import printable
+
+    def print(line: str) -> None:  # noqa: A001 – every line of this command goes through here
+        builtins.print(printable(line))
+
     print(f"{s['spec']}")
     print(f"  format      {s['format']}  ({s['model']})")
     print(f"  name        {s['name']}")
@@ -161,6 +169,7 @@ def register(commands) -> None:
 
 def info_cmd(spec: str, as_json: bool = False, albedo_samples: int = 65536) -> None:
     """Format, sample counts, value range and albedo of a BRDF file."""
+    from ..errors import printable
     from ..io import load, resolve_spec
     from ..io.nbrdf import list_materials
 
@@ -171,10 +180,10 @@ def info_cmd(spec: str, as_json: bool = False, albedo_samples: int = 65536) -> N
             print(json.dumps({"spec": spec, "format": "nbrdf-collection",
                               "path": os.fspath(path), "materials": names}))
         else:
-            print(f"{spec}: Neural-BRDF collection with {len(names)} materials "
-                  f"(use {os.path.basename(spec)}:MATERIAL)")
+            print(printable(f"{spec}: Neural-BRDF collection with {len(names)} materials "
+                            f"(use {os.path.basename(spec)}:MATERIAL)"))
             for n in names:
-                print(f"  {n}")
+                print(f"  {printable(n)}")
         return
     brdf = load(spec)
     summary = summarize(brdf, spec, albedo_samples=albedo_samples)

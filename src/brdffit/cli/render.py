@@ -107,9 +107,11 @@ def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str |
     else:
         rgb = tonemap(res.image, expo, gamma, mask=res.mask)
         write_png(output, np.concatenate([rgb, np.clip(res.alpha, 0, 1)[..., None]], -1))
-    print(f"{output}: {scene} {resolution}x{resolution} {spp} spp, evaluator "
-               f"{res.info['evaluator']} ({res.info['path']}), set-up {r.setup_seconds:.2f} s, "
-               f"render {res.seconds:.2f} s")
+    from ..errors import printable
+
+    print(printable(f"{output}: {scene} {resolution}x{resolution} {spp} spp, evaluator "
+                    f"{res.info['evaluator']} ({res.info['path']}), set-up "
+                    f"{r.setup_seconds:.2f} s, render {res.seconds:.2f} s"))
     if report_error:
         from ..evaluation.render.translate import resampling_error
 

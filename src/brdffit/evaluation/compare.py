@@ -45,7 +45,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 import numpy as np
 
 from .._isolation import ChildCrashed
-from ..errors import BRDFError
+from ..errors import BRDFError, printable
 from ..fit.registry import fit_model, is_isotropic_only, model_params, small_json
 from . import metrics as M
 from . import plots as P
@@ -537,9 +537,10 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
     # ---- plots -----------------------------------------------------------------------
     ok = {r["name"]: fitted[r["name"]] for r in records if r["status"] == "ok"}
     plots: dict[str, str] = {}
-    for key, fn in (("lobes", lambda p: P.plot_lobes(reference, ok, p, title=mat_name)),
-                    ("factors", lambda p: P.plot_factors(ok, p, title=mat_name)),
-                    ("slices", lambda p: P.plot_slices(reference, ok, p, title=mat_name))):
+    title = printable(mat_name)
+    for key, fn in (("lobes", lambda p: P.plot_lobes(reference, ok, p, title=title)),
+                    ("factors", lambda p: P.plot_factors(ok, p, title=title)),
+                    ("slices", lambda p: P.plot_slices(reference, ok, p, title=title))):
         if not ok:
             break
         try:

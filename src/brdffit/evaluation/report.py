@@ -32,6 +32,7 @@ import numpy as np
 
 from .._atomic import atomic_write
 from .._json import json_default
+from ..errors import printable
 
 __all__ = ["RESULT_NAME", "slugify", "write_result", "read_results", "write_material_page",
            "write_index", "local_links", "missing_links", "summarize"]
@@ -188,7 +189,9 @@ def _sortkey(x) -> str:
 
 
 def _e(s) -> str:
-    return html.escape(str(s), quote=True)
+    """Text for HTML: control and invisible format characters (ESC, NUL, bidirectional
+    overrides) escaped as visible ``\\x1b``-style text, then HTML-escaped."""
+    return html.escape(printable(str(s)), quote=True)
 
 
 def _td(x, digits=2, cls="", unit=""):
