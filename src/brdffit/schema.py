@@ -34,8 +34,15 @@ Physical bounds (generous: they reject nonsense, not unusual fits)
 =======================  ==============================  ========================================
 constant                 value                           used for
 =======================  ==============================  ========================================
-``ALPHA_MAX``            100                             slope scales α, αx, αy, SGD α (> 0);
+``ALPHA_MAX``            100                             slope scales α, αx, αy, SGD α;
                                                          fitters stay below 3
+``ALPHA_MIN``            1e-6                            their lower bound: α² and α⁴ stay
+                                                         normal float32 numbers (a GLSL or glTF
+                                                         target divides by them); far below
+                                                         MERL's finest θh cell (1.9e-4 rad)
+``TINY``                 1e-30                           any nonzero number: a smaller magnitude
+                                                         (a denormal such as 5e-324) is refused,
+                                                         it underflows to 0 in float32
 ``P_EXPONENT_MAX``       100                             SGD exponent ``|p|`` (fits: −2 … 4)
 ``ALBEDO_MAX``           10                              Lambertian ρd (≥ 0)
 ``SPECULAR_MAX``         1e3                             specular scales ks, SGD ρs (≥ 0)
@@ -70,9 +77,12 @@ __all__ = ["StateError", "ArrayHeader", "Schema", "Number", "Numbers", "Integer"
            "Choice", "Opt", "Nested", "ListOf", "Component", "Array", "Any_",
            "validate_state", "schema_of", "ALPHA_MAX", "P_EXPONENT_MAX", "ALBEDO_MAX",
            "SPECULAR_MAX", "FRESNEL_MAX", "INDEX_MAX", "FACTOR_MAX", "TABLE_MAX", "F1_MAX",
+           "ALPHA_MIN", "TINY",
            "MAX_ARRAY_ELEMENTS"]
 
 ALPHA_MAX = 100.0
+ALPHA_MIN = 1e-6
+TINY = 1e-30
 P_EXPONENT_MAX = 100.0
 ALBEDO_MAX = 10.0
 SPECULAR_MAX = 1e3
@@ -188,7 +198,8 @@ class Any_(Validator):
 
 
 class Number(Validator):
-    """A finite real number (not a boolean, not a string) within optional bounds."""
+    """A finite real number (not a boolean, not a string) within optional bounds, 0 or of a
+    magnitude of at least :data:`TINY` (no denormals)."""
 
     def __init__(self, *, ge=None, gt=None, le=None, lt=None):
         self.ge, self.gt, self.le, self.lt = ge, gt, le, lt
@@ -216,6 +227,9 @@ class Number(Validator):
     def check(self, value, path, scope):
         if not _is_number(value) or not math.isfinite(float(value)) or not self.ok(float(value)):
             raise StateError(path, f"expected {self.describe()}, found {show(value)}")
+        if 0.0 < abs(float(value)) < TINY:
+            raise StateError(path, f"expected {self.describe()} of magnitude >= {TINY:g} (or "
+                                   f"0), found {show(value)}")
 
 
 class Integer(Number):

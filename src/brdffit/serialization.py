@@ -95,6 +95,13 @@ class SerializableModel:
         :class:`~brdffit.schema.StateError` naming the field."""
         validate_state(cls, params, arrays)
 
+    def validate(self) -> None:
+        """Check this model against its schema, as a fit file of it would be checked on load
+        (:meth:`validate_state` of :meth:`to_state`): the one validation path of models made
+        in Python, read from parameter JSON or from fit files."""
+        params, arrays = self.to_state()
+        type(self).validate_state(params, arrays)
+
     @classmethod
     def has_schema(cls) -> bool:
         """True when the kind declares its own (or an inherited) state schema."""

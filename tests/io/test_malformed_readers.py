@@ -94,6 +94,7 @@ def _run(args, folder, case):
 @pytest.mark.parametrize("case", CLI_CASES, ids=[c.name for c in CLI_CASES])
 def test_cli_refuses_cleanly_under_limits(case, command, folder):
     spec = case.make(folder)
+    (folder / "out").mkdir(exist_ok=True)  # -o never creates folders
     args = (["info", spec] if command == "info"
             else ["fit", spec, "--model", "ggx", "-o", folder / "out" / "x.npz"])
     outcome, problems = _run(args, folder, case)

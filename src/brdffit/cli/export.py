@@ -90,8 +90,11 @@ def run_export(fits: list[str], to: str, out: Path, options: dict | None = None)
     out = check_output_path(out)
     models = [load_model(f) for f in fits]
     if to == "npf-uber":
+        from ..export import check_model
         from ..export.glsl import pack_npf_uber_texture
 
+        for m in models:
+            check_model(m)
         return {"target": to, **pack_npf_uber_texture(models, out, **(options or {}))}
     if len(models) != 1:
         raise ExportError(f"--to {to} exports one fit, found {len(models)} (only npf-uber packs "

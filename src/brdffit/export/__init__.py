@@ -31,7 +31,7 @@ from importlib import import_module
 
 from ..errors import ExportError
 
-__all__ = ["export", "TARGETS", "SUFFIXES", "load_json", "ExportError", "load_sgd_table", "load_npf_table",
+__all__ = ["export", "check_model", "TARGETS", "SUFFIXES", "load_json", "ExportError", "load_sgd_table", "load_npf_table",
            "pack_npf_uber_texture", "GLTFBRDF"]
 
 _LAZY = {"load_sgd_table": ".tables", "load_npf_table": ".tables",
@@ -76,8 +76,26 @@ def export(model, to: str, path, **options) -> dict:
     if to not in TARGETS:
         raise ExportError(f"unknown export target {to!r}; expected one of {', '.join(TARGETS)}")
     path = check_output_path(path)
+    for m in model if isinstance(model, (list, tuple)) else [model]:
+        check_model(m)
     mod, fn = TARGETS[to]
     return getattr(import_module(mod, __name__), fn)(model, path, **options)
+
+
+def check_model(model) -> None:
+    """:class:`ExportError` (one line) unless ``model`` passes its schema
+    (:meth:`~brdffit.serialization.SerializableModel.validate`), as a fit file of it would:
+    every export writes only numbers that its target can hold (finite, no denormals, slope
+    scales whose squares are float32 numbers). Models without a schema pass as they are."""
+    from ..serialization import SerializableModel
+    from ._common import label
+
+    if isinstance(model, SerializableModel) and model.fit_kind and model.has_schema():
+        try:
+            model.validate()
+        except (ValueError, TypeError) as exc:
+            raise ExportError(f"cannot export {label(model)}: its parameters are out of range "
+                              f"({exc})") from None
 
 
 def load_json(path):

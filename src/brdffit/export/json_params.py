@@ -23,6 +23,11 @@ A file written by :func:`write_json` holds
 
 A hand-written file without ``state`` is accepted for a ``microfacet`` model whose
 ``parameters`` use the keys above (analytic distributions and Fresnel terms only).
+
+Reading is as careful as for fit files: at most :data:`MAX_JSON_BYTES`, a regular file, the
+nesting depth bounded (:data:`MAX_DEPTH`), the version an integer, arrays of numeric dtypes
+only, and every model, from ``state`` or from ``parameters``, checked against its schema
+(:mod:`brdffit.schema`) before it is used; every message names the file.
 """
 
 from __future__ import annotations
@@ -42,6 +47,11 @@ __all__ = ["to_json_dict", "from_json_dict", "write_json", "load_json", "describ
 
 FORMAT = "brdffit-params"
 VERSION = 1
+#: Largest parameter JSON read (a tabulated fit's state is ~0.1 MB; an NPF bivariate ~2 MB).
+MAX_JSON_BYTES = 64 << 20
+#: Deepest nesting of objects and lists accepted (written files nest 6 levels).
+MAX_DEPTH = 32
+_NUMERIC_KINDS = "fiub"
 
 CONVENTIONS = {
     "f_r": "BRDF value in 1/sr, NOT multiplied by cos(theta); 0 below the horizon",
@@ -148,7 +158,10 @@ def _encode_array(a: np.ndarray) -> dict:
 
 def _decode_array(d, path) -> np.ndarray:
     try:
-        a = np.asarray(d["data"], dtype=np.dtype(d["dtype"]))
+        dtype = np.dtype(d["dtype"])
+        if dtype.kind not in _NUMERIC_KINDS:
+            raise ValueError(f"dtype {str(dtype)!r} is not numeric")
+        a = np.asarray(d["data"], dtype=dtype)
         return a.reshape(d["shape"])
     except (KeyError, TypeError, ValueError) as exc:
         raise BRDFFormatError(path, f"expected an array entry with dtype, shape and data, "
@@ -214,9 +227,11 @@ def _from_parameters(p: dict, path):
                 arrays = {"theta_d": np.asarray(p["fresnel"]["theta_d"], float),
                           "values": np.asarray(p["fresnel"]["values"], float)}
             fres = fresnel_from_state({"kind": fk, "params": fp}, arrays)
-        return MicrofacetBRDF(dist, fres, p.get("rho_d"), specular=p.get("ks"),
-                              correlated=p.get("correlated", True))
-    except (KeyError, TypeError, ValueError) as exc:
+        model = MicrofacetBRDF(dist, fres, p.get("rho_d"), specular=p.get("ks"),
+                               correlated=p.get("correlated", True))
+        model.validate()  # the fit-file schema (brdffit.schema), as for a 'state' section
+        return model
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise BRDFFormatError(path, f"expected microfacet parameters (distribution kind and "
                                     f"parameters, optional fresnel/rho_d/ks), found an error: "
                                     f"{exc}") from None
@@ -234,10 +249,15 @@ def from_json_dict(doc: dict, path=None):
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise BRDFFormatError(path, f"expected a JSON object with format {FORMAT!r}, found "
                                     f"{doc.get('format') if isinstance(doc, dict) else type(doc).__name__!r}")
-    if doc.get("version", 0) > VERSION:
-        raise BRDFFormatError(path, f"expected format version <= {VERSION}, found {doc['version']}")
+    version = doc.get("version", 0)
+    if not isinstance(version, int) or isinstance(version, bool) or not 0 <= version <= VERSION:
+        raise BRDFFormatError(path, f"expected format version an integer in 0..{VERSION}, found "
+                                    f"{json.dumps(version)[:40]}")
     kind = doc.get("model")
     state = doc.get("state")
+    if not isinstance(kind, str) or not (state is None or isinstance(state, dict)):
+        raise BRDFFormatError(path, f"expected a model kind (a string) and a 'state' object, "
+                                    f"found {type(kind).__name__} and {type(state).__name__}")
     if state is None:
         if kind != "microfacet":
             raise BRDFFormatError(path, f"expected a 'state' section for model {kind!r} (only "
@@ -262,11 +282,52 @@ def from_json_dict(doc: dict, path=None):
     return m
 
 
+def _depth(doc) -> int:
+    """Nesting depth of a parsed JSON document (iterative)."""
+    deepest, stack = 0, [(doc, 1)]
+    while stack:
+        node, depth = stack.pop()
+        deepest = max(deepest, depth)
+        if depth > MAX_DEPTH:
+            break
+        if isinstance(node, dict):
+            stack.extend((v, depth + 1) for v in node.values())
+        elif isinstance(node, list):
+            stack.extend((v, depth + 1) for v in node if isinstance(v, (dict, list)))
+    return deepest
+
+
 def load_json(path):
-    """Rebuild a model from a JSON file of :func:`write_json` (or hand-written, see module doc)."""
+    """Rebuild a model from a JSON file of :func:`write_json` (or hand-written, see module
+    doc), checked as the module docstring says."""
+    import os
+    import stat
+
     path = Path(path)
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        st = os.stat(path)
+    except OSError as exc:
+        raise BRDFFormatError(path, f"expected a readable file, found none ({exc.strerror})") \
+            from None
+    if not stat.S_ISREG(st.st_mode):
+        raise BRDFFormatError(path, "expected a regular file, found something else (a folder, "
+                                    "a device or a FIFO)")
+    if st.st_size > MAX_JSON_BYTES:
+        raise BRDFFormatError(path, f"expected at most {MAX_JSON_BYTES} bytes of JSON, found "
+                                    f"{st.st_size}")
+    try:
+        with open(path, "rb") as fh:
+            text = fh.read(MAX_JSON_BYTES + 1).decode("utf-8")
+        doc = json.loads(text)
+    except UnicodeDecodeError as exc:
+        raise BRDFFormatError(path, f"expected UTF-8 text, found undecodable bytes at "
+                                    f"{exc.start}") from None
     except json.JSONDecodeError as exc:
         raise BRDFFormatError(path, f"expected JSON, found a syntax error: {exc}") from None
+    except RecursionError:
+        raise BRDFFormatError(path, f"expected JSON nested at most {MAX_DEPTH} levels, found "
+                                    "deeper nesting") from None
+    if _depth(doc) > MAX_DEPTH:
+        raise BRDFFormatError(path, f"expected JSON nested at most {MAX_DEPTH} levels, found "
+                                    "deeper nesting")
     return from_json_dict(doc, path)

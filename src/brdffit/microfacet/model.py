@@ -54,8 +54,8 @@ import numpy as np
 
 from ..brdf import BRDF, IsotropicBRDF, _as_dirs, cosine_hemisphere_pdf, cosine_hemisphere_sample
 from ..geometry import half_diff_to_io, slope_to_normal
-from ..schema import (ALBEDO_MAX, ALPHA_MAX, SPECULAR_MAX, RGB, Bool, Component, ListOf, Number,
-                      Opt, Schema, StateError, Text)
+from ..schema import (ALBEDO_MAX, ALPHA_MAX, ALPHA_MIN, SPECULAR_MAX, RGB, Bool, Component,
+                      ListOf, Number, Opt, Schema, StateError, Text)
 from ..serialization import SerializableModel, resolve_kind
 from .base import Fresnel, SlopeDistribution
 from .beckmann import Beckmann
@@ -212,7 +212,7 @@ ScaledDistribution.to_state = _scaled_to_state
 ScaledDistribution.from_state = classmethod(_scaled_from_state)
 #: roughness scales of Eq. 9 (> 0, <= ALPHA_MAX) and the base distribution (any kind)
 ScaledDistribution.state_schema = Schema(
-    {"ax": Number(gt=0, le=ALPHA_MAX), "ay": Number(gt=0, le=ALPHA_MAX),
+    {"ax": Number(ge=ALPHA_MIN, le=ALPHA_MAX), "ay": Number(ge=ALPHA_MIN, le=ALPHA_MAX),
      "base": Component(_lookup_distribution, prefix="base.", what="distribution")},
     required=("ax", "ay", "base"))
 

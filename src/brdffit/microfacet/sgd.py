@@ -46,7 +46,7 @@ import functools
 import numpy as np
 from scipy import interpolate, optimize, special
 
-from ..schema import ALPHA_MAX, P_EXPONENT_MAX, Number, Schema
+from ..schema import ALPHA_MAX, ALPHA_MIN, P_EXPONENT_MAX, Number, Schema
 from .base import SlopeDistribution
 from .gamma import upper_gamma
 
@@ -162,7 +162,7 @@ class SGD(SlopeDistribution):
     isotropic = True
     kind = "sgd"              # component kind in microfacet.model's registry (fit files)
     #: fit-file state: α in (0, ALPHA_MAX], |p| <= P_EXPONENT_MAX (fits use −2 <= p <= 4)
-    state_schema = Schema({"alpha": Number(gt=0, le=ALPHA_MAX),
+    state_schema = Schema({"alpha": Number(ge=ALPHA_MIN, le=ALPHA_MAX),
                            "p": Number(ge=-P_EXPONENT_MAX, le=P_EXPONENT_MAX)},
                           required=("alpha", "p"), strict=True)
 
@@ -448,7 +448,7 @@ class SGDApproxG1(SGD):
 
     kind = "sgd_eq9"
     #: fit-file state: the SGD's α, p and Eq. 9's λ <= 1e6, c <= EQ9_C_MAX, k <= 1e3 (all > 0)
-    state_schema = Schema({"alpha": Number(gt=0, le=ALPHA_MAX),
+    state_schema = Schema({"alpha": Number(ge=ALPHA_MIN, le=ALPHA_MAX),
                            "p": Number(ge=-P_EXPONENT_MAX, le=P_EXPONENT_MAX),
                            "lam": Number(gt=0, le=1e6), "c": Number(gt=0, le=EQ9_C_MAX),
                            "k": Number(gt=0, le=1e3)},

@@ -64,7 +64,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import normalize, slope_to_normal
-from ..schema import ALPHA_MAX, Number, Opt, Schema
+from ..schema import ALPHA_MAX, ALPHA_MIN, Number, Opt, Schema
 from .base import SlopeDistribution
 
 __all__ = ["sigma_numerical", "lambda_numerical", "g1_numerical",
@@ -206,8 +206,8 @@ class EllipticalSlopeDistribution(SlopeDistribution):
 
     kind: str = ""
     #: fit-file state (:mod:`brdffit.schema`): slope scales in (0, ALPHA_MAX], ρ in (−1, 1)
-    state_schema = Schema({"alpha_x": Number(gt=0, le=ALPHA_MAX),
-                           "alpha_y": Opt(Number(gt=0, le=ALPHA_MAX)),
+    state_schema = Schema({"alpha_x": Number(ge=ALPHA_MIN, le=ALPHA_MAX),
+                           "alpha_y": Opt(Number(ge=ALPHA_MIN, le=ALPHA_MAX)),
                            "rho": Number(gt=-1, lt=1)}, required=("alpha_x",), strict=True)
 
     def __init__(self, alpha_x, alpha_y=None, rho=0.0):

@@ -44,8 +44,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import slope_to_normal
-from ..schema import (ALPHA_MAX, FRESNEL_MAX, TABLE_MAX, Array, Bool, Choice, Integer, Numbers,
-                      Schema, StateError)
+from ..schema import (ALPHA_MAX, ALPHA_MIN, FRESNEL_MAX, TABLE_MAX, Array, Bool, Choice,
+                      Integer, Numbers, Schema, StateError)
 from .base import SlopeDistribution
 from .fresnel import TabulatedFresnel
 
@@ -218,7 +218,7 @@ class TabulatedSlopeDistribution(SlopeDistribution):
     state_schema = Schema(
         {"rule": Choice("merl", "gauss"), "isotropic": Bool(),
          "n_theta": Integer(ge=2, le=4096), "n_phi": Integer(ge=1, le=1024),
-         "alpha_x": Numbers(gt=0, le=ALPHA_MAX), "alpha_y": Numbers(gt=0, le=ALPHA_MAX)},
+         "alpha_x": Numbers(ge=ALPHA_MIN, le=ALPHA_MAX), "alpha_y": Numbers(ge=ALPHA_MIN, le=ALPHA_MAX)},
         arrays={"P": Array([("n",), ("n", "m")], ge=0, le=TABLE_MAX, nonzero=True),
                 "sigma": Array(("n",), ge=0, le=TABLE_MAX, required=False)},
         dims={"n": (2, 4096), "m": (1, 1024)}, checks=(_check_table_size,))
