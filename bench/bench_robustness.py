@@ -12,6 +12,15 @@ Three parts, each run for real on this machine (nothing is counted that did not 
   clean = the export succeeds, the generated file parses (Python ``compile``, XML, JSON) and
   the payload never runs (no ``INJECTED`` file after executing the Python script's code
   objects is checked by the test suite; here: parse + the payload only inside literals);
+* **output targets** (issue 32): ``-o`` naming a device, a FIFO, a socket, a folder, a
+  missing or unwritable place, another format's extension, a protected file: the documented
+  exit status, one line, the destination unchanged, the check before any work;
+* **parameter files**: hand-written parameter JSON (out-of-range, denormal, NaN, huge tables,
+  deep nesting, wrong version or dtype, 70 MB, invalid UTF-8) through ``export``: as bad inputs;
+* **option values**: values no command can honour: exit 2 naming the option, before any work;
+* **printing paths**: a file name with ESC, BEL and a bidirectional override through
+  ``info``, ``fit``, errors, ``compare``, ``batch`` and into ``batch.log``, ``summary.csv``
+  and the report: no raw control character anywhere;
 * **fault scenarios**: the batch/CLI fault tests (``tests/batch/test_faults.py``,
   ``tests/batch/test_names.py``, ``tests/cli/test_exit_codes.py``) run by pytest; recovered =
   the test passed (each asserts that nothing was lost and the exit code is right).
@@ -63,6 +72,7 @@ def bad_inputs(quick: bool) -> list[dict]:
             folder = Path(tmp)
             spec = case.make(folder)
             out = folder / "out"
+            out.mkdir()  # -o never creates folders
             o = run_limited(["fit", spec, "--model", "ggx", "-o", out / "x.npz"], cwd=folder)
             rows.append(_row("reader", case.name, o,
                              o.problems(names=case.file_name, out_dir=out)))
@@ -72,6 +82,7 @@ def bad_inputs(quick: bool) -> list[dict]:
             folder = Path(tmp)
             path = Path(case.write(folder))
             out = folder / "out"
+            out.mkdir()
             o = run_limited(["export", path, "--to", "json", "-o", out / "x.json"], cwd=folder)
             rows.append(_row("fit-file", case.name, o, o.problems(names=path.name, out_dir=out)))
     return rows
@@ -123,6 +134,211 @@ def hostile_names(quick: bool) -> list[dict]:
     return rows
 
 
+# -- issue 32: outputs, parameter files, option values, names on printing paths ---------------
+def _plain(kind, name, o, problems) -> dict:
+    return _row(kind, name, o, problems)
+
+
+def output_targets() -> list[dict]:
+    """``-o`` naming devices, FIFOs, sockets, folders, missing or unwritable places, other
+    formats' extensions, protected files: the documented outcome, one line, nothing replaced."""
+    import socket
+    import stat
+    import threading
+
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        fit = folder / "g.npz"
+        assert run_limited(["fit", "synthetic:gold-ggx", "-m", "ggx", "-o", fit],
+                           cwd=folder).returncode == 0
+        (folder / "a-file").write_text("x")
+        kept = folder / "kept.gltf"
+        kept.write_text("old")
+        kept.chmod(0o600)
+        link = folder / "null.gltf"
+        link.symlink_to("/dev/null")
+        fifo = folder / "pipe"
+        os.mkfifo(fifo)
+        sock_path = folder / "s.sock"
+        sock = socket.socket(socket.AF_UNIX)
+        sock.bind(str(sock_path))
+        export = ["export", fit, "--to", "gltf", "-o"]
+        cases = [  # name, argv, expected exit, check after
+            ("/dev/null", export + ["/dev/null"], 0,
+             lambda: stat.S_ISCHR(os.stat("/dev/null").st_mode)),
+            ("link to /dev/null", export + [link], 0,
+             lambda: link.is_symlink() and stat.S_ISCHR(os.stat("/dev/null").st_mode)),
+            ("FIFO", export + [fifo], 0, lambda: stat.S_ISFIFO(fifo.lstat().st_mode)),
+            ("socket", export + [sock_path], 1, lambda: stat.S_ISSOCK(sock_path.lstat().st_mode)),
+            ("directory", ["fit", "synthetic:gold-ggx", "-m", "ggx", "-o", folder], 1, None),
+            ("missing folder", export + [folder / "missing" / "x.gltf"], 1,
+             lambda: not (folder / "missing").exists()),
+            ("parent is a file", export + [folder / "a-file" / "x.gltf"], 1, None),
+            ("/proc", ["fit", "synthetic:gold-ggx", "-m", "npf", "-o", "/proc/x.npz"], 1, None),
+            ("fit -o x.gltf", ["fit", "synthetic:gold-ggx", "-o", folder / "x.gltf"], 2,
+             lambda: not (folder / "x.gltf").exists()),
+            ("--to gltf -o x.npz", export[:-1] + ["-o", folder / "y.npz"], 2, None),
+            ("--to json -o x.gltf", ["export", fit, "--to", "json", "-o", folder / "y.gltf"], 2,
+             None),
+            ("glsl (2 files) -o /dev/null", ["export", fit, "--to", "glsl", "-o", "/dev/null"],
+             1, lambda: stat.S_ISCHR(os.stat("/dev/null").st_mode)),
+            ("mode 0600 kept", export + [kept], 0,
+             lambda: stat.S_IMODE(kept.stat().st_mode) == 0o600),
+        ]
+        for name, argv, code, after in cases:
+            reader = None
+            if name == "FIFO":
+                reader = threading.Thread(target=lambda: fifo.read_bytes(), daemon=True)
+                reader.start()
+            o = run_limited(argv, cwd=folder)
+            if reader is not None:
+                reader.join(10)
+            problems = []
+            if o.returncode != code:
+                problems.append(f"exit {o.returncode}, expected {code}: {o.stderr[-200:]!r}")
+            if code == 1 and len(o.error_lines) != 1:
+                problems.append(f"{len(o.error_lines)} lines on stderr")
+            if "Traceback" in o.stderr or ".tmp" in o.stderr:
+                problems.append("traceback or temporary name on stderr")
+            if o.seconds > MAX_SECONDS:
+                problems.append(f"took {o.seconds:.1f} s: the check did not come first")
+            if after is not None and not after():
+                problems.append("destination changed")
+            rows.append(_plain("output-target", name, o, problems))
+        sock.close()
+    return rows
+
+
+def parameter_files() -> list[dict]:
+    """Hand-written parameter JSON files through ``brdffit export``: exit 1, one line naming
+    the file, nothing written, within the time and memory limits."""
+    base = {"format": "brdffit-params", "version": 1, "model": "microfacet",
+            "parameters": {"distribution": {"kind": "ggx", "alpha_x": 0.2}, "rho_d": 0.1}}
+
+    def doc(**dist):
+        d = json.loads(json.dumps(base))
+        d["parameters"]["distribution"].update(dist)
+        return json.dumps(d)
+
+    fresnel = json.loads(json.dumps(base))
+    fresnel["parameters"]["fresnel"] = {"kind": "conductor", "eta": 1e300, "k": 1e300}
+    table = json.loads(json.dumps(base))
+    table["parameters"]["fresnel"] = {"kind": "table", "theta_d": [i * 1.0 for i in range(
+        3_000_000)], "values": [[0.5, 0.5, 0.5]] * 3_000_000}
+    cases = {
+        "alpha 1e300": doc(alpha_x=1e300), "alpha denormal 5e-324": doc(alpha_x=5e-324),
+        "alpha NaN": doc(alpha_x=float("nan")), "conductor 1e300": json.dumps(fresnel),
+        "Fresnel table of 3e6 nodes to 3e6 rad": json.dumps(table),
+        "version '2'": json.dumps(dict(base, version="2")),
+        "version 99": json.dumps(dict(base, version=99)),
+        "nested 100000 deep": "[" * 100_000 + "]" * 100_000,
+        "not JSON": "{format: brdffit", "a JSON list": "[1, 2]",
+        "object dtype": json.dumps(dict(base, state={"params": {}, "arrays": {"x": {
+            "dtype": "object", "shape": [1], "data": [1]}}})),
+        "70 MB of spaces": json.dumps(base) + " " * (70 << 20),
+        "invalid UTF-8": b"\xff\xfe{}",
+    }
+    rows = []
+    for name, text in cases.items():
+        with tempfile.TemporaryDirectory() as tmp:
+            folder = Path(tmp)
+            path = folder / "params.json"
+            (path.write_bytes if isinstance(text, bytes) else path.write_text)(text)
+            out = folder / "out"
+            out.mkdir()
+            for to, ext in (("glsl", ".glsl"), ("gltf", ".gltf")):
+                o = run_limited(["export", path, "--to", to, "-o", out / f"x{ext}"], cwd=folder)
+                rows.append(_row("parameter-file", f"{name} --to {to}", o,
+                                 o.problems(names=path.name, out_dir=out)))
+    return rows
+
+
+def option_values() -> list[dict]:
+    """Values no command can honour: exit 2, the option named, before any work."""
+    cases = [
+        ["fit", "synthetic:gold-ggx", "-m", "ggx-diffuse", "-O", "starts=-5"],
+        ["fit", "synthetic:gold-ggx", "-m", "ggx-diffuse", "-O", "theta_d_stride=0"],
+        ["fit", "synthetic:gold-ggx", "-m", "ggx-diffuse", "-O", "phi_d_stride=-3"],
+        ["fit", "synthetic:gold-ggx", "-m", "npf", "-O", "seed=-1"],
+        ["fit", "synthetic:gold-ggx", "-m", "npf", "-O", "max_iter=0"],
+        ["fit", "synthetic:gold-ggx", "-m", "npf", "-O", "tol=nan"],
+        ["fit", "synthetic:gold-ggx", "-m", "npf", "-O", "polish_bound=0.5"],
+        ["fit", "synthetic:gold-ggx", "-m", "tabulated", "-O", "n=1000000000"],
+        ["fit", "synthetic:gold-ggx", "-m", "npf", "-O", "callback=1"],
+        ["render", "synthetic:gold-ggx", "-o", "x.png", "--resolution", "1000000"],
+        ["render", "synthetic:gold-ggx", "-o", "x.png", "--spp", "1000000000"],
+        ["render", "synthetic:gold-ggx", "-o", "x.png", "--resolution", "4096", "--spp", "65536"],
+        ["render", "synthetic:gold-ggx", "-o", "x.png", "--seed", "-1"],
+        ["render", "synthetic:gold-ggx", "-o", "x.png", "--gamma", "0"],
+        ["render", "synthetic:gold-ggx", "-o", "x.png", "--exposure", "nan"],
+        ["compare", "synthetic:gold-ggx", "--spp", "4", "--batches", "3"],
+        ["compare", "synthetic:gold-ggx", "--fit-options", '{"ggx": {"n": 0}}', "-m", "ggx"],
+        ["compare", "synthetic:gold-ggx", "--exposure", "-1"],
+        ["demo", "--spp", "12"],
+        ["demo", "--jobs", "1000"],
+        ["batch", "synthetic:", "--out", "runs", "--render", "--spp", "10"],
+        ["info", "synthetic:gold-ggx", "--albedo-samples", "0"],
+    ]
+    rows = []
+    for argv in cases:
+        with tempfile.TemporaryDirectory() as tmp:
+            o = run_limited(argv, cwd=tmp)
+            problems = []
+            if o.returncode != 2:
+                problems.append(f"exit {o.returncode}, expected 2: {o.stderr[-200:]!r}")
+            if "Traceback" in o.stderr or "error:" not in o.stderr:
+                problems.append("no one-line error")
+            if o.seconds > MAX_SECONDS:
+                problems.append(f"took {o.seconds:.1f} s: work started before the check")
+            if any(Path(tmp).iterdir()):
+                problems.append("something was written")
+            rows.append(_plain("option-value", " ".join(map(str, argv)), o, problems))
+    return rows
+
+
+def printing_paths() -> list[dict]:
+    """A file name with ESC, bell, a bidirectional override and a newline through every
+    command that prints it, and the logs and tables it reaches: no raw control character."""
+    raw = ("\x1b", "\x07", "\u202e", "\x00")
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        name = "evil\x1b[2J\u202ename\x07"
+        data = folder / "in"
+        data.mkdir()
+        src = data / f"{name}.binary"
+        assert run_limited(["convert", "synthetic:gold-ggx", src], cwd=folder).returncode == 0
+        runs = {
+            "info": ["info", src, "--albedo-samples", "256"],
+            "fit": ["fit", src, "-m", "ggx", "--no-error"],
+            "fit (missing file)": ["fit", data / f"gone{name}.binary"],
+            "export (bad output)": ["export", "synthetic:gold-ggx", "--to", "json", "-o",
+                                    folder / f"no{name}" / "x.json"],
+            "compare": ["compare", src, "-m", "ggx", "--spp", "2", "--resolution", "16",
+                        "--scenes", "sphere-studio", "--out", folder / "cmp"],
+            "batch": ["batch", data, "-m", "ggx", "--workers", "1", "-q", "--out",
+                      folder / "runs"],
+        }
+        for label, argv in runs.items():
+            o = run_limited(argv, cwd=folder, max_bytes=4 << 30, timeout=300)
+            problems = [f"raw {c!r} on {stream}" for c in raw
+                        for stream, text in (("stdout", o.stdout), ("stderr", o.stderr))
+                        if c in text]
+            if "Traceback" in o.stderr:
+                problems.append("traceback")
+            rows.append(_plain("printing-path", label, o, problems))
+        for label, path in (("batch.log", folder / "runs" / "batch.log"),
+                            ("summary.csv", folder / "runs" / "summary.csv"),
+                            ("report HTML", folder / "cmp" / "index.html")):
+            text = path.read_text(encoding="utf-8") if path.is_file() else ""
+            problems = [] if text else ["not written"]
+            problems += [f"raw {c!r}" for c in raw if c in text]
+            rows.append({"kind": "printing-path", "case": label, "clean": not problems,
+                         "problems": problems, "seconds": 0.0, "peak_mib": 0.0})
+    return rows
+
+
 def fault_scenarios() -> list[dict]:
     with tempfile.TemporaryDirectory() as tmp:
         xml = Path(tmp) / "junit.xml"
@@ -151,12 +367,14 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "robustness.json"))
     args = ap.parse_args(argv)
     load0 = os.getloadavg()
-    rows = bad_inputs(args.quick) + hostile_names(args.quick) + fault_scenarios()
-    rejected = [r for r in rows if r["kind"] in ("reader", "fit-file")]
+    rows = (bad_inputs(args.quick) + hostile_names(args.quick) + output_targets()
+            + parameter_files() + option_values() + printing_paths() + fault_scenarios())
+    rejected = [r for r in rows if r["kind"] in ("reader", "fit-file", "parameter-file")]
     summary = {"load_average_start": load0, "load_average_end": os.getloadavg(),
                "memory_limit_bytes": MEMORY_LIMIT, "time_limit_s": MAX_SECONDS,
                "quick": args.quick, "by_kind": {}}
-    for kind in ("reader", "fit-file", "hostile-name", "fault"):
+    for kind in ("reader", "fit-file", "hostile-name", "output-target", "parameter-file",
+                 "option-value", "printing-path", "fault"):
         rs = [r for r in rows if r["kind"] == kind]
         summary["by_kind"][kind] = {"tried": len(rs), "clean": sum(r["clean"] for r in rs)}
     summary["tried"] = len(rows)
