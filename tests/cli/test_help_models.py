@@ -46,7 +46,7 @@ def test_help_lists_every_model_with_its_description(command, monkeypatch, capsy
 
 def test_help_shows_defaults(monkeypatch, capsys):
     text = " ".join(" ".join(_help(["fit"], monkeypatch, capsys)).split())
-    assert "[default: tabulated]" in text
+    assert "[default: ggx-diffuse]" in text
     text = " ".join(" ".join(_help(["batch"], monkeypatch, capsys)).split())
     assert "[default: tabulated,ggx,beckmann]" in text and "[default: 2; x>=1]" in text
 

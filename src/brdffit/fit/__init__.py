@@ -52,7 +52,7 @@ def __getattr__(name):
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def fit(brdf: BRDF | str, model: str = "tabulated", **options) -> BRDF:
+def fit(brdf: BRDF | str, model: str = "ggx-diffuse", **options) -> BRDF:
     """Fit ``brdf`` with the model named ``model``; returns the fitted model (a BRDF).
 
     Parameters
@@ -61,7 +61,7 @@ def fit(brdf: BRDF | str, model: str = "tabulated", **options) -> BRDF:
         Any BRDF of the library (measured, synthetic, another fit) or a load spec for
         :func:`brdffit.load` (``"gold.binary"``, ``"merl_nbrdf.zip:gold-metallic-paint"``,
         ``"synthetic:gold-ggx"``).
-    model : str, default "tabulated"
+    model : str, default "ggx-diffuse"
         A model name of :data:`brdffit.fit.registry.MODELS` (``brdffit models`` lists them:
         ``tabulated``, ``ggx``, ``beckmann``, ``ggx-diffuse``, ``beckmann-diffuse``, ``sgd``,
         ``npf``, ``npf-g-from-d``, ``npf-naive``, ``npf-bivariate``, ...), the same names as
@@ -112,7 +112,7 @@ def fit(brdf: BRDF | str, model: str = "tabulated", **options) -> BRDF:
 class _CallableModule(types.ModuleType):
     """The type of this package: calling it calls :func:`fit`."""
 
-    def __call__(self, brdf, model: str = "tabulated", **options):
+    def __call__(self, brdf, model: str = "ggx-diffuse", **options):
         return fit(brdf, model, **options)
 
 

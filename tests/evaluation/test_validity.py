@@ -1,0 +1,70 @@
+"""brdffit.evaluation.validity: the physical checks of a fit (issue 31.2)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from brdffit.brdf import BRDF
+from brdffit.cli import main
+from brdffit.evaluation.validity import check_validity
+from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel, SumBRDF
+from brdffit.synthetic import list_synthetic, synthetic
+
+
+@pytest.mark.parametrize("name", list_synthetic())
+def test_the_synthetic_materials_are_valid(name):
+    assert check_validity(synthetic(name)) == []
+
+
+def test_a_fresnel_above_one_is_named_with_its_channel_and_the_advice():
+    model = MicrofacetBRDF(GGX(0.3), SchlickFresnel([0.9, 0.5, 0.4]), specular=[1.5, 1.0, 1.0])
+    (v,) = [v for v in check_validity(model) if v.check == "fresnel"]
+    assert v.figure == pytest.approx(1.5) and "in red" in v.message
+    assert "--model ggx-diffuse" in v.advice   # no diffuse term: it absorbed one
+    coated = SumBRDF([MicrofacetBRDF(GGX(0.3), SchlickFresnel(0.04), diffuse=0.5),
+                      MicrofacetBRDF(GGX(0.05), SchlickFresnel(0.04), specular=30.0)])
+    (v,) = [v for v in check_validity(coated) if v.check == "fresnel"]
+    assert v.figure > 1 and "clamps" in v.advice
+
+
+def test_an_albedo_above_one_fails_the_furnace_and_a_tiny_excess_does_not():
+    bright = MicrofacetBRDF(GGX(0.2), SchlickFresnel(0.04), diffuse=[1.3, 0.5, 0.5])
+    (v,) = [v for v in check_validity(bright) if v.check == "albedo"]
+    assert 1.3 < v.figure < 1.6 and "in red" in v.message  # + the specular lobe
+    white = MicrofacetBRDF(GGX(0.2), SchlickFresnel(0.0), diffuse=1.0, specular=0.0)
+    assert [v for v in check_validity(white) if v.check == "albedo"] == []
+
+
+class _Odd(BRDF):
+    """Negative where wi.x > 0.9, and not reciprocal (depends on wi.z only)."""
+
+    def eval(self, wi, wo):
+        wi, wo = np.asarray(wi, float), np.asarray(wo, float)
+        v = 0.1 * wi[..., 2] * (wo[..., 2] > 0) - 0.2 * (wi[..., 0] > 0.9)
+        return np.repeat(v[..., None], 3, -1)
+
+
+def test_negative_values_and_a_broken_reciprocity_are_found():
+    found = {v.check: v for v in check_validity(_Odd())}
+    assert found["non_negative"].figure < 0 and found["reciprocity"].figure > 0.01
+
+
+def test_fit_prints_the_warnings_and_json_carries_them(capsys):
+    assert main(["fit", "synthetic:plastic-beckmann", "-m", "tabulated", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert isinstance(doc["warnings"], list)
+    assert main(["fit", "synthetic:gold-ggx"]) == 0
+    out = capsys.readouterr()
+    assert "physical checks     F ≤ 1, albedo ≤ 1, f ≥ 0, reciprocal: all passed" in out.out
+    assert "warning" not in out.err
+
+
+def test_the_default_fit_of_a_diffuse_material_with_the_tabulated_model_warns(capsys):
+    """A diffuse material fitted without a diffuse term: F absorbs the base (F0 > 1)."""
+    assert main(["fit", "synthetic:plastic-beckmann", "-m", "tabulated"]) == 0
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("brdffit: warning:")]
+    assert lines and all("(tabulated fit): " in ln for ln in lines)
