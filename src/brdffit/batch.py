@@ -442,6 +442,9 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
         record["fit_file"] = fit_path.relative_to(out).as_posix()
         record["fit_sha256"] = _file_sha256(fit_path)
         record["params"] = model_params(model)
+        from .evaluation.validity import check_validity
+
+        record["warnings"] = [v.as_dict() for v in check_validity(model)]
         if metrics:
             t_m = time.perf_counter()
             record["metrics"] = _reference_metrics(task.spec).evaluate(model)

@@ -16,6 +16,9 @@ batch rendered) into one flat row per material × model, with named columns (:da
   ``cos_rel_error``, ``normalized_l2``, ``compressive_objective``;
 * rendered errors when the batch rendered (``--render``): ``psnr`` (mean over the scenes,
   dB), ``psnr_se`` (its standard error) and ``mean_de2000``;
+* ``warnings``: the physical checks the fit failed (:mod:`brdffit.evaluation.validity`:
+  ``fresnel``, ``albedo``, ``non_negative``, ``reciprocity``; each with its figure, e.g.
+  ``fresnel 1.49; albedo 1.05``), empty when every check passed;
 * ``fit_time_s`` and ``fit_file`` (relative to the batch folder).
 
 Empty cells mean "does not apply" (e.g. no α for NPF, no PSNR without renders).
@@ -60,8 +63,8 @@ COLUMNS = (["material", "model", "status", "recommended", "is_recommended",
             "gltf_roughness_y"]
            + [f"alpha_{c}" for c in _RGB] + [f"gltf_roughness_{c}" for c in _RGB]
            + [f"f0_{c}" for c in _RGB] + [f"rho_d_{c}" for c in _RGB]
-           + ["table_bytes", *METRICS, "psnr", "psnr_se", "mean_de2000", "fit_time_s",
-              "fit_file", "error"])
+           + ["table_bytes", *METRICS, "psnr", "psnr_se", "mean_de2000", "warnings",
+              "fit_time_s", "fit_file", "error"])
 
 
 def _num(v) -> float | None:
@@ -152,6 +155,12 @@ def summary_rows(records: list, out: Path) -> tuple[list[dict], dict[str, dict]]
                    error=r.get("error") or "", fit_time_s=_num(r.get("fit_time_s")),
                    fit_file=r.get("fit_file") if r.get("status") == "ok" else None)
         row.update(_flat_figures(_figures(r, out)))
+        warns = r.get("warnings")
+        if isinstance(warns, list):
+            row["warnings"] = "; ".join(f"{w.get('check')} {w.get('figure'):.3g}"
+                                        if isinstance(w.get("figure"), (int, float))
+                                        else str(w.get("check"))
+                                        for w in warns if isinstance(w, dict))
         metrics = r.get("metrics") if isinstance(r.get("metrics"), dict) else {}
         for k, v in metrics.items():
             if not isinstance(v, (dict, list)):

@@ -68,3 +68,26 @@ def test_the_default_fit_of_a_diffuse_material_with_the_tabulated_model_warns(ca
     err = capsys.readouterr().err
     lines = [ln for ln in err.splitlines() if ln.startswith("brdffit: warning:")]
     assert lines and all("(tabulated fit): " in ln for ln in lines)
+
+
+def test_the_report_shows_a_badge_and_the_summary_a_column(tmp_path):
+    from brdffit.batch_summary import summary_rows
+    from brdffit.evaluation.report import write_index, write_material_page, write_result
+
+    model = MicrofacetBRDF(GGX(0.3), SchlickFresnel(0.9), specular=1.5)
+    checks = [v.as_dict() for v in check_validity(model)]
+    fig = {"params": {"figures": {"alpha": [0.3, 0.3, 0.0], "f0": [1.35] * 3, "rho_d": [0.0] * 3,
+                                  "table_bytes": 0}}}
+    result = {"material": "m", "slug": "m", "models": [
+        {"name": "bad", "status": "ok", "psnr": 30.0, "validity": checks, **fig},
+        {"name": "good", "status": "ok", "psnr": 31.0, "validity": [], **fig}]}
+    write_result(tmp_path / "m", result)
+    page = write_material_page(tmp_path, result).read_text()
+    index = write_index(tmp_path).read_text()
+    assert "⚠ fresnel 1.5" in page and '<span class="badge ok"' in page
+    assert "⚠ fresnel 1.5" in index and index.count('class="badge') == 1
+    rows, _ = summary_rows([{"material": "m", "model": "bad", "status": "ok",
+                             "warnings": checks},
+                            {"material": "m", "model": "good", "status": "ok", "warnings": []}],
+                           tmp_path)
+    assert rows[0]["warnings"].startswith("fresnel 1.5") and rows[1]["warnings"] == ""

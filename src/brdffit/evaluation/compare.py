@@ -324,6 +324,9 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
             fitted[label] = model
             rec["model_class"] = type(model).__name__
             rec["params"] = model_params(model)
+            from .validity import check_validity
+
+            rec["validity"] = [v.as_dict() for v in check_validity(model)]
             info = getattr(model, "fit_info", None)
             if info:
                 rec["fit_info"] = small_json(dict(info))

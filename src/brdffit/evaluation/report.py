@@ -51,6 +51,8 @@ th.sorted-desc::after{content:' \\25BC'}td.l,th.l{text-align:left}
 .cell{text-align:center;font-size:.8em;width:min-content}
 .cell img{display:block;image-rendering:auto;border:1px solid #999;background:#000}
 .best{font-weight:bold;background:#e6f4e6}.fail{color:#b00}
+.badge{display:inline-block;padding:0 .35em;border-radius:.3em;font-size:85%;background:#fde8c8;color:#7a4100}
+.badge.ok{background:#e6f4e6;color:#215a21}
 img.plot{max-width:100%;border:1px solid #ddd;background:#fff}
 img.thumb{width:64px;height:64px;border:1px solid #999}
 pre{font-size:.75em;background:#f0f0f0;padding:.4em;max-width:60em;overflow:auto;white-space:pre-wrap}
@@ -259,6 +261,23 @@ def _td_pm(m, cls="", thumb: str = "") -> str:
             f'{_e(_pm(m.get("psnr"), m.get("psnr_se"), m.get("psnr_bound", m.get("bound"))))}</td>')
 
 
+def _validity_badge(m: dict, full: bool = False) -> str:
+    """The physical checks of a model (:mod:`.validity`, ``m["validity"]``) as a badge: the
+    failed checks with their figures (each message in the tooltip, or written out with
+    ``full``), "valid" when all passed, ``""`` for results without checks."""
+    checks = m.get("validity") if isinstance(m, dict) else None
+    if not isinstance(checks, list):
+        return ""
+    if not checks:
+        return '<span class="badge ok" title="F ≤ 1, albedo ≤ 1, f ≥ 0, reciprocal">valid</span>'
+    items = [c for c in checks if isinstance(c, dict)]
+    label = ", ".join(f"{c.get('check')} {_fmt(c.get('figure'), 3)}" for c in items)
+    text = "; ".join(f"{c.get('check')}: {c.get('message')}"
+                     + (f" ({c.get('advice')})" if c.get("advice") else "") for c in items)
+    badge = f'<span class="badge" title="{_e(text)}">⚠ {_e(label)}</span>'
+    return badge + (f'<br><span class="note">{_e(text)}</span>' if full else "")
+
+
 def _thumb(slug: str, m: dict, result: dict) -> str:
     """The model's rendering of the first scene as a 64-pixel thumbnail (``""`` if none)."""
     png = m.get("png")
@@ -394,16 +413,21 @@ def _params_table(models) -> str:
                     f'<td class="l">{_e(f.get("alpha_kind") or "–")}</td>'
                     f'<td class="l">{_e(alpha)}</td><td>{_e(rough)}</td>'
                     f'<td>{_e(_rgb3(f.get("f0")))}</td><td>{_e(_rgb3(f.get("rho_d")))}</td>'
-                    + _td(f.get("table_bytes"), 0) + "</tr>")
+                    + _td(f.get("table_bytes"), 0)
+                    + f'<td class="l">{_validity_badge(m, full=True) or "–"}</td></tr>')
     if not rows:
         return ""
     return ("<table class=\"sortable\" id=\"params\"><thead><tr><th class=\"l\">model</th>"
             "<th class=\"l\">distribution</th><th class=\"l\">α (slope scale)</th>"
             "<th>glTF roughness √α (x, y)</th><th>F0 (R, G, B)</th><th>ρd (R, G, B)</th>"
-            "<th>table bytes</th></tr></thead><tbody>" + "".join(rows) + "</tbody></table>"
+            "<th>table bytes</th><th class=\"l\">physical checks</th></tr></thead><tbody>"
+            + "".join(rows) + "</tbody></table>"
             '<p class="note">α: the slope-space scale of GGX/Beckmann (Mitsuba\'s alpha); glTF '
             "and MaterialX roughness = √α; F0: Fresnel reflectance at normal incidence; ρd: "
-            "Lambertian albedo (ρd/π); SGD: the shape α of Bagher 2012 Eq. 8 per channel.</p>")
+            "Lambertian albedo (ρd/π); SGD: the shape α of Bagher 2012 Eq. 8 per channel. "
+            "Physical checks: Fresnel ≤ 1 per channel, directional albedo ≤ 1 (white "
+            "furnace, 1 % tolerance), no negative value, reciprocity "
+            "(brdffit.evaluation.validity).</p>")
 
 
 def _sparkline(hist: dict, width: int = 220, height: int = 60) -> str:
@@ -742,7 +766,9 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
                 cells.append('<td class="fail" data-sort="">' + (_e(m.get("status", "failed")) if m else "–") + "</td><td></td>")
                 continue
             cls = "best" if best is not None and _num(m.get("psnr")) == best else ""
-            cells.append(_td_pm(m, cls=cls, thumb=_thumb(slug, m, r)) + _td(m.get("mean_de2000")))
+            badge = _validity_badge(m) + "<br>" if m.get("validity") else ""  # failed checks
+            cells.append(_td_pm(m, cls=cls, thumb=_thumb(slug, m, r) + badge)
+                         + _td(m.get("mean_de2000")))
         rows.append(f'<tr><td class="l">{thumb}</td><td class="l" data-sort="{_e(str(r.get("material", slug)).lower())}">'
                     + (f'<a href="{_e(_url(slug))}/index.html">{_e(r.get("material", slug))}</a></td>'
                        if _url(slug) else f'{_e(r.get("material", slug))}</td>')
