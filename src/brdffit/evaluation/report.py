@@ -391,6 +391,16 @@ def _rgb3(v, digits=3) -> str:
     return ", ".join(_fmt(x, digits) for x in v[:3])
 
 
+def _coat_text(coat) -> str:
+    """The clear-coat lobe of a coated fit (``figures()["coat"]``): α, glTF clearcoat
+    roughness √α, weight and F0; ``–`` without one."""
+    if not isinstance(coat, dict) or _num(coat.get("alpha")) is None:
+        return "–"
+    a = _num(coat.get("alpha"))
+    return (f"α {_fmt(a, 4)} (roughness {_fmt(math.sqrt(a), 4) if a >= 0 else '–'}), weight "
+            f"{_fmt(coat.get('weight'), 3)}, F0 {_fmt(coat.get('f0'), 3)}")
+
+
 def _params_table(models) -> str:
     """α (slope scale) and glTF roughness √α side by side, F0 and ρd per channel, bytes."""
     rows = []
@@ -413,6 +423,7 @@ def _params_table(models) -> str:
                     f'<td class="l">{_e(f.get("alpha_kind") or "–")}</td>'
                     f'<td class="l">{_e(alpha)}</td><td>{_e(rough)}</td>'
                     f'<td>{_e(_rgb3(f.get("f0")))}</td><td>{_e(_rgb3(f.get("rho_d")))}</td>'
+                    f'<td class="l">{_e(_coat_text(f.get("coat")))}</td>'
                     + _td(f.get("table_bytes"), 0)
                     + f'<td class="l">{_validity_badge(m, full=True) or "–"}</td></tr>')
     if not rows:
@@ -420,10 +431,12 @@ def _params_table(models) -> str:
     return ("<table class=\"sortable\" id=\"params\"><thead><tr><th class=\"l\">model</th>"
             "<th class=\"l\">distribution</th><th class=\"l\">α (slope scale)</th>"
             "<th>glTF roughness √α (x, y)</th><th>F0 (R, G, B)</th><th>ρd (R, G, B)</th>"
-            "<th>table bytes</th><th class=\"l\">physical checks</th></tr></thead><tbody>"
+            "<th class=\"l\">coat</th><th>table bytes</th><th class=\"l\">physical checks</th></tr></thead><tbody>"
             + "".join(rows) + "</tbody></table>"
             '<p class="note">α: the slope-space scale of GGX/Beckmann (Mitsuba\'s alpha); glTF '
-            "and MaterialX roughness = √α; F0: Fresnel reflectance at normal incidence; ρd: "
+            "and MaterialX roughness = √α; F0: Fresnel reflectance at normal incidence (of the "
+            "base lobe when there is a coat); coat: the second, white specular lobe of a "
+            "coated fit (glTF KHR_materials_clearcoat, OpenPBR coat); ρd: "
             "Lambertian albedo (ρd/π); SGD: the shape α of Bagher 2012 Eq. 8 per channel. "
             "Physical checks: Fresnel ≤ 1 per channel, directional albedo ≤ 1 (white "
             "furnace, 1 % tolerance), no negative value, reciprocity "
@@ -643,6 +656,26 @@ def _metrics_table(models, scenes, best) -> str:
 TIE_Z = 2.0
 
 
+def _tied_with_best(models: list[dict], tie_db: float = 2.0) -> set:
+    """Names of the models whose PSNR is the best or tied with it (the rule of
+    :func:`summarize`: within ``TIE_Z`` combined standard errors, ``tie_db`` without them)."""
+    scored = [(m.get("name"), _num(m.get("psnr")), _num(m.get("psnr_se"))) for m in models]
+    scored = [s for s in scored if s[1] is not None]
+    if not scored:
+        return set()
+    top = max(scored, key=lambda s: s[1])
+    out = set()
+    for name, p, se in scored:
+        if math.isinf(top[1]):
+            tie = math.isinf(p)
+        else:
+            t = TIE_Z * math.hypot(se, top[2]) if se is not None and top[2] is not None else tie_db
+            tie = top[1] - p <= t
+        if tie:
+            out.add(name)
+    return out
+
+
 def summarize(results: Iterable[dict], tie_db: float = 2.0) -> dict:
     """Per-model mean/median PSNR and dE2000 and pairwise wins/ties over materials, and the
     median standard error of the models' PSNR (results with ``psnr_se``).
@@ -757,16 +790,18 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
         thumb = (_img(slug + "/" + ref["png"], str(r.get("material", slug)) + " reference", cls="thumb")
                  if isinstance(ref.get("png"), str) and _url(ref["png"]) is not None else "")
         by = {m.get("name"): m for m in _models(r)}
-        ps = [_num(m.get("psnr")) for m in by.values() if _ok(m) and _num(m.get("psnr")) is not None]
-        best = max(ps) if ps else None
+        tied = _tied_with_best([m for m in by.values() if _ok(m)])
         cells = []
         for n in names:
             m = by.get(n)
             if m is None or not _ok(m):
                 cells.append('<td class="fail" data-sort="">' + (_e(m.get("status", "failed")) if m else "–") + "</td><td></td>")
                 continue
-            cls = "best" if best is not None and _num(m.get("psnr")) == best else ""
+            cls = "best" if n in tied else ""
             badge = _validity_badge(m) + "<br>" if m.get("validity") else ""  # failed checks
+            if n in tied and len(tied) > 1:
+                badge += f'<span class="badge ok" title="within {TIE_Z:g} standard errors of ' \
+                         f'the best (or 2 dB without them)">tie</span><br>'
             cells.append(_td_pm(m, cls=cls, thumb=_thumb(slug, m, r) + badge)
                          + _td(m.get("mean_de2000")))
         rows.append(f'<tr><td class="l">{thumb}</td><td class="l" data-sort="{_e(str(r.get("material", slug)).lower())}">'
