@@ -175,14 +175,26 @@ def _channel_lobes(model):
     return None
 
 
+def _specular_fresnel(lobe, cos_d) -> np.ndarray:
+    """``ks·F(θd)`` of a lobe, ``(n, channels)``: the reflectance whose value at θd = 0 is
+    the F0 of the parameters table (:func:`brdffit.fit.registry.figures`)."""
+    if hasattr(lobe, "_fresnel"):
+        F = np.asarray(lobe._fresnel(cos_d), float)
+    else:
+        F = np.asarray(lobe.fresnel.eval(cos_d), float)
+        ks = getattr(lobe, "specular", None)
+        if ks is not None:
+            F = F * np.asarray(ks, float)
+    return F.reshape(np.size(cos_d), -1)
+
+
 def _plot_channel_lobes(axF, axD, axG, name, lobes, th, m, ls):
-    """Factors of a per-channel model: channel c's own Fresnel, D and G1 in colour c."""
+    """Factors of a per-channel model: channel c's own ks·F, D and G1 in colour c."""
     for c, lobe in enumerate(lobes):
         lab = f"{name} (per channel)" if c == 0 else None
         try:
-            F = np.asarray(lobe.fresnel.eval(np.cos(th)), float).reshape(th.size, -1)
-            axF.plot(np.degrees(th), F[:, c if F.shape[1] == 3 else 0], ls, color=_RGB[c], lw=1,
-                     label=lab)
+            F = _specular_fresnel(lobe, np.cos(th))
+            axF.plot(np.degrees(th), F[:, c if F.shape[1] == 3 else 0], ls, color=_RGB[c], lw=1)
         except Exception:  # noqa: BLE001
             pass
         try:
@@ -209,9 +221,10 @@ def _angles(n):
 
 
 def plot_factors(fits: Mapping[str, object], path, n: int = 200, title: str | None = None):
-    """Fresnel (R, G, B) over θd, D over θh and Smith G1 over θ for every fit that has them,
-    plus one row of NPF D/F/G per channel for each NPF-like fit. Returns the path, or
-    ``None`` when no fit exposes any factor (no file is written then)."""
+    """Fresnel ``ks·F`` (R, G, B: the colour is the channel, the line style the model; its
+    value at θd = 0 is the parameters table's F0) over θd, D over θh and Smith G1 over θ for
+    every fit that has them, plus one row of NPF D/F/G per channel for each NPF-like fit.
+    Returns the path, or ``None`` when no fit exposes any factor (no file is written then)."""
     plt = _plt()
     micro = {k: m for k, m in fits.items() if getattr(m, "distribution", None) is not None
              or getattr(m, "fresnel", None) is not None or _channel_lobes(m)}
@@ -226,20 +239,24 @@ def plot_factors(fits: Mapping[str, object], path, n: int = 200, title: str | No
         axF, axD, axG = axes[0]
         m = np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], -1)
         styles = ("-", "--", ":", "-.")
+        from matplotlib.lines import Line2D
+
+        fresnel_keys = []   # one legend entry per model: its line style, in black
         for k, (name, model) in enumerate(micro.items()):
             col = _MODEL_COLOURS[k % len(_MODEL_COLOURS)]
             ls = styles[k % len(styles)]
             lobes = _channel_lobes(model)
             if lobes:
                 _plot_channel_lobes(axF, axD, axG, name, lobes, th, m, ls)
+                fresnel_keys.append(Line2D([], [], ls=ls, color="k", lw=1,
+                                           label=f"{name} (per channel)"))
                 continue
-            fr = getattr(model, "fresnel", None)
-            if fr is not None:
+            if getattr(model, "fresnel", None) is not None or hasattr(model, "_fresnel"):
                 try:
-                    F = np.asarray(fr.eval(np.cos(th)), float).reshape(n, -1)
+                    F = _specular_fresnel(model, np.cos(th))
                     for c in range(min(3, F.shape[1])):
-                        axF.plot(np.degrees(th), F[:, c], ls, color=_RGB[c], lw=1,
-                                 label=name if c == 0 else None)
+                        axF.plot(np.degrees(th), F[:, c], ls, color=_RGB[c], lw=1)
+                    fresnel_keys.append(Line2D([], [], ls=ls, color="k", lw=1, label=name))
                 except Exception:  # noqa: BLE001 – a factor that cannot be evaluated is skipped
                     pass
             dist = getattr(model, "distribution", None)
@@ -254,10 +271,12 @@ def plot_factors(fits: Mapping[str, object], path, n: int = 200, title: str | No
                     axG.plot(np.degrees(th), G, ls, color=col, lw=1, label=name)
                 except Exception:  # noqa: BLE001
                     pass
-        axF.set(title="Fresnel (R, G, B)", xlabel="θd (°)")
+        axF.set(title="Fresnel ks·F (colour: R, G, B)", xlabel="θd (°)")
         axD.set(title="NDF D", xlabel="θh (°)")
         axG.set(title="Smith G1", xlabel="θ (°)", ylim=(0, 1.05))
-        for ax in axes[0]:
+        if fresnel_keys:
+            axF.legend(handles=fresnel_keys, fontsize=6)
+        for ax in (axD, axG):
             if ax.get_legend_handles_labels()[0]:
                 ax.legend(fontsize=6)
         row = 1
