@@ -56,5 +56,27 @@ def random_hemisphere(rng, n):
 
 
 @pytest.fixture
+def null_device(tmp_path):
+    """A character device that discards what is written (the null device, major 1 minor 3)
+    of the test's own: a node in ``tmp_path`` when the tests run as root, so that a
+    regression that replaces devices cannot destroy the machine's ``/dev/null``; else
+    ``/dev/null`` itself (which a non-root process cannot replace)."""
+    import stat
+
+    if hasattr(os, "geteuid") and os.geteuid() == 0:
+        node = tmp_path / "null"
+        try:
+            os.mknod(node, stat.S_IFCHR | 0o666, os.makedev(1, 3))
+            with open(node, "wb") as fh:  # a filesystem mounted nodev refuses device nodes
+                fh.write(b"probe")
+            return node
+        except OSError:
+            pass
+    if not stat.S_ISCHR(os.stat("/dev/null").st_mode):
+        pytest.skip("/dev/null is not a character device on this machine")
+    return Path("/dev/null")
+
+
+@pytest.fixture
 def rng():
     return np.random.default_rng(1234)

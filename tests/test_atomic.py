@@ -31,19 +31,20 @@ def test_a_replaced_file_keeps_its_mode_and_a_new_one_gets_the_umask(tmp_path):
     assert stat.S_IMODE(new.stat().st_mode) == 0o666 & ~umask
 
 
-def test_dev_null_is_written_through_and_stays_a_device():
-    before = os.stat("/dev/null")
-    _write("/dev/null", "discarded")
-    after = os.stat("/dev/null")
+def test_a_null_device_is_written_through_and_stays_a_device(null_device):
+    before = os.stat(null_device)
+    _write(null_device, "discarded")
+    after = os.stat(null_device)
     assert stat.S_ISCHR(after.st_mode) and after.st_rdev == before.st_rdev
     assert stat.S_IMODE(after.st_mode) == stat.S_IMODE(before.st_mode)
 
 
-def test_a_link_to_a_device_is_written_through_and_a_link_to_a_file_is_replaced(tmp_path):
+def test_a_link_to_a_device_is_written_through_and_a_link_to_a_file_is_replaced(tmp_path,
+                                                                                null_device):
     to_null = tmp_path / "sink"
-    to_null.symlink_to("/dev/null")
+    to_null.symlink_to(null_device)
     _write(to_null, "discarded")
-    assert to_null.is_symlink() and stat.S_ISCHR(os.stat("/dev/null").st_mode)
+    assert to_null.is_symlink() and stat.S_ISCHR(os.stat(null_device).st_mode)
     target = tmp_path / "target.json"
     target.write_text("kept")
     link = tmp_path / "link.json"

@@ -11,15 +11,17 @@ import pytest
 from brdffit.cli import main
 
 
-def test_export_to_dev_null_discards_and_leaves_the_device(capsys):
-    assert main(["export", "synthetic:gold-ggx", "--to", "gltf", "-o", "/dev/null"]) == 0
-    assert stat.S_ISCHR(os.stat("/dev/null").st_mode)
-    assert main(["fit", "synthetic:gold-ggx", "-m", "ggx", "--no-error", "-o", "/dev/null"]) == 0
-    assert stat.S_ISCHR(os.stat("/dev/null").st_mode)
+def test_export_to_a_null_device_discards_and_leaves_the_device(null_device, capsys):
+    """``-o /dev/null`` (here a null device of the test's own, see the fixture)."""
+    out = str(null_device)
+    assert main(["export", "synthetic:gold-ggx", "--to", "gltf", "-o", out]) == 0
+    assert stat.S_ISCHR(os.stat(out).st_mode)
+    assert main(["fit", "synthetic:gold-ggx", "-m", "ggx", "--no-error", "-o", out]) == 0
+    assert stat.S_ISCHR(os.stat(out).st_mode)
 
 
-def test_an_export_of_several_files_to_a_device_is_refused(capsys):
-    assert main(["export", "synthetic:gold-ggx", "--to", "glsl", "-o", "/dev/null"]) == 1
+def test_an_export_of_several_files_to_a_device_is_refused(null_device, capsys):
+    assert main(["export", "synthetic:gold-ggx", "--to", "glsl", "-o", str(null_device)]) == 1
     err = capsys.readouterr().err
     assert "this export writes 2 files" in err and "found a character device" in err
 
