@@ -80,7 +80,7 @@ def test_the_report_shows_a_badge_and_the_summary_a_column(tmp_path):
                                   "table_bytes": 0}}}
     result = {"material": "m", "slug": "m", "models": [
         {"name": "bad", "status": "ok", "psnr": 30.0, "validity": checks, **fig},
-        {"name": "good", "status": "ok", "psnr": 31.0, "validity": [], **fig}]}
+        {"name": "good", "status": "ok", "psnr": 40.0, "validity": [], **fig}]}
     write_result(tmp_path / "m", result)
     page = write_material_page(tmp_path, result).read_text()
     index = write_index(tmp_path).read_text()
