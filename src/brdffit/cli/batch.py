@@ -13,7 +13,7 @@ from . import DEFAULT_MODELS, EXIT_ERROR, EXIT_FAILED_TASKS, EXIT_USAGE
 
 
 def register(commands) -> None:
-    from . import add_command, add_render_options, at_least, models_help
+    from . import add_command, add_render_options, at_least, between, models_help
 
     cmd = add_command(commands, "batch", batch_cmd, epilog=models_help())
     cmd.add_argument("source", metavar="SOURCE",
@@ -31,11 +31,11 @@ def register(commands) -> None:
                      help="Address of an existing Dask scheduler, e.g. tcp://host:8786 "
                           "(default: a local cluster). Its workers must share OUT and the data "
                           "at the same paths and run the same brdffit version.")
-    cmd.add_argument("--workers", type=at_least(1), default=2, metavar="N",
+    cmd.add_argument("--workers", type=between(1, 256), default=2, metavar="N",
                      help="Local cluster: worker processes.")
     cmd.add_argument("--memory-limit", default="", metavar="SIZE",
                      help="Local cluster: memory per worker, e.g. 8GiB.")
-    cmd.add_argument("--retries", type=at_least(0), default=2, metavar="N",
+    cmd.add_argument("--retries", type=between(0, 100), default=2, metavar="N",
                      help="Local cluster: how many more times a task that kills its worker "
                           "(out of memory...) is tried before it is recorded as failed.")
     cmd.add_argument("--no-metrics", action="store_true", help="Skip BRDF-space metrics.")

@@ -156,14 +156,14 @@ def _print_summary(s: dict) -> None:
 
 
 def register(commands) -> None:
-    from . import add_command, at_least
+    from . import add_command, between
 
     cmd = add_command(commands, "info", info_cmd)
     cmd.add_argument("spec", metavar="FILE[:MATERIAL]",
                      help="A BRDF file, collection.zip:material or synthetic:NAME.")
     cmd.add_argument("--json", dest="as_json", action="store_true",
                      help="Print one JSON object.")
-    cmd.add_argument("--albedo-samples", type=at_least(16), default=65536, metavar="N",
+    cmd.add_argument("--albedo-samples", type=between(16, 1 << 22), default=65536, metavar="N",
                      help="Monte Carlo samples per albedo angle.")
 
 
