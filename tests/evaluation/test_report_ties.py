@@ -28,3 +28,21 @@ def test_the_parameters_table_shows_the_coat(tmp_path):
     page = write_material_page(tmp_path, _result([
         {"name": "ggx-diffuse", "status": "ok", "params": {"figures": fig}}])).read_text()
     assert "α 0.0025 (roughness 0.0500), weight 0.800, F0 0.040" in page
+
+
+def test_the_index_says_which_file_to_use(tmp_path):
+    models = [{"name": "tabulated", "status": "ok", "psnr": 40.0, "psnr_se": 0.1,
+               "table_bytes": 1800, "fit_time": 0.02, "fit_file": "fits/tabulated.npz",
+               "exports": ["exports/tabulated.json"]},
+              {"name": "ggx-diffuse", "status": "ok", "psnr": 39.9, "psnr_se": 0.1,
+               "table_bytes": 0, "fit_time": 1.1, "fit_file": "fits/ggx-diffuse.npz",
+               "exports": ["exports/ggx-diffuse.json", "exports/ggx-diffuse.gltf"],
+               "validity": []},
+              {"name": "npf", "status": "ok", "psnr": 30.0, "psnr_se": 0.1, "table_bytes": 3264}]
+    write_result(tmp_path / "m", _result(models))
+    index = write_index(tmp_path).read_text()
+    assert '<a href="m/exports/ggx-diffuse.gltf">ggx-diffuse (glTF)</a>' in index
+    assert ('most faithful: <a href="m/fits/tabulated.npz">tabulated</a> (1,800 B of tables, '
+            "fit 0.02 s) – tied with ggx-diffuse") in index
+    assert ('smallest of those: <a href="m/fits/ggx-diffuse.npz">ggx-diffuse</a> (parameters '
+            "only, fit 1.10 s)") in index

@@ -676,6 +676,57 @@ def _tied_with_best(models: list[dict], tie_db: float = 2.0) -> set:
     return out
 
 
+def _link(slug: str, rel, text: str) -> str:
+    """A link to a file of the material's folder (``text`` when the path is not safe)."""
+    if isinstance(rel, str) and _url(rel) is not None and _url(slug) is not None:
+        return f'<a href="{_e(_url(slug))}/{_e(_url(rel))}">{_e(text)}</a>'
+    return _e(text)
+
+
+def _use_cell(slug: str, models: list[dict], tied: set) -> str:
+    """Which file to use, per material: the **engine** file (the glTF of the best-rendered
+    model that has one, with its checks), the **most faithful** fit (highest PSNR; every
+    model tied with it named) and the **smallest** fit among those tied with the best (its
+    fit-file table bytes; the smallest overall when none is tied), with sizes and fit
+    times."""
+    ok = [m for m in models if _ok(m)]
+    if not ok:
+        return "–"
+    scored = sorted((m for m in ok if _num(m.get("psnr")) is not None),
+                    key=lambda m: -_num(m.get("psnr")))
+    lines = []
+
+    def facts(m) -> str:
+        bits = []
+        size = _num(m.get("table_bytes"))
+        if size is not None:
+            bits.append(f"{int(size):,} B of tables" if size else "parameters only")
+        if _num(m.get("fit_time")) is not None:
+            bits.append(f"fit {_fmt(m.get('fit_time'), 2)} s")
+        return f" ({', '.join(bits)})" if bits else ""
+
+    engine = next((m for m in scored + ok if any(
+        isinstance(x, str) and x.endswith(".gltf") for x in (m.get("exports") or []))), None)
+    if engine is not None:
+        gltf = next(x for x in engine["exports"] if str(x).endswith(".gltf"))
+        valid = "" if not engine.get("validity") else " ⚠"
+        lines.append(f"engine: {_link(slug, gltf, str(engine.get('name')) + ' (glTF)')}{valid}")
+    if scored:
+        best = scored[0]
+        others = sorted(n for n in tied if n != best.get("name"))
+        lines.append(f"most faithful: {_link(slug, best.get('fit_file'), str(best.get('name')))}"
+                     + _e(facts(best)) + (f" – tied with {_e(', '.join(others))}" if others
+                                          else ""))
+    pool = [m for m in ok if m.get("name") in tied] or ok
+    sized = [m for m in pool if _num(m.get("table_bytes")) is not None]
+    if sized:
+        small = min(sized, key=lambda m: (_num(m["table_bytes"]), -(_num(m.get("psnr")) or 0)))
+        lines.append(f"smallest{' of those' if tied else ''}: "
+                     f"{_link(slug, small.get('fit_file'), str(small.get('name')))}"
+                     + _e(facts(small)))
+    return "<br>".join(lines)
+
+
 def summarize(results: Iterable[dict], tie_db: float = 2.0) -> dict:
     """Per-model mean/median PSNR and dE2000 and pairwise wins/ties over materials, and the
     median standard error of the models' PSNR (results with ``psnr_se``).
@@ -810,7 +861,8 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
                     + (_td(r.get("noise_floor_psnr")) if legacy_floor else "")
                     + (f'<td class="l">{_e(recommended.get(str(r.get("material")), "–"))}</td>'
                        if recommended else "")
-                    + "".join(cells) + "</tr>")
+                    + "".join(cells)
+                    + f'<td class="l use">{_use_cell(slug, list(by.values()), tied)}</td></tr>')
     parts.append("<h2>Materials</h2>"
                  '<p><label>Filter: <input id="filter" type="search" placeholder="material '
                  'name"></label></p>'
@@ -818,7 +870,12 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
                  "<th class=\"l\">reference</th><th class=\"l\">material</th>"
                  + ("<th>noise floor PSNR (old results)</th>" if legacy_floor else "")
                  + ("<th class=\"l\">recommended model</th>" if recommended else "")
-                 + head + "</tr></thead><tbody>" + "".join(rows) + "</tbody></table>")
+                 + head + "<th class=\"l\">which file to use</th></tr></thead><tbody>" + "".join(rows) + "</tbody></table>"
+                 '<p class="note">Which file to use: <b>engine</b>, the glTF material of the '
+                 "best-rendered fit that has one (⚠: it failed a physical check, see its "
+                 "page); <b>most faithful</b>, the fit with the highest PSNR; <b>smallest</b>, the "
+                 "fit with the fewest table bytes among those tied with the best (a tie: PSNRs "
+                 f"within {TIE_Z:g} combined standard errors, or 2 dB without them).</p>")
     path = out_dir / "index.html"
     with atomic_write(path, "w") as fh:
         fh.write(_page(title, "\n".join(parts)))
