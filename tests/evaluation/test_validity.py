@@ -91,3 +91,18 @@ def test_the_report_shows_a_badge_and_the_summary_a_column(tmp_path):
                             {"material": "m", "model": "good", "status": "ok", "warnings": []}],
                            tmp_path)
     assert rows[0]["warnings"].startswith("fresnel 1.5") and rows[1]["warnings"] == ""
+
+
+def test_a_large_error_names_a_better_model(monkeypatch, capsys):
+    from brdffit.cli import fit as F
+
+    monkeypatch.setattr(F, "LARGE_ERROR", 1e-9)      # every fit's error is "large" here
+    monkeypatch.setattr(F, "ALTERNATIVES", ("ggx-diffuse", "sgd"))
+    assert main(["fit", "synthetic:plastic-beckmann", "-m", "ggx", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    (q,) = [w for w in doc["warnings"] if w["check"] == "quality"]
+    assert q["message"].startswith("the error ") and "is large (above 1e-07 %)" in q["message"]
+    # the synthetic material is a Beckmann + Lambert: GGX + Lambert fits it far better
+    assert q["advice"].startswith("ggx-diffuse does better on this material") or \
+        q["advice"].startswith("sgd does better on this material"), q["advice"]
+    assert "--model " in q["advice"] and "tried ggx-diffuse" in q["advice"]
