@@ -92,7 +92,10 @@ def summarize(brdf, spec=None, *, albedo_samples: int = 65536) -> dict:
         if isinstance(valid, np.ndarray):  # the file's own 'valid' field, reported as is
             if valid.dtype == np.uint8 and n is not None and valid.size * 8 == n:
                 bits = int(np.unpackbits(valid).sum())
-                counts["valid_field"] = f"bit mask, {bits} of {n} bits set"
+                counts["valid_field"] = (
+                    f"{bits} of the {n} samples of the warped RGB tables are marked measured "
+                    f"({100 * bits / n:.0f} %); Mitsuba and brdffit evaluate every sample, so "
+                    f"the fits and their errors also use the {n - bits} unmarked ones")
             else:
                 counts["valid_field"] = f"{int(np.count_nonzero(valid))} of {valid.size} set"
     else:
