@@ -85,3 +85,41 @@ def test_progress_events_of_the_child_reach_the_parent_and_name_the_stage():
 def test_crash_text():
     assert crash_text(-signal.SIGSEGV) == "SIGSEGV" and crash_text(-signal.SIGKILL) == "SIGKILL"
     assert crash_text(3) == "exit status 3"
+
+
+def _init_fails():
+    raise ValueError("init failed")
+
+
+def test_a_call_that_does_not_pickle_is_not_sent_and_a_failed_init_keeps_no_child():
+    from brdffit._isolation import NotSendable
+
+    with IsolatedProcess() as child:
+        with pytest.raises(NotSendable, match="cannot send"):
+            child.call(operator.add, lambda: 1, 2)
+        assert child.call(operator.add, 1, 2) == 3
+    with IsolatedProcess(init=[(_init_fails, (), {})]) as child:
+        for _ in range(2):  # each call starts a child and runs the init again
+            with pytest.raises(ValueError, match="init failed"):
+                child.call(operator.add, 1, 2)
+        assert child.starts == 2 and child._proc is None
+
+
+class _OnlyHere:
+    """A class the child cannot import (the test makes it a class of ``__main__``)."""
+
+    def __reduce__(self):
+        return (_OnlyHere, ())
+
+
+def test_a_call_the_child_cannot_load_is_not_sendable_and_the_child_goes_on(monkeypatch):
+    import sys
+
+    from brdffit._isolation import NotSendable
+
+    monkeypatch.setattr(_OnlyHere, "__module__", "__main__")
+    monkeypatch.setattr(sys.modules["__main__"], "_OnlyHere", _OnlyHere, raising=False)
+    with IsolatedProcess() as child:
+        with pytest.raises(NotSendable, match="cannot load the call"):
+            child.call(operator.eq, _OnlyHere(), 1)
+        assert child.call(operator.add, 1, 2) == 3 and child.starts == 1

@@ -8,7 +8,8 @@ it also works inside daemonic Dask workers), one at a time, and turns the child'
 starts a new child; ``init`` calls are replayed there first.
 
 Calls are ``fn(*args, **kwargs)`` with a module-level function and picklable arguments and
-results (pickle, not JSON: the child is our own code, started by us, talking over a private
+results (a call that does not pickle is :class:`NotSendable`, raised before anything is sent;
+pickle, not JSON: the child is our own code, started by us, talking over a private
 pipe); the child gets the parent's ``sys.path`` so that it can import what the parent
 can. A child keeps module state between calls (e.g. a renderer built by an ``init`` call).
 :attr:`IsolatedProcess.cpu_seconds` adds up the child's CPU time of the calls
@@ -35,7 +36,7 @@ import time
 
 from .errors import BRDFError
 
-__all__ = ["IsolatedProcess", "ChildCrashed", "crash_text"]
+__all__ = ["IsolatedProcess", "ChildCrashed", "NotSendable", "crash_text"]
 
 _HEADER = struct.Struct("<Q")
 _CHILD_COMMAND = "import sys; from brdffit._isolation import _child_main; sys.exit(_child_main())"
@@ -51,6 +52,12 @@ class ChildCrashed(BRDFError):
         self.signal_name, self.exit_status, self.stage = signal_name, exit_status, stage
 
 
+class NotSendable(BRDFError):
+    """A call (its function, arguments) that cannot be pickled for the child, or that the
+    child cannot unpickle (e.g. a class defined in the parent's ``__main__``): it did not
+    run, the child is as it was."""
+
+
 def crash_text(returncode: int | None) -> str:
     """``"SIGSEGV"`` for a child killed by a signal, ``"exit status 3"`` otherwise."""
     if returncode is not None and returncode < 0:
@@ -62,12 +69,19 @@ def crash_text(returncode: int | None) -> str:
 
 
 def _send(stream, obj) -> None:
-    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    _write(stream, pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL))
+
+
+def _write(stream, data: bytes) -> None:
     stream.write(_HEADER.pack(len(data)) + data)
     stream.flush()
 
 
 def _receive(stream):
+    return pickle.loads(_read(stream))
+
+
+def _read(stream) -> bytes:
     head = stream.read(_HEADER.size)
     if len(head) < _HEADER.size:
         raise EOFError
@@ -75,7 +89,7 @@ def _receive(stream):
     data = stream.read(size)
     if len(data) < size:
         raise EOFError
-    return pickle.loads(data)
+    return data
 
 
 def _reap(proc: subprocess.Popen) -> int:
@@ -117,10 +131,14 @@ class IsolatedProcess:
         self._proc = subprocess.Popen([sys.executable, "-c", _CHILD_COMMAND],
                                       stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
         self.starts += 1
-        # the child imports what the parent can (the functions and classes of the calls)
-        _send(self._proc.stdin, ("path", list(sys.path)))
-        for fn, args, kwargs in self.init:
-            self._call(fn, args, kwargs)
+        try:
+            # the child imports what the parent can (the functions and classes of the calls)
+            _send(self._proc.stdin, ("path", list(sys.path)))
+            for fn, args, kwargs in self.init:
+                self._call(fn, args, kwargs)
+        except BaseException:  # never keep a child whose init did not run: the next call
+            self.close()       # starts a new one
+            raise
 
     def close(self) -> None:
         """Stop the child (it exits when its input closes)."""
@@ -159,7 +177,13 @@ class IsolatedProcess:
 
         proc = self._proc
         try:
-            _send(proc.stdin, ("call", fn, args, kwargs))
+            data = pickle.dumps(("call", fn, args, kwargs), protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception as exc:  # noqa: BLE001 – pickle raises several kinds
+            raise NotSendable(f"{self.what}: cannot send {getattr(fn, '__name__', fn)!r} "
+                              f"and its arguments to a child process ({type(exc).__name__}: "
+                              f"{exc})") from None
+        try:
+            _write(proc.stdin, data)
             while True:
                 kind, payload = _receive(proc.stdout)
                 if kind == "event":
@@ -201,9 +225,15 @@ def _child_main() -> int:
 
     while True:
         try:
-            message = _receive(inp)
+            data = _read(inp)
         except EOFError:
             return 0
+        try:
+            message = pickle.loads(data)
+        except Exception as exc:  # noqa: BLE001 – e.g. a class of the parent's __main__
+            _send(out, ("error", NotSendable(f"the child process cannot load the call "
+                                             f"({type(exc).__name__}: {exc})")))
+            continue
         if message[0] == "path":
             sys.path[:] = list(dict.fromkeys([*message[1], *sys.path]))
             continue
@@ -220,6 +250,5 @@ def _child_main() -> int:
             except Exception:  # noqa: BLE001 – an exception that does not pickle
                 exc = RuntimeError(f"{type(exc).__name__}: {exc}")
             data = pickle.dumps(("error", exc), protocol=pickle.HIGHEST_PROTOCOL)
-        out.write(_HEADER.pack(len(data)) + data)
-        out.flush()
+        _write(out, data)
 

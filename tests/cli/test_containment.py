@@ -88,3 +88,21 @@ def test_batch_render_records_the_crashed_scene_and_exits_3(tmp_path):
     assert fit["status"] == "ok"
     assert (tmp_path / "runs" / "summary.csv").is_file()
     assert (tmp_path / "runs" / "report" / "index.html").is_file()
+
+
+def test_brdfs_the_renderer_child_cannot_load_render_in_this_process(tmp_path, monkeypatch):
+    """A BRDF class of the caller's ``__main__`` (a notebook, a script) cannot be sent to the
+    renderer's child: the comparison renders in this process and says so."""
+    import sys
+
+    from brdffit.evaluation.compare import compare
+    from brdffit.synthetic import synthetic
+
+    ref = synthetic("gold-ggx")
+    local = type("Local", (type(ref),), {"__module__": "__main__"})
+    monkeypatch.setattr(sys.modules["__main__"], "Local", local, raising=False)
+    ref.__class__ = local
+    r = compare(ref, ["ggx"], tmp_path, spp=2, resolution=16, scenes="sphere-studio",
+                exports=False)
+    assert r["timing"]["renders_isolated"] is False and r["models"][0]["status"] == "ok"
+    assert any("not isolated: the child process cannot load the call" in n for n in r["notes"])

@@ -804,16 +804,16 @@ def _make_engine(reference, models: Mapping, records, say, mat_name, isolate: bo
     """The Mitsuba engine, in a child process when ``isolate`` and the BRDFs can be sent
     there (pickled); otherwise in this process, with the reason. Returns ``(engine, note)``."""
     if isolate:
-        import pickle
+        from .._isolation import NotSendable
 
         try:
-            pickle.dumps((reference, dict(models)))
-        except Exception as exc:  # noqa: BLE001 – e.g. a class defined in __main__
-            note = (f"renders ran in this process, not isolated: the BRDFs cannot be sent to "
-                    f"a child process ({type(exc).__name__}: {exc})")
-            return _CRNEngine(reference, models, records, say, mat_name), note
-        return _IsolatedCRNEngine(reference, models, records, say, mat_name), None
-    return _CRNEngine(reference, models, records, say, mat_name), None
+            return _IsolatedCRNEngine(reference, models, records, say, mat_name), None
+        except NotSendable as exc:  # e.g. a class defined in __main__
+            note = f"renders ran in this process, not isolated: {exc}"
+            say = (lambda msg: None)  # "preparing the renderer" was said already
+    else:
+        note = None
+    return _CRNEngine(reference, models, records, say, mat_name), note
 
 
 class _CallbackEngine:
