@@ -103,6 +103,13 @@ def periodic_coordinate(x, period, n):
     return table_coordinate(u, n - 1e-4)
 
 
+def periodic_cell(x, n):
+    """Nodes ``i0, i1`` (``i1`` wraps to 0 after the last) and weight ``t`` of linear
+    interpolation at a continuous index ``x`` of :func:`periodic_coordinate`."""
+    i0 = dr.minimum(mi.UInt32(dr.floor(x)), n - 1)
+    return i0, dr.select(i0 + 1 >= n, 0, i0 + 1), x - mi.Float(i0)
+
+
 def half_diff(wi, wo):
     """Rusinkiewicz (θh, θd, φd) of Dr.Jit directions (MERL convention, as
     :func:`brdffit.geometry.io_to_half_diff`; φh is not needed by isotropy). Also returns
@@ -288,9 +295,7 @@ class MERLTableEval(_ProxySampling):
         ih0, fh = table_cell(dr.sqrt(th * (2.0 / dr.pi)) * 90.0, 90)
         id0, fd = table_cell(td * (180.0 / dr.pi), 90)
         ih1, id1 = ih0 + 1, id0 + 1
-        xp = periodic_coordinate(pd, period, n_phi)
-        ip0 = dr.minimum(mi.UInt32(dr.floor(xp)), n_phi - 1); fp = xp - mi.Float(ip0)
-        ip1 = dr.select(ip0 + 1 >= n_phi, 0, ip0 + 1)
+        ip0, ip1, fp = periodic_cell(periodic_coordinate(pd, period, n_phi), n_phi)
         ok = active & (wi.z > 0) & (wo.z > 0)
         out = mi.Color3f(0.0)
         for ih, wh in ((ih0, 1.0 - fh), (ih1, fh)):
@@ -396,9 +401,12 @@ class Table4DEval(_ProxySampling):
         xpd = periodic_coordinate(pd, two_pi, npd)
 
         def axis(x, n, periodic):
-            i0 = dr.minimum(mi.UInt32(dr.floor(x)), n - 1)
-            f = x - mi.Float(i0)
-            i1 = dr.select(i0 + 1 >= n, 0 if periodic else n - 1, i0 + 1)
+            if periodic:
+                i0, i1, f = periodic_cell(x, n)
+            else:
+                i0 = dr.minimum(mi.UInt32(dr.floor(x)), n - 1)
+                f = x - mi.Float(i0)
+                i1 = dr.minimum(i0 + 1, n - 1)
             return ((i0, 1.0 - f), (i1, f))
 
         ok = active & (wi.z > 0) & (wo.z > 0)
@@ -874,10 +882,7 @@ class NPFEval(_ProxySampling):
             spec *= _lerp1(self.G, ti, 91, ok) * _lerp1(self.G, to, 91, ok) / (
                 dr.maximum(wi.z, 1e-7) * dr.maximum(wo.z, 1e-7))
         else:
-            up = periodic_coordinate(pd, dr.pi, 180)
-            i0 = dr.minimum(mi.UInt32(dr.floor(up)), 179)
-            t = up - mi.Float(i0)
-            i1 = dr.select(i0 + 1 >= 180, 0, i0 + 1)
+            i0, i1, t = periodic_cell(periodic_coordinate(pd, dr.pi, 180), 180)
             spec *= dr.lerp(dr.gather(mi.Color3f, self.H, i0, ok), dr.gather(mi.Color3f, self.H, i1, ok), t)
         f = mi.Color3f(self.rho_d) + mi.Color3f(self.rho_s) * spec
         return dr.select(ok, f, 0.0)
