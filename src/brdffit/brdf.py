@@ -23,7 +23,7 @@ import numpy as np
 from .geometry import half_diff_to_io, io_to_half_diff
 
 __all__ = ["BRDF", "IsotropicBRDF", "cosine_hemisphere_sample", "cosine_hemisphere_pdf",
-           "cosine_pairs"]
+           "cosine_pairs", "stratified_square"]
 
 
 def _as_dirs(wi, wo) -> tuple[np.ndarray, np.ndarray]:
@@ -41,6 +41,15 @@ def cosine_hemisphere_sample(u) -> np.ndarray:
     phi = 2.0 * np.pi * u[..., 1]
     z = np.sqrt(np.maximum(0.0, 1.0 - u[..., 0]))
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
+
+
+def stratified_square(n: int, seed: int = 0) -> np.ndarray:
+    """``⌊√n⌋²`` jittered points of the unit square, one per cell of a ``⌊√n⌋ × ⌊√n⌋`` grid
+    (``(m, 2)``; the jitter from ``numpy.random.default_rng(seed)``)."""
+    side = int(np.sqrt(n))
+    rng = np.random.default_rng(seed)
+    cells = np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
+    return (cells.reshape(-1, 2) + rng.random((side * side, 2))) / side
 
 
 def cosine_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -106,11 +115,7 @@ class BRDF(abc.ABC):
         Monte Carlo with stratified cosine-weighted samples; returns ``(len(theta_i), 3)``.
         """
         theta_i = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
-        side = int(np.sqrt(n_samples))
-        rng = np.random.default_rng(seed)
-        g = (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
-             .reshape(-1, 2) + rng.random((side * side, 2))) / side
-        wo = cosine_hemisphere_sample(g)
+        wo = cosine_hemisphere_sample(stratified_square(n_samples, seed))
         out = np.empty((theta_i.size, 3))
         for k, t in enumerate(theta_i):
             wi = np.array([np.sin(t), 0.0, np.cos(t)])

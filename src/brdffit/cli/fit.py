@@ -89,13 +89,6 @@ def _unexpected_option(exc: TypeError, options: dict) -> str | None:
 QUICK_ERROR_PAIRS = 1 << 14
 
 
-def _r4_pairs(n: int):
-    """``n`` cosine-distributed direction pairs (:func:`brdffit.brdf.cosine_pairs`)."""
-    from ..brdf import cosine_pairs
-
-    return cosine_pairs(n)
-
-
 #: Direction pairs per model evaluation of :func:`_grid_error`.
 _EVAL_CHUNK = 8192
 
@@ -153,7 +146,7 @@ def quick_error(reference, model, n_pairs: int = QUICK_ERROR_PAIRS) -> dict:
     * A MERL table (``merl_table()``): quadrature on its own valid nodes (no interpolation of
       the input; :func:`_grid_error`).
     * Anything else: ``n_pairs`` fixed quasi-random direction pairs drawn ∝ cos θi cos θo
-      (:func:`_r4_pairs`) instead of the metric's 2^17 scrambled Sobol pairs (SciPy's
+      (:func:`brdffit.brdf.cosine_pairs`) instead of the metric's 2^17 scrambled Sobol pairs (SciPy's
       generator costs ~0.3 s to import).
 
     Both agree with the full metric within a few % (tests/cli/test_fit_cli.py).
@@ -167,7 +160,9 @@ def quick_error(reference, model, n_pairs: int = QUICK_ERROR_PAIRS) -> dict:
         si, sj, sk = QUICK_ERROR_GRID_STRIDE
         return {"cos_rel_error": err, "samples": n,
                 "method": f"{n} valid MERL nodes (every {si}/{sj}/{sk} θh/θd/φd)"}
-    wi, wo = _r4_pairs(n_pairs)
+    from ..brdf import cosine_pairs
+
+    wi, wo = cosine_pairs(n_pairs)
     fr = np.nan_to_num(np.asarray(reference.eval(wi, wo), dtype=np.float64))
     ft = np.nan_to_num(np.asarray(model.eval(wi, wo), dtype=np.float64))
     den = float(np.abs(fr).sum())

@@ -63,10 +63,6 @@ class Violation:
     message: str
     advice: str = ""
 
-    def line(self, name: str = "the fit") -> str:
-        """``NAME: check: message; advice``: the warning line of the command line."""
-        return f"{name}: {self.check}: {self.message}" + (f"; {self.advice}" if self.advice else "")
-
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)
 
@@ -133,12 +129,9 @@ def _fresnel(model) -> list[Violation]:
 
 
 def _albedo(model) -> list[Violation]:
-    from ..brdf import cosine_hemisphere_sample
+    from ..brdf import cosine_hemisphere_sample, stratified_square
 
-    side = int(math.sqrt(ALBEDO_SAMPLES))
-    rng = np.random.default_rng(0)
-    grid = (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
-            .reshape(-1, 2) + rng.random((side * side, 2))) / side
+    grid = stratified_square(ALBEDO_SAMPLES, seed=0)
     worst = None
     for deg in ALBEDO_ANGLES_DEG:
         t = math.radians(deg)

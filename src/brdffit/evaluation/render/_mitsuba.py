@@ -6,7 +6,7 @@ libLLVM 19. :func:`load` sets ``DRJIT_LIBLLVM_PATH`` (when unset) to the first e
 importing drjit/mitsuba, then selects the variant. Nothing here runs at ``import brdffit``.
 
 Two environment variables, read once by :func:`load` and inherited by every worker process
-(``demo``, ``batch``, the isolated renderer of :mod:`.isolated`):
+(``demo``, ``batch``, the renderer's child process of :mod:`brdffit._isolation`):
 
 ``BRDFFIT_DRJIT_DEBUG=1``
     Dr.Jit's debug mode: every ``gather``/``scatter`` is bounds-checked and an out-of-bounds
@@ -28,7 +28,7 @@ import os
 
 from ...errors import BRDFError
 
-__all__ = ["load", "available", "configuration", "VARIANT", "LLVM_TARGETS", "MitsubaUnavailable"]
+__all__ = ["load", "available", "VARIANT", "LLVM_TARGETS", "MitsubaUnavailable"]
 
 VARIANT = "llvm_ad_rgb"
 _LLVM_CANDIDATES = ("/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1", "/usr/lib/*/libLLVM.so.19*",
@@ -106,14 +106,6 @@ def _configure(dr) -> None:
     if os.environ.get("BRDFFIT_DRJIT_DEBUG", "").strip() not in ("", "0"):
         dr.set_flag(dr.JitFlag.Debug, True)
         dr.set_flag(dr.JitFlag.PacketOps, False)
-
-
-def configuration() -> dict:
-    """What :func:`load` applied: ``{"variant", "llvm_target", "debug"}`` (for logs and tests)."""
-    mi, dr = load()
-    return {"variant": mi.variant(),
-            "llvm_target": os.environ.get("BRDFFIT_LLVM_TARGET", "").strip().lower() or "native",
-            "debug": bool(dr.flag(dr.JitFlag.Debug))}
 
 
 def available() -> bool:
