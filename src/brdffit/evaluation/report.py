@@ -657,23 +657,20 @@ TIE_Z = 2.0
 
 
 def _tied_with_best(models: list[dict], tie_db: float = 2.0) -> set:
-    """Names of the models whose PSNR is the best or tied with it (the rule of
-    :func:`summarize`: within ``TIE_Z`` combined standard errors, ``tie_db`` without them)."""
-    scored = [(m.get("name"), _num(m.get("psnr")), _num(m.get("psnr_se"))) for m in models]
-    scored = [s for s in scored if s[1] is not None]
+    """Names of the models whose PSNR is the best or tied with it, by the rule of the wins /
+    ties table (:func:`.metrics.count_wins` with ``TIE_Z``: within ``TIE_Z`` combined
+    standard errors, ``tie_db`` without them)."""
+    from .metrics import count_wins
+
+    scored = {m.get("name"): (_num(m.get("psnr")), _num(m.get("psnr_se"))) for m in models
+              if _num(m.get("psnr")) is not None}
     if not scored:
         return set()
-    top = max(scored, key=lambda s: s[1])
-    out = set()
-    for name, p, se in scored:
-        if math.isinf(top[1]):
-            tie = math.isinf(p)
-        else:
-            t = TIE_Z * math.hypot(se, top[2]) if se is not None and top[2] is not None else tie_db
-            tie = top[1] - p <= t
-        if tie:
-            out.add(name)
-    return out
+    top = max(scored, key=lambda n: scored[n][0])
+    wins = count_wins({n: [p] for n, (p, _) in scored.items()}, tie_db,
+                      se={n: [math.nan if se is None else se] for n, (_, se) in scored.items()},
+                      z=TIE_Z)
+    return {top} | {n for n in scored if n != top and wins[top][n]["ties"]}
 
 
 def _link(slug: str, rel, text: str) -> str:
