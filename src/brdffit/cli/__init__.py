@@ -104,36 +104,31 @@ def usage_error(option: str | None, message: str) -> UsageError:
 
 
 # -- value types (their errors are usage errors naming the option) ------------------------------
-def at_least(low: int):
-    """The ``type=`` of an integer option ≥ ``low`` (``--help`` shows ``x>=low``)."""
+def _integer_in(low: int, high: int | None, range_text: str):
+    """The ``type=`` of an integer option in ``[low, high]`` (``high`` ``None``: no upper
+    bound); errors and ``--help`` show ``range_text``."""
     def parse(text: str) -> int:
         try:
             value = int(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-        if value < low:
-            raise argparse.ArgumentTypeError(f"{text!r} is not in the range x>={low}")
+        if value < low or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(f"{text!r} is not in the range {range_text}")
         return value
 
-    parse.range_text = f"x>={low}"
+    parse.range_text = range_text
     parse.__name__ = "integer"
     return parse
+
+
+def at_least(low: int):
+    """The ``type=`` of an integer option ≥ ``low`` (``--help`` shows ``x>=low``)."""
+    return _integer_in(low, None, f"x>={low}")
 
 
 def between(low: int, high: int):
     """The ``type=`` of an integer option in ``[low, high]`` (``--help`` shows the range)."""
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-        if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"{text!r} is not in the range {low}..{high}")
-        return value
-
-    parse.range_text = f"{low}..{high}"
-    parse.__name__ = "integer"
-    return parse
+    return _integer_in(low, high, f"{low}..{high}")
 
 
 def positive(high: float = 1e6):
@@ -322,14 +317,21 @@ def add_render_options(command, when: str = "") -> None:
                          metavar="PX", help=text("image side in pixels."))
 
 
-def check_batches(spp: int, batches: int, batches_option: str | None = "--batches") -> None:
-    """Usage error (exit 2) unless ``spp`` is a multiple of ``batches`` (every batch renders
-    ``spp / batches`` samples per pixel: no silent rounding)."""
+def check_render_settings(spp: int, batches: int, resolution: int,
+                          batches_option: str | None = "--batches") -> int:
+    """The batches a comparison renders (``batches``, or ``spp`` when there are fewer
+    samples, as :func:`brdffit.evaluation.compare.compare` does), after the usage errors
+    (exit 2) of its settings: ``spp`` not a multiple of them (every batch renders ``spp /
+    batches`` samples per pixel: no silent rounding; ``batches_option`` ``None`` when the
+    command has no such option) and a pass too large (:func:`check_render_size`)."""
+    batches = min(batches, spp)
     if spp % batches:
         lower, upper = spp // batches * batches, -(-spp // batches) * batches
         options = " or ".join(f"--spp {v}" for v in dict.fromkeys((lower, upper)) if v > 0)
         of = f"--batches {batches}" if batches_option else f"the {batches} batches"
         raise usage_error("--spp", f"{spp} is not a multiple of {of}; use {options}")
+    check_render_size(resolution, spp // batches)
+    return batches
 
 
 def check_models(names, option: str = "--models") -> list[str]:

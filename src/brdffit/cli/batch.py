@@ -88,10 +88,9 @@ def batch_cmd(source: str, out: str, models: str = DEFAULT_MODELS, only: str = "
                                                 f"{memory_limit!r}") from None
     if render:
         from ..evaluation.render.scenes import scene_suite
-        from . import check_batches, check_render_size
+        from . import check_render_settings
 
-        check_batches(spp, min(batches, spp))
-        check_render_size(resolution, spp // min(batches, spp))
+        check_render_settings(spp, batches, resolution)
         try:
             scene_suite(scenes)
         except (ValueError, KeyError) as exc:

@@ -90,11 +90,9 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
     from . import check_models  # model names (not saved fits) must be known: exit 2
 
     check_models([m for m in model_list if "=" not in m and not m.endswith(".npz")])
-    from . import check_batches, check_render_size
+    from . import check_render_settings
 
-    batches = min(batches, spp)  # as compare(): fewer samples than batches, one each
-    check_batches(spp, batches)
-    check_render_size(resolution, spp // batches)
+    batches = check_render_settings(spp, batches, resolution)
     exp = exposure
     try:
         fopts = json.loads(fit_options) if fit_options else None

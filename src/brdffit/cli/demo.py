@@ -102,10 +102,9 @@ def demo_cmd(out: str = "demo-out", data: str = "", limit: int = 0, models: str 
     if not model_list:
         raise usage_error("--models", f"expected at least one model name, found {models!r}")
     from ..evaluation.compare import DEFAULT_BATCHES
-    from . import check_batches, check_render_size
+    from . import check_render_settings
 
-    check_batches(spp, min(DEFAULT_BATCHES, spp), None)
-    check_render_size(resolution, spp // min(DEFAULT_BATCHES, spp))
+    check_render_settings(spp, DEFAULT_BATCHES, resolution, batches_option=None)
     source = data or "synthetic:"
     materials = enumerate_materials(source, limit=limit or None)
     jobs = max(1, min(jobs or os.cpu_count() or 1, len(materials)))
