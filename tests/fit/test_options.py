@@ -8,7 +8,8 @@ import pytest
 import brdffit
 from brdffit.cli import main
 from brdffit.fit import registry
-from brdffit.fit.options import RANGES, OptionError, check_options, fitter_parameters, option_kind
+from brdffit.fit.options import RANGES, OptionError, fitter_parameters, option_kind
+from brdffit.fit.registry import check_options
 
 
 @pytest.mark.parametrize("model, options, message", [

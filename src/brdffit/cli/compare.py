@@ -103,7 +103,8 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
         raise ValueError(f"--fit-options: expected a JSON object {{model: {{option: value}}}}, "
                          f"found {fit_options!r}")
     if fopts:
-        from ..fit.options import OptionError, check_options
+        from ..fit.options import OptionError
+        from ..fit.registry import check_options
         from . import usage_error
 
         labels = [m.split("=", 1)[0] if "=" in m else Path(m).stem if m.endswith(".npz")

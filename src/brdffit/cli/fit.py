@@ -66,9 +66,10 @@ def accepted_options(fn) -> tuple[set, bool]:
 
 
 def check_options(model: str, options: dict) -> dict:
-    """The options checked (:func:`brdffit.fit.options.check_options`): names, types and
+    """The options checked (:func:`brdffit.fit.registry.check_options`): names, types and
     ranges; a bad one is a usage error (exit 2) naming it and what is accepted."""
-    from ..fit.options import OptionError, check_options as check
+    from ..fit.options import OptionError
+    from ..fit.registry import check_options as check
     from . import usage_error
 
     try:

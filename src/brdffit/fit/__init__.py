@@ -99,7 +99,7 @@ def fit(brdf: BRDF | str, model: str = "ggx-diffuse", **options) -> BRDF:
     if not isinstance(model, str) or (model not in known_names()
                                       and model not in list_fitters()):
         raise ValueError(f"unknown model {model!r}; expected one of {', '.join(known_names())}")
-    from .options import check_options
+    from .registry import check_options
 
     options = check_options(model, options)
     if isinstance(brdf, str):

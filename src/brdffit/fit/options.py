@@ -5,9 +5,12 @@ takes ``**kwargs``, those of the functions it forwards them to (:func:`fitter_pa
 Each option's **type** comes from its annotation (``int``, ``float``, ``bool``, ``str``,
 ``tuple[int, int]``, ``Iterable[str]``; ``| None`` accepts ``None`` = the default) and its
 **range** from :data:`RANGES`, one table for every fitter (an option name means the same
-thing wherever it appears). :func:`check_options` is the one check of ``brdffit fit -O``,
-``compare --fit-options``, the demo's and the batch's options and :func:`brdffit.fit.fit`.
+thing wherever it appears). :func:`check_fitter_options` is the one check of ``brdffit fit
+-O``, ``compare --fit-options``, the demo's and the batch's options and
+:func:`brdffit.fit.fit`, by model name through :func:`brdffit.fit.registry.check_options`
+(this module knows fitting functions, not the registry).
 
+>>> from brdffit.fit.registry import check_options
 >>> check_options("ggx-diffuse", {"starts": 2, "theta_d_stride": 3})
 {'starts': 2, 'theta_d_stride': 3}
 >>> check_options("ggx-diffuse", {"phi_d_stride": -3})
@@ -24,7 +27,7 @@ import math
 import textwrap
 from collections.abc import Mapping
 
-__all__ = ["OptionError", "RANGES", "fitter_parameters", "check_options", "option_kind"]
+__all__ = ["OptionError", "RANGES", "fitter_parameters", "check_fitter_options", "option_kind"]
 
 
 class OptionError(ValueError):
@@ -225,15 +228,14 @@ def check_value(name: str, param: inspect.Parameter, value):
     return value
 
 
-def check_options(model: str, options: Mapping, command_line: bool = False) -> dict:
-    """The options of a fit with ``model``, checked: names the fitter takes, types and
-    ranges (module docstring); with ``command_line``, the parameters that take Python
-    objects (:data:`NOT_OPTIONS`) are unknown names. Returns the options with numbers from
-    strings converted; raises :class:`OptionError` (one line, naming the option) or
-    ``KeyError`` for an unknown model."""
-    from .registry import get
-
-    params, open_ended = fitter_parameters(get(model).fit)
+def check_fitter_options(fn, options: Mapping, *, model: str,
+                         command_line: bool = False) -> dict:
+    """The options of a fit with the fitting function ``fn`` (of the model named ``model``,
+    for messages), checked: names the fitter takes, types and ranges (module docstring);
+    with ``command_line``, the parameters that take Python objects (:data:`NOT_OPTIONS`) are
+    unknown names. Returns the options with numbers from strings converted; raises
+    :class:`OptionError` (one line, naming the option)."""
+    params, open_ended = fitter_parameters(fn)
     offered = {n: p for n, p in params.items() if n not in NOT_OPTIONS}
     if command_line:
         params = offered

@@ -41,7 +41,8 @@ from .._blas import with_single_blas_thread
 __all__ = ["Fitter", "FITTERS", "ModelInfo", "MODELS", "PAPERS", "TYPICAL_SOURCE",
            "register_fitter", "get_fitter", "get", "list_fitters", "known_names",
            "load_undeclared_modules", "describe", "fit", "fit_model", "is_isotropic_only",
-           "summarize", "model_params", "small_json", "figures", "table_bytes"]
+           "summarize", "model_params", "small_json", "figures", "table_bytes",
+           "check_options"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -326,11 +327,17 @@ def is_isotropic_only(name: str) -> bool:
         return False
 
 
-def fit_model(name: str, reference, options: Mapping | None = None):
-    """Fit model ``name`` to ``reference`` with ``options`` checked
-    (:func:`brdffit.fit.options.check_options`); returns ``(model, seconds)``."""
-    from .options import check_options
+def check_options(name: str, options: Mapping, command_line: bool = False) -> dict:
+    """The options of a fit with model ``name`` checked and converted
+    (:func:`brdffit.fit.options.check_fitter_options`); ``KeyError`` for an unknown model."""
+    from .options import check_fitter_options  # not at import: `brdffit --help` reads MODELS
 
+    return check_fitter_options(get(name).fit, options, model=name, command_line=command_line)
+
+
+def fit_model(name: str, reference, options: Mapping | None = None):
+    """Fit model ``name`` to ``reference`` with ``options`` checked (:func:`check_options`);
+    returns ``(model, seconds)``."""
     fitter = get(name).fit
     options = check_options(name, dict(options or {}))
     t0 = time.perf_counter()
