@@ -7,6 +7,9 @@ Conventions (the same everywhere in brdffit):
 * :meth:`BRDF.eval` returns the BRDF value f_r in 1/sr, **not** multiplied by the cosine,
   as RGB ``(..., 3)`` (linear, the colour space of the source data), and 0 when either
   direction is at or below the horizon.
+* :meth:`BRDF.measured` says where the values are measurements: fits weight only those
+  direction pairs and errors are computed only over them (:attr:`BRDF.measured_domain` says
+  it in words; ``None`` means everywhere above the horizon).
 * :meth:`BRDF.sample` draws ``wo`` for a given ``wi`` from 2D uniform numbers and returns the
   direction with its solid-angle density; :meth:`BRDF.pdf` returns that density. The base
   class samples the cosine-weighted hemisphere, which is valid (if not efficient) for every
@@ -23,7 +26,7 @@ import numpy as np
 from .geometry import half_diff_to_io, io_to_half_diff
 
 __all__ = ["BRDF", "IsotropicBRDF", "cosine_hemisphere_sample", "cosine_hemisphere_pdf",
-           "cosine_pairs", "stratified_square"]
+           "cosine_pairs", "stratified_square", "measured_mask", "sampled_albedo"]
 
 
 def _as_dirs(wi, wo) -> tuple[np.ndarray, np.ndarray]:
@@ -68,6 +71,45 @@ def cosine_hemisphere_pdf(wo) -> np.ndarray:
     return np.maximum(np.asarray(wo)[..., 2], 0.0) / np.pi
 
 
+def measured_mask(brdf, wi, wo) -> np.ndarray | None:
+    """``brdf.measured(wi, wo)`` when ``brdf`` has a restricted measured domain, else ``None``
+    (every pair is data: callers skip the mask). Works on any object with ``eval``."""
+    if getattr(brdf, "measured_domain", None) is None or not hasattr(brdf, "measured"):
+        return None
+    return np.asarray(brdf.measured(wi, wo), dtype=bool)
+
+
+def sampled_albedo(brdf, theta_i, n_samples: int = 4096, seed: int = 0
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Directional albedo ``a(θi) = ∫ f_r cos θo dωo`` and its standard error, both
+    ``(len(theta_i), 3)``, by importance sampling with the BRDF's own ``sample`` (cosine
+    sampling when it has none): ``a ≈ mean(f_r cos θo / pdf)`` over :func:`stratified_square`
+    points. The white furnace of a BRDF that conserves energy reads ≤ 1 at every θi.
+    Samples with a zero, non-finite or below-horizon draw count as 0; an infinite weight
+    as 1e30 (so that a singular BRDF fails a furnace test instead of vanishing)."""
+    theta_i = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
+    grid = stratified_square(n_samples, seed)
+    mean = np.empty((theta_i.size, 3))
+    se = np.empty((theta_i.size, 3))
+    for k, t in enumerate(theta_i):
+        wi = np.broadcast_to(np.array([np.sin(t), 0.0, np.cos(t)]), (grid.shape[0], 3))
+        try:
+            wo, pdf = brdf.sample(wi, grid)
+        except (NotImplementedError, AttributeError):
+            wo = cosine_hemisphere_sample(grid)
+            pdf = cosine_hemisphere_pdf(wo)
+        wo, pdf = np.asarray(wo, dtype=np.float64), np.asarray(pdf, dtype=np.float64)
+        ok = (pdf > 0) & (wo[:, 2] > 0) & np.isfinite(pdf)
+        f = np.zeros((wo.shape[0], 3))
+        if ok.any():
+            f[ok] = np.asarray(brdf.eval(wi[ok], wo[ok]), dtype=np.float64)
+        w = np.where(ok[:, None], f * (np.where(ok, wo[:, 2], 0.0)
+                                       / np.where(ok, pdf, 1.0))[:, None], 0.0)
+        w = np.nan_to_num(w, nan=0.0, posinf=1e30)
+        mean[k], se[k] = w.mean(0), w.std(0, ddof=1) / np.sqrt(w.shape[0])
+    return mean, se
+
+
 class BRDF(abc.ABC):
     """Abstract BRDF: subclasses implement :meth:`eval` (and optionally ``sample``/``pdf``).
 
@@ -84,10 +126,20 @@ class BRDF(abc.ABC):
     name: str = "brdf"
     isotropic: bool = False
     source: str | None = None
+    #: The measured domain in words when it is smaller than the upper hemispheres (e.g.
+    #: "θi ≤ 78.5°"); ``None`` when every pair above the horizon is data.
+    measured_domain: str | None = None
 
     @abc.abstractmethod
     def eval(self, wi, wo) -> np.ndarray:
         """BRDF value f_r(wi, wo), shape ``broadcast(wi, wo).shape[:-1] + (3,)``."""
+
+    def measured(self, wi, wo) -> np.ndarray:
+        """True where ``f_r(wi, wo)`` is data rather than an extrapolation beyond what was
+        measured, shape ``broadcast(wi, wo).shape[:-1]``. The base class: both directions
+        above the horizon."""
+        wi, wo = _as_dirs(wi, wo)
+        return (wi[..., 2] > 0) & (wo[..., 2] > 0)
 
     def sample(self, wi, u) -> tuple[np.ndarray, np.ndarray]:
         """Draw ``wo`` given ``wi`` from uniform numbers ``u`` ``(..., 2)``.
@@ -147,6 +199,11 @@ class IsotropicBRDF(BRDF):
         f = self.eval_hd(th, td, pd)
         above = (wi[..., 2] > 0) & (wo[..., 2] > 0)
         return np.where(above[..., None], f, 0.0)
+
+    def measured_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
+        """:meth:`measured` at Rusinkiewicz coordinates (φh = 0)."""
+        wi, wo = half_diff_to_io(theta_h, 0.0, theta_d, phi_d)
+        return self.measured(wi, wo)
 
     def eval_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
         """BRDF value at Rusinkiewicz coordinates (φh irrelevant by isotropy), ``(..., 3)``."""

@@ -12,6 +12,7 @@ import numpy as np
 __all__ = [
     "N_THETA_H", "N_THETA_D", "N_PHI_D", "merl_theta_h", "merl_theta_d", "merl_phi_d",
     "theta_h_to_index", "theta_d_to_index", "phi_d_to_index", "tabulate_merl_grid",
+    "merl_node_values",
 ]
 
 N_THETA_H, N_THETA_D, N_PHI_D = 90, 90, 180
@@ -55,13 +56,16 @@ def tabulate_merl_grid(brdf, chunk: int = 1 << 18) -> tuple[np.ndarray, np.ndarr
     ``merl_table`` attribute returning ``(values, valid)``) is returned as stored, so that
     invalid measurements stay marked. Otherwise every finite, non-negative value is valid.
 
+    Samples outside the BRDF's measured domain (:meth:`brdffit.brdf.BRDF.measured`) are
+    invalid too, so fits and errors computed from the grid use measurements only.
+
     A BRDF that never changes after it is made (a Neural-BRDF network) may carry an empty list
     ``_merl_grid_memo``: its tabulation is then computed once and returned read-only to every
     later caller (every fit and metric of a material tabulates the same reference).
     """
-    table = getattr(brdf, "merl_table", None)
+    table = _stored_table(brdf)
     if table is not None:
-        return table() if callable(table) else table
+        return table
     memo = getattr(brdf, "_merl_grid_memo", None)    # opt-in for immutable BRDFs (NBRDF)
     if memo is not None:
         if not memo:
@@ -82,4 +86,41 @@ def _evaluate(brdf, chunk: int) -> tuple[np.ndarray, np.ndarray]:
         out[sl] = brdf.eval_hd(th[sl], td[sl], pd[sl])
     out = out.reshape(N_THETA_H, N_THETA_D, N_PHI_D, 3)
     valid = np.all(np.isfinite(out), axis=-1) & np.all(out >= 0, axis=-1)
+    if getattr(brdf, "measured_domain", None) is not None:
+        valid &= _measured_hd(brdf, th, td, pd).reshape(valid.shape)
     return out, valid
+
+
+def _stored_table(brdf):
+    table = getattr(brdf, "merl_table", None)
+    if table is None:
+        return None
+    return table() if callable(table) else table
+
+
+def _measured_hd(brdf, th, td, pd) -> np.ndarray:
+    return np.broadcast_to(np.asarray(brdf.measured_hd(th, td, pd), dtype=bool),
+                           np.broadcast_shapes(np.shape(th), np.shape(td), np.shape(pd)))
+
+
+def merl_node_values(brdf, ih=slice(None), jd=slice(None), kp=slice(None)
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """The BRDF at the MERL nodes ``θh[ih] × θd[jd] × φd[kp]`` (index arrays or slices).
+
+    Returns ``(values (…, 3), measured (…))`` on that sub-grid. A MERL table
+    (``merl_table``) is read as stored and ``measured`` is its valid mask; any other isotropic
+    BRDF is evaluated with ``eval_hd`` and ``measured`` is its measured domain
+    (:meth:`brdffit.brdf.IsotropicBRDF.measured_hd`, all True when it has none). Values are
+    returned as they come: callers clean non-finite or negative ones their own way.
+    """
+    table = _stored_table(brdf)
+    if table is not None:
+        values, valid = table
+        return np.asarray(values)[ih][:, jd][:, :, kp], np.asarray(valid)[ih][:, jd][:, :, kp]
+    th, td, pd = np.meshgrid(merl_theta_h()[ih], merl_theta_d()[jd], merl_phi_d()[kp],
+                             indexing="ij")
+    values = np.asarray(brdf.eval_hd(th.ravel(), td.ravel(), pd.ravel()), dtype=np.float64)
+    values = values.reshape(th.shape + (-1,))
+    if getattr(brdf, "measured_domain", None) is None:
+        return values, np.ones(th.shape, dtype=bool)
+    return values, _measured_hd(brdf, th, td, pd)

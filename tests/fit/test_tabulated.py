@@ -373,14 +373,22 @@ def test_per_channel_distributions_differ_by_channel():
     assert f[0, 0] < f[0, 1] and f[1, 0] > f[1, 1]  # sharp green peak, rough red tail
 
 
-def test_grazing_cut_keeps_rgl_fresnel_sane(shared_data):
-    """RGL tables explode within a few degrees of the horizon; the default 89° cut of the
-    Fresnel average keeps the fit close to the data (measured: 6.9 → 0.16)."""
+def test_measured_domain_keeps_rgl_fresnel_sane(shared_data):
+    """RGL tables explode towards their extrapolated 90° incidence row; the fit reads only the
+    measured domain (θi below 85° here), so even without the 89° cut of the Fresnel average it
+    stays close to the data, and without the domain (everything treated as data) it does not
+    (measured: 0.13 vs 6.9)."""
+    import copy
+
     from brdffit.evaluation.metrics import cosine_weighted_relative_error
     from brdffit.io import load
 
     ref = load(shared_data("rgl", "acrylic_felt_green_rgb.bsdf"))
-    cut = cosine_weighted_relative_error(ref, fit_tabulated(ref), n_samples=1 << 14)
-    uncut = cosine_weighted_relative_error(ref, fit_tabulated(ref, fresnel_max_theta_deg=None),
-                                           n_samples=1 << 14)
-    assert cut < 0.3 < uncut
+    everywhere = copy.copy(ref)
+    everywhere.__class__ = type("Everywhere", (type(ref),), {"measured_domain": None})
+    assert ref.measured_domain.startswith("θi ≤ ") and np.degrees(ref.theta_i_measured) < 85
+    kept = cosine_weighted_relative_error(ref, fit_tabulated(ref, fresnel_max_theta_deg=None),
+                                          n_samples=1 << 14)
+    lost = cosine_weighted_relative_error(
+        ref, fit_tabulated(everywhere, fresnel_max_theta_deg=None), n_samples=1 << 14)
+    assert kept < 0.3 < lost

@@ -9,6 +9,7 @@ import pytest
 
 from brdffit.brdf import BRDF, IsotropicBRDF
 from brdffit.errors import BRDFFormatError
+from brdffit.geometry import half_diff_to_io
 from brdffit.grid import merl_phi_d, merl_theta_d, merl_theta_h, tabulate_merl_grid
 from brdffit.io import merl as merl_mod
 from brdffit.io.merl import MERLBRDF, read_merl, resample_to_merl, write_merl
@@ -315,3 +316,20 @@ def test_fast_half_diff_matches_geometry_and_base_eval(rng, compiled, monkeypatc
     np.testing.assert_allclose(b.eval(wi[20:], wo[20:]), IsotropicBRDF.eval(b, wi[20:], wo[20:]),
                                rtol=1e-9, atol=1e-12)
     assert b.eval(wi[0], wo[0]).shape == (3,)
+
+
+def test_measured_domain_is_the_valid_mask(merl_file, raw_table, rng):
+    """A MERL table's measured domain is its valid samples: ``measured`` at the nodes is the
+    mask, and a direction pair is measured when its nearest sample is."""
+    _, invalid = raw_table
+    b = read_merl(merl_file)
+    assert b.measured_domain == f"the {N - invalid.sum()} of {N} table samples not marked invalid"
+    th, td, pd = _grid()
+    np.testing.assert_array_equal(b.measured_hd(th, td, pd), ~invalid.reshape(th.shape))
+    sub = (slice(1, None, 7), slice(1, None, 5), slice(None, None, 11))  # θh, θd > 0: φd defined
+    wi, wo = half_diff_to_io(th[sub], 0.0, td[sub], pd[sub])
+    above = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+    expect = ~invalid.reshape(th.shape)[sub] & above
+    np.testing.assert_array_equal(b.measured(wi, wo), expect)
+    full = MERLBRDF(np.ones(th.shape + (3,)))
+    assert full.measured_domain is None

@@ -11,7 +11,7 @@ import pytest
 
 from brdffit.brdf import IsotropicBRDF
 from brdffit.errors import BRDFFormatError
-from brdffit.geometry import io_to_half_diff
+from brdffit.geometry import half_diff_to_io, io_to_half_diff
 from brdffit.io.rgl import (IsotropicRGLBRDF, RGLBRDF, _Marginal2D, elevation, phi_to_u,
                             read_rgl, theta_to_u, u_to_phi, u_to_theta)
 from brdffit.io.tensorfile import read_tensor_file, write_tensor_file
@@ -448,3 +448,50 @@ def test_matches_mitsuba_measured_plugin(mitsuba, name):
 def test_matches_mitsuba_on_anisotropic_files(mitsuba, aniso_files, reduction):
     path = aniso_files[reduction]
     _cross_check(mitsuba, read_rgl(path), path, seed=10 + reduction)
+
+
+# ----------------------------------------------------------------------------- measured domain
+@pytest.mark.parametrize("name", NAMES)
+def test_measured_domain_ends_at_the_last_measured_incidence(name):
+    """The 90° row of an RGL file cannot be measured: the domain ends at the node before it,
+    and ``measured`` is exactly θi ≤ that node (wo anywhere above the horizon)."""
+    b = rgl(name)
+    assert np.degrees(b.theta_i[-1]) == pytest.approx(90.0, abs=0.01)
+    t = b.theta_i_measured
+    assert t == pytest.approx(float(b.theta_i[-2])) and 70.0 < np.degrees(t) < 85.0
+    assert b.measured_domain == f"θi ≤ {np.degrees(t):.1f}° (the file's measured incidences)"
+    wo = np.array([0.3, 0.1, np.sqrt(1 - 0.1)])
+
+    def at(deg):
+        r = np.radians(deg)
+        return np.array([np.sin(r), 0.0, np.cos(r)])
+
+    assert b.measured(at(np.degrees(t) - 0.01), wo) and not b.measured(at(np.degrees(t) + 0.05), wo)
+    assert not b.measured(at(30.0), np.array([0.0, 0.6, -0.8]))   # wo below the horizon
+    th, td, pd = np.radians([10.0, 30.0]), np.radians([5.0, 80.0]), np.radians([20.0, 90.0])
+    wi, wo2 = half_diff_to_io(th, 0.0, td, pd)
+    np.testing.assert_array_equal(b.measured_hd(th, td, pd), b.measured(wi, wo2))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_valid_field_marks_the_horizon_or_its_complement(name):
+    """What ``valid_mask`` documents: read MSB first, the file's bit mask is set exactly on
+    the texels whose outgoing direction lies above the horizon, or exactly on the others —
+    so it carries no measured domain (the 90° rows of the last θi excepted, ≤ 0.2 %)."""
+    b = rgl(name)
+    bits = b.valid_mask()
+    n = bits.shape[-1]
+    y, x = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    s = np.stack([x.ravel() / (n - 1), y.ravel() / (n - 1)], -1)
+    agree = []
+    for k, th in enumerate(b.theta_i):
+        corners = b._vndf.corners([np.zeros(len(s)), np.full(len(s), th)])
+        u_m, _ = b._vndf.sample(s, corners)
+        phi_m, theta_m = u_to_phi(u_m[:, 1]), u_to_theta(u_m[:, 0])
+        m = np.stack([np.cos(phi_m) * np.sin(theta_m), np.sin(phi_m) * np.sin(theta_m),
+                      np.cos(theta_m)], -1)
+        wi = np.array([np.sin(th), 0.0, np.cos(th)])
+        wo_z = 2 * (m @ wi) * m[:, 2] - wi[2]
+        agree.append(np.mean(bits[0, k].ravel() == (wo_z > 0)))
+    agree = np.array(agree)
+    assert np.all(agree >= 0.998) or np.all(agree <= 0.002), agree

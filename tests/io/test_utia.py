@@ -153,3 +153,17 @@ def test_failed_write_leaves_no_output(tmp_path):
     with pytest.raises(BRDFFormatError):
         write_utia((values, np.ones(values.shape[:-1], bool)), tmp_path / "b.bin")
     assert os.listdir(tmp_path) == []
+
+
+def test_measured_domain_is_the_grid(utia_file):
+    """Beyond θ = 75° the UTIA value is held, not measured: the domain is θi, θo ≤ 75°."""
+    b = read_utia(utia_file)
+    assert b.measured_domain.startswith("θi, θo ≤ 75°")
+
+    def d(deg, phi=0.0):
+        t, p = np.radians(deg), np.radians(phi)
+        return np.array([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
+
+    assert b.measured(d(75.0), d(0.0)) and b.measured(d(40.0), d(75.0, 120.0))
+    assert not b.measured(d(75.5), d(10.0)) and not b.measured(d(10.0), d(80.0, 30.0))
+    assert not b.measured(d(10.0), np.array([0.0, 0.0, -1.0]))

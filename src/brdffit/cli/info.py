@@ -92,15 +92,15 @@ def summarize(brdf, spec=None, *, albedo_samples: int = 65536) -> dict:
         if isinstance(valid, np.ndarray):  # the file's own 'valid' field, reported as is
             if valid.dtype == np.uint8 and n is not None and valid.size * 8 == n:
                 bits = int(np.unpackbits(valid).sum())
-                counts["valid_field"] = (
-                    f"{bits} of the {n} samples of the warped RGB tables are marked measured "
-                    f"({100 * bits / n:.0f} %); Mitsuba and brdffit evaluate every sample, so "
-                    f"the fits and their errors also use the {n - bits} unmarked ones")
+                counts["valid_field"] = f"{bits} of the {n} texels set; not used"
+                counts["valid_field_meaning"] = ("it marks the texels with wo above the "
+                                                 "horizon, or the others")
             else:
                 counts["valid_field"] = f"{int(np.count_nonzero(valid))} of {valid.size} set"
     else:
         counts = {"n_samples": None, "n_invalid": None}
     out["samples"] = counts
+    out["measured_domain"] = getattr(brdf, "measured_domain", None)
     if table is not None:
         out["value_range"] = _range_of(*table)
         out["value_range_of"] = "stored valid samples"
@@ -146,6 +146,11 @@ def _print_summary(s: dict) -> None:
         print(f"  parameters  {c['n_parameters']}  (network; no stored samples)")
     if "valid_field" in c:
         print(f"  valid field {c['valid_field']}")
+        if c.get("valid_field_meaning"):
+            print(f"              ({c['valid_field_meaning']})")
+    if s.get("measured_domain"):
+        print(f"  measured    {s['measured_domain']}")
+        print("              (fits weight only these directions; errors are computed over them)")
     if "field_shapes" in c:
         print("  fields      " + ", ".join(f"{k}{tuple(v)}" for k, v in c["field_shapes"].items()))
     for key in ("interpolation", "precision"):

@@ -135,7 +135,7 @@ from scipy import optimize, special
 from ..brdf import IsotropicBRDF, _as_dirs, cosine_hemisphere_pdf, cosine_hemisphere_sample
 from ..errors import FitError
 from ..geometry import slope_to_normal
-from ..grid import merl_phi_d, merl_theta_d, merl_theta_h
+from ..grid import merl_node_values, merl_phi_d, merl_theta_d, merl_theta_h
 from ..microfacet.beckmann import Beckmann
 from ..microfacet.fresnel import GeneralizedSchlickFresnel
 from ..microfacet.ggx import GGX
@@ -229,6 +229,12 @@ def _clean(v: np.ndarray, valid: np.ndarray | None = None) -> tuple[np.ndarray, 
     return np.where(ok, np.maximum(v, 0.0), 0.0), ok
 
 
+def _node_values(brdf, ih, jd):
+    """The φd = 0 nodes ``θh[ih] × θd[jd]`` flattened: values ``(n, 3)``, measured ``(n, 1)``."""
+    v, measured = merl_node_values(brdf, ih, jd, [0])
+    return v.reshape(-1, v.shape[-1]), measured.reshape(-1, 1)
+
+
 def two_slices(brdf) -> dict[str, np.ndarray]:
     """The θd = 0 slice ``m_h(θh)`` and the θh = 0 slice ``m_d(θd)`` on the MERL nodes.
 
@@ -254,8 +260,8 @@ def two_slices(brdf) -> dict[str, np.ndarray]:
         if not getattr(brdf, "isotropic", False) or not hasattr(brdf, "eval_hd"):
             raise FitError(f"{getattr(brdf, 'name', brdf)!r}: the two-slice fit needs an "
                            f"isotropic BRDF with eval_hd, found {type(brdf).__name__}")
-        m_h, valid_h = _clean(brdf.eval_hd(th, np.zeros_like(th), np.zeros_like(th)))
-        m_d, valid_d = _clean(brdf.eval_hd(np.zeros_like(td), td, np.zeros_like(td)))
+        m_h, valid_h = _clean(*_node_values(brdf, slice(None), [0]))
+        m_d, valid_d = _clean(*_node_values(brdf, [0], slice(None)))
     return {"theta_h": th, "m_h": m_h, "valid_h": valid_h,
             "theta_d": td, "m_d": m_d, "valid_d": valid_d}
 
@@ -878,15 +884,9 @@ def _selection_data(brdf, theta_d_stride: int, phi_stride: int) -> dict:
     pd = merl_phi_d()[::sp]
     TH, TD, PD = np.meshgrid(th, td, pd, indexing="ij")
     wv = volume_form_weight()[:, jd, ::sp] * width[None, :, None] * sp
-    table = getattr(brdf, "merl_table", None)
-    if table is not None:
-        values, valid = table() if callable(table) else table
-        v = np.asarray(values, dtype=np.float64)[:, jd, ::sp]
-        ok = np.asarray(valid)[:, jd, ::sp][..., None] & np.isfinite(v) & (v >= 0)
-    else:
-        v = np.asarray(brdf.eval_hd(TH.ravel(), TD.ravel(), PD.ravel()), dtype=np.float64)
-        v = v.reshape(TH.shape + (-1,))
-        ok = np.isfinite(v) & (v >= 0)
+    v, measured = merl_node_values(brdf, slice(None), jd, slice(None, None, sp))
+    v = np.asarray(v, dtype=np.float64)
+    ok = measured[..., None] & np.isfinite(v) & (v >= 0)
     v = np.where(ok, v, 0.0)
     ok = np.broadcast_to(ok, v.shape)
     wi, wo = half_diff_to_io(TH, 0.0, TD, PD)
@@ -1363,16 +1363,9 @@ def _full_data(brdf, theta_d_stride: int, phi_stride: int):
     td = merl_theta_d()[::theta_d_stride]
     pd = merl_phi_d()[::phi_stride]
     TH, TD, PD = np.meshgrid(th, td, pd, indexing="ij")
-    table = getattr(brdf, "merl_table", None)
-    if table is not None:
-        values, valid = table() if callable(table) else table
-        v = np.asarray(values)[:, ::theta_d_stride, ::phi_stride]
-        ok = np.asarray(valid)[:, ::theta_d_stride, ::phi_stride][..., None] & np.isfinite(v)
-        v = np.where(ok & (v >= 0), v, 0.0)
-        ok = np.broadcast_to(ok, v.shape)
-    else:
-        v, ok = _clean(brdf.eval_hd(TH.ravel(), TD.ravel(), PD.ravel()))
-        v, ok = v.reshape(TH.shape + (3,)), ok.reshape(TH.shape + (3,))
+    v, measured = merl_node_values(brdf, slice(None), slice(None, None, theta_d_stride),
+                                   slice(None, None, phi_stride))
+    v, ok = _clean(v, measured[..., None])
     wi, wo = half_diff_to_io(TH, 0.0, TD, PD)
     keep = (w > 0) & (wi[..., 2] > 1e-4) & (wo[..., 2] > 1e-4)
     return {"theta_h": TH[keep], "cos_d": np.cos(TD[keep]), "ci": wi[..., 2][keep],

@@ -49,7 +49,7 @@ import time
 
 import numpy as np
 
-from ..brdf import BRDF
+from ..brdf import BRDF, measured_mask
 from ..errors import FitError
 from ..grid import (N_PHI_D, N_THETA_H, merl_phi_d, merl_theta_d, merl_theta_h,
                     tabulate_merl_grid)
@@ -103,7 +103,8 @@ def backscatter(brdf: BRDF, theta, phi=None, rule: str | None = None):
 
     Returns ``(values, valid)``: ``(Nθ, 3)`` or ``(Nθ, Nφ, 3)`` and a boolean mask. A MERL
     table (``merl_table`` attribute) read at its own ``θh`` nodes (``rule="merl"``, N = 90)
-    returns the stored samples ``(θh_k, θd = 0)`` with their validity.
+    returns the stored samples ``(θh_k, θd = 0)`` with their validity; outside the
+    measured domain (:meth:`brdffit.brdf.BRDF.measured`) values are marked invalid.
     """
     theta = np.asarray(theta, dtype=np.float64)
     table = getattr(brdf, "merl_table", None)
@@ -119,7 +120,8 @@ def backscatter(brdf: BRDF, theta, phi=None, rule: str | None = None):
         o = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1)
     vals = np.asarray(brdf.eval(o, o), dtype=np.float64)
     ok = np.all(np.isfinite(vals), -1)
-    return vals, ok
+    measured = measured_mask(brdf, o, o)
+    return vals, ok if measured is None else ok & measured
 
 
 #: Default stopping tolerance of the power iteration: the relative change
@@ -441,6 +443,9 @@ def extract_fresnel(brdf: BRDF, dist: TabulatedSlopeDistribution, *, merl=None,
             ok = (ci > 0) & (co > 0) & usable
             f = np.asarray(brdf.eval(wi, wo), dtype=np.float64)
             ok &= np.all(np.isfinite(f), -1)
+            measured = measured_mask(brdf, wi, wo)
+            if measured is not None:
+                ok &= measured
             lam = dist.Lambda(wi) + dist.Lambda(wo)
             with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
                 fid = D * 1.0 / (1.0 + lam) / (4.0 * ci * co)

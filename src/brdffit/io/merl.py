@@ -317,6 +317,28 @@ class MERLBRDF(IsotropicBRDF):
         return self._packed
 
     # -- evaluation -----------------------------------------------------------------------
+    @property
+    def measured_domain(self) -> str | None:
+        """The samples not marked invalid, when some are (``None`` otherwise)."""
+        n = self.n_invalid
+        if n == 0:
+            return None
+        return f"the {_N - n} of {_N} table samples not marked invalid"
+
+    def measured(self, wi, wo) -> np.ndarray:
+        """True where the table sample nearest to ``(wi, wo)`` (MERL's own lookup) is valid,
+        both directions above the horizon."""
+        th, td, pd, above = fast_half_diff(wi, wo)
+        return above & self.measured_hd(th, td, pd)
+
+    def measured_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
+        th, td, pd = np.broadcast_arrays(*(np.nan_to_num(np.asarray(a, np.float64))
+                                           for a in (theta_h, theta_d, phi_d)))
+        i = np.minimum(np.floor(theta_h_to_index(th) + _SNAP), N_THETA_H - 1).astype(np.intp)
+        j = np.minimum(np.floor(theta_d_to_index(td) + _SNAP), N_THETA_D - 1).astype(np.intp)
+        k = np.floor(phi_d_to_index(pd) + _SNAP).astype(np.intp) % N_PHI_D
+        return self._valid[i, j, k]
+
     def eval(self, wi, wo) -> np.ndarray:
         """f_r(wi, wo) via the table lookup in Rusinkiewicz coordinates; 0 below the horizon."""
         th, td, pd, above = fast_half_diff(wi, wo)

@@ -460,6 +460,28 @@ class RGLBRDF(BRDF):
         self._rgb_table = np.ascontiguousarray(np.moveaxis(rgb, 2, -1)).reshape(-1, 3)
         self._rgb_warp = _Marginal2D(rgb[:, :, 0], params, normalize=False, enable_sampling=False)
 
+    # -------------------------------------------------------------- measured domain
+    @property
+    def theta_i_measured(self) -> float:
+        """The largest measured incidence (radians): the last ``theta_i`` node, or the one
+        before it when the last is 90° (light at grazing incidence cannot be measured; that
+        row is an extrapolation, and values interpolated towards it grow like 1/cos θi)."""
+        last = float(self.theta_i[-1])
+        if self.theta_i.size > 1 and last >= np.radians(89.9):
+            return float(self.theta_i[-2])
+        return last
+
+    @property
+    def measured_domain(self) -> str:
+        return f"θi ≤ {np.degrees(self.theta_i_measured):.1f}° (the file's measured incidences)"
+
+    def measured(self, wi, wo) -> np.ndarray:
+        """True for an incidence within the measured ``theta_i`` range, both directions above
+        the horizon. (The file's ``valid`` bit mask is not used: see :meth:`valid_mask`.)"""
+        wi, wo = _as_dirs(wi, wo)
+        lim = np.cos(self.theta_i_measured) - 1e-9
+        return (wi[..., 2] >= lim) & (wi[..., 2] > 0) & (wo[..., 2] > 0)
+
     # -------------------------------------------------------------- tables for other modules
     def ndf_table(self) -> AngularTable:
         """The stored NDF ``D(θm, φm)`` with its angular grid (see :class:`AngularTable`)."""
@@ -477,14 +499,18 @@ class RGLBRDF(BRDF):
                             ut, up, doc)
 
     def valid_mask(self) -> np.ndarray | None:
-        """The ``valid`` field unpacked as booleans ``(Nφ, Nθ, n, n)`` (little-endian bit order).
+        """The ``valid`` field unpacked as booleans ``(Nφ, Nθ, n, n)``, one bit per texel of
+        the warped tables, most significant bit first. ``None`` when absent or of another size.
 
-        The field is not used by Mitsuba; this reading of it (one bit per luminance texel,
-        LSB first) is our interpretation. ``None`` when absent or of another size.
+        Mitsuba does not use the field, nor does brdffit. Read this way, in five of the seven
+        RGL files of the test data it is set exactly on the texels whose outgoing direction
+        (the reflection of ``wi`` about the VNDF-warped half vector) is above the horizon, and
+        in two (``colodur_napoli_4f``, ``paper_white``) exactly on the others: it says nothing
+        about the measurement beyond the horizon (:meth:`measured` is the measured domain).
         """
         if self.valid is None:
             return None
-        bits = np.unpackbits(np.asarray(self.valid, np.uint8), bitorder="little").astype(bool)
+        bits = np.unpackbits(np.asarray(self.valid, np.uint8)).astype(bool)
         shape = self.luminance.shape
         return bits.reshape(shape) if bits.size == int(np.prod(shape)) else None
 

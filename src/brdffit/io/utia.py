@@ -139,6 +139,7 @@ class UTIABRDF(BRDF):
 
     format = "utia"
     isotropic = False
+    measured_domain = "θi, θo ≤ 75° (the UTIA grid; beyond it the value at 75° is held)"
 
     def __init__(self, values, valid=None, *, name: str = "utia", source: str | None = None,
                  _raw: np.ndarray | None = None):
@@ -203,6 +204,12 @@ class UTIABRDF(BRDF):
         f = self.eval_angles(ti, pi, tv, pv)
         above = (wi[..., 2] > 0) & (wo[..., 2] > 0)
         return np.where(above[..., None], f, 0.0)
+
+    def measured(self, wi, wo) -> np.ndarray:
+        """True for both elevations within the grid (θ ≤ 75°), above the horizon."""
+        wi, wo = _as_dirs(wi, wo)
+        lim = np.cos(utia_theta()[-1]) - 1e-9
+        return (wi[..., 2] >= lim) & (wo[..., 2] >= lim) & (wi[..., 2] > 0) & (wo[..., 2] > 0)
 
     def describe(self) -> dict:
         d = super().describe()

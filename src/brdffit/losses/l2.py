@@ -16,10 +16,12 @@ Quadrature (deterministic):
   each node gets the exact measure of the cell centred on it (in the sqrt-mapped θh index,
   in θd and in φd: a midpoint rule),
   ``2π · 2Δφ · 4 · (cos θh_a − cos θh_b) · (sin²θd_b − sin²θd_a)/2``, times
-  ``cos θi cos θo`` at the node (Σ w = π² to 0.02 %). Invalid samples of a measured table (validity mask of
-  :func:`brdffit.grid.tabulate_merl_grid`) are left out.
+  ``cos θi cos θo`` at the node (Σ w = π² to 0.02 %). Invalid samples of a measured table and samples outside
+  the reference's measured domain (validity mask of :func:`brdffit.grid.tabulate_merl_grid`)
+  are left out.
 * ``"mc"``: ``n`` Sobol (scrambled with a fixed seed) pairs of cosine-distributed
-  directions, ``E² = π² mean((m − ρ)²)``; works for anisotropic BRDFs too.
+  directions, ``E² = π² mean((m − ρ)²)`` over the pairs in the measured domain; works for
+  anisotropic BRDFs too.
 
 Option ``theta_max`` restricts the integral to ``θi, θo ≤ theta_max``: the Cook-Torrance
 form of Eq. 1 grows like ``1/(cos θi cos θo)`` at grazing angles, and with a reference that
@@ -37,9 +39,9 @@ import dataclasses
 
 import numpy as np
 
-from ..brdf import cosine_hemisphere_sample
-from ..grid import (N_PHI_D, N_THETA_D, N_THETA_H, merl_phi_d, merl_theta_d, merl_theta_h,
-                    tabulate_merl_grid)
+from ..brdf import cosine_hemisphere_sample, measured_mask
+from ..grid import (N_PHI_D, N_THETA_D, N_THETA_H, merl_node_values, merl_phi_d, merl_theta_d,
+                    merl_theta_h, tabulate_merl_grid)
 from ..geometry import half_diff_to_io
 
 __all__ = ["normalized_l2", "L2Reference", "L2Result", "merl_grid_weights"]
@@ -103,10 +105,8 @@ def _grid_values(brdf, phi_stride: int) -> tuple[np.ndarray, np.ndarray]:
     td = merl_theta_d()
     pd = merl_phi_d()[::phi_stride]
     TH, TD, PD = np.meshgrid(th, td, pd, indexing="ij")
-    vals = np.asarray(brdf.eval_hd(TH.ravel(), TD.ravel(), PD.ravel()), dtype=np.float64)
-    vals = vals.reshape(TH.shape + (3,))
-    valid = np.all(np.isfinite(vals), axis=-1) & np.all(vals >= 0, axis=-1)
-    return vals, valid
+    vals, valid = merl_node_values(brdf, slice(None), slice(None), slice(None, None, phi_stride))
+    return vals, valid & np.all(np.isfinite(vals), axis=-1) & np.all(vals >= 0, axis=-1)
 
 
 class L2Reference:
@@ -138,6 +138,9 @@ class L2Reference:
             self.wo = cosine_hemisphere_sample(u[:, 2:])
             self.values = np.asarray(ref.eval(self.wi, self.wo), dtype=np.float64)
             self.valid = np.all(np.isfinite(self.values), axis=-1)
+            measured = measured_mask(ref, self.wi, self.wo)
+            if measured is not None:
+                self.valid &= measured
             if theta_max is not None:
                 cmin = np.cos(theta_max)
                 self.valid &= (self.wi[:, 2] >= cmin) & (self.wo[:, 2] >= cmin)

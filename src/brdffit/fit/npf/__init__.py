@@ -66,6 +66,7 @@ from __future__ import annotations
 
 import os
 import time
+import warnings
 from concurrent.futures import ThreadPoolExecutor
 from typing import Iterable
 
@@ -136,7 +137,8 @@ def _resolve_input(brdf, data):
 def _slice_start(values, valid):
     """D from the θd = 0 slice, F from the θh = 0 slice (mean over φd), G = 1 (channel-first)."""
     v = np.where(valid[..., None], np.maximum(values, 0.0), np.nan)
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)    # rows without data: NaN, then 0
         D = np.nanmean(v[:, 0, :, :], axis=1).T            # (3, 90)
         F = np.nanmean(v[0, :, :, :], axis=1).T
     D = np.where(np.isfinite(D), D, 0.0)
