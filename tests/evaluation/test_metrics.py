@@ -239,3 +239,54 @@ def test_combine_psnr_over_scenes():
     assert inf["psnr"] == np.inf and inf["psnr_se"] == 0.0
     low = M.combine_psnr([{"psnr": 30.0, "psnr_se": 0.3}, {"psnr": 50.0, "bound": "lower"}])
     assert low["bound"] == "lower" and low["psnr"] == 40.0
+
+
+class Sum(BRDF):
+    isotropic = True
+
+    def __init__(self, *parts):
+        self.parts = parts
+
+    def eval(self, wi, wo):
+        return sum(p.eval(wi, wo) for p in self.parts)
+
+
+class TiltedColour(BRDF):
+    """A diffuse whose colour turns from red at normal incidence to blue at grazing."""
+
+    isotropic = True
+
+    def eval(self, wi, wo):
+        wi, wo = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wo, float))
+        c = np.clip(wi[..., 2], 0, 1)[..., None]
+        rgb = c * np.array([0.8, 0.2, 0.1]) + (1 - c) * np.array([0.1, 0.2, 0.8])
+        up = ((wi[..., 2] > 0) & (wo[..., 2] > 0))[..., None]
+        return np.where(up, rgb / np.pi, 0.0)
+
+
+def test_region_of_sorts_pairs_into_the_documented_regions():
+    def d(deg, phi=0.0):
+        t, p = np.radians(deg), np.radians(phi)
+        return np.array([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
+
+    wi = np.stack([d(30), d(40), d(75), d(30), d(20)])
+    wo = np.stack([d(30, 180), d(45), d(10, 180), d(60, 90), d(30, 180)])
+    # mirror pair (θh 0), near-retro (θd 2.5°), grazing light, off-specular body, θh 5° peak
+    assert [M.REGIONS[k] for k in M.region_of(wi, wo)] == [
+        "specular peak", "retro-reflection", "grazing", "body", "specular peak"]
+
+
+def test_error_regions_name_the_missing_peak_and_the_angle_dependent_colour():
+    diffuse = Lambert([0.3, 0.3, 0.3])
+    peaky = Sum(diffuse, Phongish(400))
+    r = M.error_regions(peaky, diffuse, n_samples=1 << 14)
+    shares = [v["error_share"] for v in r["regions"].values()]
+    assert sum(shares) == pytest.approx(1.0) and r["worst"] == "specular peak"
+    assert r["regions"]["specular peak"]["fit_over_measured"] < 1.0
+    assert "second, narrower specular lobe" in r["diagnosis"]
+    assert M.error_regions(diffuse, diffuse, n_samples=1 << 12)["diagnosis"] is None
+    c = M.error_regions(TiltedColour(), Lambert([0.45, 0.2, 0.45]), n_samples=1 << 14)
+    assert c["colour_shift"]["measured"] > 0.15 and c["colour_shift"]["fit"] < 1e-9
+    assert any("colour changes with the angle of incidence" in f for f in c["findings"])
+    bm = M.BRDFMetrics(peaky, n_samples=1 << 14)
+    assert bm.evaluate(diffuse)["error_regions"]["worst"] == "specular peak"

@@ -215,3 +215,19 @@ def test_compare_loads_saved_fit_files(tmp_path):
     for m in res["models"]:
         assert m["status"] == "ok" and m["origin"].startswith("loaded")
         assert m["psnr"] == np.inf and m["brdf"]["cos_rel_error"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_material_page_says_where_the_error_lies(report_dir):
+    """The section of the most faithful fit by BRDF-space error (here "exact" or the equal
+    "microfacet", error 0: no region stands out), with its regions table; a finding reaches
+    the page escaped."""
+    out, res = report_dir
+    text = (out / res["slug"] / "index.html").read_text()
+    assert "(0.0 %, the most faithful fit)" in text and "No region stands out." in text
+    for region in ("specular peak", "retro-reflection", "grazing", "body"):
+        assert f'<td class="l">{region}</td>' in text
+    lam = next(m for m in res["models"] if m["name"] == "lambert")
+    hostile = dict(lam, name="<b>x</b>", brdf=dict(lam["brdf"], cos_rel_error=0.0,
+                   error_regions=dict(lam["brdf"]["error_regions"], findings=["a <i>b</i>"])))
+    section = R._error_regions_section([hostile])
+    assert "&lt;i&gt;b&lt;/i&gt;" in section and "<i>" not in section and "<b>x</b>" not in section

@@ -234,31 +234,63 @@ def test_isotropic_lobe_shape_equals_the_direct_formula(anisotropic):
 
 
 def test_coat_solve_is_the_bounded_optimum_and_its_bound_is_safe():
-    """`_coat_solve` returns the unconstrained minimum when it is feasible and BVLS
-    otherwise: either way scipy's bounded least squares optimum on the same problem; with a
-    bound below the unconstrained minimum it returns no solution, with one above the bounded
-    optimum the same answer."""
-    from scipy.optimize import lsq_linear
+    """`_coat_solve` returns the optimum of the coated least squares under its bounds and
+    the base's A + C ≤ 1 per channel (F ≤ 1): scipy's SLSQP on the same constrained problem
+    finds no lower value; the unconstrained minimum when it is feasible; with a bound below
+    the unconstrained minimum no solution, with one above the optimum the same answer."""
+    from scipy.optimize import LinearConstraint, minimize
 
     from brdffit.fit.analytic import ALBEDO_MAX, _coat_solve
 
     rng = np.random.default_rng(5)
     hi = np.array([ALBEDO_MAX, np.inf, np.inf] * 3 + [1.0])
-    interior = 0
+    sums = np.zeros((3, 10))
+    for c in range(3):
+        sums[c, 3 * c + 1] = sums[c, 3 * c + 2] = 1.0
+    interior = on_face = 0
     for trial in range(40):
         X = rng.random((200, 10))
         truth = rng.random(10) * (0.2 if trial % 2 else 2.0) - (0.0 if trial % 4 < 2 else 0.3)
         z = X @ truth + 0.01 * rng.standard_normal(200)
         H, g, zz = X.T @ X, X.T @ z, float(z @ z)
         E, x = _coat_solve(H, g, zz)
-        ref = lsq_linear(X, z, bounds=(np.zeros(10), hi), method="bvls", tol=1e-12)
-        assert E == pytest.approx(float(np.sum((X @ ref.x - z) ** 2)), rel=1e-8, abs=1e-12)
-        np.testing.assert_allclose(x, ref.x, atol=1e-7)
-        interior += bool(np.all((x > 0) & (x < hi)))
+        assert np.all(x >= 0) and np.all(x <= hi) and np.all(sums @ x <= 1.0 + 1e-9)
+        assert E == pytest.approx(float(np.sum((X @ x - z) ** 2)), rel=1e-9, abs=1e-12)
+        ref = minimize(lambda v: float(np.sum((X @ v - z) ** 2)), np.full(10, 0.1),
+                       jac=lambda v: 2.0 * X.T @ (X @ v - z), method="SLSQP",
+                       bounds=list(zip(np.zeros(10), np.where(np.isfinite(hi), hi, None))),
+                       constraints=[LinearConstraint(sums, -np.inf, 1.0)],
+                       options={"ftol": 1e-14, "maxiter": 500})
+        assert E <= ref.fun * (1 + 1e-6) + 1e-12
+        interior += bool(np.all((x > 0) & (x < hi)) and np.all(sums @ x < 1.0))
+        on_face += bool(np.any(np.isclose(sums @ x, 1.0)))
         unconstrained = float(np.sum((X @ np.linalg.lstsq(X, z, rcond=None)[0] - z) ** 2))
         assert _coat_solve(H, g, zz, bound=0.5 * unconstrained)[1] is None
         assert _coat_solve(H, g, zz, bound=1.5 * E)[0] == E
-    assert 0 < interior < 40                  # both branches were taken
+    assert 0 < interior < 40 and on_face > 0          # every branch was taken
+
+
+def test_schlick_specular_never_exceeds_one():
+    """The free-f90 Schlick solve keeps ks = A + C ≤ 1 per channel (F ≤ 1 at every angle)
+    even when the data asks for more, and is then the optimum on the face A + C = 1."""
+    from brdffit.fit.analytic import ALBEDO_MAX, _box_qp, _on_unit_sum_faces
+
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        X = rng.random((100, 3))
+        z = X @ np.array([0.3, 1.5, 0.9]) + 0.01 * rng.standard_normal(100)
+        H, g = X.T @ X, X.T @ z
+        lo, hi = [0.0, 0.0, 0.0], [ALBEDO_MAX, np.inf, np.inf]
+        x, v = _box_qp(H, g, lo, hi)
+        assert x[1] + x[2] > 1.0                       # the unconstrained fit breaks F ≤ 1
+        xf, vf = _on_unit_sum_faces(_box_qp, H, g, lo, hi, [(1, 2)])
+        assert xf[1] + xf[2] == pytest.approx(1.0) and vf >= v
+        grid = np.linspace(0.0, 1.0, 201)              # brute force along the face
+        best = min(0.5 * p @ H @ p - g @ p for a in grid
+                   for p in [np.array([np.clip(np.linalg.solve(H[:1, :1], g[:1] - H[:1, 1:] @
+                                                                np.array([a, 1 - a]))[0],
+                                               0, ALBEDO_MAX), a, 1 - a])])
+        assert vf <= best + 1e-9
 
 
 @pytest.mark.parametrize("f90", ["free", "one"])
@@ -350,3 +382,22 @@ def test_coated_fit_saves_loads_and_prints(tmp_path):
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     np.testing.assert_allclose(back.eval(d[:32], d[32:]), fit.eval(d[:32], d[32:]), rtol=1e-12)
     assert main(["info", str(tmp_path / "c.npz")]) == 0
+
+
+@pytest.mark.parametrize("name", ["paper_white", "chm_mint", "cc_ibiza_sunset"])
+def test_default_fit_of_rgl_measurements_is_physically_valid(shared_data, name):
+    """The default fit is valid by construction on real measurements: F ≤ 1 (ks ≤ 1) and the
+    furnace (ρd held below 1 − the specular albedo). paper_white failed both before (F 1.02
+    at 90°, albedo 1.05 at 85°)."""
+    from brdffit.evaluation.validity import check_validity
+    from brdffit.fit import fit
+    from brdffit.io import load
+
+    model = fit(load(shared_data("rgl", f"{name}_rgb.bsdf")))
+    assert check_validity(model) == []
+    ks = np.asarray(model.fit_info["ks"])
+    assert np.all(ks <= 1.0 + 1e-12)
+    lowered = np.asarray(model.fit_info["rho_d_furnace_lowering"])
+    assert np.all(lowered >= 0)
+    if name == "paper_white":
+        assert lowered.max() > 0.01                    # the hold did something here

@@ -146,6 +146,7 @@ def quick_error(reference, model, n_pairs: int = QUICK_ERROR_PAIRS) -> dict:
 
     * A MERL table (``merl_table()``): quadrature on its own valid nodes (no interpolation of
       the input; :func:`_grid_error`).
+    * Over the reference's measured domain only (:meth:`brdffit.brdf.BRDF.measured`).
     * Anything else: ``n_pairs`` fixed quasi-random direction pairs drawn ∝ cos θi cos θo
       (:func:`brdffit.brdf.cosine_pairs`) instead of the metric's 2^17 scrambled Sobol pairs (SciPy's
       generator costs ~0.3 s to import).
@@ -161,16 +162,23 @@ def quick_error(reference, model, n_pairs: int = QUICK_ERROR_PAIRS) -> dict:
         si, sj, sk = QUICK_ERROR_GRID_STRIDE
         return {"cos_rel_error": err, "samples": n,
                 "method": f"{n} valid MERL nodes (every {si}/{sj}/{sk} θh/θd/φd)"}
-    from ..brdf import cosine_pairs
+    from ..brdf import cosine_pairs, measured_mask
 
     wi, wo = cosine_pairs(n_pairs)
+    method = f"{n_pairs} fixed direction pairs"
+    keep = measured_mask(reference, wi, wo)
+    if keep is not None:
+        wi, wo = wi[keep], wo[keep]
+        method = (f"the {len(wi)} of {n_pairs} fixed direction pairs in the measured domain, "
+                  f"{reference.measured_domain}")
     fr = np.nan_to_num(np.asarray(reference.eval(wi, wo), dtype=np.float64))
     ft = np.nan_to_num(np.asarray(model.eval(wi, wo), dtype=np.float64))
     den = float(np.abs(fr).sum())
     if den <= 0:
-        raise ValueError("the input BRDF is 0 everywhere: no relative error")
-    return {"cos_rel_error": float(np.abs(ft - fr).sum() / den), "samples": n_pairs,
-            "method": f"{n_pairs} fixed direction pairs"}
+        raise ValueError("the input BRDF is 0 everywhere (in its measured domain): "
+                         "no relative error")
+    return {"cos_rel_error": float(np.abs(ft - fr).sum() / den), "samples": len(wi),
+            "method": method}
 
 
 def _figures_summary(fitted) -> dict:
@@ -343,17 +351,18 @@ def run_fit(spec: str, model: str = DEFAULT_MODEL, out: Path | None = None,
         err = summary["error"].get("cos_rel_error")
         if err is not None and err > LARGE_ERROR:
             t0 = time.perf_counter()
-            summary["warnings"].append(_large_error_advice(brdf, model, err))
+            summary["warnings"].append(_large_error_advice(brdf, model, err, fitted))
             timings["alternatives"] = time.perf_counter() - t0
     summary["timings_s"] = timings
     summary["details"] = details
     return fitted, summary
 
 
-def _large_error_advice(brdf, model: str, error: float) -> dict:
+def _large_error_advice(brdf, model: str, error: float, fitted) -> dict:
     """The ``quality`` warning of a fit whose error exceeds :data:`LARGE_ERROR`: the
     :data:`ALTERNATIVES` are fitted (defaults) and measured the same way, and the best one
-    is named when it does better by a tenth or more; else what the models lack is said."""
+    is named when it does better by a tenth or more; else what the fit misses is said
+    (:func:`brdffit.evaluation.metrics.error_regions`)."""
     from ..fit import registry
 
     tried = {}
@@ -372,9 +381,16 @@ def _large_error_advice(brdf, model: str, error: float) -> dict:
         advice = (f"{best[1]} does better on this material: {100 * best[0]:.1f} % "
                   f"(--model {best[1]}; tried {figures})")
     else:
-        advice = (f"no other model does better here ({figures or 'none could be fitted'}): the "
-                  "material has what these microfacet models lack (e.g. a second specular "
-                  "lobe, retro-reflection, thin-film colours) or noisy measurements")
+        from ..evaluation.metrics import error_regions
+
+        try:
+            missing = error_regions(brdf, fitted, n_samples=1 << 14)["diagnosis"]
+        except Exception:  # noqa: BLE001 - the warning stands without its diagnosis
+            missing = None
+        advice = (f"no other model does better here ({figures or 'none could be fitted'}): "
+                  + (missing or "the material has what these microfacet models lack (e.g. a "
+                     "second specular lobe, retro-reflection, thin-film colours) or noisy "
+                     "measurements"))
     return {"check": "quality", "figure": float(error), "message": message, "advice": advice}
 
 

@@ -368,6 +368,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
                               "source": getattr(reference, "source", None) or (
                                   str(source) if not hasattr(source, "eval") else None),
                               "scene": settings, "models": records,
+                              "measured_domain": getattr(reference, "measured_domain", None),
                               "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
     if scene_notes:
         result["notes"] = list(scene_notes)

@@ -42,11 +42,14 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from ..brdf import measured_mask
+
 __all__ = [
     "DELTA_E_VMAX", "DELTA_E_CMAP", "npf_tonemap", "foreground_mask", "rendered_psnr",
     "crn_psnr", "combine_psnr", "psnr_from_mse", "DeltaE2000",
     "to_lab", "delta_e2000_image", "mean_delta_e2000", "colorize_delta_e",
-    "cosine_weighted_relative_error", "count_wins", "brdf_metrics", "BRDFMetrics",
+    "cosine_weighted_relative_error", "measured_pairs", "error_regions", "region_of",
+    "REGIONS", "count_wins", "brdf_metrics", "BRDFMetrics",
     "normalized_l2", "compressive_objective",
 ]
 
@@ -376,6 +379,18 @@ def _sobol_pairs(n: int, seed: int):
     return cos_hemi(u[:, 0], u[:, 1]), cos_hemi(u[:, 2], u[:, 3])
 
 
+def measured_pairs(reference, wi, wo) -> tuple[np.ndarray, np.ndarray]:
+    """The direction pairs within ``reference``'s measured domain (all of them when it has
+    none); raises ``ValueError`` when none is."""
+    keep = measured_mask(reference, wi, wo)
+    if keep is None:
+        return wi, wo
+    if not keep.any():
+        raise ValueError(f"reference BRDF: expected direction pairs within its measured domain "
+                         f"({reference.measured_domain}), found none")
+    return wi[keep], wo[keep]
+
+
 def cosine_weighted_relative_error(reference, test, n_samples: int = 1 << 17, seed: int = 0,
                                    chunk: int = 1 << 15, per_channel: bool = False):
     """Cosine-weighted relative L1 error of ``test`` against ``reference`` (two BRDFs).
@@ -396,8 +411,11 @@ def cosine_weighted_relative_error(reference, test, n_samples: int = 1 << 17, se
     from the cosine-weighted hemisphere for ``i`` and ``o`` (density ``cos θi cos θo / π²``,
     which cancels the weights), so the estimate is deterministic for a ``seed``. Works for
     anisotropic BRDFs. ``per_channel=True`` returns the three per-channel ratios instead.
+
+    Both integrals run over the reference's measured domain only
+    (:meth:`brdffit.brdf.BRDF.measured`; the pairs outside it are dropped).
     """
-    wi, wo = _sobol_pairs(n_samples, seed)
+    wi, wo = measured_pairs(reference, *_sobol_pairs(n_samples, seed))
     num = np.zeros(3)
     den = np.zeros(3)
     for s in range(0, wi.shape[0], chunk):
@@ -413,14 +431,135 @@ def cosine_weighted_relative_error(reference, test, n_samples: int = 1 << 17, se
     return float(num.sum() / den.sum())
 
 
+#: Regions of :func:`error_regions`, in the order they are assigned (a pair belongs to the
+#: first that contains it): the specular peak (θh < 8°), retro-reflection (θd < 10°: light
+#: and view within 20° of each other), grazing (θi or θo > 70°), the rest of the lobe's body.
+REGIONS = ("specular peak", "retro-reflection", "grazing", "body")
+_PEAK_DEG, _RETRO_DEG, _GRAZING_DEG = 8.0, 10.0, 70.0
+
+#: What each region's error says is missing (:func:`error_regions`, ``diagnosis``), by the
+#: sign of the fit's bias there (too dark, too bright).
+_MISSING = {
+    "specular peak": ("the measured peak is sharper and higher than the fit's lobe can be: "
+                      "a second, narrower specular lobe is missing",
+                      "the fit's peak is too high: the measured highlight is broader or "
+                      "dimmer than one lobe of this shape (a heavier-tailed distribution)"),
+    "retro-reflection": ("the material reflects back towards the light more than the model "
+                         "can: a retro-reflective lobe is missing",
+                         "the fit reflects back towards the light more than the material"),
+    "grazing": ("the material is brighter at grazing angles than the model (sheen, a "
+                "Fresnel rise the model's F lacks, or grazing measurement noise)",
+                "the fit is brighter at grazing angles than the material (its Fresnel or "
+                "shadowing, or grazing measurement noise)"),
+    "body": ("the off-specular reflection is brighter than the model's diffuse and lobe "
+             "tails (subsurface scattering, or angle-dependent colour such as thin-film "
+             "interference)",
+             "the fit's off-specular reflection is too bright (lobe tails too heavy, or a "
+             "diffuse term where the material has angle-dependent colour)"),
+}
+
+
+def region_of(wi, wo) -> np.ndarray:
+    """Index into :data:`REGIONS` of each direction pair ``(…,)``."""
+    h = wi + wo
+    h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    th = np.degrees(np.arccos(np.clip(h[..., 2], -1.0, 1.0)))
+    td = np.degrees(np.arccos(np.clip(np.sum(wi * h, -1), -1.0, 1.0)))
+    grazing = np.degrees(np.arccos(np.clip(np.minimum(wi[..., 2], wo[..., 2]), -1.0, 1.0)))
+    return np.select([th < _PEAK_DEG, td < _RETRO_DEG, grazing > _GRAZING_DEG],
+                     [0, 1, 2], default=3)
+
+
+def _colour_by_incidence(wi, vals) -> np.ndarray:
+    """RGB shares of the energy of the pairs with θi < 30°, 30-60° and > 60° (3, 3)."""
+    ti = np.degrees(np.arccos(np.clip(wi[..., 2], -1.0, 1.0)))
+    out = np.full((3, 3), np.nan)
+    for k, (lo, hi) in enumerate(((0, 30), (30, 60), (60, 90))):
+        e = np.abs(vals[(ti >= lo) & (ti < hi)]).sum(0)
+        if e.sum() > 0:
+            out[k] = e / e.sum()
+    return out
+
+
+def _regions_from(region, ref_vals, test_vals, wi) -> dict:
+    diff = np.abs(test_vals - ref_vals).sum(-1)
+    ref = np.abs(ref_vals).sum(-1)
+    test = np.abs(test_vals).sum(-1)
+    total_err, total_ref = float(diff.sum()), float(ref.sum())
+    out = {}
+    for k, name in enumerate(REGIONS):
+        sel = region == k
+        out[name] = {"error_share": float(diff[sel].sum() / total_err) if total_err > 0 else 0.0,
+                     "energy_share": float(ref[sel].sum() / total_ref) if total_ref > 0 else 0.0,
+                     "fit_over_measured": (float(test[sel].sum() / ref[sel].sum())
+                                           if ref[sel].sum() > 0 else None)}
+    findings = []
+    worst = max(REGIONS, key=lambda n: out[n]["error_share"] - out[n]["energy_share"])
+    r = out[worst]
+    if total_err > 0 and r["error_share"] >= 0.25 and r["error_share"] >= r["energy_share"] + 0.05:
+        dark = r["fit_over_measured"] is not None and r["fit_over_measured"] < 1.0
+        findings.append(f"{100 * r['error_share']:.0f} % of the error lies in the {worst} region "
+                        f"({100 * r['energy_share']:.0f} % of the reflected energy; the fit "
+                        f"{r['fit_over_measured'] or 0:.2f}× the measurement there): "
+                        + _MISSING[worst][0 if dark else 1])
+    ratios = [v["fit_over_measured"] for v in out.values()
+              if v["fit_over_measured"] is not None and v["energy_share"] >= 0.05]
+    if ratios and max(ratios) < 0.85:
+        findings.append(f"the fit is darker than the measurement in every region "
+                        f"({min(ratios):.2f}-{max(ratios):.2f}×): it misses part of the reflected "
+                        "energy (the fits minimise the compressive objective, which weighs "
+                        "bright samples down)")
+    elif ratios and min(ratios) > 1.15:
+        findings.append(f"the fit is brighter than the measurement in every region "
+                        f"({min(ratios):.2f}-{max(ratios):.2f}×)")
+    colour_ref = _colour_by_incidence(wi, ref_vals)
+    colour_fit = _colour_by_incidence(wi, test_vals)
+    shift_ref = float(np.nanmax(np.abs(colour_ref - colour_ref[0]).sum(-1)))
+    shift_fit = float(np.nanmax(np.abs(colour_fit - colour_fit[0]).sum(-1)))
+    if shift_ref > 0.15 and shift_fit < 0.6 * shift_ref:
+        a, b = colour_ref[0], colour_ref[np.nanargmax(np.abs(colour_ref - colour_ref[0]).sum(-1))]
+        findings.append("the measured colour changes with the angle of incidence (RGB shares "
+                        f"{a[0]:.2f}/{a[1]:.2f}/{a[2]:.2f} at θi < 30° → "
+                        f"{b[0]:.2f}/{b[1]:.2f}/{b[2]:.2f}), the fit's far less "
+                        f"(shift {shift_fit:.2f} vs {shift_ref:.2f}): angle-dependent colour "
+                        "such as thin-film interference, which these models do not have")
+    return {"regions": out, "worst": worst, "colour_shift": {"measured": shift_ref,
+                                                              "fit": shift_fit},
+            "findings": findings, "diagnosis": "; ".join(findings) or None}
+
+
+def error_regions(reference, test, n_samples: int = 1 << 16, seed: int = 0) -> dict:
+    """Where the cosine-weighted error of ``test`` against ``reference`` lies.
+
+    The pairs of :func:`cosine_weighted_relative_error` (measured domain only) are split into
+    :data:`REGIONS`; per region: ``error_share`` (its part of Σ|f − f_ref| cos θi cos θo),
+    ``energy_share`` (its part of the reference's Σ f_ref cos θi cos θo) and
+    ``fit_over_measured`` (Σ f / Σ f_ref there). ``worst`` is the region whose error share most
+    exceeds its energy share. ``findings`` (joined in ``diagnosis``, ``None`` when empty) say
+    what the model misses: the worst region when it holds at least a quarter of the error
+    (and 5 points more than its energy share), a fit darker (< 0.85×) or brighter (> 1.15×)
+    than the measurement in every region, and a measured colour that changes with the angle
+    of incidence (RGB shares of the energy at θi < 30°, 30-60°, > 60° differ by > 0.15 in
+    L1) when the fit's changes by less than 0.6 of that (``colour_shift``). A heuristic
+    reading of the residual, not a fit of the missing component.
+    """
+    wi, wo = measured_pairs(reference, *_sobol_pairs(n_samples, seed))
+    fr = np.nan_to_num(np.asarray(reference.eval(wi, wo), dtype=np.float64))
+    ft = np.nan_to_num(np.asarray(test.eval(wi, wo), dtype=np.float64))
+    return _regions_from(region_of(wi, wo), fr, ft, wi)
+
+
 class BRDFMetrics:
     """BRDF-space metrics of several fits against one reference, the reference prepared once.
 
     ``BRDFMetrics(ref).evaluate(fit)`` returns a dict with
 
-    * ``cos_rel_error`` – :func:`cosine_weighted_relative_error` (always);
+    * ``cos_rel_error`` – :func:`cosine_weighted_relative_error` (always; over the
+      reference's measured domain, as the other two);
     * ``normalized_l2`` – Bagher et al. 2012 §6.3 via :class:`brdffit.losses.l2.L2Reference`
       (MERL-grid quadrature for isotropic references, Monte Carlo otherwise);
+    * ``error_regions`` – :func:`error_regions`: where that error lies and what the model
+      misses there;
     * ``compressive_objective`` – Eq. 7 of Bagher et al. 2016 with the weights of Eq. 8-12
       (:mod:`brdffit.losses.objective`), *normalised* by the objective of the all-zero
       model (``Σ w ρ*²``) so that it is comparable across materials; isotropic references only.
@@ -429,7 +568,7 @@ class BRDFMetrics:
     ``errors``. ``metrics`` restricts which ones are computed.
     """
 
-    ALL = ("cos_rel_error", "normalized_l2", "compressive_objective")
+    ALL = ("cos_rel_error", "normalized_l2", "compressive_objective", "error_regions")
 
     def __init__(self, reference, n_samples: int = 1 << 16, seed: int = 0,
                  metrics: Sequence[str] = ALL):
@@ -440,7 +579,7 @@ class BRDFMetrics:
         import time
 
         t0 = time.perf_counter()
-        self._wi, self._wo = _sobol_pairs(n_samples, seed)
+        self._wi, self._wo = measured_pairs(reference, *_sobol_pairs(n_samples, seed))
         self._ref_vals = np.nan_to_num(np.asarray(reference.eval(self._wi, self._wo), float))
         self.timings["cos_rel_error_setup"] = time.perf_counter() - t0
         self._l2 = None
@@ -474,9 +613,20 @@ class BRDFMetrics:
                 self.errors["compressive_objective"] = f"{type(exc).__name__}: {exc}"
             self.timings["compressive_objective_setup"] = time.perf_counter() - t0
 
+    def _test_values(self, test) -> np.ndarray:
+        if getattr(self, "_last", (None,))[0] is not test:    # one evaluation per fit
+            self._last = (test, np.nan_to_num(np.asarray(test.eval(self._wi, self._wo), float)))
+        return self._last[1]
+
+    def error_regions(self, test) -> dict:
+        """:func:`error_regions` on the prepared sample pairs."""
+        if getattr(self, "_regions", None) is None:
+            self._regions = region_of(self._wi, self._wo)
+        return _regions_from(self._regions, self._ref_vals, self._test_values(test), self._wi)
+
     def cos_rel_error(self, test, per_channel: bool = False):
         """:func:`cosine_weighted_relative_error` on the prepared sample pairs."""
-        ft = np.nan_to_num(np.asarray(test.eval(self._wi, self._wo), float))
+        ft = self._test_values(test)
         num = np.abs(ft - self._ref_vals).sum(axis=0)
         den = np.abs(self._ref_vals).sum(axis=0)
         if per_channel:
@@ -497,6 +647,8 @@ class BRDFMetrics:
             try:
                 if key == "cos_rel_error":
                     out[key] = self.cos_rel_error(test)
+                elif key == "error_regions":
+                    out[key] = self.error_regions(test)
                 elif key == "normalized_l2" and self._l2 is not None:
                     out[key] = float(self._l2.error(test).value)
                 elif key == "compressive_objective" and self._obj is not None:

@@ -361,6 +361,11 @@ def write_material_page(out_dir, result: dict, colorbar: str | None = "../assets
     else:
         parts += _single_scene_sections(ref, models, disp, colorbar)
     parts.append(_metrics_table(models, scenes, best))
+    if isinstance(result.get("measured_domain"), str):
+        parts.append('<p class="note">BRDF-space metrics (cos-weighted error, normalised L2, '
+                     "compressive objective) over the measured domain only: "
+                     f"{_e(result['measured_domain'])}.</p>")
+    parts.append(_error_regions_section(models))
 
     # plots
     plots = result.get("plots") or {}
@@ -610,6 +615,36 @@ def _single_scene_sections(ref, models, disp, colorbar) -> list[str]:
         parts.append('<h2>CIE dE2000 difference to the reference</h2><div class="grid">'
                      + "".join(cells) + "</div>")
     return parts
+
+
+def _error_regions_section(models) -> str:
+    """Where the most faithful fit's BRDF-space error lies, region by region, and what that
+    says is missing (:func:`brdffit.evaluation.metrics.error_regions`); '' without data."""
+    cands = [m for m in models if _ok(m) and isinstance(m.get("brdf"), dict)
+             and isinstance(m["brdf"].get("error_regions"), dict)
+             and _num(m["brdf"].get("cos_rel_error")) is not None]
+    if not cands:
+        return ""
+    m = min(cands, key=lambda c: c["brdf"]["cos_rel_error"])
+    reg = m["brdf"]["error_regions"]
+    rows = "".join(
+        f'<tr><td class="l">{_e(name)}</td>' + _td(100 * _num(v.get("error_share")), 1, unit=" %")
+        + _td(100 * _num(v.get("energy_share")), 1, unit=" %")
+        + _td(v.get("fit_over_measured"), 2, unit="×") + "</tr>"
+        for name, v in (reg.get("regions") or {}).items() if isinstance(v, dict)
+        and _num(v.get("error_share")) is not None and _num(v.get("energy_share")) is not None)
+    findings = [f for f in (reg.get("findings") or []) if isinstance(f, str)]
+    return (f"<h2>Where the error lies: {_e(m.get('name'))} "
+            f"({_e(_fmt(100 * m['brdf']['cos_rel_error'], 1))} %, the most faithful fit)</h2>"
+            '<table><thead><tr><th class="l">region</th><th>share of the error</th>'
+            "<th>share of the reflected energy</th><th>fit / measured</th></tr></thead><tbody>"
+            + rows + "</tbody></table>"
+            + ("<ul>" + "".join(f"<li>{_e(f)}</li>" for f in findings) + "</ul>"
+               if findings else '<p class="note">No region stands out.</p>')
+            + '<p class="note">Cosine-weighted pairs of the measured domain; regions: specular '
+            "peak θh &lt; 8°, retro-reflection θd &lt; 10°, grazing θi or θo &gt; 70°, the body "
+            "elsewhere (each pair in the first that holds it). A heuristic reading of the "
+            "residual, not a fit of the missing component.</p>")
 
 
 def _metrics_table(models, scenes, best) -> str:

@@ -129,27 +129,11 @@ def _fresnel(model) -> list[Violation]:
 
 
 def _albedo(model) -> list[Violation]:
-    from ..brdf import cosine_hemisphere_sample, stratified_square
+    from ..brdf import sampled_albedo
 
-    grid = stratified_square(ALBEDO_SAMPLES, seed=0)
+    means, ses = sampled_albedo(model, np.radians(ALBEDO_ANGLES_DEG), ALBEDO_SAMPLES)
     worst = None
-    for deg in ALBEDO_ANGLES_DEG:
-        t = math.radians(deg)
-        wi = np.broadcast_to(np.array([math.sin(t), 0.0, math.cos(t)]), (grid.shape[0], 3))
-        try:
-            wo, pdf = model.sample(wi, grid)
-        except (NotImplementedError, AttributeError):
-            wo = cosine_hemisphere_sample(grid)
-            pdf = wo[:, 2] / np.pi
-        wo, pdf = np.asarray(wo, dtype=np.float64), np.asarray(pdf, dtype=np.float64)
-        ok = (pdf > 0) & (wo[:, 2] > 0) & np.isfinite(pdf)
-        f = np.zeros((wo.shape[0], 3))
-        if ok.any():
-            f[ok] = np.asarray(model.eval(wi[ok], wo[ok]), dtype=np.float64)
-        w = np.where(ok[:, None], f * (np.where(ok, wo[:, 2], 0.0) / np.where(ok, pdf, 1.0))
-                     [:, None], 0.0)
-        w = np.nan_to_num(w, nan=0.0, posinf=1e30)
-        a, se = w.mean(0), w.std(0, ddof=1) / math.sqrt(w.shape[0])
+    for deg, a, se in zip(ALBEDO_ANGLES_DEG, means, ses):
         c = int(np.argmax(a - 3 * se))
         excess = a[c] - 3 * se[c] - (1.0 + ALBEDO_TOLERANCE)
         if excess > 0 and (worst is None or a[c] > worst[0]):

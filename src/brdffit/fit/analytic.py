@@ -15,7 +15,8 @@ Models ``ggx-diffuse`` and ``beckmann-diffuse`` (:func:`fit_ggx_diffuse`,
   index η (``fresnel="dielectric"``), or the exact
   conductor Fresnel of a per-channel complex index ``η + i k`` (``fresnel="conductor"``,
   :class:`~brdffit.microfacet.ConductorFresnel`). ``f90="free"`` fits a per-channel
-  specular scale ``ks`` as well (``specular=ks``: ``F = ks·Schlick(F0)``, ``F(90°) = ks``).
+  specular scale ``ks ≤ 1`` as well (``specular=ks``: ``F = ks·Schlick(F0)``, ``F(90°) = ks``),
+  so that F ≤ 1 at every angle by construction.
 
 **Which Fresnel** (``fresnel="auto"``, the default, fits the three and keeps the lowest
 objective, the conductor only when it is at least ``CONDUCTOR_MARGIN`` = 5 % below the best of
@@ -57,6 +58,14 @@ phenolics and lacquered woods that one GGX lobe cannot.
 (The coat search runs on every isotropic fit; ``coat="off"`` skips it, ``coat="on"`` keeps
 any coat that lowers the objective.)
 
+**Physically valid by construction.** Every Fresnel lobe has F ≤ 1 at every angle (ks ≤ 1:
+the Schlick ``A + C ≤ 1`` per channel is a constraint of the exact linear solve, the exact
+Fresnel forms bound ks by 1), and the white furnace holds: the fitted ρd is lowered, where
+needed, so that ρd plus the specular lobes' directional albedo stays ≤ 1 at every incidence
+of ``FURNACE_ANGLES_DEG`` (:func:`_hold_furnace`; ``fit_info["rho_d_furnace_lowering"]``;
+the objective reported is that of the held model). The checks of
+:mod:`brdffit.evaluation.validity` then pass on every fit.
+
 Objective
 ---------
 The compressive-weighted least squares of Bagher, Snyder & Nowrouzezahrai 2016 **Eq. 7-12**
@@ -80,8 +89,9 @@ For a fixed distribution the model is linear in (ρd_c, F0_c) per channel:
 ``f_c = ρd_c·(1/π) + F0_c·S(1 − x⁵) + S x⁵`` with ``S = D G/(4 cos θi cos θo)`` and
 ``x = 1 − cos θd`` (``f90="free"``: ``f_c = ρd_c/π + A_c S + C_c S x⁵``, ``A = ks F0``,
 ``C = ks(1 − F0)``). Those are solved *exactly* with their bounds (ρd ∈ [0, ALBEDO_MAX],
-F0 ∈ [0, 1]; A, C ≥ 0) by enumerating the active sets of the tiny box-constrained
-quadratic problem, so only the distribution parameters are searched:
+F0 ∈ [0, 1]; A, C ≥ 0 with A + C = ks ≤ 1) by enumerating the active sets of the tiny
+box-constrained quadratic problem (the face ``A + C = 1`` when its optimum has ks > 1), so only
+the distribution parameters are searched:
 
 * isotropic: ln α over a 32-node scan of [ALPHA_MIN, 1] (multi-start: the ``starts`` best
   local minima of the scan plus the Dupuy slope-moment α of :func:`fit_ggx` /
@@ -124,7 +134,9 @@ from scipy import optimize
 
 from ..errors import FitError
 from ..geometry import half_diff_to_io
-from ..grid import N_PHI_D, N_THETA_D, N_THETA_H, merl_phi_d, merl_theta_d, merl_theta_h
+from ..brdf import measured_mask
+from ..grid import (N_PHI_D, N_THETA_D, N_THETA_H, merl_node_values, merl_phi_d, merl_theta_d,
+                    merl_theta_h)
 from ..microfacet.shadowing import EllipticalSlopeDistribution
 from ..schema import ALBEDO_MAX, INDEX_MAX
 
@@ -140,9 +152,13 @@ ALPHA_MIN, ALPHA_MAX_FIT = 2e-3, 1.0
 #: θd rows from this MERL index on are all kept (grazing rows vary fast)
 GRAZING_ROW = 72
 RHO_MAX = 0.95
-#: bounds of the dielectric index η and of the specular scale ks
+#: bounds of the dielectric index η and of the specular scale ks (ks ≤ 1: F ≤ 1 at every
+#: angle, every exact and Schlick Fresnel reaching 1 at grazing)
 ETA_BOUNDS = (1.001, 4.0)
-KS_MAX = 100.0
+#: incidences (degrees) and samples of the furnace the fitted ρd is held to (:func:`_hold_furnace`)
+FURNACE_ANGLES_DEG = (0.0, 30.0, 45.0, 60.0, 70.0, 75.0, 80.0, 85.0, 88.0)
+FURNACE_SAMPLES = 4096
+KS_MAX = 1.0
 _MAX_THETA_IO_DEG = 89.0
 _SCAN = 32
 
@@ -173,13 +189,7 @@ def _isotropic_samples(brdf, theta_d_stride: int, phi_d_stride: int):
     kp = np.arange(0, N_PHI_D, sp)
     TH, TD, PD = np.meshgrid(merl_theta_h(), merl_theta_d()[jd], merl_phi_d()[kp], indexing="ij")
     wv = volume_form_weight()[:, jd][:, :, kp] * width[None, :, None] * sp
-    table = getattr(brdf, "merl_table", None)
-    if table is not None:
-        values, valid = table() if callable(table) else table
-        v, ok = _clean(np.asarray(values)[:, jd][:, :, kp], np.asarray(valid)[:, jd][:, :, kp])
-    else:
-        v, ok = _clean(np.asarray(brdf.eval_hd(TH.ravel(), TD.ravel(), PD.ravel()),
-                                  dtype=np.float64).reshape(TH.shape + (3,)))
+    v, ok = _clean(*merl_node_values(brdf, slice(None), jd, kp))
     wi, wo = half_diff_to_io(TH, 0.0, TD, PD)
     return wi.reshape(-1, 3), wo.reshape(-1, 3), v.reshape(-1, 3), ok.ravel(), wv.ravel()
 
@@ -205,7 +215,7 @@ def _anisotropic_samples(brdf, theta_h_stride: int, n_phi_h: int, theta_d_stride
     wv = 4.0 * np.cos(TD) * np.sin(tdc)[None, None, :, None] * np.sin(np.maximum(TH, 1e-3)) * cell
     wi, wo = half_diff_to_io(TH, PH, TD, PD)
     wi, wo = wi.reshape(-1, 3), wo.reshape(-1, 3)
-    v, ok = _clean(np.asarray(brdf.eval(wi, wo), dtype=np.float64))
+    v, ok = _clean(np.asarray(brdf.eval(wi, wo), dtype=np.float64), measured_mask(brdf, wi, wo))
     return wi, wo, v, ok, wv.ravel()
 
 
@@ -415,6 +425,29 @@ def _weighted_sums(data) -> tuple:
     return data["_sums"]
 
 
+def _on_unit_sum_faces(solve, H, g, lo, hi, faces):
+    """``solve`` (a box QP ``(H, g, lo, hi) -> (x, value)`` of ``½xᵀHx − gᵀx``) restricted to
+    ``x[c] = 1 − x[a]`` for every ``(a, c)`` in ``faces``: the Schlick ``A + C = ks ≤ 1``
+    (F ≤ 1 at every angle) held with equality. Substitutes ``x = P y + q`` and solves for ``y``
+    (``x[a] ∈ [lo, 1]``), returning the full ``(x, value)``. When the box optimum of a convex
+    QP violates one such constraint, the constrained optimum lies on its face, so this is
+    exact for one face and feasible for several."""
+    n = len(g)
+    dropped = {c for _, c in faces}
+    keep = [i for i in range(n) if i not in dropped]
+    P, q = np.zeros((n, len(keep))), np.zeros(n)
+    P[keep, np.arange(len(keep))] = 1.0
+    lo_r, hi_r = np.asarray(lo, float)[keep], np.asarray(hi, float)[keep].copy()
+    for a, c in faces:
+        P[c, keep.index(a)] = -1.0
+        q[c] = 1.0
+        hi_r[keep.index(a)] = min(hi_r[keep.index(a)], 1.0)
+    y, v = solve(P.T @ H @ P, P.T @ (g - H @ q), lo_r, hi_r)
+    if y is None:
+        return None, np.inf
+    return P @ y + q, v + 0.5 * q @ H @ q - g @ q
+
+
 def _linear(S, data, fresnel: str, f90: str, Fd=None):
     """Per channel the exact optimum of the linear parameters for the shape ``S``.
 
@@ -462,6 +495,8 @@ def _linear(S, data, fresnel: str, f90: str, Fd=None):
             g[1:] -= Wv[c, o + 2:]
             yy += Wv[c, o + 1] - 2.0 * Zv[c, o]
         x, v = _box_qp(H, g, lo, hi)
+        if x is not None and fresnel == "schlick" and f90 != "one" and x[1] + x[2] > 1.0:
+            x, v = _on_unit_sum_faces(_box_qp, H, g, lo, hi, [(1, 2)])
         if x is None:
             return None
         E += max(float(yy + 2.0 * v), 0.0)
@@ -777,11 +812,9 @@ def _coat_solve(H, g, zz, bound: float = np.inf):
     """Bounded least squares of the coated model for one (α_base, α_coat): per channel
     (ρd, A, C) and one coat weight w for the three channels (``H`` (10, 10), ``g`` (10,),
     ``zz`` = Σ w z²): ``(E, x)``, x = (ρd, A, C) × 3 then w; ρd ∈ [0, ALBEDO_MAX],
-    A, C ≥ 0, w ∈ [0, 1]. Bounded-variable least squares on the Cholesky factor of ``H``,
-    skipped when the unconstrained minimum is feasible (then it is the answer: the problem is
+    A, C ≥ 0 with A + C = ks ≤ 1 (the base's F ≤ 1; :func:`_on_unit_sum_faces`), w ∈ [0, 1].
+    Bounded-variable least squares on the Cholesky factor of ``H``, skipped when the unconstrained minimum is feasible (then it is the answer: the problem is
     convex) or is not below ``bound`` (then no feasible point is: ``(inf, None)``)."""
-    from scipy.optimize import lsq_linear
-
     n = g.size
     try:
         L = np.linalg.cholesky(H + 1e-13 * np.trace(H) / n * np.eye(n))
@@ -793,10 +826,33 @@ def _coat_solve(H, g, zz, bound: float = np.inf):
     hi = np.array([ALBEDO_MAX, np.inf, np.inf] * 3 + [1.0])
     x = np.linalg.solve(L.T, rhs)
     if not np.all((x >= 0.0) & (x <= hi)):
-        x = np.clip(lsq_linear(L.T, rhs, bounds=(np.zeros(n), hi), tol=1e-12, method="bvls").x,
-                    0.0, hi)
+        x = _bvls(H, g, np.zeros(n), hi)
+    faces: list[tuple[int, int]] = []
+    while x is not None:                 # F ≤ 1: ks = A + C ≤ 1 per channel
+        over = [(3 * c + 1, 3 * c + 2) for c in range(3)
+                if x[3 * c + 1] + x[3 * c + 2] > 1.0 + 1e-12 and (3 * c + 1, 3 * c + 2) not in faces]
+        if not over:
+            break
+        faces += over
+        x, _ = _on_unit_sum_faces(lambda *a: (_bvls(*a), 0.0), H, g, np.zeros(n), hi, faces)
+    if x is None:
+        return np.inf, None
     E = float(zz - 2.0 * g @ x + x @ H @ x)
     return (max(E, 0.0), x) if np.isfinite(E) else (np.inf, None)
+
+
+def _bvls(H, g, lo, hi):
+    """``argmin ½xᵀHx − gᵀx`` on the box by bounded-variable least squares on the Cholesky
+    factor of ``H`` (``None`` when ``H`` is not positive definite)."""
+    from scipy.optimize import lsq_linear
+
+    n = g.size
+    try:
+        L = np.linalg.cholesky(H + 1e-13 * np.trace(H) / n * np.eye(n))
+    except np.linalg.LinAlgError:
+        return None
+    rhs = np.linalg.solve(L, g)
+    return np.clip(lsq_linear(L.T, rhs, bounds=(lo, hi), tol=1e-12, method="bvls").x, lo, hi)
 
 
 def _coat_system(cols_c, data):
@@ -1130,9 +1186,13 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
               *(lin["k"] if chosen == "conductor" else [])]
     if not all(np.isfinite(values)):
         raise FitError(f"{label}: {kind}-diffuse fit produced non-finite parameters")
-    model = MicrofacetBRDF(_distribution(kind, ax, ay, rho), F, diffuse=rho_d, specular=ks,
+    dist = _distribution(kind, ax, ay, rho)
+    rho_d, lowered = _hold_furnace(rho_d, [MicrofacetBRDF(dist, F, specular=ks)])
+    model = MicrofacetBRDF(dist, F, diffuse=rho_d, specular=ks,
                            correlated=True, name=name or f"{label}-{kind}-diffuse",
                            source=getattr(brdf, "source", None))
+    if lowered.any():
+        E = _objective_of(model, data)
     model.fit_info = {
         "method": f"{kind} + Lambert, {chosen} Fresnel, compressive objective (Bagher 2016 "
                   "Eq. 7-12), variable projection",
@@ -1143,6 +1203,7 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
         "F0": f0_eff.tolist(), "ks": None if ks is None else ks.tolist(), "objective": float(E),
         "objective_normalised": float(E / data["ref_energy"]) if data["ref_energy"] > 0 else None,
         "objective_by_fresnel": {k: float(v[0]) for k, v in finite.items()},
+        "rho_d_furnace_lowering": lowered.tolist(),
         "n_samples": data["n"], "anisotropic": bool(anisotropic),
         "moment_start": None if mom is None else [float(m) for m in mom],
         "starts": tried, "time_samples": t1 - t0, "time_moments": t2 - t1,
@@ -1161,6 +1222,19 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
         model.fit_info["time"] = time.perf_counter() - t0
         return model
     E_coat, (a_base, a_coat), x = found
+    rho_d, A, C = x[0:9:3], x[1:9:3], x[2:9:3]
+    ks = A + C
+    F0 = np.where(ks > 0, A / np.where(ks > 0, ks, 1.0), 0.0)
+    base_dist, base_fresnel = _distribution(kind, a_base), SchlickFresnel(np.clip(F0, 0.0, 1.0))
+    coat_lobe = MicrofacetBRDF(_distribution(kind, a_coat), SchlickFresnel(np.full(3, COAT_F0)),
+                               specular=np.full(3, float(x[9])), correlated=True, name="coat")
+    rho_d, lowered = _hold_furnace(rho_d, [MicrofacetBRDF(base_dist, base_fresnel, specular=ks),
+                                           coat_lobe])
+    base = MicrofacetBRDF(base_dist, base_fresnel, diffuse=rho_d, specular=ks, correlated=True,
+                          name="base")
+    coated = SumBRDF([base, coat_lobe], name=model.name, source=model.source)
+    if lowered.any():
+        E_coat = _objective_of(coated, data)
     margin = 0.0 if coat == "on" else COAT_MARGIN
     # a gain below COAT_MIN_GAIN of the data's energy is numerical noise (an exact fit)
     gain = (E - E_coat) / data["ref_energy"] if data["ref_energy"] > 0 else 0.0
@@ -1173,24 +1247,40 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
     info.update(coat=coat_info, time=time.perf_counter() - t0)
     if not coat_info["kept"]:
         return model
-    rho_d, A, C = x[0:9:3], x[1:9:3], x[2:9:3]
-    ks = A + C
-    F0 = np.where(ks > 0, A / np.where(ks > 0, ks, 1.0), 0.0)
-    base = MicrofacetBRDF(_distribution(kind, a_base), SchlickFresnel(np.clip(F0, 0.0, 1.0)),
-                          diffuse=rho_d, specular=ks, correlated=True, name="base")
-    coat_lobe = MicrofacetBRDF(_distribution(kind, a_coat), SchlickFresnel(np.full(3, COAT_F0)),
-                               specular=np.full(3, float(x[9])), correlated=True, name="coat")
-    coated = SumBRDF([base, coat_lobe], name=model.name, source=model.source)
     info.update(
         method=f"{kind} + Lambert + coat ({kind}, white, F0 {COAT_F0}), Schlick Fresnel, "
                "compressive objective (Bagher 2016 Eq. 7-12), variable projection",
         fresnel="schlick", alpha_x=a_base, alpha_y=a_base, rho=0.0, eta=None, k=None,
-        rho_d=rho_d.tolist(), F0=A.tolist(), ks=ks.tolist(), objective=float(E_coat),
+        rho_d=rho_d.tolist(), rho_d_furnace_lowering=lowered.tolist(), F0=A.tolist(),
+        ks=ks.tolist(), objective=float(E_coat),
         objective_normalised=(float(E_coat / data["ref_energy"]) if data["ref_energy"] > 0
                               else None))
     info["objective_by_fresnel"]["schlick+coat"] = float(E_coat)
     coated.fit_info, coated.fit_options = info, model.fit_options
     return coated
+
+
+def _objective_of(model, data) -> float:
+    """The objective ``Σ_c Σ_j w_cj (f_c(j) − ρ*_cj)²`` of a built model on the sample set."""
+    f = np.asarray(model.eval(data["wi"], data["wo"]), dtype=np.float64)
+    return float(np.sum(data["w"] * (f - data["z"]) ** 2))
+
+
+def _hold_furnace(rho_d, specular_lobes) -> tuple[np.ndarray, np.ndarray]:
+    """``(ρd, lowering)``: ρd per channel lowered where ``ρd + Σ a_spec(θi)`` exceeds 1 at an
+    incidence of :data:`FURNACE_ANGLES_DEG`, so that the fit's directional albedo stays ≤ 1
+    (the Lambertian term adds exactly ρd to it at every θi). ``a_spec`` is the specular lobes'
+    albedo (:func:`brdffit.brdf.sampled_albedo`, :data:`FURNACE_SAMPLES` samples); each lobe
+    has F ≤ 1 and a Smith G, so it alone never exceeds 1. Deviation from the least-squares
+    optimum: only ρd moves (the specular part is kept), the least change that holds the
+    furnace; ``lowering`` is what was taken off (0 on most materials)."""
+    from ..brdf import sampled_albedo
+
+    angles = np.radians(FURNACE_ANGLES_DEG)
+    spec = sum(sampled_albedo(lobe, angles, FURNACE_SAMPLES)[0] for lobe in specular_lobes)
+    cap = np.clip(1.0 - spec.max(axis=0), 0.0, None)
+    held = np.minimum(np.asarray(rho_d, dtype=np.float64), cap)
+    return held, np.asarray(rho_d, dtype=np.float64) - held
 
 
 def fit_ggx_diffuse(brdf, **kwargs) -> MicrofacetBRDF | SumBRDF:
