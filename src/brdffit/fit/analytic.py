@@ -44,7 +44,7 @@ by a 24 × 24 scan of [ALPHA_MIN, 1]² and Nelder-Mead (0.3-0.6 s). The coated f
 its objective is at least ``COAT_MARGIN`` = 5 % below the best uncoated one (and by more
 than ``COAT_MIN_GAIN`` of the data's energy): rendered, a coat that lowers the objective by
 less than that gains little and loses on some materials, a coat below the margin gains on
-nearly all (``bench/studies/coat.py``). The coat takes the heavy tail of plastics,
+nearly all (``bench/studies/coat_margin.py``). The coat takes the heavy tail of plastics,
 phenolics and lacquered woods that one GGX lobe cannot.
 (The coat search runs on every isotropic fit; ``coat="off"`` skips it, ``coat="on"`` keeps
 any coat that lowers the objective.)
@@ -60,7 +60,7 @@ excluded — so highlights and dark regions both count. Isotropic input: the MER
 node above (grazing rows vary fast), every ``phi_d_stride``-th φd node (≈ 70 000 samples
 with the defaults; the weights of :func:`brdffit.losses.objective.volume_form_weight` scaled
 by the nodes each sample stands for). **Deviation**: a subsample instead of all 1.1 M
-samples, for speed; the objective reported by ``bench/fit/bench_analytic.py`` is the full-grid
+samples, for speed; the objective reported by ``bench/bench_analytic.py`` is the full-grid
 one (:func:`brdffit.losses.objective.compressive_objective`). Anisotropic input: the same
 weights on a 4D grid (θh, φh, θd, φd) with the 4D volume form
 ``dωi dωo = 4 cos θd sin θd sin θh dθh dφh dθd dφd`` in place of Eq. 9 (the isotropic
