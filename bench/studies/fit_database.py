@@ -5,9 +5,9 @@ Resumable: a fit whose ``.json`` says ``ok`` and whose ``.npz`` loads is not red
 walks the materials in order (``--reverse`` for a second process from the end); each fit runs in
 this process with its CPU time recorded (the machine is shared). Defaults are the product's::
 
-    nice -n 19 .venv/bin/python bench/fit_database.py --models tabulated,ggx,beckmann,sgd,\\
+    nice -n 19 .venv/bin/python bench/studies/fit_database.py --models tabulated,ggx,beckmann,sgd,\\
         npf-g-from-d,npf-naive,npf-bivariate
-    nice -n 19 .venv/bin/python bench/fit_database.py --models npf --reverse
+    nice -n 19 .venv/bin/python bench/studies/fit_database.py --models npf --reverse
 
 Materials: the 100 Neural-BRDF MERL networks (``merl_nbrdf.zip``) and the 7 RGL materials.
 """
@@ -22,7 +22,7 @@ import time
 import traceback
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "src"))
 
 from brdffit._atomic import atomic_write  # noqa: E402

@@ -10,7 +10,7 @@ iterations, stop, CPU time, ρs ratio polished / start (max over channels), F(0)
 (min over channels) before and after. The summary counts the degenerate factorisations:
 ρs moved more than 10× and F(0) below 1e-3 of F's max.
 
-    .venv/bin/python bench/bench_npf_polish.py --start runs/db100v4 \\
+    .venv/bin/python bench/studies/npf_polish.py --start runs/db100v4 \\
         --configs "bound=2+cap=100,bound=none+cap=100"
 
 Writes ``<out>.json`` (summary, load average) and ``<out>_materials.csv`` atomically after
@@ -27,8 +27,9 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT / "bench"))  # _common
 
 from brdffit._blas import single_thread_env  # noqa: E402
 

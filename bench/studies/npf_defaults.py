@@ -9,7 +9,7 @@ reason. With ``--reference DIR`` (a ``brdffit batch`` output whose ``fits/<mater
 and ``npf-g-from-d.npz`` were made by an earlier version) the objective ratio new / reference
 per material, i.e. "never above today's capped fit". Materials of the reference run first.
 
-    nice .venv/bin/python bench/bench_npf_defaults.py --reference runs/db20
+    nice .venv/bin/python bench/studies/npf_defaults.py --reference runs/db20
 
 Writes ``bench/results/npf_defaults.json`` (summary, load average) and
 ``npf_defaults_materials.csv`` (one row per material × variant) atomically after every
@@ -26,8 +26,9 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT / "bench"))  # _common
 
 from brdffit._blas import single_thread_env  # noqa: E402
 

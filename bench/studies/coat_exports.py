@@ -3,7 +3,7 @@ ggx-diffuse keeps its coat (product defaults), the glTF and MaterialX equivalent
 coated fit and of the same material fitted with ``coat="off"`` are rendered against the
 measured reference, side by side with common random numbers (``compare()``, paper suite).
 
-    nice .venv/bin/python bench/bench_coat_exports.py [--only a,b]
+    nice .venv/bin/python bench/studies/coat_exports.py [--only a,b]
 
 Writes ``bench/results/coat_exports.csv`` (PSNR ± se per material and column) and
 ``coat_exports.json`` (per target: mean PSNR with / without the coat, mean difference ± its
@@ -21,8 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT / "bench"))  # _common
 
 from _common import resumable_merl_study, write_rows  # noqa: E402
 

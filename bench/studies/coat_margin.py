@@ -4,8 +4,8 @@ kept whenever it lowers the objective at all), rendered side by side on the pape
 common random numbers (``compare()`` defaults), against the objective ratio coated /
 uncoated. The product keeps the coat when that ratio is below ``1 − COAT_MARGIN``.
 
-    nice .venv/bin/python bench/bench_coat.py                 # all 100 (≈ 20 s each)
-    .venv/bin/python bench/bench_coat.py --only delrin,nylon  # some
+    nice .venv/bin/python bench/studies/coat_margin.py                 # all 100 (≈ 20 s each)
+    .venv/bin/python bench/studies/coat_margin.py --only delrin,nylon  # some
 
 Writes ``bench/results/coat_margin.csv`` (material, objective ratio, PSNR ± se of both,
 ΔPSNR, coat α and weight; NaN and Δ = 0 where no coat lowers the objective, not rendered) and ``coat_margin.json`` (ΔPSNR summed / counted per ratio bucket,
@@ -24,8 +24,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT / "bench"))  # _common
 
 from _common import resumable_merl_study, write_rows  # noqa: E402
 

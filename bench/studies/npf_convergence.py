@@ -1,7 +1,7 @@
-"""NPF independent-G convergence study (issue 15 item 2): objective against CPU time and
+"""NPF independent-G convergence study: objective against CPU time and
 iterations for solver configurations, side by side on the same materials in one run.
 
-    nice -n 5 .venv/bin/python bench/bench_npf_convergence.py --materials 5 \\
+    nice -n 5 .venv/bin/python bench/studies/npf_convergence.py --materials 5 \\
         --configs default,extrapolate,screen20-extrapolate
 
 Each configuration fits ``merl_nbrdf.zip:<name>`` (materials evenly spaced over the
@@ -9,14 +9,8 @@ alphabetical list) from the same tabulated data; CPU time of the process (all th
 final objective, objective relative to ``default``, stop reason of the final run, and the
 objective history. Results: ``bench/results/npf_convergence.json`` (+ ``.csv``) and
 ``npf_convergence.png`` (objective / final objective of ``default`` against CPU time).
-
-Against an earlier revision, side by side (the ``baseline`` config runs that checkout's
-default fit in a subprocess)::
-
-    git worktree add /tmp/base 0d977fc
-    nice .venv/bin/python bench/bench_npf_convergence.py --configs default,baseline \
-        --baseline-src /tmp/base/src --only alum-bronze,gold-metallic-paint3,green-fabric \
-        --out bench/results/npf_versus_baseline
+Every configuration is an option of ``fit_npf`` (or the module constant ``G_OVER_RELAX``) of
+this tree.
 """
 
 from __future__ import annotations
@@ -29,7 +23,7 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "src"))
 
 CONFIGS = {
@@ -39,7 +33,6 @@ CONFIGS = {
     "screen20": {"start_max_iter": 20},
     "polish30": {"polish": 30},
     "cap3000-extrapolate": {"extrapolate": True, "max_iter": 3000},
-    "baseline": None,       # the default fit of --baseline-src, in a subprocess
     "screen20-extrapolate-cap2000": {"start_max_iter": 20, "extrapolate": True, "max_iter": 2000},
     # the over-relaxation ω of the independent-G G step (module constant G_OVER_RELAX)
     "omega1": {"_g_over_relax": 1.0},
@@ -48,50 +41,13 @@ CONFIGS = {
 }
 
 
-def _worker(name: str, src: str) -> None:
-    """``--worker``: one default fit of ``name`` with the brdffit of ``src`` (a baseline
-    checkout), printing ``{"cpu_s", "wall_s", "info", "trace"}`` as one JSON line."""
-    sys.path.insert(0, src)
-    from brdffit.fit.npf import fit_npf
-    from brdffit.grid import tabulate_merl_grid
-    from brdffit.io import load
-
-    zip_path = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
-    data = tabulate_merl_grid(load(f"{zip_path}:{name}"))  # src's own alias may not resolve
-    trace = []
-    c0, t0 = time.process_time(), time.perf_counter()
-    m = fit_npf(data=data, variant="independent-g", name=name,
-                callback=lambda it, e: trace.append((time.process_time() - c0, e)))
-    info = m.fit_info
-    keep = {k: info.get(k) for k in ("objective", "iterations", "continuation", "stop_reason")}
-    keep["continuation"] = {k: (keep["continuation"] or {}).get(k) for k in ("stop_reason",)}
-    print(json.dumps({"cpu_s": time.process_time() - c0, "wall_s": time.perf_counter() - t0,
-                      "info": keep, "trace": trace}))
-
-
-def _baseline_fit(name: str, src: str) -> tuple[float, float, dict, list]:
-    import subprocess
-
-    out = subprocess.run([sys.executable, __file__, "--worker", name, "--baseline-src", src],
-                         capture_output=True, text=True, check=True, cwd=ROOT)
-    res = json.loads(out.stdout.strip().splitlines()[-1])
-    return res["cpu_s"], res["wall_s"], res["info"], [tuple(x) for x in res["trace"]]
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--baseline-src", default=None,
-                    help="config 'baseline': the default fit by the brdffit of this src folder "
-                         "(e.g. a `git worktree` of an earlier revision), in a subprocess")
-    ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--materials", type=int, default=5, help="how many, evenly spaced")
     ap.add_argument("--only", default="", help="comma-separated names instead")
     ap.add_argument("--configs", default="default,extrapolate,screen20-extrapolate")
     ap.add_argument("--out", default=str(ROOT / "bench" / "results" / "npf_convergence"))
     args = ap.parse_args(argv)
-    if args.worker:
-        _worker(args.worker, args.baseline_src)
-        return 0
 
     import numpy as np
 
@@ -113,25 +69,22 @@ def main(argv=None) -> int:
         data = tabulate_merl_grid(load(f"merl_nbrdf.zip:{name}"))
         base = None
         for cfg in configs:
-            if cfg == "baseline":
-                cpu, wall, info, trace = _baseline_fit(name, args.baseline_src)
-            else:
-                c0, t0 = time.process_time(), time.perf_counter()
-                trace = []
+            c0, t0 = time.process_time(), time.perf_counter()
+            trace = []
 
-                def cb(it, e, c0=c0, trace=trace):
-                    trace.append((time.process_time() - c0, e))
+            def cb(it, e, c0=c0, trace=trace):
+                trace.append((time.process_time() - c0, e))
 
-                kwargs = dict(CONFIGS[cfg])
-                omega = kwargs.pop("_g_over_relax", _solver.G_OVER_RELAX)
-                saved, _solver.G_OVER_RELAX = _solver.G_OVER_RELAX, omega
-                try:
-                    m = fit_npf(data=data, variant="independent-g", name=name, callback=cb,
-                                **kwargs)
-                finally:
-                    _solver.G_OVER_RELAX = saved
-                cpu, wall = time.process_time() - c0, time.perf_counter() - t0
-                info = m.fit_info
+            kwargs = dict(CONFIGS[cfg])
+            omega = kwargs.pop("_g_over_relax", _solver.G_OVER_RELAX)
+            saved, _solver.G_OVER_RELAX = _solver.G_OVER_RELAX, omega
+            try:
+                m = fit_npf(data=data, variant="independent-g", name=name, callback=cb,
+                            **kwargs)
+            finally:
+                _solver.G_OVER_RELAX = saved
+            cpu, wall = time.process_time() - c0, time.perf_counter() - t0
+            info = m.fit_info
             last = info.get("continuation") or {}
             reason = last.get("stop_reason") or "screen only"
             E = info["objective"]
@@ -155,10 +108,9 @@ def main(argv=None) -> int:
             "converged": sum(x["converged"] for x in r),
             "ratio_to_default_max": max((x["ratio_to_default"] or 1.0) for x in r),
             "ratio_to_default_mean": float(np.mean([x["ratio_to_default"] or 1.0 for x in r]))}
-    fig = {"benchmark": "NPF independent-G convergence (issue 15.2)",
-           "command": "bench/bench_npf_convergence.py " + " ".join(argv or sys.argv[1:]),
+    fig = {"benchmark": "NPF independent-G convergence",
+           "command": "bench/studies/npf_convergence.py " + " ".join(argv or sys.argv[1:]),
            "configs": {c: CONFIGS[c] for c in configs}, "materials": chosen,
-           "baseline_src": args.baseline_src,
            "timer": "time.process_time (all threads of the process)",
            "load_average_start": load0, "load_average_end": os.getloadavg(),
            "summary": summary, "rows": rows}

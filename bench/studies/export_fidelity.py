@@ -22,7 +22,7 @@ Writes ``bench/results/export_fidelity.csv`` (one row per material and target, a
 goes: a cut run resumes with ``--resume``) and ``export_fidelity.json`` (aggregates, the load
 average before and after)::
 
-    .venv/bin/python bench/bench_export_fidelity.py [--limit N] [--resume]
+    .venv/bin/python bench/studies/export_fidelity.py [--limit N] [--resume]
 """
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "src"))
 os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
 

@@ -4,7 +4,7 @@ so a later ``brdffit batch --render`` on the same folder skips what this did).
 
 Used to overlap the render stage with the tail of a long fit run on a small machine::
 
-    .venv/bin/python bench/render_completed.py runs/merl-full merl_nbrdf.zip \\
+    .venv/bin/python bench/studies/render_completed.py runs/merl-full merl_nbrdf.zip \\
         --models tabulated,ggx,beckmann,sgd,npf-g-from-d,npf --extra npf-naive
 
 ``--extra`` models are fitted here (cheap ones) before rendering. Stops when every material
@@ -18,7 +18,7 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "src"))
 
 from brdffit.batch import (RenderSettings, _existing, enumerate_materials,  # noqa: E402

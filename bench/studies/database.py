@@ -1,13 +1,13 @@
 """The database comparison of issue 13 item 4: every model the project fits, rendered on the
 paper's scene suite with common random numbers, over the Neural-BRDF MERL and RGL materials.
 
-Input: the fits of ``bench/fit_database.py`` (``runs/db/fits/<slug>/<model>.npz``, loaded, not
+Input: the fits of ``bench/studies/fit_database.py`` (``runs/db/fits/<slug>/<model>.npz``, loaded, not
 refitted). For each material whose fits exist, :func:`brdffit.evaluation.compare.compare` runs
 with the product's defaults (``scenes="paper"``: sphere × courtyard/studio/sunrise + knot ×
 courtyard; 256², 64 spp per scene in 8 CRN batches) and writes ``runs/db/report/<slug>/``.
 Resumable: a material is rendered again only when a fit appeared that its ``result.json``
 lacks. ``--summarise`` (also done at the end of a run) writes
-``bench/results/report_database.json``:
+``bench/results/database.json``:
 
 * per model: mean / median PSNR (mean over the four scenes, dB), the standard error of the
   mean over materials, the median per-material standard error (CRN batches + converged peak),
@@ -20,8 +20,8 @@ lacks. ``--summarise`` (also done at the end of a run) writes
 
 ::
 
-    nice -n 5 .venv/bin/python bench/bench_database.py            # render what is missing
-    .venv/bin/python bench/bench_database.py --summarise          # tables only
+    nice -n 5 .venv/bin/python bench/studies/database.py            # render what is missing
+    .venv/bin/python bench/studies/database.py --summarise          # tables only
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "src"))
 
 MODELS = ("npf-bivariate", "npf", "npf-naive", "npf-g-from-d", "sgd", "tabulated", "ggx",
@@ -186,7 +186,7 @@ def summarise(args) -> dict:
     fig = {"benchmark": "database comparison (issue 13 item 4)",
            "protocol": "compare() defaults: paper scene suite (sphere-courtyard, sphere-studio, "
                        "sphere-sunrise, knot-courtyard), 256², 64 spp/scene in 8 CRN batches, "
-                       "fits loaded from runs/db/fits (bench/fit_database.py, product defaults)",
+                       "fits loaded from runs/db/fits (bench/studies/fit_database.py, product defaults)",
            "n_materials": len(table), "materials": sorted(table),
            "tie_rule": f"|ΔPSNR| ≤ {Z}·sqrt(se_a² + se_b²) per material",
            "median_tie_threshold_db": float(np.median(thresholds)) if thresholds else None,
@@ -221,14 +221,14 @@ def main(argv=None) -> int:
     ap.add_argument("--summarise", action="store_true")
     ap.add_argument("--results", default=None,
                     help="name of the summary in bench/results/ (.json and .csv); default "
-                         "report_database for the default --out, database_<out folder name> "
+                         "database for the default --out, database_<out folder name> "
                          "otherwise (a run on other fits never overwrites the database's)")
     ap.add_argument("--min-models", type=int, default=7,
                     help="render a material only when this many of its fits exist")
     args = ap.parse_args(argv)
     if args.results is None:
         default_out = Path(ap.get_default("out")).resolve()
-        args.results = ("report_database" if Path(args.out).resolve() == default_out
+        args.results = ("database" if Path(args.out).resolve() == default_out
                         else f"database_{Path(args.out).name}")
     if not args.summarise:
         render(args)
