@@ -1,4 +1,4 @@
-"""The evidence for the coat margin of the diffuse fits (``COAT_MARGIN``, issue 14): for each
+"""The evidence for the coat margin of the diffuse fits (``COAT_MARGIN``): for each
 Neural-BRDF MERL material, ggx-diffuse with ``coat="off"`` and with ``coat="on"`` (the coat
 kept whenever it lowers the objective at all), rendered side by side on the paper suite with
 common random numbers (``compare()`` defaults), against the objective ratio coated /

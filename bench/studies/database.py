@@ -1,4 +1,4 @@
-"""The database comparison of issue 13 item 4: every model the project fits, rendered on the
+"""The database comparison: every model the project fits, rendered on the
 paper's scene suite with common random numbers, over the Neural-BRDF MERL and RGL materials.
 
 Input: the fits of ``bench/studies/fit_database.py`` (``runs/db/fits/<slug>/<model>.npz``, loaded, not
@@ -183,7 +183,7 @@ def summarise(args) -> dict:
                        "holds": bool(holds),
                        "broken_on": sorted(broken, key=lambda x: x[1] if kind == "gt"
                                            else -abs(x[1]))})
-    fig = {"benchmark": "database comparison (issue 13 item 4)",
+    fig = {"benchmark": "database comparison",
            "protocol": "compare() defaults: paper scene suite (sphere-courtyard, sphere-studio, "
                        "sphere-sunrise, knot-courtyard), 256², 64 spp/scene in 8 CRN batches, "
                        "fits loaded from runs/db/fits (bench/studies/fit_database.py, product defaults)",

@@ -1,4 +1,4 @@
-"""Export fidelity per target over the Neural-BRDF MERL materials (issue 14 figure).
+"""Export fidelity per target over the Neural-BRDF MERL materials.
 
 For every material: the ``ggx-diffuse`` fit with the product's defaults is the reference;
 each export target's *equivalent* BRDF — what the target's renderer evaluates for the
@@ -16,7 +16,7 @@ pairs, :func:`brdffit.evaluation.metrics.brdf_metrics`) and, rendered with commo
 numbers against the fit (:func:`brdffit.evaluation.compare.compare`, one scene of the paper's
 suite, default ``sphere-courtyard`` 128², 64 spp in 8 batches), the PSNR ± standard error and
 the mean dE2000 of the tone-mapped images; mean / median / worst over the materials. The fit
-time of each ``ggx-diffuse`` fit (CPU) is recorded too (issue 14: ≤ 2 s).
+time of each ``ggx-diffuse`` fit (CPU) is recorded too.
 
 Writes ``bench/results/export_fidelity.csv`` (one row per material and target, appended as it
 goes: a cut run resumes with ``--resume``) and ``export_fidelity.json`` (aggregates, the load
@@ -202,7 +202,7 @@ def main(argv=None) -> int:
             print(f"[{i + 1}/{len(mats)}] {name}: " + "; ".join(
                 f"{r['target']} cre {r['cos_rel_error']:.4f} PSNR {r['psnr_db']:.1f}"
                 f"±{r['psnr_se_db']:.2f} dE {r['mean_de2000']:.2f}" for r in new), flush=True)
-    summary = {"benchmark": "export fidelity per target vs the ggx-diffuse fit (issue 14)",
+    summary = {"benchmark": "export fidelity per target vs the ggx-diffuse fit",
                "protocol": f"ggx-diffuse product defaults; equivalents of gltf/materialx/"
                            f"mitsuba-xml; BRDF-space cos-weighted relative error (2^15 fixed "
                            f"pairs); CRN render {args.scenes} {args.res}² {args.spp} spp in "

@@ -1,5 +1,5 @@
-"""Fit every model to every material of the database once, for the database comparison
-(issue 13 item 4): ``runs/db/fits/<slug>/<model>.npz`` + ``<model>.json`` (fit time, status).
+"""Fit every model to every material of the database once, for the database comparison:
+``runs/db/fits/<slug>/<model>.npz`` + ``<model>.json`` (fit time, status).
 
 Resumable: a fit whose ``.json`` says ``ok`` and whose ``.npz`` loads is not redone. One process
 walks the materials in order (``--reverse`` for a second process from the end); each fit runs in

@@ -1,4 +1,4 @@
-"""NPF fits with the product's defaults (issue 15 item 2): convergence rate, time and
+"""NPF fits with the product's defaults: convergence rate, time and
 objective against a reference run.
 
 For each Neural-BRDF MERL material (tabulated once): ``fit_npf(variant="independent-g")``
@@ -40,9 +40,9 @@ from _common import write_csv_and_summary  # noqa: E402
 
 ZIP = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
 #: model → (variant, options); ``npf-awls`` is independent-G without the Newton polish (the
-#: default before session 14); ``npf-g-from-d-plain`` is G-from-D without the over-relaxed
-#: sweeps and the polish (the default before session 8), ``npf-g-from-d-awls`` without the
-#: polish (the default of sessions 8-12), run side by side with ``--models``
+#: defaults compared in docs/design/npf-fit.md); ``npf-g-from-d-plain`` is G-from-D without
+#: the over-relaxed sweeps and the polish, ``npf-g-from-d-awls`` without the polish, run side
+#: by side with ``--models``
 VARIANTS = {"npf": ("independent-g", {}), "npf-awls": ("independent-g", {"polish": 0}),
             "npf-g-from-d": ("g-from-d", {}),
             "npf-g-from-d-awls": ("g-from-d", {"polish": 0}),

@@ -1,8 +1,8 @@
-"""The NPF polish from stored AWLS fits (issue 15 item 2): how far it lowers Eq. 7, whether it
+"""The NPF polish from stored AWLS fits: how far it lowers Eq. 7, whether it
 converges, and what it does to the factors, with and without its trust region.
 
 For each material of a ``brdffit batch`` output whose ``fits/<material>/<model>.npz`` holds an
-AWLS fit (``--start``, e.g. runs/db100v4: session 11, before any polish), the Neural-BRDF MERL
+AWLS fit (``--start``, e.g. a batch folder of fits made with ``polish=0``), the Neural-BRDF MERL
 data are tabulated and ``_solver.polish_lm`` runs from the stored factors once per
 ``--configs`` entry (``bound=<b>`` or ``bound=none``, ``newton=<0|1>``, ``cap=<n>``, joined by
 ``+``), side by side. Recorded per material × config: objective ratio polished / start,
