@@ -313,8 +313,7 @@ def openpbr_parameters(model, metal: bool | None = None) -> dict:
     F0, F90, rd = reflectances(m)
     F0c, F90c = np.clip(F0, 0.0, 1.0), np.clip(F90, 0.0, 1.0)
     # as for glTF: a fit whose grazing reflectance stays far below 1 is no metal (OpenPBR's
-    # metal would drop its diffuse term): +9.4 dB mean (min +5.1) rendered against the fit on
-    # the 10 MERL materials this moved (paper suite, CRN)
+    # metal would drop its diffuse term; measured gains: docs/design/exports.md)
     metal = is_metal(m, F0c, rd, F90c) if metal is None else bool(metal)
     p = {"specular_roughness": r, "specular_roughness_anisotropy": float(a),
          "base_weight": 1.0, "base_diffuse_roughness": 0.0,
