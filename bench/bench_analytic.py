@@ -1,4 +1,4 @@
-"""Benchmark of the analytic fits with a diffuse lobe (issue 14 items 1-3).
+"""Benchmark of the analytic fits with a diffuse lobe.
 
 Run: ``.venv/bin/python bench/bench_analytic.py`` (``--materials a,b,...`` to choose the
 Neural-BRDF MERL materials, ``--no-validator`` to skip the Khronos glTF-Validator). Writes

@@ -1,4 +1,4 @@
-"""Batch throughput with 1 and 2 local Dask workers (issue 7 scaling figure), and the
+"""Batch throughput with 1 and 2 local Dask workers, and the
 whole-database run time.
 
 Runs ``brdffit.batch.run_batch`` on the first ``--limit`` materials of a database with each

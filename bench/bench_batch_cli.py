@@ -1,5 +1,5 @@
 """One ``brdffit batch`` invocation over a sample of the MERL database with every model
-(issue 15 item 5: "the whole MERL-100 run with every model ... as one invocation").
+(``--every 1``: the whole MERL-100 run with every model, as one invocation).
 
     nice .venv/bin/python bench/bench_batch_cli.py --every 5 --out runs/db20b
 
@@ -9,8 +9,8 @@ the CPU time of the process tree (``RUSAGE_CHILDREN``), the load average, and pe
 fit times, convergence and status from ``OUT/records``. The projection to the whole database
 is ``N ×`` the wall time (the sample is every N-th of the alphabetical list). With
 ``--reference DIR`` (an earlier run of the same command) the per-model fit times and the NPF
-objectives are compared material by material. Writes
-``bench/results/batch_one_invocation_<n>.json``.
+objectives are compared material by material. Writes ``bench/results/batch_cli.json`` (the
+newest run, whatever its ``--every``).
 """
 
 from __future__ import annotations
@@ -87,7 +87,6 @@ def main() -> int:
     ap.add_argument("--summarise", action="store_true", help="only summarise --out")
     ap.add_argument("--render", action="store_true",
                     help="pass --render (the four-scene paper suite, product defaults)")
-    ap.add_argument("--name", default=None, help="results file suffix (default: the count)")
     args = ap.parse_args()
     from brdffit.batch import enumerate_materials
 
@@ -97,7 +96,8 @@ def main() -> int:
     if args.render:
         cmd.append("--render")
     result = {"benchmark": "one brdffit batch invocation, every model",
-              "command": " ".join(cmd[1:]), "materials": names, "cpus": os.cpu_count()}
+              "command": " ".join(cmd[1:]), "every": args.every, "materials": names,
+              "cpus": os.cpu_count()}
     if not args.summarise:
         load0 = list(os.getloadavg())
         t0 = time.perf_counter()
@@ -131,9 +131,7 @@ def main() -> int:
     for m in pm.values():
         m.pop("objective", None)
     print(json.dumps(result, indent=1))
-    name = args.name or f"{len(names)}_v2"
-    with atomic_write(ROOT / "bench" / "results" / f"batch_one_invocation_{name}.json",
-                      "w") as fh:
+    with atomic_write(ROOT / "bench" / "results" / "batch_cli.json", "w") as fh:
         json.dump(result, fh, indent=1)
     return 0
 

@@ -1,4 +1,4 @@
-"""Benchmark of the command line as a user runs it (issue 15.4): whole processes.
+"""Benchmark of the command line as a user runs it: whole processes.
 
 Prints and writes ``bench/results/cli.json``:
 
@@ -12,9 +12,6 @@ Prints and writes ``bench/results/cli.json``:
   the CLI, reading the input (NumPy included), importing the fitting module, the fit, the
   save, the error figure, the rest (parsing, printing, exit); the slowest imports
   (``python -X importtime``) and which heavy packages the process loaded;
-* ``--baseline REV``: the same commands on the source tree of git revision ``REV``
-  (``git archive`` into a temporary folder, run with ``PYTHONPATH``): before/after in one
-  run, at the same load;
 * ``--reference CMD``: a reference program doing the same job, timed interleaved with the
   commands above (side by side, same load), e.g. the authors' C++ (jdupuy/dj_brdf, built
   outside the repository: ``djb::merl`` read, ``djb::tabular(merl, 90, true)`` fit, tables
@@ -28,7 +25,7 @@ merl_nbrdf.zip:gold-metallic-paint``) when ``../shared/data`` is present, else
 ``synthetic:gold-ggx`` resampled on the MERL grid. The load average is recorded before and
 after: on this shared 2-core machine wall times grow with the load, CPU times much less.
 
-Run: ``.venv/bin/python bench/bench_cli.py [--runs 11] [--baseline 0c0eea6^] [--models]``.
+Run: ``.venv/bin/python bench/bench_cli.py [--runs 11] [--models] [--reference CMD]``.
 """
 
 from __future__ import annotations
@@ -52,7 +49,7 @@ REPO = ROOT.parent
 SHARED = REPO.parent / "shared" / "data"
 HEAVY = ("numpy", "scipy", "numba", "llvmlite", "pydantic", "rich", "click", "mitsuba",
          "drjit", "dask", "distributed", "matplotlib", "colour", "h5py", "PIL")
-C_REFERENCE_S = 0.175  # issue 15: jdupuy/dj_brdf (egsr_2015, g++ -O3) on this machine
+C_REFERENCE_S = 0.175  # jdupuy/dj_brdf (egsr_2015, g++ -O3) on this machine
 REFERENCE = "reference program (--reference): read, fit, save"
 FIT = "fit tabulated -o (read, fit, save)"
 
@@ -77,15 +74,13 @@ def _stats(samples: list[float]) -> dict:
 _PYCACHE = Path(tempfile.mkdtemp(prefix="bench-cli-pycache-"))
 
 
-def _env(src: Path | None) -> dict:
+def _env() -> dict:
     """The children's environment: as a user's -- bytecode cached (this machine's sessions
     set PYTHONDONTWRITEBYTECODE, which recompiles every brdffit module in every process,
     ~20 ms); the caches go to a temporary folder, not into the source tree."""
     env = dict(os.environ)
     env.pop("PYTHONDONTWRITEBYTECODE", None)
-    env["PYTHONPYCACHEPREFIX"] = str(_PYCACHE / ("baseline" if src is not None else "current"))
-    if src is not None:
-        env["PYTHONPATH"] = str(src)
+    env["PYTHONPYCACHEPREFIX"] = str(_PYCACHE / "current")
     return env
 
 
@@ -108,58 +103,36 @@ def _make_inputs(tmp: Path) -> tuple[Path, Path, str]:
     return gold, bad, what
 
 
-def _has_no_error(py: str, env: dict) -> bool:
-    """Whether the tree's ``fit`` has ``--no-error`` (revisions before it always measured
-    the error figure)."""
-    out = subprocess.run([py, "-c", _WRAP, "fit", "--help"], capture_output=True, text=True,
-                         env=env)
-    return "--no-error" in out.stdout
-
-
-def _commands(py: str, gold: Path, bad: Path, out: Path, baseline: bool,
-              no_error: bool = True, reference: str | None = None) -> dict[str, list]:
+def _commands(py: str, gold: Path, bad: Path, out: Path,
+              reference: str | None = None) -> dict[str, list]:
     cli = [py, "-m", "brdffit"]  # the tree's own entry point, as the console script runs it
     fit = cli + ["fit", str(gold), "--model", "tabulated", "-o", str(out)]
     cmds = {
         "python -c pass": [py, "-c", "pass"],
         "import brdffit": [py, "-c", "import brdffit"],
         "brdffit --help": cli + ["--help"],
-        # the C++ reference's job: read the MERL file, fit, save (a baseline without
-        # --no-error also computes the error figure: see "baseline_no_error" in the JSON)
-        FIT: fit + ["--no-error"] if no_error else fit,
+        # the C++ reference's job: read the MERL file, fit, save
+        FIT: fit + ["--no-error"],
         "fit rejected input": cli + ["fit", str(bad), "--model", "tabulated", "-o", str(out)],
         "info rejected input": cli + ["info", str(bad)],
+        "brdffit models": cli + ["models"],
+        "fit tabulated -o, with error figure": fit,
     }
-    if not baseline:
-        cmds["brdffit models"] = cli + ["models"]
-        cmds["fit tabulated -o, with error figure"] = fit
-        if reference:
-            cmds[REFERENCE] = shlex.split(reference.format(input=gold,
-                                                           output=out.with_suffix(".ref")))
+    if reference:
+        cmds[REFERENCE] = shlex.split(reference.format(input=gold,
+                                                       output=out.with_suffix(".ref")))
     return cmds
 
 
-BASELINE_FIT = "baseline: " + FIT
-
-
-def time_commands(py, src, gold, bad, runs, baseline=False, reference=None,
-                  baseline_src=None) -> dict:
+def time_commands(py, gold, bad, runs, reference=None) -> dict:
     """Median (and min) wall and CPU of each command over ``runs`` rounds; every round runs
     each command once, in an order shuffled per round (a fixed order moved medians by up to
-    10 %: the command after a heavy one pays for it). With ``baseline_src``, the baseline
-    tree's fit joins the same rounds (``BASELINE_FIT``): before/after at the same moments."""
-    env = _env(src)
-    no_error = _has_no_error(py, env)
+    10 %: the command after a heavy one pays for it)."""
+    env = _env()
     rng = random.Random(0)
     with tempfile.TemporaryDirectory() as tmp:
         cmds = {k: (argv, env) for k, argv in
-                _commands(py, gold, bad, Path(tmp) / "f.npz", baseline, no_error,
-                          reference).items()}
-        if baseline_src is not None:
-            base_env = _env(baseline_src)
-            base_fit = _commands(py, gold, bad, Path(tmp) / "b.npz", True,
-                                 _has_no_error(py, base_env))[FIT]
-            cmds[BASELINE_FIT] = (base_fit, base_env)
+                _commands(py, gold, bad, Path(tmp) / "f.npz", reference).items()}
         res = {k: {"wall": [], "cpu": [], "status": None} for k in cmds}
         for argv, cmd_env in cmds.values():  # warm-up: bytecode caches, page cache
             _run(argv, cmd_env)
@@ -173,12 +146,7 @@ def time_commands(py, src, gold, bad, runs, baseline=False, reference=None,
                 res[name]["status"] = status
     out = {k: {"wall_s": _stats(v["wall"]), "cpu_s": _stats(v["cpu"]), "exit": v["status"]}
            for k, v in res.items()}
-    out[FIT]["no_error"] = no_error
-    if BASELINE_FIT in out:
-        out[BASELINE_FIT]["current_over_baseline_per_round_median"] = {
-            k: statistics.median(a / b for a, b in zip(res[FIT][k.split("_")[0]],
-                                                       res[BASELINE_FIT][k.split("_")[0]]))
-            for k in ("wall_s", "cpu_s")}
+    out[FIT]["no_error"] = True
     if REFERENCE in out:
         out[REFERENCE]["command"] = reference
         out[REFERENCE]["fit_over_reference"] = {
@@ -219,7 +187,7 @@ print(json.dumps({"import_cli": t1 - t0 - tn, "import_numpy": tn,
 
 def breakdown(py, gold, runs) -> dict:
     """Where the time of ``brdffit fit GOLD -m tabulated -o f.npz`` goes (medians)."""
-    env = _env(None)
+    env = _env()
     floor = [_run([py, "-c", "pass"], env)[0] for _ in range(runs)]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
@@ -269,7 +237,7 @@ def _loaded(py, argv) -> str:
             "with contextlib.redirect_stdout(io.StringIO()):\n    main(sys.argv[1:])\n"
             f"print(json.dumps(sorted({{m.split('.')[0] for m in sys.modules}} & set({HEAVY!r}))))")
     return subprocess.run([py, "-c", code, *argv], capture_output=True, text=True,
-                          check=True, env=_env(None)).stdout
+                          check=True, env=_env()).stdout
 
 
 def model_figures(spec: Path, names: list[str]) -> dict:
@@ -312,7 +280,6 @@ def _git(*args) -> str:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--runs", type=int, default=11)
-    ap.add_argument("--baseline", default=None, help="git revision to compare with")
     ap.add_argument("--models", nargs="?", const="all", default=None,
                     help="also fit GOLD with these models (comma-separated; default all)")
     ap.add_argument("--no-commands", action="store_true", help="only --models")
@@ -325,7 +292,7 @@ def main() -> None:
     previous = {}
     if Path(args.out).is_file():
         previous = json.loads(Path(args.out).read_text())
-    result = {"benchmark": "whole-process CLI (issue 15.4)",
+    result = {"benchmark": "whole-process CLI",
               "machine": {"platform": platform.platform(), "python": platform.python_version(),
                           "cpus": os.cpu_count()},
               "revision": _git("rev-parse", "--short", "HEAD"),
@@ -335,26 +302,13 @@ def main() -> None:
         gold, bad, what = _make_inputs(tmp)
         result["input"] = what
         if not args.no_commands:
-            base = None
-            if args.baseline:
-                rev = _git("rev-parse", "--short", args.baseline)
-                base = tmp / "baseline"
-                base.mkdir()
-                subprocess.run(f"git archive {rev} src | tar -x -C {base}", shell=True,
-                               cwd=REPO, check=True)
-            print(f"timing {args.runs} runs of each command (current tree) ...", flush=True)
-            result["commands"] = time_commands(py, None, gold, bad, args.runs,
-                                               reference=args.reference,
-                                               baseline_src=None if base is None
-                                               else base / "src")
+            print(f"timing {args.runs} runs of each command ...", flush=True)
+            result["commands"] = time_commands(py, gold, bad, args.runs,
+                                               reference=args.reference)
             print("breakdown of the fit process ...", flush=True)
             result["fit_breakdown"] = breakdown(py, gold, args.runs)
-            if args.baseline:
-                print(f"timing the baseline {rev} ...", flush=True)
-                result["baseline"] = {"revision": rev, "commands": time_commands(
-                    py, base / "src", gold, bad, args.runs, baseline=True)}
         else:   # keep the command timings with the revision and load they were measured at
-            for key in ("commands", "fit_breakdown", "baseline", "revision",
+            for key in ("commands", "fit_breakdown", "revision",
                         "load_average_before", "load_average_after"):
                 if key in previous:
                     result[key] = previous[key]
@@ -386,24 +340,17 @@ def main() -> None:
     Path(args.out).write_text(json.dumps(result, indent=1) + "\n")
 
     if "commands" in result:
-        base = (result.get("baseline") or {}).get("commands", {})
-        print(f"\n{'command':<40}{'wall med':>9}{'CPU med':>9}   baseline wall/CPU")
+        print(f"\n{'command':<40}{'wall med':>9}{'CPU med':>9}")
         for name, r in result["commands"].items():
-            b = base.get(name)
-            bt = (f"{b['wall_s']['median']:.3f} / {b['cpu_s']['median']:.3f}" if b else "")
             status = "" if r["exit"] in (0, None) else f"  (exit {r['exit']})"
             if "fit_over_reference" in r:
                 status += "  fit / reference: {wall_s:.2f} wall, {cpu_s:.2f} CPU".format(
                     **r["fit_over_reference"])
-            print(f"{name:<40}{r['wall_s']['median']:>9.3f}{r['cpu_s']['median']:>9.3f}   "
-                  f"{bt}{status}")
+            print(f"{name:<40}{r['wall_s']['median']:>9.3f}{r['cpu_s']['median']:>9.3f}"
+                  f"{status}")
             for fit_name, ratio in r.get("per_round_ratio_median", {}).items():
                 print(f"    {fit_name} / reference, median of the per-round ratios: "
                       f"{ratio['wall_s']:.3f} wall, {ratio['cpu_s']:.3f} CPU")
-            if "current_over_baseline_per_round_median" in r:
-                print("    current / baseline fit, median of the per-round ratios: "
-                      "{wall_s:.3f} wall, {cpu_s:.3f} CPU".format(
-                          **r["current_over_baseline_per_round_median"]))
         print("\nfit process, where the time goes (median wall s):")
         for k, v in result["fit_breakdown"]["phases_s"].items():
             print(f"  {k:<58}{v:8.3f}")

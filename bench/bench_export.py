@@ -1,4 +1,4 @@
-"""Export benchmark (issue 8): loss of fidelity of the glTF material of GGX fits, error of the
+"""Export benchmark: loss of fidelity of the glTF material of GGX fits, error of the
 Mitsuba built-in mapping, GLSL/RGL resampling errors and export timings.
 
 Run: ``.venv/bin/python bench/bench_export.py`` (synthetic materials), ``--real`` to add a few

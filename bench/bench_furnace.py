@@ -1,4 +1,4 @@
-"""Furnace benchmark (issue 13 item 2): is every importance sampler of brdffit unbiased?
+"""Furnace benchmark: is every importance sampler of brdffit unbiased?
 
 For every render translator (Dr.Jit evaluators: closed-form GGX/Beckmann with Schlick or
 tabulated Fresnel, radial-table distributions for SGD and tabulated fits, sums of lobes,

@@ -1,4 +1,4 @@
-"""Benchmark of the measured-data readers (issue 2 figures).
+"""Benchmark of the measured-data readers.
 
 Prints and writes ``bench/results/io.json``:
 

@@ -1,4 +1,4 @@
-"""Benchmark of the analytic microfacet models (issue 2 figures).
+"""Benchmark of the analytic microfacet models.
 
 Prints and writes ``bench/results/microfacet.json``:
 

@@ -1,4 +1,4 @@
-"""Rendering benchmark (issue 5): Mitsuba 3 sphere renders per model, noise floor, and the
+"""Rendering benchmark: Mitsuba 3 sphere renders per model, noise floor, and the
 resampling error of the Dr.Jit evaluators.
 
 Run: ``.venv/bin/python bench/bench_render.py`` (``--quick`` for a 64², 32 spp smoke run,
@@ -15,7 +15,7 @@ Figures (per model, 256×256 sphere at 256 spp under an environment map, target 
   weighted relative L1 / L2 / albedo error of the Dr.Jit evaluator vs ``brdf.eval``);
 * for fits: ``psnr_vs_reference`` (same seed as the reference's first render).
 
-``--crn`` (issue 13) measures instead, and writes ``bench/results/render_crn.json``:
+``--crn`` measures instead, and writes ``bench/results/render_crn.json``:
 
 * the dynamic range of the eight CC0 environment maps (:func:`envmap_stats`: max/median,
   decades between the max and the 1st percentile, energy share of the brightest 0.1 %), which
@@ -230,7 +230,7 @@ def main(argv=None) -> int:
                     help="only the per-scene timings (merged into an existing --out file)")
     ap.add_argument("--out", default=None)
     ap.add_argument("--crn", action="store_true",
-                    help="issue 13 figures (envmaps, gold-ggx PSNR ± se) → render_crn.json")
+                    help="CRN figures (envmaps, gold-ggx PSNR ± se) → render_crn.json")
     ap.add_argument("--crn-spp", type=int, default=64)
     ap.add_argument("--crn-batches", type=int, default=8)
     args = ap.parse_args(argv)

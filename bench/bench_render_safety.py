@@ -1,4 +1,4 @@
-"""Renderer safety (issue 30): repeated user commands on a chosen LLVM target, and stray
+"""Renderer safety: repeated user commands on a chosen LLVM target, and stray
 memory accesses counted in Dr.Jit's debug mode.
 
 Run: ``.venv/bin/python bench/bench_render_safety.py`` (defaults below; ``--help``). Writes

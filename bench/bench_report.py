@@ -1,4 +1,4 @@
-"""Benchmark of the comparison report (issue 5, "Figures to reach").
+"""Benchmark of the comparison report.
 
 Single-material mode (default): time of a complete one-material report — fitting every model,
 rendering the reference, the noise floor and every fit, metrics, plots, HTML — with the
@@ -26,7 +26,7 @@ than the 2 dB tie margin are listed):
 
     .venv/bin/python bench/bench_report.py --from-batch runs/merl-full,runs/rgl-full
 
-``--crn-speed`` (issue 13): time of the four-scene comparison (the paper suite, 256², common
+``--crn-speed``: time of the four-scene comparison (the paper suite, 256², common
 random numbers, default spp and batches) of one material with all eight models, *fits
 excluded*: the fits are loaded from ``--fits-dir`` (made there first, untimed, when missing).
 Wall and CPU time (the machine is shared) and the load average; per-phase timings; the PSNR

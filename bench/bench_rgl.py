@@ -1,4 +1,4 @@
-"""Benchmark of the RGL ``.bsdf`` reader (issue 2 figure: 10⁶ evaluations under 3 s).
+"""Benchmark of the RGL ``.bsdf`` reader (target: 10⁶ evaluations under 3 s).
 
 Prints and writes ``bench/results/rgl.json``:
 

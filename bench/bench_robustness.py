@@ -1,4 +1,4 @@
-"""Robustness figures of issue 12: every bad input and fault scenario, clean or not.
+"""Robustness figures: every bad input and fault scenario, clean or not.
 
 Three parts, each run for real on this machine (nothing is counted that did not run):
 
@@ -12,7 +12,7 @@ Three parts, each run for real on this machine (nothing is counted that did not 
   clean = the export succeeds, the generated file parses (Python ``compile``, XML, JSON) and
   the payload never runs (no ``INJECTED`` file after executing the Python script's code
   objects is checked by the test suite; here: parse + the payload only inside literals);
-* **output targets** (issue 32): ``-o`` naming a device, a FIFO, a socket, a folder, a
+* **output targets**: ``-o`` naming a device, a FIFO, a socket, a folder, a
   missing or unwritable place, another format's extension, a protected file: the documented
   exit status, one line, the destination unchanged, the check before any work;
 * **parameter files**: hand-written parameter JSON (out-of-range, denormal, NaN, huge tables,
@@ -134,7 +134,7 @@ def hostile_names(quick: bool) -> list[dict]:
     return rows
 
 
-# -- issue 32: outputs, parameter files, option values, names on printing paths ---------------
+# -- outputs, parameter files, option values, names on printing paths ---------------
 def _plain(kind, name, o, problems) -> dict:
     return _row(kind, name, o, problems)
 

@@ -8,15 +8,14 @@ Usage::
     .venv/bin/python bench/bench_sgd.py --skip-synthetic --modes 16   # paper vs default fit
     .venv/bin/python bench/bench_sgd.py --skip-synthetic --modes 16 --psnr   # + renderings
 
-Speed (``--speed [N]``, issue 15): CPU time (``time.process_time``) of ``fit_sgd`` on the
-first N (10) Neural-BRDF MERL materials, side by side in one process with a baseline version
-of ``brdffit/fit/sgd.py`` read from git (``--baseline REV``, default the last commit before
-the speed-up), interleaved, median of ``--repeats`` fits per material; the new fit timed cold
-(memoised grid tables cleared before each fit, as a fresh ``brdffit fit`` process) and warm
-(as the later materials of a batch); the compressive objective (brdffit.losses.objective,
-Bagher et al. 2016 Eq. 7) of both fits against the network tabulated on the MERL grid, and the
-new fit's convergence report. ``--merl-grid`` fits the tabulated table (a MERL file) instead of
-the network. Writes bench/results/sgd_speed.json::
+Speed (``--speed [N]``): CPU time (``time.process_time``) of ``fit_sgd`` on the first N (10)
+Neural-BRDF MERL materials, median of ``--repeats`` fits per material, timed cold (memoised
+grid tables cleared before each fit, as a fresh ``brdffit fit`` process) and warm (as the later
+materials of a batch), side by side; the compressive objective (brdffit.losses.objective,
+Bagher et al. 2016 Eq. 7) of the fit against the network tabulated on the MERL grid, and the
+fit's convergence report. ``--merl-grid`` fits the tabulated table (a MERL file) instead of the
+network. Written to the ``speed`` section of bench/results/sgd.json (``network`` or
+``merl_grid``)::
 
     .venv/bin/python bench/bench_sgd.py --speed 10 --skip-synthetic
 
@@ -291,31 +290,6 @@ def run_modes(names: list[str], prev: dict | None = None, psnr: bool = False):
         yield results
 
 
-SPEED_OUT = ROOT / "bench" / "results" / "sgd_speed.json"
-BASELINE_REV = "5b500f3"       # last commit of src/brdffit/fit/sgd.py before issue 15
-
-
-def _load_baseline(rev: str):
-    """``brdffit/fit/sgd.py`` at git revision ``rev`` as module ``brdffit.fit._sgd_baseline``
-    (its fitters are re-registered to the current module afterwards)."""
-    import importlib.util
-    import subprocess
-    import tempfile
-
-    import brdffit.fit.sgd as current
-
-    src = subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:src/brdffit/fit/sgd.py"],
-                         check=True, capture_output=True, text=True).stdout
-    tmp = Path(tempfile.mkdtemp()) / "_sgd_baseline.py"
-    tmp.write_text(src)
-    spec = importlib.util.spec_from_file_location("brdffit.fit._sgd_baseline", tmp)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod
-    spec.loader.exec_module(mod)
-    current._register_fitters()            # the baseline's import registered its own fitters
-    return mod
-
-
 class _MerlGrid:
     """A network tabulated once on the MERL grid (what a MERL .binary file gives)."""
 
@@ -335,8 +309,8 @@ class _MerlGrid:
         return self._brdf.eval_hd(th, td, pd)
 
 
-def run_speed(n: int, baseline: str | None, repeats: int, merl_grid: bool) -> dict:
-    """Issue 15 item 3: CPU time per material, old vs new, and their objectives."""
+def run_speed(n: int, repeats: int, merl_grid: bool) -> dict:
+    """CPU time per material, cold and warm, and the fit's objective."""
     import statistics
 
     import brdffit
@@ -345,25 +319,18 @@ def run_speed(n: int, baseline: str | None, repeats: int, merl_grid: bool) -> di
     from brdffit.io.nbrdf import list_materials
     from brdffit.losses.objective import objective_from_values
 
-    old = _load_baseline(baseline) if baseline else None
     names = list_materials(NBRDF)[:n]
     load0 = os.getloadavg()
     rows = []
     warm_input = brdffit.load(f"{NBRDF}:{names[0]}")
     new.fit_sgd(warm_input)                   # imports, numba compilation of the network
-    if old is not None:
-        old.fit_sgd(warm_input)
     for name in names:
         net = brdffit.load(f"{NBRDF}:{name}")
         ref_values, ref_valid = tabulate_merl_grid(net)
         brdf = _MerlGrid(net, (ref_values, ref_valid)) if merl_grid else net
-        times = {"new_cold": [], "new_warm": [], "old": []}
+        times = {"new_cold": [], "new_warm": []}
         models = {}
         for _ in range(repeats):             # interleaved: the machine's load hits both alike
-            if old is not None:
-                t0 = time.process_time()
-                models["old"] = old.fit_sgd(brdf)
-                times["old"].append(time.process_time() - t0)
             new.clear_caches()
             t0 = time.process_time()
             models["new"] = new.fit_sgd(brdf)
@@ -382,15 +349,9 @@ def run_speed(n: int, baseline: str | None, repeats: int, merl_grid: bool) -> di
         info = models["new"].fit_info
         row["convergence_new"] = {k: info.get(k) for k in (
             "converged", "success", "message", "iterations", "cap_reached", "n_local_runs")}
-        if old is not None:
-            row["objective_ratio_new_over_old"] = row["objective_new"] / row["objective_old"]
-            row["speedup_cold"] = row["cpu_s_old"] / row["cpu_s_new_cold"]
         rows.append(row)
-        print(f"  {name:28s} CPU new {row['cpu_s_new_cold']:.3f} s cold, "
-              f"{row['cpu_s_new_warm']:.3f} s warm"
-              + ("" if old is None else
-                 f" | old {row['cpu_s_old']:.3f} s | objective {row['objective_old']:.5g} → "
-                 f"{row['objective_new']:.5g} ({row['objective_ratio_new_over_old'] - 1:+.2%})"),
+        print(f"  {name:28s} CPU {row['cpu_s_new_cold']:.3f} s cold, "
+              f"{row['cpu_s_new_warm']:.3f} s warm, objective {row['objective_new']:.5g}",
               flush=True)
 
     def stats(key):
@@ -399,12 +360,10 @@ def run_speed(n: int, baseline: str | None, repeats: int, merl_grid: bool) -> di
                 "min": float(np.min(v))} if v else None
 
     out = {"materials": rows, "n_materials": len(rows), "input": "MERL-grid table" if merl_grid
-           else "Neural-BRDF network (brdffit.load)", "repeats": repeats, "baseline": baseline,
+           else "Neural-BRDF network (brdffit.load)", "repeats": repeats,
            "cpu_s_new_cold": stats("cpu_s_new_cold"), "cpu_s_new_warm": stats("cpu_s_new_warm"),
-           "cpu_s_old": stats("cpu_s_old"),
-           "objective_ratio_new_over_old": stats("objective_ratio_new_over_old"),
            "all_converged": all(r["convergence_new"]["converged"] for r in rows),
-           "targets": {"brief": "mean < 1 s CPU", "issue_15": "median <= 0.5 s, max <= 1 s"},
+           "targets": {"cpu": "median <= 0.5 s, max <= 1 s"},
            "load_average_start": load0, "load_average_end": os.getloadavg(),
            "openblas_num_threads": os.environ.get("OPENBLAS_NUM_THREADS"),
            "timer": "time.process_time (CPU time of this process, all threads)"}
@@ -430,37 +389,12 @@ def main(argv=None) -> int:
     ap.add_argument("--psnr", action="store_true",
                     help="with --modes: also render the SGD fits (Mitsuba) and report PSNR")
     ap.add_argument("--speed", type=int, nargs="?", const=10, default=None, metavar="N",
-                    help="CPU time and objective, old vs new fit, on the first N (10) materials "
-                         "(writes bench/results/sgd_speed.json)")
-    ap.add_argument("--baseline", default=BASELINE_REV,
-                    help="git revision of the baseline fit/sgd.py for --speed ('' for none)")
+                    help="CPU time (cold and warm) and objective on the first N (10) "
+                         "materials (the 'speed' section of bench/results/sgd.json)")
     ap.add_argument("--repeats", type=int, default=3, help="fits per material for --speed")
     ap.add_argument("--merl-grid", action="store_true",
                     help="--speed on the network tabulated on the MERL grid (a MERL file)")
     args = ap.parse_args(argv)
-    if args.speed:
-        if not NBRDF.exists():
-            print(f"skipping --speed: {NBRDF} not found")
-        else:
-            res = run_speed(args.speed, args.baseline or None, args.repeats, args.merl_grid)
-            res["command"] = " ".join(["bench/bench_sgd.py"]
-                                      + (argv if argv is not None else sys.argv[1:]))
-            res["date"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-            prev = {}
-            if SPEED_OUT.exists():
-                try:
-                    prev = json.loads(SPEED_OUT.read_text())
-                except json.JSONDecodeError:
-                    prev = {}
-            prev["merl_grid" if args.merl_grid else "network"] = res
-            SPEED_OUT.parent.mkdir(parents=True, exist_ok=True)
-            with atomic_write(SPEED_OUT, "w") as fh:
-                json.dump(prev, fh, indent=1, default=float)
-            print(json.dumps({k: v for k, v in res.items() if k != "materials"}, indent=1,
-                             default=float))
-            print(f"wrote {SPEED_OUT}")
-        if args.skip_synthetic and not (args.modes or args.real):
-            return 0
     if args.psnr:
         os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
 
@@ -472,6 +406,20 @@ def main(argv=None) -> int:
             doc = {}
     doc["command"] = " ".join(["bench/bench_sgd.py"] + (argv if argv is not None else sys.argv[1:]))
     doc["date"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    if args.speed:
+        if not NBRDF.exists():
+            print(f"skipping --speed: {NBRDF} not found")
+        else:
+            res = run_speed(args.speed, args.repeats, args.merl_grid)
+            res["command"] = doc["command"]
+            res["date"] = doc["date"]
+            doc.setdefault("speed", {})["merl_grid" if args.merl_grid else "network"] = res
+            write(doc)
+            print(json.dumps({k: v for k, v in res.items() if k != "materials"}, indent=1,
+                             default=float))
+        if args.skip_synthetic and not (args.modes or args.real):
+            print(f"wrote {OUT}")
+            return 0
     if not args.skip_synthetic:
         print("synthetic SGD materials:")
         doc["synthetic"] = run_synthetic()

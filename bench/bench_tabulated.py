@@ -1,4 +1,4 @@
-"""Benchmark of the Dupuy et al. 2015 tabulated fit (issue 3). Writes bench/results/tabulated.json.
+"""Benchmark of the Dupuy et al. 2015 tabulated fit. Writes bench/results/tabulated.json.
 
 Sections (all re-runnable; timings depend on the machine's load):
 
@@ -10,7 +10,7 @@ Sections (all re-runnable; timings depend on the machine's load):
 * ``round_trip``: synthetic GGX/Beckmann microfacet BRDFs (height-correlated G2) → fit →
   Appendix C conversion. ``hotspot="G2"`` (consistent with the synthetic) and the paper's
   ``"G1"`` are both reported.
-* ``defaults`` (issue 15): the same round trip through the public ``fit_ggx``/``fit_beckmann``
+* ``defaults``: the same round trip through the public ``fit_ggx``/``fit_beckmann``
   with NO option (converged by default) next to the paper's ``iterations=4``, and CPU times
   (``time.process_time``) of the default and paper-mode fits on MERL-grid data (a Neural-BRDF
   material tabulated once on the MERL grid) and of anisotropic 90×90 fits, side by side.
@@ -242,8 +242,8 @@ class _MerlGridInput:
 
 
 def _fit_complete(brdf, **kwargs):
-    """``fit_tabulated`` and then the sampling tables, which the fit builds on first use
-    (session 12): the complete fit, as the C++ library's ``djb::tabular`` constructor also
+    """``fit_tabulated`` and then the sampling tables, which the fit builds on first use:
+    the complete fit, as the C++ library's ``djb::tabular`` constructor also
     computes its cdf / quantile tables."""
     model = fit_tabulated(brdf, **kwargs)
     model.distribution.prepare_sampling()

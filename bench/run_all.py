@@ -1,9 +1,11 @@
 """Run every benchmark of bench/ (``make bench``) and collect bench/results/*.json.
 
-Each ``bench_*.py`` writes its own JSON under ``bench/results/``; this script runs them one
+Each ``bench/bench_<name>.py`` writes ``bench/results/<name>.json``; this script runs them one
 after the other (real-data modes included when ``../shared/data`` exists), then writes
-``bench/results/all.json`` with the machine description and every result. Pass script names
-to run a subset: ``.venv/bin/python bench/run_all.py tabulated sgd``.
+``bench/results/all.json`` (not kept in git) with the machine description and every result.
+The studies of ``bench/studies/`` (hours over the whole database) are not run: see
+bench/README.md. Pass benchmark names to run a subset:
+``.venv/bin/python bench/run_all.py tabulated sgd``.
 """
 
 from __future__ import annotations
@@ -24,6 +26,9 @@ REAL_ARGS = {"tabulated": ["--real"], "sgd": ["--real"], "export": ["--real"]}
 
 
 def main(argv: list[str]) -> int:
+    if {"-h", "--help"} & set(argv):
+        print(__doc__)
+        return 0
     scripts = sorted(HERE.glob("bench_*.py"))
     if argv:
         scripts = [s for s in scripts if s.stem.removeprefix("bench_") in argv]

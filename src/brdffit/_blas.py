@@ -1,13 +1,11 @@
-"""One BLAS thread for brdffit's fits (issue 15: fits and a CLI that finish fast).
+"""One BLAS thread for brdffit's fits (fits and a CLI that finish fast).
 
 The fits do many *small* linear-algebra calls (least-squares Jacobians of a few columns,
 90×90 systems, 3-10 variable normal equations). A multi-threaded OpenBLAS wakes and spins
-its threads for each of them: measured on the 2-core bench machine (``brdffit fit`` of the
-MERL file of gold-metallic-paint, whole process, wall / user+sys CPU s), SGD 1.93 / 2.20
-with the default threads against 0.79 / 0.79 with one; ggx-diffuse 3.42 / 4.20 against
-1.42 / 1.42; tabulated 0.24 / 0.35 against 0.22 / 0.25. No fit here has a matrix large
-enough for BLAS threads to pay off, and parallel work (NPF starts, batch workers) is
-parallel above BLAS.
+its threads for each of them, which made whole ``brdffit fit`` processes 1.1-2.5× slower
+(measurements: docs/design/startup-and-speed.md). No fit here has a matrix large enough for
+BLAS threads to pay off, and parallel work (NPF starts, batch workers) is parallel above
+BLAS.
 
 * :func:`single_thread_env` — the command line, *before NumPy is imported*: sets
   ``OPENBLAS_NUM_THREADS`` (and the MKL/BLIS/Accelerate equivalents) to 1 unless the user

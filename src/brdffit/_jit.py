@@ -1,4 +1,4 @@
-"""Numba, imported and compiled on first use (issue 15.4: a CLI that starts at once).
+"""Numba, imported and compiled on first use (a CLI that starts at once).
 
 Importing Numba costs ~0.2 s of CPU and loading a cached kernel another ~0.3 s, so modules
 that merely *define* compiled kernels must not import it: ``brdffit fit x.binary`` reads a

@@ -1,4 +1,4 @@
-"""glibc ``malloc`` settings of brdffit's processes (issue 15: fits and a CLI that finish fast).
+"""glibc ``malloc`` settings of brdffit's processes (fits and a CLI that finish fast).
 
 NumPy takes every array above glibc's *mmap threshold* (128 KiB, raised on the fly up to
 32 MiB) straight from the kernel and gives it back when freed, so each new temporary is

@@ -1,4 +1,4 @@
-"""Progress of long tasks (iterations, current objective) for whoever listens (issue 15.5).
+"""Progress of long tasks (iterations, current objective) for whoever listens.
 
 A long fit calls :func:`report` as it goes (the NPF solvers once per iteration, through
 :func:`step_callback`); nothing happens unless a listener is installed with :func:`listening`

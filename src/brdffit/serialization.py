@@ -3,8 +3,8 @@
 This module sits *below* both the readers/writers (:mod:`brdffit.io.fitfile`) and the models
 (:mod:`brdffit.microfacet`, :mod:`brdffit.fit`): models subclass :class:`SerializableModel`
 from here, and the fit-file loader finds the class of a kind here, so neither imports the
-other (issue 13 item 5: the dependency is one-way, io never imports the model packages at
-import time and the model packages never import io).
+other (the dependency is one-way: io never imports the model packages at import time and
+the model packages never import io).
 
 Kinds are found in two ways:
 

@@ -20,7 +20,7 @@ Commands signal usage errors with ``raise usage_error("--option", "...")`` and o
 statuses by returning them (``return EXIT_FAILED_TASKS``); :func:`main` turns everything
 into these codes.
 
-Why not Typer/Click (issue 15.4, a CLI that starts at once): importing Typer took ~30 ms of a
+Why not Typer/Click (a CLI that starts at once): importing Typer took ~30 ms of a
 0.2 s ``brdffit fit`` process (the authors' C++ does the whole job in 0.145 s), and its value
 coercion needed Pydantic or private hooks; :mod:`argparse` imports in ~2 ms.
 """
@@ -447,7 +447,7 @@ def main(argv: list[str] | None = None) -> int:
 #: default: 700 allocations). Start-up (NumPy and the command's modules: ~160,000 objects
 #: that live until exit) otherwise triggers hundreds of young collections, each promoting
 #: survivors that the older generations then scan again: 3-6 ms of a 0.15 s tabulated fit
-#: process, as much as disabling the collector (interleaved A/B runs, session 15). Cyclic
+#: process, as much as disabling the collector (docs/design/startup-and-speed.md). Cyclic
 #: garbage is still collected, after at most this many allocations.
 GC_YOUNG_THRESHOLD = 50_000
 

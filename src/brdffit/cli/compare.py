@@ -51,7 +51,7 @@ def register(commands) -> None:
     cmd.add_argument("-o", "--out", type=path, default=Path("report"), metavar="DIR",
                      help="Report directory.")
     add_render_options(cmd)
-    cmd.add_argument("--scene", help=argparse.SUPPRESS)  # former option: --scenes NAME
+    cmd.add_argument("--scene", help=argparse.SUPPRESS)  # hidden: the single-scene form of --scenes NAME
     cmd.add_argument("--seed", type=between(0, MAX_SEED - (1 << 20)), default=0, metavar="N",
                      help="Seed of the sample streams (all models).")
     cmd.add_argument("--exposure", type=positive_or("scene", "auto"), default="scene",

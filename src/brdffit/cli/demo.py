@@ -7,7 +7,7 @@ from pathlib import Path
 
 from . import EXIT_FAILED_TASKS
 
-# the paper's models and the engine-ready GGX + Lambert (+ coat) of issue 14
+# the paper's models and the engine-ready GGX + Lambert (+ coat)
 DEMO_MODELS = "tabulated,ggx,beckmann,ggx-diffuse,sgd,npf-g-from-d,npf"
 # The demo's independent-G NPF runs one start (from the G-from-D fit) for a bounded number of
 # AWLS iterations, to stay within a few minutes; `brdffit fit/compare` run all starts.

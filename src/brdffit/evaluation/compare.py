@@ -2,7 +2,7 @@
 common random numbers on a suite of scenes, measure, plot, and write the HTML report.
 
 :func:`compare` handles one material and updates the report index; :func:`compare_many`
-loops over several. The measurement protocol (issue 13):
+loops over several. The measurement protocol:
 
 * **scenes**: by default the paper's suite (Bagher et al. 2016 §5; :data:`SUITES` ``paper``
   in :mod:`.render.scenes`): a sphere under three environment maps of different dynamic range
@@ -19,9 +19,9 @@ loops over several. The measurement protocol (issue 13):
   reference's foreground) is estimated from the batches without the noise bias and with its
   standard error (:func:`.metrics.crn_psnr`: U-statistic MSE, jackknife, delta method);
   a model's ``psnr`` is the mean over scenes with ``psnr_se`` propagated
-  (:func:`.metrics.combine_psnr`). This replaces the former noise floor (reference against
-  itself with another seed), which is no longer computed (``noise_floor`` is accepted and
-  ignored; old ``result.json`` files with ``noise_floor_psnr`` are still shown by the index);
+  (:func:`.metrics.combine_psnr`). No noise floor (reference against itself with another
+  seed) is computed: ``noise_floor`` is accepted and ignored, and ``result.json`` files that
+  carry a ``noise_floor_psnr`` are still shown by the index (docs/design/render-comparisons.md);
 * pictures: the paper's fixed tone map with one exposure per *scene*
   (:func:`.render.scenes.scene_exposure`; ``exposure="auto"`` picks one per scene from the
   reference instead, a number fixes it), dE2000 on the tone-mapped mean images (:mod:`.metrics`);
@@ -225,7 +225,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
         ``"paper"`` (default: the four scenes of Bagher 2016 §5, see :mod:`.render.scenes`),
         one scene name or several (list or comma-separated: ``sphere-studio``,
         ``knot-courtyard``, ``sphere-env`` with ``render_options={"envmap": ...}``, ...).
-        ``scene`` (one name) is the former single-scene argument and, when given, wins.
+        ``scene`` (one name, kept for callers of the single-scene form) wins when given.
     spp, batches, resolution, seed:
         ``spp`` samples per pixel per scene in total, rendered as ``batches`` independent
         batches of ``ceil(spp / batches)`` (``batches ≥ 3`` gives standard errors); scene

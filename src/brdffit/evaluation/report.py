@@ -211,7 +211,7 @@ def _url(path) -> str | None:
     """A relative link to a file of the report: each path segment percent-encoded (spaces,
     ``#``, ``?``, ``%``, quotes, non-ASCII), or ``None`` for anything that is not a relative
     path (a scheme such as ``javascript:``/``data:``, ``//host``, an absolute path, a
-    backslash or a control character): result files may come from elsewhere (issue 12)."""
+    backslash or a control character): result files may come from elsewhere (untrusted)."""
     from urllib.parse import quote
 
     s = str(path) if path is not None else ""

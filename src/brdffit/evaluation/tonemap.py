@@ -15,7 +15,7 @@ same point of the curve as the paper's typical pixel (``x·exposure = 1``, i.e. 
 reference) for all models so that images stay comparable. Deviation documented here:
 ``exposure="auto"`` is a brdffit convenience, not part of the paper.
 
-Comparisons (:func:`brdffit.evaluation.compare.compare`, issue 13) use the paper's *fixed*
+Comparisons (:func:`brdffit.evaluation.compare.compare`) use the paper's *fixed*
 operator by default: one exposure per *scene*, independent of the material, as the paper
 fixes 0.02 (1 for its dark Ennis map) for all its renderings. Ours is
 :func:`brdffit.evaluation.render.scenes.scene_exposure`, ``1 / mean radiance`` of the scene's

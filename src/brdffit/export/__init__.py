@@ -1,4 +1,4 @@
-"""Exports of fitted models to renderers, engines and shaders, and imports back (issue 8).
+"""Exports of fitted models to renderers, engines and shaders, and imports back.
 
 One module per target (conventions of every target in ``docs/conventions.md``):
 

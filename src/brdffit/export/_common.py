@@ -1,6 +1,6 @@
 """Helpers shared by the export targets: model inspection, errors, frames, safe output.
 
-Output files (issue 12): every exporter writes through :func:`writing` (an ``OSError`` becomes
+Output files: every exporter writes through :func:`writing` (an ``OSError`` becomes
 a one-line :class:`ExportError` naming the output file, what was expected and what was
 found) and, when it writes several files, through :class:`StagedFiles` (all files are written
 in a temporary folder next to the destination and moved into place only when all are

@@ -36,7 +36,7 @@ GGX tails; the loss is measured):
 * **metallic rule**: a metal (``metallic = 1``, ``baseColorFactor = F0``, the fit's diffuse
   term dropped, F90 = 1; for a fit with a diffuse term, the base colour whose
   cosine-weighted mean albedo is the fit's, which also carries the grazing reflectance above
-  1 and the dropped diffuse: polyethylene's ggx-diffuse fit, F90 ≈ 2, 13.6 → 33.2 dB) when
+  1 and the dropped diffuse; docs/design/exports.md) when
   the luminance of F0 is ≥ 0.08 (``MATERIAL_METAL_F0``: common dielectrics, η ≤ 1.8, have F0
   ≤ 0.08), exceeds the luminance of the fit's ρd and — with the extensions — the luminance
   of the fit's F90 is ≥ 0.8 (``METAL_MIN_F90``; measured fits such as the ggx-diffuse ones

@@ -313,8 +313,7 @@ def openpbr_parameters(model, metal: bool | None = None) -> dict:
     F0, F90, rd = reflectances(m)
     F0c, F90c = np.clip(F0, 0.0, 1.0), np.clip(F90, 0.0, 1.0)
     # as for glTF: a fit whose grazing reflectance stays far below 1 is no metal (OpenPBR's
-    # metal would drop its diffuse term): +9.4 dB mean (min +5.1) rendered against the fit on
-    # the 10 MERL materials this moved (paper suite, CRN)
+    # metal would drop its diffuse term; measured gains: docs/design/exports.md)
     metal = is_metal(m, F0c, rd, F90c) if metal is None else bool(metal)
     p = {"specular_roughness": r, "specular_roughness_anisotropy": float(a),
          "base_weight": 1.0, "base_diffuse_roughness": 0.0,
@@ -389,24 +388,17 @@ def _dielectric_choice(model, p, F0, F90, notes, n: int = 1 << 15) -> dict:
     between the two ends — with the lower cosine-weighted error (a dark base loses little to
     the shape's darkening and keeps its exact grazing Fresnel). Why: BRDF-space errors
     do not rank the F0 end as renders do (it has the lowest cosine-weighted error and the
-    worst pictures). Measured against the ``ggx-diffuse`` fit, rendered with common random
-    numbers (paper suite, 96², 32 spp × 4): on 8 evenly spaced Neural-BRDF MERL materials
-    with a dielectric mapping the balanced index gained +7.5 dB PSNR on average over the
-    former choice (the lower cosine-weighted error of the two ends; max +15.9 dB on
-    specular-green-phenolic), and along the family it was within 2 dB of the best member on 5
-    more; but always using it lost 20.5 dB on black-obsidian and 12.7 dB on black-phenolic
-    (dark bases, where the shape end is right) — hence the choice between shape and balanced.
-    ``bench/bench_export_fidelity.py`` measures the result over MERL-100. The
+    worst pictures); the balanced index renders far better than either end on most
+    dielectrics, but always using it loses on dark bases, where the shape end is right —
+    hence the choice between shape and balanced (measurements: docs/design/exports.md).
+    ``bench/studies/export_fidelity.py`` measures the result over MERL-100. The
     cosine-weighted errors (2¹⁵ direction pairs: fewer misjudge sharp lobes) of the three
     are in the notes.
 
     The base colour is the compensated one (:func:`compensated_base`) unless ``ρd`` itself
     has the lower cosine-weighted error with the chosen index and tint (a specular layer
-    brighter than the fit's, which a darker base partly offsets). Measured over MERL-100 on
-    renders of both bases with common random numbers (``bench_export_fidelity.py
-    --ablation``, session 7), that choice by the BRDF-space error keeps ρd on 7 materials:
-    white-fabric2 +6.2 dB, silver-metallic-paint2 +4.7, polyurethane-foam +2.7,
-    specular-orange-phenolic −1.1, nylon −0.7, two within 0.15 dB; +0.12 dB on the mean.
+    brighter than the fit's, which a darker base partly offsets); on MERL-100 this keeps ρd
+    on a few materials, with a small gain on the mean (docs/design/exports.md).
     """
     from ..evaluation.metrics import BRDFMetrics
 

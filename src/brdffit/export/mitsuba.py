@@ -43,8 +43,8 @@ Tabulated, SGD and NPF fits (and anything else the render module translates) use
 the running process). Such a model has no XML form; the Python export writes the fit next to a
 ready-to-render script.
 
-Untrusted names (issue 12)
---------------------------
+Untrusted names
+---------------
 Material names, source specs and output file names are never pasted into generated code: the
 Python script carries them only as ``ascii()`` string literals (``MATERIAL``, ``FIT_FILE``,
 ``OUTPUT_NAME``; its docstring is fixed text) and every other value is written by

@@ -51,8 +51,7 @@ r = 1: 43 MiB (an isotropic file: 4 MiB; the RGL database's: 0.7 MB). Anisotropi
 tabulated fit's NDF plus 25 % uniform (:func:`_proxy_warp`), which interpolates worse between
 φi slices: ``aniso-ggx`` itself goes to 0.38 % with its own NDF (r = 1 forced) but 2.6 % when
 wrapped so that it takes the proxy route; the non-symmetric test model of the tests: 2.5 %.
-Isotropic models are written as before (one ``phi_i`` slice; the fields agree with the
-earlier writer to float32 round-off).
+Isotropic models are written with one ``phi_i`` slice.
 
 Every model maps. A :class:`~brdffit.microfacet.model.MicrofacetBRDF` (tabulated fits in
 particular, also GGX/Beckmann/SGD) stores its own NDF and σ; other models (per-channel SGD,

@@ -1,4 +1,4 @@
-"""Analytic microfacet fits with a Lambertian lobe, on the whole measured data (issue 14).
+"""Analytic microfacet fits with a Lambertian lobe, on the whole measured data.
 
 Models ``ggx-diffuse`` and ``beckmann-diffuse`` (:func:`fit_ggx_diffuse`,
 :func:`fit_beckmann_diffuse`), both a :class:`~brdffit.microfacet.MicrofacetBRDF`::
@@ -27,11 +27,9 @@ dielectric Fresnel and OpenPBR's metal with ``specular_color`` = white are Schli
 conductor adds six nonlinear, weakly determined parameters (η and k trade off against each
 other for F0 ≳ 0.5), hence the margin; it is exported exactly to Mitsuba's
 ``roughconductor`` and as its Schlick curve (F0 = F(0°)) to glTF/MaterialX, with the loss
-measured by the export. It is worth it on metals: measured on Neural-BRDF MERL materials,
-rendered PSNR (paper suite, common random numbers, ±0.4-0.9 dB) of the conductor vs the
-Schlick fit: ss440 33.8 vs 31.7, tungsten-carbide 38.4 vs 34.8, chrome 39.6 vs 35.7, steel
-40.4 vs 36.8, aluminium 39.4 vs 36.8, brass 38.9 vs 36.6 dB; green-metallic-paint 35.9 vs
-36.3 dB. On ``synthetic:gold-ggx`` (a conductor) it recovers gold's (η, k) within 0.1 %.
+measured by the export. It is worth it on metals (2-4 dB of rendered PSNR over the Schlick
+fit on MERL's metals). On ``synthetic:gold-ggx`` (a conductor) it recovers gold's (η, k)
+within 0.1 %.
 
 **The coat** (``coat="auto"``, the default; isotropic fits with ``f90="free"``). A second,
 white specular lobe of index 1.5 — what glTF's ``KHR_materials_clearcoat`` and OpenPBR's
@@ -45,15 +43,9 @@ exporters measure that difference). For fixed (α_b, α_c) the model is linear i
 ks F0, C = ks (1 − F0)) per channel and w, solved exactly with its bounds; (ln α_b, ln α_c)
 by a 24 × 24 scan of [ALPHA_MIN, 1]² and Nelder-Mead (0.3-0.6 s). The coated fit is kept when
 its objective is at least ``COAT_MARGIN`` = 5 % below the best uncoated one (and by more
-than ``COAT_MIN_GAIN`` of the data's energy). Evidence for the margin
-(``bench/bench_coat.py``: ``coat="on"`` vs ``"off"`` over the 100 Neural-BRDF MERL
-materials, rendered PSNR on the paper suite with common random numbers): with an objective
-ratio coated / uncoated below 0.95 (24 materials) the coat gained +0.08 to +5.9 dB (delrin
-+5.9, nylon +3.9, specular-black-phenolic +2.7, yellow-plastic +2.3; Σ +34 dB)
-and lost on one (cherry-235 −0.65 dB); between 0.95 and 1 it lost on 4 of 14 (Σ +9.3 dB).
-Margin 0 would add +0.09 dB to the mean over the database for four more losses (worst
-−0.78 dB); 0.05 keeps one loss. (A study forcing the coat where it raises the objective
-lost on 40 of 62 materials, Σ −62 dB.) The coat takes the heavy tail of plastics,
+than ``COAT_MIN_GAIN`` of the data's energy): rendered, a coat that lowers the objective by
+less than that gains little and loses on some materials, a coat below the margin gains on
+nearly all (``bench/studies/coat_margin.py``). The coat takes the heavy tail of plastics,
 phenolics and lacquered woods that one GGX lobe cannot.
 (The coat search runs on every isotropic fit; ``coat="off"`` skips it, ``coat="on"`` keeps
 any coat that lowers the objective.)
@@ -105,11 +97,9 @@ the distribution parameters are searched:
   (a 17-node scan of ln(η − 1) and a bounded Brent search; (ρd, ks) exact for each η, as for
   the conductor below), and ln α by a bounded Brent search within a factor 2 of the Schlick
   α (the bracket moved, at most twice, when the minimum lands on its edge). Anisotropic: TRF
-  on (ln αx, ln αy, ρ, η) from the Schlick optimum (η from its F0, and η = 1.5).
-  (Until session 10 the isotropic case also ran that TRF, with a finite-difference Jacobian
-  over all residuals: 60 % of the fit time; the profile search reaches the same or a lower
-  objective on all 100 MERL materials at 0.53-0.70× the CPU of the whole fit,
-  ``bench/bench_fit_times.py``.)
+  on (ln αx, ln αy, ρ, η) from the Schlick optimum (η from its F0, and η = 1.5). The
+  isotropic profile search is used because TRF with a finite-difference Jacobian over all
+  residuals costs most of the fit time for no better objective.
 * conductor: per channel, (ln η, ln(k + 0.01)) by bounded L-BFGS-B from the best 3 of the
   (η, k) matching the Schlick F0 and a coarse (η, k) grid, (ρd, ks) solved exactly inside;
   the objective is summed per θd node (the samples lie on MERL θd nodes, where F is one
@@ -121,6 +111,9 @@ All parameters are bounded; a candidate with a non-finite error is discarded; th
 never NaN (:class:`~brdffit.errors.FitError` when no finite candidate exists or the data has
 no valid sample). ``fit_info`` holds the parameters, the subsample objective (also
 normalised by the all-zero model's), the starts and the time.
+
+Design notes (the measurements behind the Fresnel choice and the coat margin):
+docs/design/analytic-fit.md
 """
 
 from __future__ import annotations

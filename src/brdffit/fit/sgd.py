@@ -26,7 +26,7 @@ Two-slice fit (§5.2), per channel
    §6.3 measure restricted to the slice, ``cos²θh · sin θh dθh`` (cell of the MERL θh node),
    so that step 1 approximates the error the paper reports; ``weighting="relative"`` uses
    relative residuals ``(m − ρh)/(m + ε)``, ε = 1e-3 max m (better on a few diffuse
-   materials, worse on most: see bench/bench_sgd.py).
+   materials, worse on most).
 2. Specular slice θh = 0 (``m_d(θd)``): ``ρs F(θd) = (m_d − ρd/π) π cos²θd / (D(0) G1²(θd))``
    with the step-1 values, discarding θd > 70° (§4.4), then Eq. 11 fitted to it. Written as
    ``ρs F = A(1 − cos) + B(1 − cos)⁵ + E cos`` (A = ρs F0, B = ρs(1 − F0), E = ρs(F0 − F1))
@@ -37,23 +37,13 @@ Two-slice fit (§5.2), per channel
 Safeguards (**deviations**, on by default; ``selection="slice", linear="slice",
 bounded=False`` restores the procedure above exactly)
 -----------------------------------------------------------------------------------------
-On the Neural-BRDF MERL stand-ins the procedure above blew up (compressive objective of
-Bagher et al. 2016 of 120 for *alum-bronze* and *black-phenolic*, 35 for *aventurnine*,
-against ≈ 1 for the other models; same with Beckmann/GGX). Diagnosis:
-
-* The θh = 0 ridge of these materials rises with θd much faster than the rest of the lobe
-  (the measured specular peak narrows towards grazing, which no Cook-Torrance model with a
-  fixed D reproduces). Step 2 sees the rise only on the ridge and attributes it to ``F``:
-  *alum-bronze* blue got ρs = 8.6, ``ρs F`` ×85 from θd = 0 to 80°, so the model was
-  ×100-×500 too large at θh = 3-15°, θd = 60-85°. Where the ridge *drops* after 70° (the
-  decrease §4.4 mentions, *black-phenolic*, *aventurnine*), Eq. 11 fitted below 70° keeps
-  increasing to ``F(π/2) = 1`` and ``D(0)/cos²θd`` of a sharp SGD gives 1e5 at θd = 88°
-  (reference ≈ 200). ``ρs`` up to 14 (*beige-fabric*) also means a directional albedo far
-  above 1 (``F(π/2) = 1`` makes ρs the grazing value; nothing bounded it).
-* Step 1 weights the θd = 0 slice by ``cos²θh sin θh``: the peak (θh < 5°) gets little
-  weight, and the step-1 optimum can be 3× off there (*alum-bronze*).
-
-Hence, per channel:
+Why: on materials whose θh = 0 ridge rises with θd much faster than the rest of the lobe (the
+measured specular peak narrows towards grazing, which no Cook-Torrance model with a fixed D
+reproduces), step 2 attributes that rise to ``F``, and where the ridge drops after 70° (the
+decrease §4.4 mentions) Eq. 11 fitted below 70° still climbs to ``F(π/2) = 1``: the model
+ends up orders of magnitude too large near grazing, with ρs (the grazing value, since
+``F(π/2) = 1``) far above 1 and nothing bounding the albedo. Step 1's ``cos²θh sin θh``
+weights also give the peak (θh < 5°) little weight. Hence, per channel:
 
 1. **Bounded albedo** (``bounded=True``): the directional albedo ``ρd + a_spec(θi)`` must
    not exceed 1 at θi = 0, 30, 50, 65, 75, 82, 86, 89°. ``a_spec`` is linear in
@@ -73,29 +63,23 @@ Hence, per channel:
    Nowrouzezahrai 2016 Eq. 8 (volume form × cos θi cos θo × compressive weight; θi, θo ≤
    89°) as in :mod:`brdffit.losses.objective` (the §6.3 L2 weights alone let the few
    largest grazing values decide). Grid: all 90 θh, every 4th θd below 76° and every θd
-   from 76° (grazing rows vary fast: every 4th row there picked fits 10× worse on *brass*),
-   every 15th φd (≈ 20 000 samples with θi, θo ≤ 89°). ``refine=k`` additionally refines
-   the k best candidates by bounded TRF on this error (off by default: 3-5× slower for a
-   few % gain).
+   from 76° (grazing rows vary fast), every 15th φd (≈ 20 000 samples with θi, θo ≤ 89°).
+   ``refine=k`` additionally refines the k best candidates by bounded TRF on this error (off
+   by default: several times slower for a few % gain).
 
 Remaining differences from the paper: (α, p) may come from the grid scan rather than the
 step-1 optimum (then it is a grid node unless ``refine`` > 0), and ρd, ρs, F0, F1 come from
-the full data; the slices still drive step 1. Measured (bench/bench_sgd.py ``--modes 16``):
-median compressive objective over the first 16 materials 1.35 → 0.16 (SGD), 1.71 → 0.19
-(two-slice GGX), 2.78 → 0.25 (two-slice Beckmann); the safeguards made the SGD fit ≈ 1.5-2.6 s
-instead of ≈ 0.2 s, brought back to ≈ 0.4 s CPU by the computational changes below.
+the full data; the slices still drive step 1.
 
-Speed (same computation, issue 15; ``bench/bench_sgd.py --speed``): the grid scan solves
-every node's non-negative linear least squares from its 4 × 4 normal equations, built for all
-144 nodes and 3 channels with two matrix products over the samples (:func:`_scan_linear`),
-with G1 interpolated from every 4th G1 node (≤ 4e-5 absolute; the scan only ranks nodes, the
-candidates are then evaluated with the full table); D is evaluated on the 90 θh nodes and the
-G1 interpolation cells are precomputed; the G1 tables of the fixed grid nodes are memoised
-for the process (:func:`clear_caches`); the bounded candidate evaluations (albedo rows, QP)
-are pruned exactly — a candidate whose unbounded cost (a lower bound of its bounded cost)
-exceeds the best bounded cost found cannot win; shapes and G1 tables are shared by the
-channels. On the 100 Neural-BRDF MERL materials the fitted (α, p, ρd, ρs, F0, F1) equal the
-previous implementation's to ≤ 3e-9 relative (rounding of the one-channel NNLS in step 1).
+Computation: the grid scan solves every node's non-negative linear least squares from its
+4 × 4 normal equations, built for all 144 nodes and 3 channels with two matrix products over
+the samples (:func:`_scan_linear`), with G1 interpolated from every 4th G1 node (≤ 4e-5
+absolute; the scan only ranks nodes, the candidates are then evaluated with the full table);
+D is evaluated on the 90 θh nodes and the G1 interpolation cells are precomputed; the G1
+tables of the fixed grid nodes are memoised for the process (:func:`clear_caches`); the
+bounded candidate evaluations (albedo rows, QP) are pruned exactly — a candidate whose
+unbounded cost (a lower bound of its bounded cost) exceeds the best bounded cost found
+cannot win; shapes and G1 tables are shared by the channels.
 
 Convergence report (``fit_info``, fields as the tabulated fit's): the iterative parts are
 the step-1 local least-squares runs; ``converged`` says every run stopped on its tolerance
@@ -122,6 +106,8 @@ is the exact mixture density, so ``eval``/``sample``/``pdf`` are consistent.
 Robustness: all parameters are bounded, initial values come from the data (grid search),
 several starts are refined, non-finite data are masked; :class:`~brdffit.errors.FitError`
 is raised only when no valid data or no finite solution exists. Never returns NaN.
+
+Design notes (the diagnosis behind the safeguards, measured figures): docs/design/sgd-fit.md
 """
 
 from __future__ import annotations

@@ -305,8 +305,8 @@ _SIGMA_M = 16384
 _N_PHI_HALF = 91  # φd ≤ π/2: the MERL samples 0..90 (π − φd of sample k is sample 180 − k)
 #: θh rows per block of :func:`_merl_fresnel_sums`: the geometry and the float64 weight of a
 #: block (≈ 2 MB together) are made, used and reused block after block, where whole-grid
-#: arrays (≈ 27 MB) were page-faulted in by every process (a cold tabulated fit of a MERL
-#: file: 52 → 23 ms)
+#: arrays (≈ 27 MB) would be page-faulted in by every process (a cold tabulated fit of a MERL
+#: file: 23 ms instead of 52)
 _ROWS_PER_BLOCK = 10
 
 

@@ -1,8 +1,7 @@
 """SHA-256 of the file behind a load spec, without NumPy: ``brdffit fit`` starts it on a
 thread before NumPy is imported (hashlib and the reads release the GIL), so the hash of a
-35 MB MERL file (~20 ms) overlaps the import instead of the fit, which ``save`` waited for
-(issue 15.4; bench/bench_cli.py, session 15: with :data:`brdffit.cli.GC_YOUNG_THRESHOLD`,
-0.148 → 0.142 s for the whole tabulated fit process)."""
+35 MB MERL file (~20 ms) overlaps the import instead of the fit, which ``save`` would otherwise wait for
+(docs/design/startup-and-speed.md)."""
 
 from __future__ import annotations
 

@@ -25,7 +25,7 @@ from .shadowing import EllipticalSlopeDistribution
 
 class _LazySpecial:
     """``scipy.special``, imported on first use (~0.2 s of CPU): importing the microfacet
-    package, e.g. for a tabulated fit, does not need it (issue 15.4)."""
+    package, e.g. for a tabulated fit, does not need it (start-up time)."""
 
     def __getattr__(self, name):
         from scipy import special as _special

@@ -100,8 +100,7 @@ def _spline_slopes(x, y):
     ``scipy.interpolate.CubicSpline(x, y, axis=0).derivative()(x)`` in NumPy -- the same
     tridiagonal system and end conditions (de Boor), solved by the Thomas algorithm (its
     pivots are > 0 for increasing ``x``). Avoids importing scipy.interpolate (~0.45 s of CPU)
-    in every fit, and a multi-threaded LAPACK solve that stalls on a busy machine (issue
-    15.4); agrees with SciPy to ~1e-15 (tests/cli/test_startup.py)."""
+    in every fit, and a multi-threaded LAPACK solve that stalls on a busy machine; agrees with SciPy to ~1e-15 (tests/cli/test_startup.py)."""
     x = np.asarray(x, dtype=np.float64)
     y = np.asarray(y, dtype=np.float64)
     n = x.shape[0]

@@ -27,7 +27,7 @@ boundary, where it vanishes with cos θo). ``θh`` is integrated with composite 
 in ``v = ln θh + θh/δ`` (δ = 0.2) from ``θ_min = 10⁻⁶`` (the cap below adds a one-node
 term): logarithmic near the normal, where a lobe of any width α is a bump of width O(1) in
 ``ln θh`` centred near ``ln α``, so one grid serves α from 10⁻³ to 1 alike; steps of
-0.05 rad at large θh (a purely logarithmic grid was 0.6 % off on the measured RGL
+0.05 rad at large θh (a purely logarithmic grid is 0.6 % off on the measured RGL
 ``chm_mint`` at θi = 80°). Checks: GGX α = 0.001 at θi = 80°, default grid vs a 2.5× finer
 one: 2e-8; a Lambertian lobe: exact to 1e-15; ``∫ D cos θh`` of GGX over the visible cone
 equals ``1/(1 + α²)`` to 1e-13 for α = 0.001 … 1. Piecewise-linear tables (NPF, MERL grid)

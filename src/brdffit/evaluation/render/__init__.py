@@ -1,11 +1,11 @@
-"""Rendering BRDFs of the library with Mitsuba 3 (``llvm_ad_rgb``), issue 5.
+"""Rendering BRDFs of the library with Mitsuba 3 (``llvm_ad_rgb``).
 
 Public API (Mitsuba is imported lazily, on first use):
 
 * :func:`render` / :func:`render_ex` / :class:`Renderer` – image of any BRDF in a scene;
 * :class:`MultiRenderer` / :func:`render_models` – the reference and several models in one
   pass with common random numbers (one model-independent :class:`Proposal` fitted to the
-  reference, :func:`proposal_for`), for comparisons with standard errors (issue 13);
+  reference, :func:`proposal_for`), for comparisons with standard errors;
 * :data:`SUITES`, :func:`scene_suite` – the paper's four-scene suite (Bagher 2016 §5);
 * :func:`noise_floor` – PSNR between two seeds (Monte Carlo noise level);
 * :func:`psnr`, :func:`foreground_mask` – Bagher 2016 §5 rendered PSNR;

@@ -7,7 +7,7 @@ in the Mitsuba plugin (:class:`.plugin.BRDFBSDF`), loads the named scene
 is linear RGB ``(H, W, 3)`` float32 in the units of the lights (environment radiance ×
 BRDF); the film's alpha gives the coverage and the foreground mask (pixels fully covered by the object, as Bagher 2016 §5 counts for PSNR).
 
-Comparisons with common random numbers (issue 13): :class:`MultiRenderer` renders the
+Comparisons with common random numbers: :class:`MultiRenderer` renders the
 reference and any number of models *in one pass* with a Python ``mi.SamplingIntegrator``
 (:func:`crn_integrator`): every path is traced once, its directions drawn from one
 model-independent :class:`.proposal.Proposal` (fitted to the reference) combined by MIS

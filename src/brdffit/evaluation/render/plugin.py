@@ -15,7 +15,7 @@ Spatially varying roughness (Dupuy 2015 Eq. 9, Fig. 1/4): with ``alpha_texture``
 of positive scales), the roughness multiplier at the hit point's ``uv`` is read with bilinear
 filtering (``mi.Texture2f``) and passed to the evaluator's distribution.
 
-Common random numbers (issue 13): with ``proposal`` (an object with the evaluators'
+Common random numbers: with ``proposal`` (an object with the evaluators'
 ``sample``/``pdf`` interface, e.g. :class:`.proposal.Proposal` fitted to a comparison's
 reference), ``sample`` and ``pdf`` come from the proposal and only ``eval`` from the model.
 Two BSDFs sharing a proposal then draw the same light directions with the same densities and

@@ -1,6 +1,6 @@
 """A model-independent sampling proposal for comparisons with common random numbers.
 
-Issue 13, item 1. In a comparison, the reference and every model must be rendered with the
+In a comparison, the reference and every model must be rendered with the
 *same* light directions and the *same* densities, so that the difference of two images is
 estimated with noise proportional to the difference itself (common random numbers, CRN).
 With each model's own importance sampling this fails twice: the directions differ between

@@ -24,8 +24,7 @@ Deviations from the paper (deliberate, documented):
   pass, ``_solver.line_search_g``; the paper iterates G "until it converges or increases the
   objective"), and each sweep is followed by an accepted-only-if-better over-relaxation of
   all factors (``extrapolate``, default on). Together they make the fit converge where plain
-  AWLS crawls along the near-ambiguity of F(θd) and G(θi)G(θo): bench/bench_npf_defaults.py
-  and bench/bench_npf_convergence.py.
+  AWLS crawls along the near-ambiguity of F(θd) and G(θi)G(θo).
 * G-from-D searches along a D step that increases the objective by parabolic interpolation
   started from the previous accepted step (``_solver.run_g_from_d``), and from its 50th
   sweep on over-relaxes each sweep as independent-G does (accepted only if better; the
@@ -36,18 +35,14 @@ Deviations from the paper (deliberate, documented):
   not a minimum of Eq. 7 — and the paper's D update (Eq. 14) even holds G fixed although G
   is a function of D. The polish in (D, F, ρd, ρs), G following D through Smith's integrals
   with their exact first and second derivatives, F kept within a factor 2 of its AWLS value
-  (``polish_bound``, :data:`POLISH_BOUNDED`), converged on 18 of 20 MERL materials and
-  lowered the objective by 0-23 % (mean 4.7 %); when the cap is reached ``fit_info`` says
-  "NOT converged" with the cap (bench/bench_npf_polish.py, bench/bench_npf_defaults.py).
-  ``polish=0`` is the paper's AWLS only.
+  (``polish_bound``, :data:`POLISH_BOUNDED`), continues from there; when the cap is reached
+  ``fit_info`` says "NOT converged" with the cap. ``polish=0`` is the paper's AWLS only.
 * Independent-G's AWLS is followed by damped Newton iterations (``polish``, 100 at most;
   JᵀWJ plus the residual curvature ``Σ w r ∇²m``: Eq. 7 is a large-residual problem, where
   Gauss–Newton crawls) on all 272 parameters of a channel at once, each factor sample and ρs
   kept within a factor 2 of its AWLS value (``polish_bound``, :data:`DEFAULT_POLISH_BOUND`):
   unbounded, the polish follows the near-ambiguity of F(θd) and G(θi)G(θo) to degenerate
-  factors. On the 100 MERL materials it converges on its criterion on 99 (a median of 14
-  iterations, 2.7 s CPU mean) and lowers the objective of the AWLS fits by 0.1-12 % (median
-  2 %) (bench/bench_npf_defaults.py, bench/bench_npf_polish.py).
+  factors.
 * Objective weights at cell centres (see :mod:`brdffit.losses.objective`).
 * The start "from the SGD fit" uses :func:`brdffit.fit.sgd.fit_sgd` when that module exists
   (the paper used its authors' earlier Bagher et al. 2012 fits); otherwise it is skipped and
@@ -60,6 +55,9 @@ objective, or ``polish``).
 Scale ambiguity: Eq. 3 is invariant under ``(ρs, D, F, G) → (ρs/(a b c²), a D, b F, c G)``;
 the fit fixes it by max-normalising each factor (max component = 1, ρs absorbing the scale).
 The naive model has the same ambiguity in (ρs, D, F, H).
+
+Design notes (measured convergence, objectives and times behind the defaults):
+docs/design/npf-fit.md
 """
 
 from __future__ import annotations
@@ -89,33 +87,27 @@ DEFAULT_MAX_ITER = {"independent-g": 4000, "g-from-d": 300, "naive": 3000}
 #: Levenberg–Marquardt iterations after AWLS by default (``polish``; a cap: the polish stops
 #: earlier on its criterion, relative decrease < tol for 2 iterations; the cap is reported
 #: when reached). Both variants take damped Newton steps within a trust region
-#: (:data:`DEFAULT_POLISH_BOUND`, :data:`POLISH_BOUNDED`).
-#: Independent-G converges on 99 of the 100 MERL fits in a median of 14 iterations (2.7 s
-#: CPU mean). G-from-D's sweeps stop where Eq. 14's D step (G held fixed although G depends
-#: on D) no longer helps, not at a minimum of Eq. 7; Newton with Smith's second derivative
-#: converged on 18 of 20 MERL materials (every 5th) within 60 iterations (median 23, 2.6 s
-#: CPU mean), lowering the AWLS objective by 4.7 % on average, against 7 of 20 and 2.4 % for
-#: session 14's 10 Gauss–Newton iterations (bench/bench_npf_polish.py, session 15).
+#: (:data:`DEFAULT_POLISH_BOUND`, :data:`POLISH_BOUNDED`). G-from-D's sweeps stop where
+#: Eq. 14's D step (G held fixed although G depends on D) no longer helps, not at a minimum
+#: of Eq. 7; Newton with Smith's second derivative converges from there within 60 iterations
+#: on most MERL materials, where 10 Gauss–Newton iterations mostly do not (docs/design/npf-fit.md).
 DEFAULT_POLISH = {"independent-g": 100, "g-from-d": 60}
 #: Trust region of the polish by default (``polish_bound``): each factor sample and ρs within
 #: this factor of its AWLS value. Independent-G's Eq. 7 is nearly flat along
 #: F(θd)/h(θd)²·G(θi)h(θi)·G(θo)h(θo) for any smooth h; unbounded, the polish follows it to
-#: F(0) at the dynamic-range clamp and ρs 10-10⁶× the AWLS value (ρs moved > 10× on 73 of 100
-#: MERL materials, F(0) < 1e-3 of max F on 52; within the bound: 0 and 8, 7 at the start;
-#: bench/bench_npf_polish.py): better objectives, but factors that are no longer a Fresnel
-#: and a shadowing term. G-from-D has a weaker direction of the same kind, F's grazing
-#: samples (F's max) rising against the rest with ρs: its unbounded Newton polish moved ρs
-#: up to 55× and F(0)/max F down 10-50× on 3 of 20 MERL materials; there only F is bounded
-#: (:data:`POLISH_BOUNDED`), D stays free.
+#: F(0) at the dynamic-range clamp and ρs 10-10⁶× the AWLS value: better objectives, but
+#: factors that are no longer a Fresnel and a shadowing term. G-from-D has a weaker
+#: direction of the same kind, F's grazing samples (F's max) rising against the rest with
+#: ρs; there only F is bounded (:data:`POLISH_BOUNDED`), D stays free.
 DEFAULT_POLISH_BOUND = {"independent-g": 2.0, "g-from-d": 2.0}
 #: The factors the trust region bounds, per variant (``None``: D, F, G and ρs). G-from-D
-#: bounds F only: bounding D too stopped its Newton polish on the box's faces, above 10
-#: Gauss–Newton iterations on 13-16 of 20 materials (bench/bench_npf_polish.py, session 15).
+#: bounds F only: bounding D too stops its Newton polish on the box's faces, at objectives
+#: above those of 10 Gauss–Newton iterations on most MERL materials.
 POLISH_BOUNDED = {"independent-g": None, "g-from-d": ("F",)}
 #: G-from-D over-relaxes its sweeps (``extrapolate``) from this iteration on: by then the
 #: materials whose plain sweeps converge have mostly done so at their own point, and the
 #: others (a third of MERL, which plain sweeps leave at the cap) converge in 100-200
-#: iterations (bench/bench_npf_defaults.py --models npf-g-from-d,npf-g-from-d-plain)
+#: iterations
 G_FROM_D_EXTRAPOLATE_AFTER = 50
 #: model names of the registry and CLI -> variants (one naming scheme across CLI and API)
 CLI_VARIANTS = {"npf": "independent-g", "npf-g-from-d": "g-from-d", "npf-naive": "naive",

@@ -34,10 +34,8 @@ from . import _kernels
 NH = ND = NG = 90
 NP = 180
 #: independent-G G step (:func:`line_search_g`): largest step along the AWLS G update and
-#: over-relaxation factor ω of the exact line-search minimiser (chosen on MERL materials:
-#: ω = 1.3 / 1.5 / 1.7 / 1.9 / 2 gave 8.020 / 8.006 / 7.993 / 7.981 / 8.009e-4 after 300
-#: iterations on alum-bronze, ω = 1 8.044e-4 and the former golden-section search 8.035e-4,
-#: at twice the time per iteration)
+#: over-relaxation factor ω of the exact line-search minimiser (ω = 1.9: the lowest objective
+#: after a fixed number of iterations among 1-2 on MERL materials; docs/design/npf-fit.md)
 G_STEP_CAP = 4.0
 G_OVER_RELAX = 1.9
 
@@ -497,15 +495,13 @@ def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
     evaluations, its first trial the channel's previous accepted step: the accepted steps
     are small, 0.03-0.6, and change slowly); F by Eq. 14; ρd/ρs by Cramer; negative
     components clamped to 0 (``eps``). The paper does not say which search; a golden-section
-    search with 8 evaluations gave objectives within ±0.06 % of this one on six MERL
-    materials at 2-2.7× the time.
+    search reaches the same objectives at several times the cost (docs/design/npf-fit.md).
 
     ``extrapolate_after`` (an extension): from that iteration on, each sweep is followed by
     an accepted-if-better over-relaxation of D, F, ρ (:func:`_extrapolate`; ``None``:
     never). Plain AWLS crawls on about a third of the MERL materials (300 iterations leave
     a relative decrease of 1e-3 to 1e-6); starting the over-relaxation after the first
-    iterations keeps (to 0.1 %) the point the plain sweeps reach where they converge
-    (bench/bench_npf_defaults.py --models npf-g-from-d,npf-g-from-d-plain)."""
+    iterations keeps (to 0.1 %) the point the plain sweeps reach where they converge."""
     t0 = time.perf_counter()
     st.D, st.rho_s = normalise(np.maximum(st.D, eps), st.rho_s, eps)
     st.F, st.rho_s = normalise(np.maximum(st.F, eps), st.rho_s, eps)
@@ -786,7 +782,7 @@ def _g_from_d_curvature(st: MFState, curvature, g, J):
     """Newton's residual curvature in the G-from-D parameters: the product's
     (:func:`_residual_curvature`, chained like JᵀWJ) plus, G being a function of D, the
     gradient in G times Smith's second derivative (:func:`smith_g_curvature`) in the D
-    block (the term session 14's trial of a G-from-D Newton step lacked)."""
+    block (without it, Newton's matrix is not the Hessian of Eq. 7 in D)."""
     chained, _ = _chain_g_from_d(curvature, None, J)
     chained[:, :NH, :NH] += smith_g_curvature(st.D, g[:, NH + ND:NH + ND + NG])
     return chained
@@ -821,26 +817,21 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
     gauge samples; see :func:`_damped_step_in_box` for how steps respect it).
     Independent-G needs it: the near-ambiguity F(θd)·G(θi)G(θo) ≈ F(θd)/h(θd)²·G(θi)h(θi)
     ·G(θo)h(θo) is broken only weakly by the data, and the unbounded polish runs along it to
-    degenerate factors (F(0) at the clamp ``eps``, ρs grown 10-10⁶×: 49 of 97 MERL fits
-    with 30 iterations) that fit Eq. 7 better but are no longer a Fresnel and a shadowing
-    term. ρd is additive and not bounded.
+    degenerate factors (F(0) at the clamp ``eps``, ρs grown 10-10⁶×) that fit Eq. 7 better
+    but are no longer a Fresnel and a shadowing term. ρd is additive and not bounded.
 
     ``newton`` (default on; off: Gauss–Newton): the residual-curvature term ``Σ w r ∇²m``
     (:func:`_residual_curvature`) is added to JᵀWJ, i.e. Newton's method damped à la
     Levenberg–Marquardt (the damping scaled by JᵀWJ's diagonal). Eq. 7 is a large-residual
     problem for most materials (the model cannot fit them), where Gauss–Newton converges
-    linearly and slowly (aluminium: relative decreases of 1e-6-1e-5 per iteration after 60
-    iterations); Newton's steps converge on the same materials in ≈ 10-20 iterations.
+    linearly and slowly; Newton's steps converge in ≈ 10-20 iterations.
     ``bounded``: the factor groups the trust region applies to (``"D"``, ``"F"``, ``"G"``,
     ``"rho_s"``; default all). G-from-D's Newton matrix adds, G being a function of D, the
     gradient in G times Smith's second derivative (:func:`_g_from_d_curvature`,
-    :func:`smith_g_curvature`). On 20 MERL materials (bench/bench_npf_polish.py, session 15)
-    its unbounded polish drifts like independent-G's (F's grazing samples rise against the
-    rest, ρs up to 55× in 30 iterations); bounding every factor stops it on the box's faces
-    (above 10 Gauss–Newton iterations on 13-16 of 20); bounding F alone (``bounded=("F",)``,
-    ``bound`` 2, 60 iterations) converged on 18 / 20 with ρs within 4× and the lowest
-    objectives (mean 0.953 of the AWLS value, against 0.976 for 10 Gauss–Newton
-    iterations)."""
+    :func:`smith_g_curvature`). Unbounded, G-from-D's polish drifts like independent-G's
+    (F's grazing samples rise against the rest with ρs); bounding every factor stops it on
+    the box's faces; bounding F alone (``bounded=("F",)``) is G-from-D's default. Measured
+    figures: docs/design/npf-fit.md."""
     t0 = time.perf_counter()
     newton = True if newton is None else bool(newton)
     start = np.log(np.maximum(_log_params(st, g_from_d), 1e-300))
