@@ -447,7 +447,9 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
         record["warnings"] = [v.as_dict() for v in check_validity(model)]
         if metrics:
             t_m = time.perf_counter()
-            record["metrics"] = _reference_metrics(task.spec).evaluate(model)
+            bm = _reference_metrics(task.spec)
+            record["metrics"] = bm.evaluate(model)
+            record["error_domain"] = getattr(bm.reference, "measured_domain", None)
             record["metrics_seconds"] = record["metrics"].pop("seconds", None)
             record["metrics_time_s"] = time.perf_counter() - t_m
         record["status"] = "ok"

@@ -13,7 +13,9 @@ batch rendered) into one flat row per material × model, with named columns (:da
   ``gltf_roughness_r/g/b`` instead; ``f0_r/g/b`` (ks·F at normal incidence), ``rho_d_r/g/b``
   (Lambertian albedo) and ``table_bytes`` (bytes of the fit file's tables);
 * BRDF-space errors of the fit against its input (:mod:`brdffit.evaluation.metrics`):
-  ``cos_rel_error``, ``normalized_l2``, ``compressive_objective``;
+  ``cos_rel_error``, ``normalized_l2``, ``compressive_objective``, computed over the
+  input's measured domain, which ``error_domain`` names (``everywhere`` when the input has
+  no smaller domain; :meth:`brdffit.brdf.BRDF.measured`);
 * rendered errors when the batch rendered (``--render``): ``psnr`` (mean over the scenes,
   dB), ``psnr_se`` (its standard error) and ``mean_de2000``;
 * ``warnings``: the physical checks the fit failed (:mod:`brdffit.evaluation.validity`:
@@ -63,7 +65,8 @@ COLUMNS = (["material", "model", "status", "recommended", "is_recommended",
             "gltf_roughness_y"]
            + [f"alpha_{c}" for c in _RGB] + [f"gltf_roughness_{c}" for c in _RGB]
            + [f"f0_{c}" for c in _RGB] + [f"rho_d_{c}" for c in _RGB]
-           + ["table_bytes", *METRICS, "psnr", "psnr_se", "mean_de2000", "warnings",
+           + ["table_bytes", *METRICS, "error_domain", "psnr", "psnr_se", "mean_de2000",
+              "warnings",
               "fit_time_s", "fit_file", "error"])
 
 
@@ -161,6 +164,9 @@ def summary_rows(records: list, out: Path) -> tuple[list[dict], dict[str, dict]]
                                         if isinstance(w.get("figure"), (int, float))
                                         else str(w.get("check"))
                                         for w in warns if isinstance(w, dict))
+        if r.get("metrics") is not None:
+            domain = r.get("error_domain")
+            row["error_domain"] = domain if isinstance(domain, str) else "everywhere"
         metrics = r.get("metrics") if isinstance(r.get("metrics"), dict) else {}
         for k, v in metrics.items():
             if not isinstance(v, (dict, list)):

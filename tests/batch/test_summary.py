@@ -49,6 +49,7 @@ def test_summary_csv_has_flat_named_columns(batch_dir):
     assert 0 < _f(ggx["cos_rel_error"]) < 1 and _f(ggx["fit_time_s"]) > 0
     assert (batch_dir / ggx["fit_file"]).is_file()
     assert ggx["psnr"] == "" and ggx["alpha_r"] == ""  # not rendered; not per channel
+    assert ggx["error_domain"] == "everywhere"          # a synthetic model: no smaller domain
 
     ct = rows[("plastic", "beckmann-ct")]
     assert ct["alpha_x"] == "" and _f(ct["alpha_r"]) == pytest.approx(0.18, rel=0.1)
@@ -58,6 +59,7 @@ def test_summary_csv_has_flat_named_columns(batch_dir):
     assert int(ct["table_bytes"]) >= 0
 
     bad = rows[("missing", "ggx")]
+    assert bad["error_domain"] == ""
     assert bad["status"] == "failed" and "missing.binary" in bad["error"]
     assert bad["fit_file"] == "" and bad["recommended"] == "" and bad["alpha_x"] == ""
 
@@ -141,3 +143,15 @@ def test_recommend_rule_with_renders():
     assert recommend(rows)["m"]["model"] == "ggx"
     rows[1]["psnr"] = None  # one fit not rendered: decide on the BRDF-space error
     assert recommend(rows)["m"]["by"] == "cos_rel_error"
+
+
+def test_error_domain_names_the_measured_domain(tmp_path, shared_data):
+    """A measurement with a smaller measured domain (RGL: θi up to its last measured
+    incidence) says so in the row of every fit whose errors were computed over it."""
+    out = tmp_path / "rgl"
+    spec = str(shared_data("rgl", "paper_white_rgb.bsdf"))
+    assert run_task(Task("paper", spec, "ggx-diffuse"), out)["status"] == "ok"
+    write_summary(out)
+    row = _csv(out)[0]
+    assert row["error_domain"] == "θi ≤ 78.5° (the file's measured incidences)"
+    assert 0 < _f(row["cos_rel_error"]) < 0.1 and row["warnings"] == ""
