@@ -96,7 +96,7 @@ def test_radial_table_roughness_scale_furnace():
 def _maroon_like():
     """A per-channel SGD model with the parameters of the SGD fit of maroon-plastic
     (α ≈ 0.002, p ≈ 0.84, strong red diffuse), no shared data needed."""
-    from brdffit.fit.sgd import PerChannelMicrofacetBRDF
+    from brdffit.microfacet.sgd_model import PerChannelMicrofacetBRDF
     from brdffit.microfacet.sgd import SGD
 
     chans = [(0.002017, 0.8400, 0.1976, 0.003908, -0.573),

@@ -11,6 +11,11 @@
   conductor, tabulated.
 * :mod:`.model` – :class:`MicrofacetBRDF` (Dupuy Eq. 1), :class:`SumBRDF`, and the component
   registry used by the fit files (``register_distribution`` / ``register_fresnel``).
+* :mod:`.coat` – the white coat lobe of a coated diffuse model.
+* :mod:`.per_channel` – three models, one per colour channel; :mod:`.sgd_model` – the
+  per-channel Cook-Torrance model of Bagher 2012.
+* :mod:`.conversions` – tabulated to Beckmann/GGX by slope moments (Dupuy App. C), roughness
+  editing (Eq. 9).
 """
 
 from __future__ import annotations

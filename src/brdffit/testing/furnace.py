@@ -270,8 +270,8 @@ def model_zoo(alpha: float) -> dict:
     ``per-channel-tabulated`` (tabulated fits R α, G 0.05, B 0.5), ``npf``, ``npf-naive``,
     ``npf-bivariate`` (Bagher 2016 tables of a GGX α lobe).
     """
-    from ..fit.sgd import PerChannelMicrofacetBRDF
-    from ..fit.tabulated import PerChannelBRDF
+    from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
+    from ..microfacet.per_channel import PerChannelBRDF
     from ..microfacet import (GGX, Beckmann, ConductorFresnel, MicrofacetBRDF, SchlickFresnel,
                               SumBRDF)
     from ..microfacet.fresnel import GeneralizedSchlickFresnel

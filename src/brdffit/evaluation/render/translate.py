@@ -136,9 +136,9 @@ register_translator("SumBRDF", _sum_translator)
 
 
 def _per_channel_translator(brdf):
-    """``PerChannelBRDF`` (three single-channel fits, ``brdffit.fit.tabulated``: ``models``)
-    and ``PerChannelMicrofacetBRDF`` (Bagher 2012 per-channel lobes, ``brdffit.fit.sgd``:
-    ``lobes``): channel c from the Dr.Jit evaluator of component c."""
+    """``PerChannelBRDF`` (three single-channel models, ``brdffit.microfacet.per_channel``:
+    ``models``) and ``PerChannelMicrofacetBRDF`` (Bagher 2012 per-channel lobes,
+    ``brdffit.microfacet.sgd_model``: ``lobes``): channel c from the Dr.Jit evaluator of component c."""
     models = getattr(brdf, "models", None) or getattr(brdf, "lobes", None)
     if not models or len(models) != 3:
         return None
