@@ -65,7 +65,7 @@ def bench_material(name, brdf, args) -> dict:
     import brdffit
     from brdffit.evaluation.metrics import brdf_metrics
     from brdffit.export import glsl, glsl_cpu, gltf, mitsuba, rgl
-    from brdffit.fit.tabulated import to_ggx
+    from brdffit.microfacet.conversions import to_ggx
 
     out: dict = {"material": name, "timings": {}}
     t = Timer()

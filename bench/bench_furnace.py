@@ -7,7 +7,7 @@ and 4D tables) and every Python ``sample``/``pdf`` pair of the library's models
 (:func:`brdffit.testing.furnace.model_zoo`), over roughness α (0.001 … 1) × incidence θi
 (0 … 80°), the importance-sampled directional albedo ``mean(f cos θo / pdf)`` (per RGB
 channel) is compared with the deterministic quadrature of the same ``f``
-(:func:`brdffit.testing.furnace.albedo_quadrature`, half-vector, log-θh Gauss-Legendre).
+(:func:`brdffit.furnace.albedo_quadrature`, half-vector, log-θh Gauss-Legendre).
 
 Uniforms are stratified (16 independent batches of jittered-grid points; the standard error
 is that of the batch means) unless ``--iid``.
@@ -57,8 +57,8 @@ def _evaluators(zoo):
 
 def run(alphas, thetas, n_drjit, n_python, python_side=True, stratified=True, log=print):
     from brdffit.evaluation.render.translate import albedo_drjit, evaluate_drjit
-    from brdffit.testing.furnace import (FurnaceResult, albedo_quadrature, albedo_sampled,
-                                         model_zoo)
+    from brdffit.furnace import FurnaceResult, albedo_quadrature, albedo_sampled
+    from brdffit.testing.furnace import model_zoo
 
     rows = []
     for a in alphas:

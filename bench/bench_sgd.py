@@ -47,9 +47,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from brdffit._atomic import atomic_write  # noqa: E402
-from brdffit.fit.sgd import (PerChannelMicrofacetBRDF, fit_beckmann_two_slice,  # noqa: E402
-                             fit_cook_torrance, fit_ggx_two_slice, fit_sgd)
+from brdffit.fit.sgd import (fit_beckmann_two_slice, fit_cook_torrance,  # noqa: E402
+                             fit_ggx_two_slice, fit_sgd)
 from brdffit.microfacet.sgd import SGD  # noqa: E402
+from brdffit.microfacet.sgd_model import PerChannelMicrofacetBRDF  # noqa: E402
 
 NBRDF = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
 SHOWCASE = ("two-layer-gold", "color-changing-paint1", "white-paint")

@@ -40,9 +40,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
 from brdffit._atomic import atomic_write  # noqa: E402
-from brdffit.fit.tabulated import (backscatter, beckmann_parameters, fit_tabulated,  # noqa: E402
-                                   ggx_parameters, luminance, solve_slope_pdf)
+from brdffit.fit.tabulated import (backscatter, fit_tabulated, luminance,  # noqa: E402
+                                   solve_slope_pdf)
 from brdffit.microfacet import GGX, Beckmann, MicrofacetBRDF, SchlickFresnel  # noqa: E402
+from brdffit.microfacet.conversions import beckmann_parameters, ggx_parameters  # noqa: E402
 from brdffit.microfacet.tabulated import TabulatedSlopeDistribution, radial_rule  # noqa: E402
 
 SHARED = ROOT.parent / "shared" / "data"

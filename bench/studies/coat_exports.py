@@ -57,7 +57,7 @@ def main(argv=None) -> int:
     from brdffit.evaluation.compare import compare
     from brdffit.export.gltf import gltf_equivalent
     from brdffit.export.materialx import openpbr_equivalent
-    from brdffit.fit.analytic import coat_parts
+    from brdffit.microfacet.coat import coat_parts
 
     fields = ["material"] + [c + s for c in COLUMNS for s in ("", "_se")]
     load0 = list(os.getloadavg())

@@ -510,6 +510,7 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
     from .evaluation.compare import compare
     from .evaluation.metrics import BRDFMetrics
     from .evaluation.report import write_material_page, write_result
+    from .export import report_exports
     from .io import load
 
     out = Path(out_dir)
@@ -532,7 +533,7 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
             result = compare(load(task.spec), models, out / "report", name=task.material,
                              scenes=st.scenes, spp=st.spp, batches=st.batches,
                              resolution=st.resolution, seed=st.seed, save_fits=False,
-                             update_index=False,
+                             update_index=False, exports=report_exports,
                              brdf_metrics=(() if len(fit_metrics) == len(models)
                                            else BRDFMetrics.ALL))
         if len(fit_metrics) == len(models):  # the fit tasks measured them already: reuse

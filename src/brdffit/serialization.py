@@ -39,8 +39,8 @@ PLUGINS: dict[str, str] = {
     "npf": "brdffit.microfacet.npf_model:NPFMicrofacetBRDF",
     "npf-naive": "brdffit.microfacet.npf_model:NPFNaiveBRDF",
     "npf-bivariate": "brdffit.microfacet.npf_model:NPFBivariateBRDF",
-    "tabulated_per_channel": "brdffit.fit.tabulated:PerChannelBRDF",
-    "per_channel_microfacet": "brdffit.fit.sgd:PerChannelMicrofacetBRDF",
+    "tabulated_per_channel": "brdffit.microfacet.per_channel:PerChannelBRDF",
+    "per_channel_microfacet": "brdffit.microfacet.sgd_model:PerChannelMicrofacetBRDF",
 }
 _BUILTIN = frozenset(PLUGINS)
 

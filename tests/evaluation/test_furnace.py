@@ -38,7 +38,7 @@ def _furnace(ev, theta_deg, seed=0, reference=None, n=N):
     """FurnaceResult of a Dr.Jit evaluator; the quadrature is of ``reference.eval`` when
     given (the model's own albedo), else of the evaluator's ``eval``."""
     from brdffit.evaluation.render.translate import albedo_drjit, evaluate_drjit
-    from brdffit.testing.furnace import FurnaceResult, albedo_quadrature
+    from brdffit.furnace import FurnaceResult, albedo_quadrature
 
     t = np.radians(theta_deg)
     est, se = albedo_drjit(ev, t, n=n, seed=seed, stratified=True)
@@ -80,7 +80,7 @@ def test_radial_table_roughness_scale_furnace():
     from brdffit.evaluation.render import drjit_eval as dj
     from brdffit.evaluation.render.translate import albedo_drjit, evaluate_drjit
     from brdffit.microfacet.sgd import SGD
-    from brdffit.testing.furnace import FurnaceResult, albedo_quadrature
+    from brdffit.furnace import FurnaceResult, albedo_quadrature
 
     ev = dj.MicrofacetEval(dj.RadialTableDist.from_distribution(SGD(0.1, 1.2)),
                            dj.ConstantFresnelDJ(0.8), kd=[0.05, 0.1, 0.2])
@@ -96,7 +96,7 @@ def test_radial_table_roughness_scale_furnace():
 def _maroon_like():
     """A per-channel SGD model with the parameters of the SGD fit of maroon-plastic
     (α ≈ 0.002, p ≈ 0.84, strong red diffuse), no shared data needed."""
-    from brdffit.fit.sgd import PerChannelMicrofacetBRDF
+    from brdffit.microfacet.sgd_model import PerChannelMicrofacetBRDF
     from brdffit.microfacet.sgd import SGD
 
     chans = [(0.002017, 0.8400, 0.1976, 0.003908, -0.573),

@@ -36,7 +36,7 @@ HOSTILE = [
 
 
 def _brdfs():
-    from brdffit.fit.sgd import PerChannelMicrofacetBRDF
+    from brdffit.microfacet.sgd_model import PerChannelMicrofacetBRDF
     from brdffit.microfacet import (Beckmann, ConductorFresnel, GGX, MicrofacetBRDF,
                                     SchlickFresnel)
     from brdffit.microfacet.npf_model import D_THETA_H, F_THETA_D, G_THETA, NPFMicrofacetBRDF

@@ -38,7 +38,7 @@ def _npf():
 
 def _sgd_per_channel():
     """Bagher 2012 per-channel SGD lobes (what fit_sgd returns)."""
-    from brdffit.fit.sgd import PerChannelMicrofacetBRDF
+    from brdffit.microfacet.sgd_model import PerChannelMicrofacetBRDF
     from brdffit.microfacet.sgd import SGD
 
     return PerChannelMicrofacetBRDF([dict(distribution=SGD(0.15 * c, 1.2), rho_d=0.05 * c,

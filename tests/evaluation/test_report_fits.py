@@ -11,6 +11,7 @@ import pytest
 import brdffit
 from brdffit.evaluation import compare as C
 from brdffit.evaluation import report as R
+from brdffit.export import report_exports
 
 from .test_report import standin_render
 
@@ -21,7 +22,7 @@ def fitted_report(tmp_path_factory):
     out = root / "report"
     res = C.compare(brdffit.synthetic("gold-ggx"), ["tabulated", "ggx", "npf-g-from-d"], out,
                     renderer=standin_render, spp=8, resolution=16, brdf_metric_samples=1 << 9,
-                    fit_options={"npf-g-from-d": {"max_iter": 5}})
+                    fit_options={"npf-g-from-d": {"max_iter": 5}}, exports=report_exports)
     return root, out, res
 
 
@@ -74,7 +75,7 @@ def test_loaded_fit_files_are_linked_where_they_are(tmp_path):
     ref = brdffit.synthetic("gold-ggx")
     fp = save_fit(fit_model("ggx", ref)[0], tmp_path / "fits" / "gold" / "ggx.npz")
     res = C.compare(ref, {"ggx": str(fp)}, tmp_path / "report", renderer=standin_render,
-                    spp=4, resolution=16, brdf_metric_samples=1 << 9)
+                    spp=4, resolution=16, brdf_metric_samples=1 << 9, exports=report_exports)
     page = tmp_path / "report" / res["slug"] / "index.html"
     links = R.local_links(page)
     assert "../../fits/gold/ggx.npz" in links and "exports/ggx.gltf" in links

@@ -130,7 +130,7 @@ def test_write_glsl_and_uber_texture(tmp_path):
 
 def test_unsupported_raises_and_per_channel_works():
     from brdffit.export.gltf import GLTFBRDF
-    from brdffit.fit.tabulated import PerChannelBRDF
+    from brdffit.microfacet.per_channel import PerChannelBRDF
 
     with pytest.raises(ExportError, match="GLSL"):
         GL.model_spec(GLTFBRDF([0.5, 0.5, 0.5], 0.0, 0.5))

@@ -300,7 +300,7 @@ def test_metal_keeps_the_fits_mean_albedo_when_its_grazing_reflectance_exceeds_o
 
 def _coated(w=0.07, a_coat=0.03):
     """A coated diffuse fit as ggx-diffuse returns it (base lobe + white coat lobe)."""
-    from brdffit.fit.analytic import COAT_F0
+    from brdffit.microfacet.coat import COAT_F0
     from brdffit.microfacet import SumBRDF
 
     base = MicrofacetBRDF(GGX(0.005), SchlickFresnel([0.9, 0.85, 0.8]),

@@ -12,7 +12,7 @@ from brdffit.errors import BRDFFormatError, ExportError
 from brdffit.export import export, load_json
 from brdffit.export.json_params import to_json_dict
 from brdffit.export.tables import load_npf_table, load_sgd_table, write_sgd_table
-from brdffit.fit.sgd import PerChannelMicrofacetBRDF
+from brdffit.microfacet.sgd_model import PerChannelMicrofacetBRDF
 from brdffit.microfacet.sgd import SGD
 
 
@@ -75,7 +75,7 @@ def test_json_unserialisable_raises(tmp_path):
 
 
 def test_json_per_channel_tabulated(tmp_path):
-    from brdffit.fit.tabulated import PerChannelBRDF
+    from brdffit.microfacet.per_channel import PerChannelBRDF
 
     pc = PerChannelBRDF([brdffit.synthetic(n) for n in ("gold-ggx", "aniso-ggx", "sgd-paint")])
     export(pc, "json", tmp_path / "pc.json")

@@ -249,7 +249,7 @@ def test_coated_fit_with_a_flat_base_fresnel_keeps_its_high_index():
     """A base lobe whose Fresnel is flat (F0 = F90: the coat took the rise) maps to a high
     specular_ior; under the coat the index to write is higher still, and it must be reached
     (a clipped index darkens the base far less than its compensated colour assumes)."""
-    from brdffit.fit.analytic import COAT_F0
+    from brdffit.microfacet.coat import COAT_F0
     from brdffit.microfacet import SumBRDF
 
     base = MicrofacetBRDF(GGX(0.0085), SchlickFresnel(1.0), diffuse=0.0076,
@@ -299,7 +299,7 @@ def test_coated_fit_with_a_metal_like_base_is_mapped_the_closer_way():
     OpenPBR's dielectric cannot hold a flat 0.5 reflectance)."""
     from brdffit.evaluation.metrics import brdf_metrics
     from brdffit.export.materialx import _brdf_of
-    from brdffit.fit.analytic import COAT_F0
+    from brdffit.microfacet.coat import COAT_F0
     from brdffit.microfacet import SumBRDF
 
     base = MicrofacetBRDF(GGX(0.8), SchlickFresnel(1.0), diffuse=[0.015, 0.066, 0.094],

@@ -323,7 +323,7 @@ def test_dielectric_search_moves_its_bracket_to_a_distant_roughness():
 
 
 def _coated_material(w=0.3, a_base=0.12, a_coat=0.02):
-    from brdffit.fit.analytic import COAT_F0
+    from brdffit.microfacet.coat import COAT_F0
     from brdffit.microfacet import GGX, SchlickFresnel, SumBRDF
 
     base = MicrofacetBRDF(GGX(a_base), SchlickFresnel([0.6, 0.5, 0.4]),
@@ -337,7 +337,7 @@ def test_coat_recovered_on_a_coated_material():
     """A GGX + Lambert base under a white coat lobe (index 1.5) is recovered by the default
     ggx-diffuse fit: the coat is kept, its α and weight and the base's α within 1 %, and the
     objective is far below the best uncoated one's."""
-    from brdffit.fit.analytic import coat_parts
+    from brdffit.microfacet.coat import coat_parts
 
     fit = fit_ggx_diffuse(_coated_material())
     parts = coat_parts(fit)
@@ -354,7 +354,7 @@ def test_coat_recovered_on_a_coated_material():
 def test_coat_not_kept_without_a_gain_and_options_checked():
     """An uncoated material keeps a single lobe (the coat's gain is below the margin);
     coat='off' skips it; coat='on' needs an isotropic fit with a free F90."""
-    from brdffit.fit.analytic import coat_parts
+    from brdffit.microfacet.coat import coat_parts
 
     fit = fit_beckmann_diffuse(brdffit.synthetic("plastic-beckmann"))
     assert coat_parts(fit) is None and not fit.fit_info["coat"]["kept"]
@@ -368,7 +368,7 @@ def test_coat_not_kept_without_a_gain_and_options_checked():
 
 def test_coated_fit_saves_loads_and_prints(tmp_path):
     from brdffit.cli import main
-    from brdffit.fit.analytic import coat_parts
+    from brdffit.microfacet.coat import coat_parts
     from brdffit.fit.registry import figures
 
     fit = fit_ggx_diffuse(_coated_material())

@@ -7,11 +7,12 @@ import pytest
 
 from brdffit.brdf import IsotropicBRDF
 from brdffit.errors import FitError
-from brdffit.fit.sgd import (PerChannelMicrofacetBRDF, fit_beckmann_two_slice,
-                             fit_cook_torrance, fit_ggx_two_slice, fit_sgd, summary, two_slices)
+from brdffit.fit.sgd import (fit_beckmann_two_slice, fit_cook_torrance, fit_ggx_two_slice,
+                             fit_sgd, summary, two_slices)
 from brdffit.microfacet.beckmann import Beckmann
 from brdffit.microfacet.ggx import GGX
 from brdffit.microfacet.sgd import SGD
+from brdffit.microfacet.sgd_model import PerChannelMicrofacetBRDF
 
 # several α, p, F0, F1, ρd per channel (p > 1 exercises Γ(1 − p, α) with 1 − p < 0)
 MATERIALS = {
@@ -228,18 +229,6 @@ def test_fit_from_a_merl_table():
         assert row["alpha"] == pytest.approx(0.15, rel=0.01)
         assert row["p"] == pytest.approx(1.2, rel=0.01)
         assert row["F0"] == pytest.approx(0.06, abs=0.01)
-
-
-def test_sampling_chi_square_beckmann_ggx_lobes():
-    from brdffit.testing.chi2 import check_sampling
-
-    rows = [dict(rho_d=0.2, rho_s=0.5, F0=0.05, F1=0.0), dict(rho_d=0.1, rho_s=0.3, F0=0.5, F1=0.1),
-            dict(rho_d=0.0, rho_s=0.8, F0=0.9, F1=0.0)]
-    dists = [Beckmann(0.1), GGX(0.3), Beckmann(0.05)]
-    model = PerChannelMicrofacetBRDF([{"distribution": d, **r} for d, r in zip(dists, rows)])
-    ok, results = check_sampling(model, [[0, 0, 1], [0.8, 0.0, 0.6]], sample_count=50000,
-                                 res_theta=24, res_phi=48)
-    assert ok, [str(r) for r in results]
 
 
 class _NarrowingLobe(IsotropicBRDF):

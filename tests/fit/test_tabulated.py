@@ -11,9 +11,9 @@ import pytest
 
 from brdffit.brdf import BRDF
 from brdffit.errors import FitError
-from brdffit.fit.tabulated import (beckmann_parameters, fit_tabulated,
-                                   ggx_parameters, solve_slope_pdf, to_beckmann, to_ggx)
+from brdffit.fit.tabulated import fit_tabulated, solve_slope_pdf
 from brdffit.microfacet import GGX, Beckmann, MicrofacetBRDF, SchlickFresnel
+from brdffit.microfacet.conversions import beckmann_parameters, ggx_parameters
 from brdffit.microfacet.tabulated import TabulatedSlopeDistribution, radial_rule
 from brdffit.testing.closed_forms import backscatter_eq12, beckmann_lambda, beckmann_P
 from brdffit.testing.closed_forms import directions as dirs
@@ -324,25 +324,13 @@ def test_per_texel_roughness_arrays_broadcast():
     wo = wi * np.array([-1, -1, 1])
     ax = np.linspace(0.2, 2.0, 7)
     ay = ax[::-1].copy()
-    from brdffit.fit.tabulated import with_roughness
+    from brdffit.microfacet.conversions import with_roughness
 
     model = with_roughness(MicrofacetBRDF(d, None), ax, ay)
     f = model.eval(wi, wo)
     for k in range(7):
         single = MicrofacetBRDF(d.with_roughness(ax[k], ay[k]), None).eval(wi[k], wo[k])
         np.testing.assert_allclose(f[k], single, rtol=1e-12)
-
-
-# -- conversion to analytic models -------------------------------------------------------------
-def test_conversions_reuse_fresnel_and_return_microfacet_brdfs():
-    brdf = MicrofacetBRDF(GGX(0.15, 0.3), SchlickFresnel(0.8))
-    model = fit_tabulated(brdf, n=40, n_phi=40, hotspot="G2", tol=1e-8)
-    g = to_ggx(model)
-    b = to_beckmann(model)
-    assert isinstance(g.distribution, GGX) and isinstance(b.distribution, Beckmann)
-    assert g.fresnel is model.fresnel and b.fresnel is model.fresnel
-    assert g.distribution.alpha_x == pytest.approx(0.15, rel=0.02)
-    assert g.distribution.alpha_y == pytest.approx(0.3, rel=0.02)
 
 
 def test_per_channel_distributions_differ_by_channel():

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from brdffit.fit.tabulated import fit_tabulated, to_ggx
+from brdffit.fit.tabulated import fit_tabulated
+from brdffit.microfacet.conversions import to_ggx
 from brdffit.io.fitfile import load_fit, read_fit_header, save_fit, table_bytes
 from brdffit.microfacet import GGX, Beckmann, MicrofacetBRDF, SchlickFresnel
 from brdffit.microfacet.tabulated import TabulatedSlopeDistribution, radial_rule
@@ -182,7 +183,7 @@ def test_real_neural_brdf_material(shared_data):
 
 
 def test_per_channel_fit_round_trip_and_sampling(tmp_path):
-    from brdffit.fit.tabulated import PerChannelBRDF
+    from brdffit.microfacet.per_channel import PerChannelBRDF
 
     brdf = MicrofacetBRDF(GGX(0.2), SchlickFresnel([0.9, 0.5, 0.2]))
     model = fit_tabulated(brdf, per_channel=True, n=32, hotspot="G2", tol=1e-8)

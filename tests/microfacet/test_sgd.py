@@ -180,7 +180,7 @@ SHARP = (0.0026943, 1.34819)
 
 
 def test_g1_approximation_of_a_mirror_like_sgd_is_saved_and_loaded(tmp_path):
-    from brdffit.fit.sgd import PerChannelMicrofacetBRDF
+    from brdffit.microfacet.sgd_model import PerChannelMicrofacetBRDF
     from brdffit.io.fitfile import load_fit, save_fit
     from brdffit.microfacet.sgd import EQ9_C_MAX
 

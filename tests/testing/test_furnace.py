@@ -1,6 +1,6 @@
 """Furnace test of the library's Python samplers: importance-sampled directional albedo
 (``mean(f cos θo / pdf)`` with each model's own ``sample``/``pdf``) against the quadrature of
-its ``eval`` (``brdffit.testing.furnace``), for sharp (α = 0.001) and broad (α = 1) lobes at
+its ``eval`` (``brdffit.furnace``), for sharp (α = 0.001) and broad (α = 1) lobes at
 normal and grazing incidence, per-channel lobes of widths 0.001 / 0.05 / 0.5 included.
 
 The tolerance is 1 % (or 4 standard errors if larger), and every case also asserts that
@@ -15,8 +15,8 @@ import warnings
 import numpy as np
 import pytest
 
-from brdffit.testing.furnace import (FurnaceResult, albedo_quadrature, albedo_sampled, check,
-                                     model_zoo)
+from brdffit.furnace import FurnaceResult, albedo_quadrature, albedo_sampled, check
+from brdffit.testing.furnace import model_zoo
 from tests.conftest import shared_data_path
 
 MODELS = ("ggx", "beckmann", "ggx-aniso", "beckmann-aniso", "sgd", "tabulated",

@@ -83,6 +83,7 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
     """Fit, render and measure models against a reference (HTML report)."""
     from ..evaluation.compare import compare, compare_many
     from ..evaluation.report import write_index
+    from ..export import report_exports
 
     model_list = [m.strip() for m in models.split(",") if m.strip()]
     if not model_list:
@@ -125,7 +126,7 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
     say = (lambda msg: None) if quiet else (lambda msg: print(printable(msg), file=sys.stderr))
     kw = dict(scenes=scene or scenes, spp=spp, batches=batches, resolution=resolution,
               seed=seed, exposure=exp, gamma=gamma, render_options=ropts, progress=say,
-              fit_options=fopts)
+              fit_options=fopts, exports=report_exports)
     specs = _materials(spec, limit)
     if len(specs) == 1:
         res = compare(specs[0], model_list, out, **kw)

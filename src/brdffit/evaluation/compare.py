@@ -177,24 +177,6 @@ def _convergence(model) -> dict | None:
     return out
 
 
-def _exports(model, folder: Path, stem: str) -> list[str]:
-    """Engine files of a fitted model next to the report (JSON always; glTF and MaterialX
-    where the model has that form): paths relative to the material folder. An export a model
-    cannot have is skipped, never an error of the comparison. (Mitsuba XML is left out: its
-    RGL tensor is ~3.5 MB per model; ``brdffit export FIT --to mitsuba-xml`` writes it.)"""
-    from ..export import export
-
-    done = []
-    for target, suffix, opts in (("json", ".json", {}), ("gltf", ".gltf", {"fidelity": False}),
-                                 ("materialx", ".mtlx", {"fidelity": False})):
-        try:
-            info = export(model, target, folder / f"{stem}{suffix}", **opts)
-        except (BRDFError, ImportError):
-            continue
-        done += [f"exports/{Path(f).name}" for f in info.get("files", [])]
-    return done
-
-
 def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report", *,
             material: str | None = None, name: str | None = None, scenes="paper",
             scene: str | None = None, spp: int = DEFAULT_SPP, batches: int = DEFAULT_BATCHES,
@@ -203,7 +185,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
             brdf_metric_samples: int = 1 << 16,
             brdf_metrics: Sequence[str] = M.BRDFMetrics.ALL,
             fit_options: Mapping[str, Mapping] | None = None, save_fits: bool = True,
-            exports: bool = True,
+            exports: Callable[[Any, Path, str], list[str]] | None = None,
             write_exr: bool | str = "reference", renderer: Callable | None = None,
             render_options: Mapping | None = None, update_index: bool = True,
             progress: Callable[[str], None] | None = None, isolate_renders: bool = True) -> dict:
@@ -246,8 +228,10 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
     fit_options:
         Per-model keyword arguments of the fitters.
     exports:
-        Write JSON, glTF and MaterialX exports of every fitted or loaded model under
-        ``<slug>/exports/`` and link them (and the fit files) from the material page.
+        ``exports(model, folder, stem) -> [paths relative to the material folder]`` writes
+        engine files of every fitted or loaded model under ``<slug>/exports/``
+        (:func:`brdffit.export.report_exports`: JSON, glTF and MaterialX), linked with the fit
+        files from the material page; ``None`` (default) writes none.
     isolate_renders:
         Render in a child process (default): a renderer that dies from a signal fails the
         scene it was rendering (``scenes[i]["error"]``, one line through ``progress``) and
@@ -267,6 +251,9 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
     """
     from .render.scenes import scene_suite
 
+    if exports is not None and exports is not False and not callable(exports):
+        raise TypeError(f"exports: expected a function such as brdffit.export.report_exports, "
+                        f"or None, found {exports!r}")
     say = progress or (lambda msg: None)
     out_dir = Path(out_dir)
     reference = resolve_reference(source, material)
@@ -340,7 +327,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
                 rel = Path(os.path.relpath(Path(rec["loaded_from"]).resolve(), mdir.resolve()))
                 rec["fit_file"] = rel.as_posix()
                 rec["table_bytes"] = table_bytes(model)
-                rec["exports"] = _exports(model, mdir / "exports", _safe_name(label))
+                rec["exports"] = exports(model, mdir / "exports", _safe_name(label))
             if save_fits and rec["origin"] == "fitted":
                 try:
                     from ..io.fitfile import SerializableModel, save_fit, table_bytes
@@ -351,8 +338,8 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
                         rec["fit_file"] = f"fits/{fp.name}"
                         rec["table_bytes"] = table_bytes(model)
                         if exports:
-                            rec["exports"] = _exports(model, mdir / "exports",
-                                                      _safe_name(label))
+                            rec["exports"] = exports(model, mdir / "exports",
+                                                     _safe_name(label))
                 except Exception as exc:  # noqa: BLE001 – saving is a convenience
                     rec.setdefault("warnings", []).append(f"could not save fit: {exc}")
         except Exception as exc:  # noqa: BLE001 – one failing model must not sink the report

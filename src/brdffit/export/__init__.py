@@ -22,16 +22,18 @@ One module per target (conventions of every target in ``docs/conventions.md``):
 * ``npf-uber`` – one or several NPF fits packed as the uber-texture (:mod:`.glsl`);
 * :mod:`.tables` – import of published SGD (CSV) and NPF (uber-texture) parameter tables.
 
-:func:`export` dispatches on ``to`` (one of :data:`TARGETS`).
+:func:`export` dispatches on ``to`` (one of :data:`TARGETS`); :func:`report_exports` writes the
+engine files a comparison report links (``compare(..., exports=report_exports)``).
 """
 
 from __future__ import annotations
 
 from importlib import import_module
+from pathlib import Path
 
-from ..errors import ExportError
+from ..errors import BRDFError, ExportError
 
-__all__ = ["export", "check_model", "TARGETS", "SUFFIXES", "load_json", "ExportError", "load_sgd_table", "load_npf_table",
+__all__ = ["export", "report_exports", "check_model", "TARGETS", "SUFFIXES", "load_json", "ExportError", "load_sgd_table", "load_npf_table",
            "pack_npf_uber_texture", "GLTFBRDF"]
 
 _LAZY = {"load_sgd_table": ".tables", "load_npf_table": ".tables",
@@ -80,6 +82,23 @@ def export(model, to: str, path, **options) -> dict:
         check_model(m)
     mod, fn = TARGETS[to]
     return getattr(import_module(mod, __name__), fn)(model, path, **options)
+
+
+def report_exports(model, folder: Path, stem: str) -> list[str]:
+    """Engine files of a fitted model next to a comparison report (JSON always; glTF and
+    MaterialX where the model has that form): paths relative to the material folder. An
+    export a model cannot have is skipped, never an error of the comparison. (Mitsuba XML is
+    left out: its RGL tensor is ~3.5 MB per model; ``brdffit export FIT --to mitsuba-xml``
+    writes it.)"""
+    done = []
+    for target, suffix, opts in (("json", ".json", {}), ("gltf", ".gltf", {"fidelity": False}),
+                                 ("materialx", ".mtlx", {"fidelity": False})):
+        try:
+            info = export(model, target, folder / f"{stem}{suffix}", **opts)
+        except (BRDFError, ImportError):
+            continue
+        done += [f"exports/{Path(f).name}" for f in info.get("files", [])]
+    return done
 
 
 def check_model(model) -> None:

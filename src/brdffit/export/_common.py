@@ -206,11 +206,12 @@ def is_elliptical(dist, kinds=("ggx", "beckmann")) -> bool:
 
 
 def single_lobe_of(coated):
-    """A coated diffuse fit (:func:`brdffit.fit.analytic.coat_parts`) approximated by one lobe:
-    the diffuse fit of its family with ``coat="off"`` fitted to it (0.5-0.8 s). A target whose
-    coat does not behave like the fit's (glTF's clearcoat has a Fresnel of N·V) may carry
-    this closer than the coat (:func:`closer_to`)."""
-    from ..fit.analytic import coat_parts, fit_analytic_diffuse
+    """A coated diffuse fit (:func:`brdffit.microfacet.coat.coat_parts`) approximated by one
+    lobe: the diffuse fit of its family with ``coat="off"`` fitted to it (0.5-0.8 s). A
+    target whose coat does not behave like the fit's (glTF's clearcoat has a Fresnel of N·V)
+    may carry this closer than the coat (:func:`closer_to`)."""
+    from ..fit.analytic import fit_analytic_diffuse
+    from ..microfacet.coat import coat_parts
 
     base = coat_parts(coated)[0]
     kind = "beckmann" if is_elliptical(base.distribution, ("beckmann",)) else "ggx"

@@ -402,7 +402,7 @@ def _lobe_spec(m, textures, notes, prefix: str, channel=None) -> dict:
 def model_spec(model) -> dict:
     """``{"lobes": [...], "textures": {name: float32 (rows, n, 3)}, "notes": [...]}`` of
     ``model`` (see module docstring); :class:`ExportError` for unsupported models."""
-    from ..fit.sgd import PerChannelMicrofacetBRDF
+    from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
     from ..microfacet.model import MicrofacetBRDF, SumBRDF
     from ..microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF
 

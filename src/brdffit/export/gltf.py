@@ -22,9 +22,9 @@ Implementation"), with the ``KHR_materials_specular``, ``KHR_materials_ior``,
 
 Mapping of a fit (:func:`gltf_material`) — one specular lobe (``MicrofacetBRDF``) with a
 GGX or Beckmann distribution (``fit_ggx``, ``fit_ggx_diffuse``, ``fit_beckmann_diffuse``...;
-tabulated fits are first converted with :func:`brdffit.fit.tabulated.to_ggx`, Dupuy 2015
-App. C; a Beckmann α becomes the GGX α of the same value — same D(0) = 1/(πα²), heavier
-GGX tails; the loss is measured):
+tabulated fits are first converted with :func:`brdffit.microfacet.conversions.to_ggx`,
+Dupuy 2015 App. C; a Beckmann α becomes the GGX α of the same value — same
+D(0) = 1/(πα²), heavier GGX tails; the loss is measured):
 
 * roughness: ``roughnessFactor = √α``. Anisotropic / correlated: with the
   ``KHR_materials_anisotropy`` extension (default) the slope matrix is diagonalised, the
@@ -61,7 +61,7 @@ GGX tails; the loss is measured):
   curve is Schlick's (a dielectric fit's exact curve is replaced), and its Smith V is
   separable (core) or the extension's height-correlated form;
 * a **coated** diffuse fit (base lobe + white coat lobe of index 1.5,
-  :func:`brdffit.fit.analytic.coat_parts`): the base lobe by the rules above, the coat as
+  :func:`brdffit.microfacet.coat.coat_parts`): the base lobe by the rules above, the coat as
   ``KHR_materials_clearcoat`` (``clearcoatFactor`` = w, ``clearcoatRoughnessFactor`` =
   √α_coat); glTF layers it — ``f_base (1 − w Fc) + w Fc D V`` with the coat's Fresnel ``Fc``
   of N·V (:class:`GLTFBRDF`) — where the fit adds ``w S_c Schlick(0.04; V·H)``, which departs
@@ -242,7 +242,7 @@ def _ggx_model(model, target: str = "glTF 2.0"):
     notes = []
     if isinstance(model, MicrofacetBRDF) and isinstance(model.distribution,
                                                        TabulatedSlopeDistribution):
-        from ..fit.tabulated import to_ggx
+        from ..microfacet.conversions import to_ggx
 
         model = to_ggx(model)
         notes.append("tabulated NDF converted to GGX by Dupuy 2015 App. C (first moments)")
@@ -334,9 +334,9 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
     α = √(αx αy); with ``specular`` a dielectric carries its F0/F90 in
     ``KHR_materials_specular`` + ``KHR_materials_ior`` (``"specular"`` entry, ``None`` when
     the core's defaults are exact or for a metal). A coated diffuse fit
-    (:func:`brdffit.fit.analytic.coat_parts`) maps its base lobe by these rules and its coat
+    (:func:`brdffit.microfacet.coat.coat_parts`) maps its base lobe by these rules and its coat
     to ``KHR_materials_clearcoat`` (``"clearcoat"`` entry)."""
-    from ..fit.analytic import coat_parts
+    from ..microfacet.coat import coat_parts
 
     parts = coat_parts(model)
     if parts is not None:
@@ -436,7 +436,7 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
 def _with_clearcoat(p: dict, coat) -> dict:
     """``p`` (the base lobe's parameters) with the coat lobe as ``KHR_materials_clearcoat``:
     ``clearcoatFactor`` = the coat's weight w, ``clearcoatRoughnessFactor`` = √α_coat."""
-    from ..fit.analytic import coat_alpha_weight
+    from ..microfacet.coat import coat_alpha_weight
 
     alpha, w = coat_alpha_weight(coat)
     notes = list(p["notes"])

@@ -92,7 +92,7 @@ def _distribution_parameters(d) -> dict:
         out["units"] = ("alpha: SGD shape alpha (Bagher 2012 Eq. 8, dimensionless); p: exponent; "
                         "lam, c, k: Eq. 9 G1 approximation")
     if kind in ("tabulated", "tabulated_aniso"):
-        from ..fit.tabulated import ggx_parameters
+        from ..microfacet.conversions import ggx_parameters
 
         try:
             ax, ay, rho = ggx_parameters(d)
@@ -118,7 +118,7 @@ def _fresnel_parameters(f) -> dict | None:
 
 def describe_parameters(model) -> dict:
     """The readable ``parameters`` section for ``model`` (see module docstring)."""
-    from ..fit.sgd import PerChannelMicrofacetBRDF
+    from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
     from ..microfacet.model import MicrofacetBRDF, SumBRDF
     from ..microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF
 

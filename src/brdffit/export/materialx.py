@@ -49,7 +49,8 @@ height-correlated G2 of the average α = √(αx αy), and attenuates the diffus
 ``1 − E_F(θo)·comp`` (the dielectric's directional albedo) — the fit adds ρd/π unchanged
 (the base colour restores the mean, not the dependence on θo).
 
-A **coated** diffuse fit (base lobe + white coat lobe, :func:`brdffit.fit.analytic.coat_parts`):
+A **coated** diffuse fit (base lobe + white coat lobe,
+:func:`brdffit.microfacet.coat.coat_parts`):
 the base lobe by the rules above, the coat as ``coat_weight`` = w, ``coat_roughness`` =
 √α_coat, ``coat_ior`` = 1.5, ``coat_darkening`` = 0 (the fit has no darkening). OpenPBR's
 graph mixes, by ``coat_weight``, a coat-roughened base roughness ``(2 r_c⁴ + r⁴)^¼`` and a
@@ -249,10 +250,10 @@ def _schlick_f82(cos_t, f0, f82_tint):
 def openpbr_parameters(model, metal: bool | None = None) -> dict:
     """OpenPBR inputs of a fit by the rules of the module docstring, with ``notes``,
     ``tangent_rotation_deg`` and the fit's ``F0``, ``F90``, ``rho_d``. A coated diffuse fit
-    (:func:`brdffit.fit.analytic.coat_parts`): the base lobe by these rules, the coat as
+    (:func:`brdffit.microfacet.coat.coat_parts`): the base lobe by these rules, the coat as
     ``coat_weight`` = w, ``coat_roughness`` = √α_coat, ``coat_ior`` = 1.5,
     ``coat_darkening`` = 0."""
-    from ..fit.analytic import coat_alpha_weight, coat_parts
+    from ..microfacet.coat import coat_alpha_weight, coat_parts
     from .gltf import _ggx_model, is_metal, reflectances
 
     parts = coat_parts(model)

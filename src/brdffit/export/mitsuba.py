@@ -170,7 +170,7 @@ def _lobe_terms(m, mask, notes) -> list[dict]:
 def builtin_terms(model) -> tuple[list[dict], list[str]]:
     """The additive terms (``roughconductor`` lobes and one ``diffuse``) of ``model`` and the
     notes on approximations; :class:`ExportError` when it has no built-in equivalent."""
-    from ..fit.sgd import PerChannelMicrofacetBRDF
+    from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
     from ..microfacet.model import MicrofacetBRDF, SumBRDF
 
     notes: set[str] = set()
@@ -264,7 +264,7 @@ def mitsuba_equivalent(model, rotate: bool = False):
 
 
 def _source_dists(model):
-    from ..fit.sgd import PerChannelMicrofacetBRDF
+    from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
     from ..microfacet.model import SumBRDF
 
     if isinstance(model, SumBRDF):

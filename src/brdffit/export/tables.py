@@ -14,7 +14,7 @@ Bagher et al. 2012 Eq. 1 (ρd, ρs: dimensionless, the BRDF is ``ρd/π + ρs F 
 cos θo)``), Eq. 8 (SGD α, p) and Eq. 11 (F0, F1), and optionally the Eq. 9 G1 approximation
 (λ, c, k; then ``g1="approx"`` models can be built). Transcribe the paper's supplemental
 tables into this layout (one row per channel). Each material becomes a
-:class:`~brdffit.fit.sgd.PerChannelMicrofacetBRDF` with SGD channels.
+:class:`~brdffit.microfacet.sgd_model.PerChannelMicrofacetBRDF` with SGD channels.
 
 NPF table — the uber-texture of :func:`brdffit.export.glsl.pack_npf_uber_texture`
 -----------------------------------------------------------------------------------
@@ -45,7 +45,7 @@ _CH = {"r": 0, "g": 1, "b": 2, "0": 0, "1": 1, "2": 2}
 
 def load_sgd_table(path) -> dict:
     """``{material: PerChannelMicrofacetBRDF}`` from an SGD CSV table (layout above)."""
-    from ..fit.sgd import PerChannelMicrofacetBRDF
+    from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
     from ..microfacet.sgd import SGD
 
     path = Path(path)

@@ -130,6 +130,7 @@ from ..geometry import half_diff_to_io
 from ..brdf import measured_mask
 from ..grid import (N_PHI_D, N_THETA_D, N_THETA_H, merl_node_values, merl_phi_d, merl_theta_d,
                     merl_theta_h)
+from ..microfacet.coat import COAT_F0
 from ..microfacet.shadowing import EllipticalSlopeDistribution
 from ..schema import ALBEDO_MAX, INDEX_MAX
 
@@ -137,8 +138,7 @@ if TYPE_CHECKING:
     from ..microfacet import MicrofacetBRDF, SumBRDF
 
 __all__ = ["fit_analytic_diffuse", "fit_ggx_diffuse", "fit_beckmann_diffuse", "sample_set",
-           "ALPHA_MIN", "ALPHA_MAX_FIT", "COAT_F0", "COAT_MARGIN", "coat_parts",
-           "coat_alpha_weight", "summary"]
+           "ALPHA_MIN", "ALPHA_MAX_FIT", "COAT_MARGIN", "summary"]
 
 #: roughness bounds of the fits (α ≤ 1: glTF's roughness √α ≤ 1 keeps the export exact)
 ALPHA_MIN, ALPHA_MAX_FIT = 2e-3, 1.0
@@ -770,35 +770,7 @@ def _search_dielectric(kind, data, f90, schlick_alpha: float):
 COAT_MARGIN = 0.05
 #: ... and by at least this fraction of the data's energy (Σ w z²: below, an exact fit's noise)
 COAT_MIN_GAIN = 1e-6
-#: normal reflectance of the coat: index 1.5, the fixed index of glTF's clearcoat
-COAT_F0 = 0.04
 _COAT_SCAN = 24
-
-
-def coat_parts(model):
-    """``(base, coat)`` when ``model`` is a coated diffuse fit — a ``SumBRDF`` of a
-    ``MicrofacetBRDF`` and a white coat lobe (Schlick F0 = ``COAT_F0``, no diffuse term, the
-    same grey scale ``w`` ∈ [0, 1] on the three channels) — else ``None``."""
-    from ..microfacet import MicrofacetBRDF, SchlickFresnel, SumBRDF
-
-    comps = getattr(model, "components", None) if isinstance(model, SumBRDF) else None
-    if not comps or len(comps) != 2 or not all(isinstance(c, MicrofacetBRDF) for c in comps):
-        return None
-    base, coat = comps
-    f0 = np.asarray(getattr(coat.fresnel, "f0", np.nan), dtype=float)
-    w = np.asarray(coat.specular if coat.specular is not None else 1.0, dtype=float)
-    if (not isinstance(coat.fresnel, SchlickFresnel) or coat.diffuse is not None
-            or not np.allclose(f0, COAT_F0, rtol=0, atol=1e-12)
-            or not (np.ptp(w) <= 1e-12 and 0.0 <= float(np.max(w)) <= 1.0)):
-        return None
-    return base, coat
-
-
-def coat_alpha_weight(coat) -> tuple[float, float]:
-    """``(α, w)`` of the coat lobe of :func:`coat_parts`: its slope scale (√(αx αy), the
-    fits' coat is isotropic) and its grey weight."""
-    d = coat.distribution
-    return float(np.sqrt(d.alpha_x * d.alpha_y)), float(np.max(coat.specular))
 
 
 def _coat_solve(H, g, zz, bound: float = np.inf):
@@ -1058,9 +1030,9 @@ def _moment_start(brdf, kind: str, anisotropic: bool):
     Isotropic input: only the NDF of :func:`~brdffit.fit.tabulated.fit_tabulated` is needed
     (backscattering at a 90-node Gauss rule, 4 power iterations, Eq. 14-18 / Alg. 3), not its
     Fresnel table; anisotropic input: the full tabulated fit."""
+    from ..microfacet.conversions import beckmann_parameters, ggx_parameters
     from ..microfacet.tabulated import TabulatedSlopeDistribution, radial_rule
-    from .tabulated import (backscatter, beckmann_parameters, fit_tabulated, ggx_parameters,
-                            luminance, solve_slope_pdf)
+    from .tabulated import backscatter, fit_tabulated, luminance, solve_slope_pdf
 
     conv = ggx_parameters if kind == "ggx" else beckmann_parameters
     try:
@@ -1296,7 +1268,7 @@ def fit_ggx_diffuse(brdf, **kwargs) -> MicrofacetBRDF | SumBRDF:
         GGX(αx, αy, ρ), the chosen Fresnel, ``diffuse`` = ρd and ``specular`` = ks, with
         ``fit_info`` (objective, Fresnel chosen, starts, coat, time); when the coat is kept
         (module docstring), a ``SumBRDF`` of that lobe and the coat lobe
-        (:func:`coat_parts`).
+        (:func:`~brdffit.microfacet.coat.coat_parts`).
 
     Examples
     --------

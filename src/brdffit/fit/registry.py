@@ -375,7 +375,7 @@ def _lobe_figures(lobe) -> dict:
     if dist is not None:
         kind = getattr(dist, "kind", None) or type(dist).__name__.lower()
         if hasattr(dist, "table") and hasattr(dist, "slope_moments"):
-            from .tabulated import ggx_parameters  # a tabulated NDF: its GGX equivalent
+            from ..microfacet.conversions import ggx_parameters  # tabulated: GGX equivalent
 
             out["alpha"] = [float(x) for x in ggx_parameters(dist)]
             out["alpha_kind"] = "ggx-equivalent"
@@ -412,7 +412,7 @@ def figures(model) -> dict:
       a scale, Bagher 2016 §4.3).
     * ``rho_d``: per channel, the Lambertian albedo (the term is ρd/π); 0 without a diffuse
       term.
-    * ``coat``: for a coated diffuse fit (:func:`brdffit.fit.analytic.coat_parts`), the coat
+    * ``coat``: for a coated diffuse fit (:func:`brdffit.microfacet.coat.coat_parts`), the coat
       lobe's ``{"alpha", "weight", "f0"}`` (the other figures are the base lobe's); else
       ``None``.
     * ``table_bytes``: :func:`table_bytes`.
@@ -421,11 +421,9 @@ def figures(model) -> dict:
 
     out: dict[str, Any] = {"alpha": None, "alpha_kind": None, "alpha_rgb": None, "f0": None,
                            "rho_d": None, "coat": None}
-    parts = None
-    if getattr(model, "components", None) is not None:   # (analytic imports SciPy)
-        from .analytic import coat_alpha_weight, coat_parts
+    from ..microfacet.coat import coat_alpha_weight, coat_parts
 
-        parts = coat_parts(model)
+    parts = coat_parts(model)
     if parts is not None:
         base, coat = parts
         out.update(_lobe_figures(base))

@@ -17,7 +17,8 @@ Pipeline of :func:`fit_tabulated`:
 3. **Normalisation** (Eq. 8) of the *interpolated* P, continuous lookup, ``σ``/``G1``
    tables (Eq. 3) and sampling tables (Appendix A; visible normals for isotropic P):
    see :class:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution`. Roughness editing
-   (Eq. 9, scalar or per-texel arrays): :func:`with_roughness`.
+   (Eq. 9, scalar or per-texel arrays):
+   :func:`brdffit.microfacet.conversions.with_roughness`.
 4. **Fresnel** per channel: ``F(θd) = E[f_r / f_r,id | θd]`` (Eq. 19-20) with
    ``f_r,id = D G2 / (4 cos θi cos θo)`` (Eq. 1 with F = 1 and the height-correlated Eq. 2),
    averaged over every valid MERL sample (supplemental Eq. 33-39) for isotropic input. For
@@ -39,8 +40,8 @@ of the normalised iterate ≤ ``tol`` = :data:`DEFAULT_TOL` (1e-6), with a safet
 ``max_iterations`` (1000) reported in ``fit_info`` when hit (``converged``/``success`` False,
 ``cap_reached`` True, ``message``). The paper's fixed mode is ``iterations=4`` (``tol`` None).
 
-Conversions to analytic roughness by slope moments (Appendix C) are in :func:`to_beckmann`,
-:func:`to_ggx`, :func:`fit_beckmann` and :func:`fit_ggx`.
+Conversions to analytic roughness by slope moments (Appendix C) are in
+:mod:`brdffit.microfacet.conversions`; :func:`fit_beckmann` and :func:`fit_ggx` fit and convert.
 """
 
 from __future__ import annotations
@@ -53,14 +54,15 @@ from ..brdf import BRDF, measured_mask
 from ..errors import FitError
 from ..grid import (N_PHI_D, N_THETA_H, merl_phi_d, merl_theta_d, merl_theta_h,
                     tabulate_merl_grid)
+from ..microfacet.conversions import (beckmann_parameters, ggx_parameters, to_beckmann,
+                                      to_ggx)
+from ..microfacet.per_channel import PerChannelBRDF
 from ..microfacet.tabulated import (TabulatedSlopeDistribution,
                                     azimuthal_clamped_cosine_integral, radial_rule)
-from ..schema import ListOf, Nested, Opt, Schema, Text
-from ..serialization import SerializableModel
 
-__all__ = ["fit_tabulated", "fit_ggx", "fit_beckmann", "to_ggx", "to_beckmann", "with_roughness",
-           "solve_slope_pdf", "iteration_plan", "convergence_info", "extract_fresnel",
-           "luminance", "backscatter", "PerChannelBRDF", "DEFAULT_TOL", "PAPER_ITERATIONS"]
+__all__ = ["fit_tabulated", "fit_ggx", "fit_beckmann", "solve_slope_pdf", "iteration_plan",
+           "convergence_info", "extract_fresnel", "luminance", "backscatter", "DEFAULT_TOL",
+           "PAPER_ITERATIONS"]
 
 LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])  # Rec. 709 / linear sRGB
 
@@ -556,7 +558,8 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
     anisotropic:
         2D ``(θ, φ)`` fit (``n × n_phi``) or 1D radial fit; default ``not brdf.isotropic``.
     per_channel:
-        One distribution per RGB channel (a :class:`PerChannelBRDF`); default one
+        One distribution per RGB channel (a
+        :class:`~brdffit.microfacet.per_channel.PerChannelBRDF`); default one
         distribution from the luminance of the backscatter (the paper's choice).
     rule:
         Radial rule: ``"merl"`` (rectangles on θ = (π/2)u², supplemental Eq. 17-22),
@@ -638,162 +641,9 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
     return model
 
 
-def _microfacet_schema() -> Schema:
-    from ..microfacet.model import MicrofacetBRDF
-
-    return MicrofacetBRDF.state_schema
-
-
-class PerChannelBRDF(BRDF, SerializableModel):
-    """Three single-channel fits (``per_channel=True``): channel ``c`` of the result is
-    channel ``c`` of ``models[c]`` (one slope distribution and Fresnel per channel).
-
-    Sampled as an equal-weight mixture of the three models' samplers; saved as fit kind
-    ``"tabulated_per_channel"``.
-    """
-
-    fit_kind = "tabulated_per_channel"
-    #: fit-file state (:mod:`brdffit.schema`): three ``microfacet`` states, arrays under
-    #: ``c0.``, ``c1.``, ``c2.``
-    state_schema = Schema(
-        {"models": ListOf(Nested(_microfacet_schema), min_len=3, max_len=3,
-                          item_prefix="c{index}."),
-         "name": Opt(Text()), "source": Opt(Text())}, required=("models",))
-
-    def __init__(self, models, name="brdf", source=None):
-        self.models = list(models)
-        if len(self.models) != 3:
-            raise ValueError(f"PerChannelBRDF needs 3 models, got {len(self.models)}")
-        self.name = name
-        self.source = source
-        self.isotropic = all(getattr(m, "isotropic", False) for m in self.models)
-        self.fit_info = None
-        self.fit_options = None
-
-    def eval(self, wi, wo):
-        return np.stack([m.eval(wi, wo)[..., c] for c, m in enumerate(self.models)], -1)
-
-    def pdf(self, wi, wo):
-        return sum(m.pdf(wi, wo) for m in self.models) / 3.0
-
-    def sample(self, wi, u):
-        wi = np.asarray(wi, dtype=np.float64)
-        u = np.asarray(u, dtype=np.float64)
-        shape = np.broadcast_shapes(wi.shape, u.shape[:-1] + (3,))
-        wi = np.broadcast_to(wi, shape)
-        u = np.broadcast_to(u, shape[:-1] + (2,))
-        k = np.minimum((u[..., 0] * 3.0).astype(np.int64), 2)
-        u2 = np.stack([np.clip(u[..., 0] * 3.0 - k, 0.0, 1.0 - 1e-16), u[..., 1]], -1)
-        wo = np.zeros(shape)
-        for c, m in enumerate(self.models):  # three lobes, not a loop over samples
-            sel = k == c
-            if np.any(sel):
-                wo[sel] = m.sample(wi[sel], u2[sel])[0]
-        return wo, self.pdf(wi, wo)
-
-    def to_state(self):
-        params, arrays = {"name": self.name, "source": self.source, "models": []}, {}
-        for c, m in enumerate(self.models):
-            p, a = m.to_state()
-            params["models"].append(p)
-            arrays.update({f"c{c}.{k}": v for k, v in a.items()})
-        return params, arrays
-
-    @classmethod
-    def from_state(cls, params, arrays):
-        from ..microfacet import MicrofacetBRDF
-
-        models = [MicrofacetBRDF.from_state(p, {k[len(f"c{c}."):]: v for k, v in arrays.items()
-                                                if k.startswith(f"c{c}.")})
-                  for c, p in enumerate(params["models"])]
-        return cls(models, name=params.get("name"), source=params.get("source"))
-
-
-# ------------------------------------------------------------------------------------------
-# Conversion to analytic roughness (Appendix C)
-# ------------------------------------------------------------------------------------------
-def _parts(model):
-    dist = getattr(model, "distribution", None)
-    fres = getattr(model, "fresnel", None)
-    if not isinstance(dist, TabulatedSlopeDistribution):
-        raise TypeError(f"expected a tabulated microfacet model, got {type(model).__name__}")
-    return dist, fres
-
-
-def _clip_rho(rho):
-    return float(np.clip(rho, -0.999, 0.999)) if np.isfinite(rho) else 0.0
-
-
-def beckmann_parameters(dist: TabulatedSlopeDistribution) -> tuple[float, float, float]:
-    """``(αx, αy, ρ)`` from the second slope moments (App. C, LEAN mapping):
-    ``E x̃² = αx²/2``, ``E ỹ² = αy²/2``, ``E x̃ỹ = ραxαy/2`` (exact when P is Beckmann)."""
-    m = dist.slope_moments()
-    ax, ay = np.sqrt(2.0 * m["Exx"]), np.sqrt(2.0 * m["Eyy"])
-    return float(ax), float(ay), _clip_rho(2.0 * m["Exy"] / (ax * ay))
-
-
-def ggx_parameters(dist: TabulatedSlopeDistribution) -> tuple[float, float, float]:
-    """``(αx, αy, ρ)`` from first absolute moments and angular moments (App. C):
-    ``αx = E|x̃|``, ``αy = E|ỹ|``, ``ρ = (αy/αx) b1/(b1² + b2²)`` (exact when P is GGX)."""
-    m = dist.slope_moments()
-    ax, ay = m["E|x|"], m["E|y|"]
-    b1, b2 = m["b1"], m["b2"]
-    return float(ax), float(ay), _clip_rho((ay / ax) * b1 / (b1 * b1 + b2 * b2))
-
-
-def _analytic_model(model, kind):
-    from ..microfacet import GGX, Beckmann, MicrofacetBRDF
-
-    dist, fres = _parts(model)
-    if kind == "beckmann":
-        ax, ay, rho = beckmann_parameters(dist)
-        d = Beckmann(ax, ay, rho)
-    else:
-        ax, ay, rho = ggx_parameters(dist)
-        d = GGX(ax, ay, rho)
-    out = MicrofacetBRDF(d, fres)
-    for attr in ("name", "source"):
-        try:
-            setattr(out, attr, getattr(model, attr, None))
-        except AttributeError:  # pragma: no cover
-            pass
-    info = dict(getattr(model, "fit_info", None) or {})
-    info.update({"alpha_x": ax, "alpha_y": ay, "rho": rho, "converted_from": "tabulated"})
-    out.fit_info = info
-    out.fit_options = dict(getattr(model, "fit_options", None) or {}, model=kind)
-    return out
-
-
-def with_roughness(model, alpha_x, alpha_y=None):
-    """The fitted model with its table scaled by ``(αx, αy)`` (Eq. 9), without refitting.
-
-    ``alpha_x``/``alpha_y`` may be arrays (per-texel roughness) that broadcast with the
-    batch shape of the directions later given to ``eval``/``pdf``/``sample``. The Fresnel
-    and every table are shared with ``model``.
-    """
-    from ..microfacet import MicrofacetBRDF
-
-    dist, fres = _parts(model)
-    out = MicrofacetBRDF(dist.with_roughness(alpha_x, alpha_y), fres, name=model.name,
-                         source=model.source)
-    out.fit_info = getattr(model, "fit_info", None)
-    out.fit_options = getattr(model, "fit_options", None)
-    return out
-
-
-def to_beckmann(model):
-    """Anisotropic Beckmann ``MicrofacetBRDF`` with the same Fresnel (Appendix C)."""
-    return _analytic_model(model, "beckmann")
-
-
-def to_ggx(model):
-    """Anisotropic GGX ``MicrofacetBRDF`` with the same Fresnel (Appendix C)."""
-    return _analytic_model(model, "ggx")
-
-
 def fit_beckmann(brdf: BRDF, **kwargs) -> MicrofacetBRDF:
     """Beckmann fit by slope moments (Dupuy et al. 2015 App. C): :func:`fit_tabulated`, then
-    :func:`to_beckmann` (same Fresnel table).
+    :func:`~brdffit.microfacet.conversions.to_beckmann` (same Fresnel table).
 
     Parameters
     ----------
@@ -827,8 +677,8 @@ def fit_beckmann(brdf: BRDF, **kwargs) -> MicrofacetBRDF:
 
 def fit_ggx(brdf: BRDF, **kwargs) -> MicrofacetBRDF:
     """GGX fit by slope moments (Dupuy et al. 2015 App. C): :func:`fit_tabulated`, then
-    :func:`to_ggx` (same Fresnel table). For an engine material fitted over the whole data
-    with a Lambert term, see :func:`brdffit.fit.analytic.fit_ggx_diffuse`.
+    :func:`~brdffit.microfacet.conversions.to_ggx` (same Fresnel table). For an engine
+    material fitted over the whole data with a Lambert term, see :func:`brdffit.fit.analytic.fit_ggx_diffuse`.
 
     Parameters
     ----------

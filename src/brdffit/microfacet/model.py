@@ -57,12 +57,11 @@ from ..geometry import half_diff_to_io, slope_to_normal
 from ..schema import (ALBEDO_MAX, ALPHA_MAX, ALPHA_MIN, SPECULAR_MAX, RGB, Bool, Component,
                       ListOf, Number, Opt, Schema, StateError, Text)
 from ..serialization import SerializableModel, resolve_kind
-from .base import Fresnel, SlopeDistribution
+from .base import Fresnel, ScaledDistribution, SlopeDistribution
 from .beckmann import Beckmann
 from .fresnel import (ConductorFresnel, DielectricFresnel, GeneralizedSchlickFresnel,
                       SchlickFresnel, TabulatedFresnel)
 from .ggx import GGX
-from .shadowing import ScaledDistribution
 
 __all__ = ["MicrofacetBRDF", "SumBRDF", "register_distribution", "register_fresnel",
            "distribution_to_state", "distribution_from_state", "fresnel_to_state",

@@ -1,5 +1,4 @@
-"""Smith shadowing for any slope distribution, elliptical (scale-matrix) distributions, and
-roughness scaling.
+"""Smith shadowing for any slope distribution, and elliptical (scale-matrix) distributions.
 
 Contents
 --------
@@ -11,7 +10,6 @@ Contents
 * :class:`EllipticalSlopeDistribution` – the common base of the anisotropic Beckmann and GGX
   distributions with the scale matrix ``S = [[αx², ραxαy], [ραxαy, αy²]]`` of Dupuy 2015
   **Appendix C**: ``P(s) = g(sᵀ S⁻¹ s) / √|S|`` for a radial unit profile ``g``.
-* :class:`ScaledDistribution` – roughness scaling of an arbitrary distribution (Dupuy Eq. 9).
 
 Numerical integration of Eq. 3
 ------------------------------
@@ -65,10 +63,10 @@ import numpy as np
 
 from ..geometry import normalize, slope_to_normal
 from ..schema import ALPHA_MAX, ALPHA_MIN, Number, Opt, Schema
-from .base import SlopeDistribution
+from .base import SlopeDistribution, _check_float
 
 __all__ = ["sigma_numerical", "lambda_numerical", "g1_numerical",
-           "EllipticalSlopeDistribution", "ScaledDistribution"]
+           "EllipticalSlopeDistribution"]
 
 
 # ----------------------------------------------------------------------------------------
@@ -176,16 +174,6 @@ def g1_numerical(dist: SlopeDistribution, w, n: int = 96) -> np.ndarray:
 # ----------------------------------------------------------------------------------------
 # Elliptical distributions with the scale matrix of Dupuy 2015 Appendix C
 # ----------------------------------------------------------------------------------------
-def _check_float(name: str, value) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a real number, got {value!r}") from None
-    if not np.isfinite(v):
-        raise ValueError(f"{name} must be finite, got {v}")
-    return v
-
-
 class EllipticalSlopeDistribution(SlopeDistribution):
     """``P(s) = g(sᵀ S⁻¹ s) / √|S|`` with ``S = [[αx², ραxαy], [ραxαy, αy²]]`` (Dupuy App. C).
 
@@ -385,69 +373,3 @@ class EllipticalSlopeDistribution(SlopeDistribution):
                "Exy": exy}
         out.update(self.angular_moments())
         return out
-
-
-# ----------------------------------------------------------------------------------------
-# Roughness scaling of an arbitrary distribution (Dupuy 2015 Eq. 9)
-# ----------------------------------------------------------------------------------------
-class ScaledDistribution(SlopeDistribution):
-    """``P_a(x̃, ỹ) = P(x̃/ax, ỹ/ay)/(ax ay)`` for any base distribution (Dupuy 2015 Eq. 9).
-
-    Smith Λ and visible-normal sampling follow from the base by the stretch invariance of
-    Heitz 2014 §5.3: ``Λ_a(w) = Λ(normalize(ax wx, ay wy, wz))``.
-    """
-
-    kind = "scaled"
-
-    def __init__(self, base: SlopeDistribution, ax: float, ay: float | None = None):
-        ax = _check_float("ax", ax)
-        ay = ax if ay is None else _check_float("ay", ay)
-        if ax <= 0 or ay <= 0:
-            raise ValueError(f"roughness scales must be > 0, got ax={ax}, ay={ay}")
-        self.base, self.ax, self.ay = base, ax, ay
-        self.isotropic = bool(base.isotropic and ax == ay)
-        self._a = np.array([ax, ay])
-
-    def params(self) -> dict:
-        return {"ax": self.ax, "ay": self.ay, "base": type(self.base).__name__,
-                "base_params": self.base.params()}
-
-    def pdf(self, slopes) -> np.ndarray:
-        s = np.asarray(slopes, dtype=np.float64)
-        return self.base.pdf(s / self._a) / (self.ax * self.ay)
-
-    def sample(self, u) -> np.ndarray:
-        return np.asarray(self.base.sample(u)) * self._a
-
-    def _stretch(self, w):
-        w = np.asarray(w, dtype=np.float64)
-        return normalize(np.concatenate([w[..., :2] * self._a, w[..., 2:3]], -1))
-
-    def Lambda(self, w) -> np.ndarray:
-        w = np.asarray(w, dtype=np.float64)
-        return np.where(w[..., 2] > 0, self.base.Lambda(self._stretch(w)), np.inf)
-
-    def sigma(self, w) -> np.ndarray:
-        """``σ = cos θ (1 + Λ)`` above the horizon (0 below: only used for w_z > 0)."""
-        w = np.asarray(w, dtype=np.float64)
-        up = w[..., 2] > 0
-        return np.where(up, np.where(up, w[..., 2], 0.0) * (1.0 + np.where(up, self.Lambda(w), 0.0)), 0.0)
-
-    def sigma_visible(self, w) -> np.ndarray:
-        """``cos θw · σ_v,base(w*)/cos θw*`` (stretch invariance, as :meth:`Lambda`), the
-        normaliser of :meth:`sample_visible`."""
-        w = np.asarray(w, dtype=np.float64)
-        up = w[..., 2] > 0
-        ws = self._stretch(w)
-        cs = np.where(ws[..., 2] > 0, ws[..., 2], 1.0)
-        return np.where(up, np.where(up, w[..., 2], 0.0) * self.base.sigma_visible(ws) / cs, 0.0)
-
-    def sample_visible(self, w, u) -> np.ndarray:
-        from ..geometry import normal_to_slope
-
-        m0 = self.base.sample_visible(self._stretch(w), u)
-        return slope_to_normal(normal_to_slope(m0) * self._a)
-
-    def scaled(self, ax: float, ay: float | None = None):
-        ay = ax if ay is None else ay
-        return ScaledDistribution(self.base, self.ax * ax, self.ay * ay)

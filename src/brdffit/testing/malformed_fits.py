@@ -127,7 +127,7 @@ def _sum():
 
 
 def _per_channel_sgd():
-    from ..fit.sgd import PerChannelMicrofacetBRDF
+    from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
     from ..microfacet import GGX
 
     chans = [{"distribution": GGX(a), "rho_d": 0.1, "rho_s": 0.3, "F0": 0.9, "F1": -0.5}
@@ -136,7 +136,7 @@ def _per_channel_sgd():
 
 
 def _per_channel_tab():
-    from ..fit.tabulated import PerChannelBRDF
+    from ..microfacet.per_channel import PerChannelBRDF
     from ..microfacet import GGX, MicrofacetBRDF, SchlickFresnel
 
     return PerChannelBRDF([MicrofacetBRDF(GGX(a), SchlickFresnel(0.5)) for a in (0.1, 0.2, 0.3)])

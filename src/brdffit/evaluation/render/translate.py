@@ -30,7 +30,7 @@ convention mismatch cannot silently render the wrong material.
 
 :func:`albedo_drjit` / :func:`furnace_drjit` measure what a renderer estimates: the
 importance-sampled directional albedo of an evaluator, to be compared with its quadrature
-(furnace test, :mod:`brdffit.testing.furnace`; ``bench/bench_furnace.py``). ``mode="table"`` forces the
+(furnace test, :mod:`brdffit.furnace`; ``bench/bench_furnace.py``). ``mode="table"`` forces the
 table, ``mode="closed"`` forbids the fall-back (raises instead).
 """
 
@@ -136,9 +136,9 @@ register_translator("SumBRDF", _sum_translator)
 
 
 def _per_channel_translator(brdf):
-    """``PerChannelBRDF`` (three single-channel fits, ``brdffit.fit.tabulated``: ``models``)
-    and ``PerChannelMicrofacetBRDF`` (Bagher 2012 per-channel lobes, ``brdffit.fit.sgd``:
-    ``lobes``): channel c from the Dr.Jit evaluator of component c."""
+    """``PerChannelBRDF`` (three single-channel models, ``brdffit.microfacet.per_channel``:
+    ``models``) and ``PerChannelMicrofacetBRDF`` (Bagher 2012 per-channel lobes,
+    ``brdffit.microfacet.sgd_model``: ``lobes``): channel c from the Dr.Jit evaluator of component c."""
     models = getattr(brdf, "models", None) or getattr(brdf, "lobes", None)
     if not models or len(models) != 3:
         return None
@@ -327,10 +327,10 @@ def albedo_drjit(evaluator, theta_i: float, n: int = 1 << 20, seed: int = 0,
     """Importance-sampled directional albedo of a Dr.Jit evaluator, as a renderer estimates
     it: ``mean(f cos θo / pdf)`` over ``wo`` drawn by ``evaluator.sample`` (``wi`` at polar
     angle ``theta_i``, φi = 0), with the pdf ``sample`` returns; samples with pdf 0 count as
-    0. Returns ``(mean, standard error)``, RGB (:mod:`brdffit.testing.furnace`).
+    0. Returns ``(mean, standard error)``, RGB (:mod:`brdffit.furnace`).
     ``stratified``: ``batches`` independent batches of jittered-grid uniforms in
     ``[0, 1)³`` (lobe choice ``u1`` and direction ``u2``), standard error of the batch means."""
-    from ...testing.furnace import estimator_values, sample_mean
+    from ...furnace import estimator_values, sample_mean
 
     dj = _dj()
     mi = dj.mi
@@ -352,9 +352,9 @@ def furnace_drjit(evaluator, thetas_deg=(0.0, 40.0, 80.0), n: int = 1 << 20, see
                   alpha_scale=1.0, tol: float = 0.01, k: float = 4.0,
                   stratified: bool = False, **quad_kw):
     """Furnace test of a Dr.Jit evaluator: :func:`albedo_drjit` against the quadrature of
-    the evaluator's own ``eval`` (:func:`brdffit.testing.furnace.albedo_quadrature`), one
-    :class:`~brdffit.testing.furnace.FurnaceResult` per incidence."""
-    from ...testing.furnace import FurnaceResult, albedo_quadrature
+    the evaluator's own ``eval`` (:func:`brdffit.furnace.albedo_quadrature`), one
+    :class:`~brdffit.furnace.FurnaceResult` per incidence."""
+    from ...furnace import FurnaceResult, albedo_quadrature
 
     out = []
     for j, t in enumerate(np.radians(np.atleast_1d(thetas_deg))):

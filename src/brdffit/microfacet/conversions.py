@@ -1,0 +1,96 @@
+"""Conversions of a tabulated microfacet model (Dupuy, Heitz, Iehl, Poulin, Ostromoukhov 2015).
+
+* Analytic roughness by slope moments (Appendix C): :func:`beckmann_parameters` and
+  :func:`ggx_parameters` give ``(αx, αy, ρ)`` of a
+  :class:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution`; :func:`to_beckmann` and
+  :func:`to_ggx` turn a tabulated ``MicrofacetBRDF`` into a Beckmann or GGX one with the same
+  Fresnel.
+* Roughness editing (Eq. 9): :func:`with_roughness` scales the table by ``(αx, αy)``, scalars
+  or per-texel arrays, without refitting.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .beckmann import Beckmann
+from .ggx import GGX
+from .model import MicrofacetBRDF
+from .tabulated import TabulatedSlopeDistribution
+
+__all__ = ["beckmann_parameters", "ggx_parameters", "to_beckmann", "to_ggx", "with_roughness"]
+
+
+def _parts(model):
+    dist = getattr(model, "distribution", None)
+    fres = getattr(model, "fresnel", None)
+    if not isinstance(dist, TabulatedSlopeDistribution):
+        raise TypeError(f"expected a tabulated microfacet model, got {type(model).__name__}")
+    return dist, fres
+
+
+def _clip_rho(rho):
+    return float(np.clip(rho, -0.999, 0.999)) if np.isfinite(rho) else 0.0
+
+
+def beckmann_parameters(dist: TabulatedSlopeDistribution) -> tuple[float, float, float]:
+    """``(αx, αy, ρ)`` from the second slope moments (App. C, LEAN mapping):
+    ``E x̃² = αx²/2``, ``E ỹ² = αy²/2``, ``E x̃ỹ = ραxαy/2`` (exact when P is Beckmann)."""
+    m = dist.slope_moments()
+    ax, ay = np.sqrt(2.0 * m["Exx"]), np.sqrt(2.0 * m["Eyy"])
+    return float(ax), float(ay), _clip_rho(2.0 * m["Exy"] / (ax * ay))
+
+
+def ggx_parameters(dist: TabulatedSlopeDistribution) -> tuple[float, float, float]:
+    """``(αx, αy, ρ)`` from first absolute moments and angular moments (App. C):
+    ``αx = E|x̃|``, ``αy = E|ỹ|``, ``ρ = (αy/αx) b1/(b1² + b2²)`` (exact when P is GGX)."""
+    m = dist.slope_moments()
+    ax, ay = m["E|x|"], m["E|y|"]
+    b1, b2 = m["b1"], m["b2"]
+    return float(ax), float(ay), _clip_rho((ay / ax) * b1 / (b1 * b1 + b2 * b2))
+
+
+def _analytic_model(model, kind):
+    dist, fres = _parts(model)
+    if kind == "beckmann":
+        ax, ay, rho = beckmann_parameters(dist)
+        d = Beckmann(ax, ay, rho)
+    else:
+        ax, ay, rho = ggx_parameters(dist)
+        d = GGX(ax, ay, rho)
+    out = MicrofacetBRDF(d, fres)
+    for attr in ("name", "source"):
+        try:
+            setattr(out, attr, getattr(model, attr, None))
+        except AttributeError:  # pragma: no cover
+            pass
+    info = dict(getattr(model, "fit_info", None) or {})
+    info.update({"alpha_x": ax, "alpha_y": ay, "rho": rho, "converted_from": "tabulated"})
+    out.fit_info = info
+    out.fit_options = dict(getattr(model, "fit_options", None) or {}, model=kind)
+    return out
+
+
+def with_roughness(model, alpha_x, alpha_y=None):
+    """The fitted model with its table scaled by ``(αx, αy)`` (Eq. 9), without refitting.
+
+    ``alpha_x``/``alpha_y`` may be arrays (per-texel roughness) that broadcast with the
+    batch shape of the directions later given to ``eval``/``pdf``/``sample``. The Fresnel
+    and every table are shared with ``model``.
+    """
+    dist, fres = _parts(model)
+    out = MicrofacetBRDF(dist.with_roughness(alpha_x, alpha_y), fres, name=model.name,
+                         source=model.source)
+    out.fit_info = getattr(model, "fit_info", None)
+    out.fit_options = getattr(model, "fit_options", None)
+    return out
+
+
+def to_beckmann(model):
+    """Anisotropic Beckmann ``MicrofacetBRDF`` with the same Fresnel (Appendix C)."""
+    return _analytic_model(model, "beckmann")
+
+
+def to_ggx(model):
+    """Anisotropic GGX ``MicrofacetBRDF`` with the same Fresnel (Appendix C)."""
+    return _analytic_model(model, "ggx")
