@@ -1,12 +1,11 @@
-"""The BRDF protocol's measured domain, followed through the pipeline (grid, fits, errors),
-and the importance-sampled furnace of :func:`brdffit.brdf.sampled_albedo`."""
+"""The BRDF protocol's measured domain, followed through the pipeline (grid, fits, errors)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from brdffit.brdf import IsotropicBRDF, measured_mask, sampled_albedo
+from brdffit.brdf import IsotropicBRDF, measured_mask
 from brdffit.geometry import half_diff_to_io
 from brdffit.grid import merl_node_values, tabulate_merl_grid
 
@@ -86,8 +85,3 @@ def test_errors_and_fits_ignore_what_was_not_measured():
     np.testing.assert_allclose(model.fit_info["rho_d"], RHO, rtol=0.02)
     assert quick_error(ref, model)["cos_rel_error"] < 0.02
 
-
-def test_sampled_albedo_of_a_lambertian_is_its_rho():
-    a, se = sampled_albedo(Lambert(), np.radians([0.0, 45.0, 85.0]), n_samples=1024)
-    np.testing.assert_allclose(a, np.broadcast_to(RHO, a.shape), rtol=1e-2)
-    assert np.all(se < 0.01)

@@ -12,10 +12,9 @@ The public API is deliberately small; everything else lives in the subpackages:
 
 # Nothing here imports NumPy: `import brdffit` (and `brdffit --help`) stay instant; the
 # public names below are imported on first use by __getattr__.
+from ._version import __version__
 from .errors import BRDFError, BRDFFormatError, ExportError, FitError
 from .synthetic import list_synthetic, synthetic  # eager: the function shadows the module name
-
-__version__ = "0.1.0"
 
 __all__ = ["BRDF", "IsotropicBRDF", "BRDFError", "BRDFFormatError", "FitError", "ExportError",
            "synthetic", "list_synthetic", "load", "resample_to_merl", "write_merl",

@@ -26,7 +26,7 @@ import numpy as np
 from .geometry import half_diff_to_io, io_to_half_diff
 
 __all__ = ["BRDF", "IsotropicBRDF", "cosine_hemisphere_sample", "cosine_hemisphere_pdf",
-           "cosine_pairs", "stratified_square", "measured_mask", "sampled_albedo"]
+           "cosine_pairs", "stratified_square", "measured_mask"]
 
 
 def _as_dirs(wi, wo) -> tuple[np.ndarray, np.ndarray]:
@@ -77,37 +77,6 @@ def measured_mask(brdf, wi, wo) -> np.ndarray | None:
     if getattr(brdf, "measured_domain", None) is None or not hasattr(brdf, "measured"):
         return None
     return np.asarray(brdf.measured(wi, wo), dtype=bool)
-
-
-def sampled_albedo(brdf, theta_i, n_samples: int = 4096, seed: int = 0
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Directional albedo ``a(θi) = ∫ f_r cos θo dωo`` and its standard error, both
-    ``(len(theta_i), 3)``, by importance sampling with the BRDF's own ``sample`` (cosine
-    sampling when it has none): ``a ≈ mean(f_r cos θo / pdf)`` over :func:`stratified_square`
-    points. The white furnace of a BRDF that conserves energy reads ≤ 1 at every θi.
-    Samples with a zero, non-finite or below-horizon draw count as 0; an infinite weight
-    as 1e30 (so that a singular BRDF fails a furnace test instead of vanishing)."""
-    theta_i = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
-    grid = stratified_square(n_samples, seed)
-    mean = np.empty((theta_i.size, 3))
-    se = np.empty((theta_i.size, 3))
-    for k, t in enumerate(theta_i):
-        wi = np.broadcast_to(np.array([np.sin(t), 0.0, np.cos(t)]), (grid.shape[0], 3))
-        try:
-            wo, pdf = brdf.sample(wi, grid)
-        except (NotImplementedError, AttributeError):
-            wo = cosine_hemisphere_sample(grid)
-            pdf = cosine_hemisphere_pdf(wo)
-        wo, pdf = np.asarray(wo, dtype=np.float64), np.asarray(pdf, dtype=np.float64)
-        ok = (pdf > 0) & (wo[:, 2] > 0) & np.isfinite(pdf)
-        f = np.zeros((wo.shape[0], 3))
-        if ok.any():
-            f[ok] = np.asarray(brdf.eval(wi[ok], wo[ok]), dtype=np.float64)
-        w = np.where(ok[:, None], f * (np.where(ok, wo[:, 2], 0.0)
-                                       / np.where(ok, pdf, 1.0))[:, None], 0.0)
-        w = np.nan_to_num(w, nan=0.0, posinf=1e30)
-        mean[k], se[k] = w.mean(0), w.std(0, ddof=1) / np.sqrt(w.shape[0])
-    return mean, se
 
 
 class BRDF(abc.ABC):

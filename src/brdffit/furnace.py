@@ -45,7 +45,9 @@ import dataclasses
 
 import numpy as np
 
-__all__ = ["albedo_quadrature", "albedo_sampled", "estimator_values", "stratified_uniforms",
+from .brdf import cosine_hemisphere_pdf, cosine_hemisphere_sample, stratified_square
+
+__all__ = ["albedo_quadrature", "albedo_sampled", "sampled_albedo", "estimator_values", "stratified_uniforms",
            "sample_mean", "check", "FurnaceResult", "furnace"]
 
 
@@ -157,15 +159,46 @@ def sample_mean(values, rng, n: int, dims: int, *, batch: int = 1 << 18,
     return mean, np.sqrt(np.maximum(s2 / n - mean**2, 0.0) / max(n - 1, 1))
 
 
-def estimator_values(f, wo, pdf) -> np.ndarray:
+def estimator_values(f, wo, pdf, infinite: float = 0.0) -> np.ndarray:
     """Per-sample ``f cos θo / pdf`` (0 where ``pdf`` is 0 or not finite, or ``wo`` is below
-    the horizon), ``(N, 3)``."""
+    the horizon), ``(N, 3)``; a NaN value counts as 0, an infinite one as ``infinite``."""
     f = np.asarray(f, np.float64)
     pdf = np.asarray(pdf, np.float64)
     cz = np.asarray(wo, np.float64)[:, 2]
     good = (pdf > 0) & np.isfinite(pdf) & (cz > 0)
-    val = f * (np.where(good, cz, 0.0) / np.where(good, pdf, 1.0))[:, None]
+    with np.errstate(invalid="ignore", over="ignore"):
+        val = f * (np.where(good, cz, 0.0) / np.where(good, pdf, 1.0))[:, None]
+    val = np.where(np.isinf(val), infinite, val)
     return np.where(good[:, None] & np.isfinite(val), val, 0.0)
+
+
+def sampled_albedo(brdf, theta_i, n_samples: int = 4096, seed: int = 0
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Directional albedo ``a(θi) = ∫ f_r cos θo dωo`` of any BRDF and its standard error, both
+    ``(len(theta_i), 3)``: ``mean(f_r cos θo / pdf)`` over the ``stratified_square`` points
+    mapped by the BRDF's own ``sample`` (cosine sampling when it has none). The white furnace
+    of a BRDF that conserves energy reads ≤ 1 at every θi. An infinite weight counts as 1e30,
+    so that a singular BRDF fails the furnace instead of vanishing from it (the physical
+    checks of :mod:`brdffit.evaluation.validity` and the ggx-diffuse fit's ρd hold use it)."""
+    theta_i = np.atleast_1d(np.asarray(theta_i, dtype=np.float64))
+    grid = stratified_square(n_samples, seed)
+    mean = np.empty((theta_i.size, 3))
+    se = np.empty((theta_i.size, 3))
+    for k, t in enumerate(theta_i):
+        wi = np.broadcast_to(_incident(float(t)), (grid.shape[0], 3))
+        try:
+            wo, pdf = brdf.sample(wi, grid)
+        except (NotImplementedError, AttributeError):
+            wo = cosine_hemisphere_sample(grid)
+            pdf = cosine_hemisphere_pdf(wo)
+        wo, pdf = np.asarray(wo, dtype=np.float64), np.asarray(pdf, dtype=np.float64)
+        ok = (pdf > 0) & (wo[:, 2] > 0) & np.isfinite(pdf)
+        f = np.zeros((wo.shape[0], 3))
+        if ok.any():
+            f[ok] = np.asarray(brdf.eval(wi[ok], wo[ok]), dtype=np.float64)
+        w = estimator_values(f, wo, pdf, infinite=1e30)
+        mean[k], se[k] = w.mean(0), w.std(0, ddof=1) / np.sqrt(w.shape[0])
+    return mean, se
 
 
 @dataclasses.dataclass

@@ -129,7 +129,7 @@ def _fresnel(model) -> list[Violation]:
 
 
 def _albedo(model) -> list[Violation]:
-    from ..brdf import sampled_albedo
+    from ..furnace import sampled_albedo
 
     means, ses = sampled_albedo(model, np.radians(ALBEDO_ANGLES_DEG), ALBEDO_SAMPLES)
     worst = None

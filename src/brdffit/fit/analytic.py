@@ -1235,11 +1235,11 @@ def _hold_furnace(rho_d, specular_lobes) -> tuple[np.ndarray, np.ndarray]:
     """``(ρd, lowering)``: ρd per channel lowered where ``ρd + Σ a_spec(θi)`` exceeds 1 at an
     incidence of :data:`FURNACE_ANGLES_DEG`, so that the fit's directional albedo stays ≤ 1
     (the Lambertian term adds exactly ρd to it at every θi). ``a_spec`` is the specular lobes'
-    albedo (:func:`brdffit.brdf.sampled_albedo`, :data:`FURNACE_SAMPLES` samples); each lobe
+    albedo (:func:`brdffit.furnace.sampled_albedo`, :data:`FURNACE_SAMPLES` samples); each lobe
     has F ≤ 1 and a Smith G, so it alone never exceeds 1. Deviation from the least-squares
     optimum: only ρd moves (the specular part is kept), the least change that holds the
     furnace; ``lowering`` is what was taken off (0 on most materials)."""
-    from ..brdf import sampled_albedo
+    from ..furnace import sampled_albedo
 
     angles = np.radians(FURNACE_ANGLES_DEG)
     spec = sum(sampled_albedo(lobe, angles, FURNACE_SAMPLES)[0] for lobe in specular_lobes)

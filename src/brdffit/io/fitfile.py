@@ -118,7 +118,7 @@ def save_fit(model: BRDF, path: str | os.PathLike, *, source=None, options: dict
     read it): a model that could not be loaded back raises ``BRDFFormatError`` and nothing
     is written.
     """
-    from .. import __version__
+    from .._version import __version__
 
     if not isinstance(model, SerializableModel) or not model.fit_kind:
         raise TypeError(f"{type(model).__name__} cannot be saved as a fit file")
