@@ -47,7 +47,6 @@ def test_good_values_pass_and_command_line_numbers_are_converted():
 
 def test_every_numeric_option_of_every_model_has_a_range():
     """A new numeric option must be given a range here (or it is unbounded)."""
-    registry.load_undeclared_modules()
     missing = set()
     for name in registry.known_names():
         params, _ = fitter_parameters(registry.get(name).fit)

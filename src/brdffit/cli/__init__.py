@@ -339,15 +339,11 @@ def check_models(names, option: str = "--models") -> list[str]:
     (an empty list passes: callers that need a model say so).
 
     Reads the registry's declared names (:func:`brdffit.fit.registry.known_names`) without
-    importing any fitting module (only a fitting module that declares none of its models
-    would be imported, to find its names)."""
+    importing any fitting module."""
     from ..fit import registry
 
     names = list(names)
     unknown = [name for name in names if name not in set(registry.known_names())]
-    if unknown:
-        registry.load_undeclared_modules()
-        unknown = [name for name in unknown if name not in set(registry.known_names())]
     if unknown:
         raise usage_error(option, f"unknown model(s) {', '.join(map(repr, unknown))}; known "
                                   f"models: {', '.join(registry.known_names())} (brdffit "

@@ -94,10 +94,9 @@ def fit(brdf: BRDF | str, model: str = "ggx-diffuse", **options) -> BRDF:
     0.12
     """
     from .registry import fit as _fit
-    from .registry import known_names, list_fitters
+    from .registry import known_names
 
-    if not isinstance(model, str) or (model not in known_names()
-                                      and model not in list_fitters()):
+    if not isinstance(model, str) or model not in known_names():
         raise ValueError(f"unknown model {model!r}; expected one of {', '.join(known_names())}")
     from .registry import check_options
 

@@ -1310,18 +1310,3 @@ def summary(model) -> dict:
             "rho_d": info.get("rho_d"), "F0": info.get("F0"), "ks": info.get("ks"),
             "objective_normalised": info.get("objective_normalised"),
             "coat": info.get("coat"), "time_s": info.get("time")}
-
-
-def _register_fitters() -> None:
-    from .registry import register_fitter
-
-    register_fitter("ggx-diffuse", fit_ggx_diffuse, summary,
-                    "GGX + Lambert (+ a white coat lobe where it pays), Schlick F0, dielectric η "
-                    "or conductor (η, k) Fresnel, compressive objective (Bagher 2016)")
-    register_fitter("beckmann-diffuse", fit_beckmann_diffuse, summary,
-                    "Beckmann + Lambert (+ a white coat lobe where it pays), Schlick F0, "
-                    "dielectric η or conductor (η, k) Fresnel, compressive objective (Bagher "
-                    "2016)")
-
-
-_register_fitters()

@@ -1,23 +1,22 @@
 """Registry of fitting methods, by model name (used by ``brdffit fit``, compare and batch).
 
-A fitting module registers its models when it is imported::
+**Declared models.** :data:`MODELS` is one table of every built-in model, in the spirit of
+colour-science's ``*_METHODS`` mappings: its fitting function and its summary function as
+``"module:function"`` references inside :mod:`brdffit.fit`, resolved on first use, a
+one-line description, the paper, whether it fits isotropic BRDFs only, and typical figures
+(fit-file size, fit time) measured by ``bench/bench_cli.py --models`` (cited in
+:data:`TYPICAL_SOURCE`). Nothing registers itself on import: the CLI's help, ``brdffit
+models`` and the model-name checks read the table without importing SciPy, Numba or the
+fitting stack, and :func:`get` imports only the module of the model asked for.
 
-    from .registry import register_fitter
-    register_fitter("tabulated", fit_tabulated, summary_fn)
-
-* ``fn(brdf, **options) -> model``: fits a BRDF; ``options`` are keyword arguments of the
+* ``fit(brdf, **options) -> model``: fits a BRDF; ``options`` are keyword arguments of the
   fitting function (e.g. ``iterations=4``). :func:`fit` accepts them as a dict.
-* ``summary_fn(model) -> dict``: a short JSON-able summary of a fitted model (what the CLI
-  prints); optional.
+* ``summary(model) -> dict``: a short JSON-able summary of a fitted model (what the CLI
+  prints).
 
-**Declared models.** :data:`MODELS` declares every built-in model *without importing its
-fitting module*: the module that registers it, a one-line description, the paper, whether it
-fits isotropic BRDFs only, and typical figures (fit-file size, fit time) measured by
-``bench/bench_cli.py --models`` (cited in :data:`TYPICAL_SOURCE`). The CLI's help, ``brdffit
-models`` and the model-name checks read it, so they do not import SciPy, Numba or the fitting
-stack; :func:`get` imports only the module of the model asked for (all modules for a name
-that is not declared). A new fitting module adds its models to :data:`MODELS` (a test checks
-that every registered model is declared with the same isotropy).
+**Plug-ins.** Code outside the package adds a model with :func:`register_fitter`
+(``register_fitter("my-model", fit_fn, summary_fn)``); a registered name takes precedence
+over a declared one.
 
 **Figures of a fitted model.** :func:`figures` gives the numbers a user looks for, the same
 way for every model (``brdffit fit``'s summary and the batch ``summary.csv``): the slope
@@ -39,8 +38,7 @@ from .._blas import with_single_blas_thread
 # NumPy is imported inside the functions that need it: `brdffit --help` reads MODELS.
 
 __all__ = ["Fitter", "FITTERS", "ModelInfo", "MODELS", "PAPERS", "TYPICAL_SOURCE",
-           "register_fitter", "get_fitter", "get", "list_fitters", "known_names",
-           "load_undeclared_modules", "describe", "fit", "fit_model", "is_isotropic_only",
+           "register_fitter", "get_fitter", "get", "list_fitters", "known_names", "describe", "fit", "fit_model", "is_isotropic_only",
            "summarize", "model_params", "small_json", "figures", "table_bytes",
            "check_options"]
 
@@ -56,7 +54,9 @@ class ModelInfo:
     """
 
     name: str
-    module: str           # the brdffit.fit submodule that registers it
+    module: str           # the brdffit.fit submodule that holds its functions
+    function: str         # its fitting function, "module:function" within brdffit.fit
+    summary: str          # its summary function, "module:function"
     description: str      # one line (<= 58 characters: `--help` at 80 columns)
     paper: str            # keys of PAPERS, comma-separated
     isotropic_only: bool = False
@@ -98,36 +98,43 @@ _TYPICAL = {
 }
 
 
-def _model(name, module, description, paper, isotropic_only=False) -> ModelInfo:
+def _model(name, function, description, paper, isotropic_only=False) -> ModelInfo:
+    module = function.split(":")[0]
     size, tables, seconds = _TYPICAL.get(name, (None, None, None))
-    return ModelInfo(name, module, description, paper, isotropic_only, size, tables, seconds)
+    return ModelInfo(name, module, function, f"{module}:summary", description, paper,
+                     isotropic_only, size, tables, seconds)
 
 
-#: Every built-in model, in the order the CLI lists them.
+#: Every built-in model, in the order the CLI lists them (summary function: the module's
+#: ``summary``).
 MODELS: dict[str, ModelInfo] = {m.name: m for m in (
-    _model("tabulated", "tabulated", "tabulated NDF + Fresnel by power iteration", "Dupuy 2015"),
-    _model("ggx", "tabulated", "GGX from the tabulated fit's slope moments", "Dupuy 2015"),
-    _model("beckmann", "tabulated", "Beckmann from the tabulated fit's slope moments",
+    _model("tabulated", "tabulated:fit_tabulated", "tabulated NDF + Fresnel by power iteration",
            "Dupuy 2015"),
-    _model("ggx-diffuse", "analytic", "GGX + Lambert (+ coat), Schlick/dielectric/conductor",
-           "Dupuy 2015, Bagher 2016"),
-    _model("beckmann-diffuse", "analytic",
-           "Beckmann + Lambert (+ coat), Schlick/diel./conductor",
-           "Dupuy 2015, Bagher 2016"),
-    _model("sgd", "sgd", "Shifted Gamma Distribution per channel", "Bagher 2012", True),
-    _model("beckmann-2s", "sgd", "Beckmann per channel, two-slice fit", "Bagher 2012", True),
-    _model("ggx-2s", "sgd", "GGX per channel, two-slice fit", "Bagher 2012", True),
-    _model("beckmann-ct", "sgd", "Cook-Torrance Beckmann per channel, least squares",
+    _model("ggx", "tabulated:fit_ggx", "GGX from the tabulated fit's slope moments",
+           "Dupuy 2015"),
+    _model("beckmann", "tabulated:fit_beckmann", "Beckmann from the tabulated fit's slope moments",
+           "Dupuy 2015"),
+    _model("ggx-diffuse", "analytic:fit_ggx_diffuse",
+           "GGX + Lambert (+ coat), Schlick/dielectric/conductor", "Dupuy 2015, Bagher 2016"),
+    _model("beckmann-diffuse", "analytic:fit_beckmann_diffuse",
+           "Beckmann + Lambert (+ coat), Schlick/diel./conductor", "Dupuy 2015, Bagher 2016"),
+    _model("sgd", "sgd:fit_sgd", "Shifted Gamma Distribution per channel", "Bagher 2012", True),
+    _model("beckmann-2s", "sgd:fit_beckmann_two_slice", "Beckmann per channel, two-slice fit",
+           "Bagher 2012", True),
+    _model("ggx-2s", "sgd:fit_ggx_two_slice", "GGX per channel, two-slice fit", "Bagher 2012",
+           True),
+    _model("beckmann-ct", "sgd:fit_beckmann_ct",
+           "Cook-Torrance Beckmann per channel, least squares", "Cook 1982, Bagher 2012", True),
+    _model("ggx-ct", "sgd:fit_ggx_ct", "Cook-Torrance GGX per channel, least squares",
            "Cook 1982, Bagher 2012", True),
-    _model("ggx-ct", "sgd", "Cook-Torrance GGX per channel, least squares",
-           "Cook 1982, Bagher 2012", True),
-    _model("npf", "npf", "non-parametric factors D, F, G (independent G)", "Bagher 2016", True),
-    _model("npf-g-from-d", "npf", "non-parametric factors, G derived from D", "Bagher 2016",
-           True),
-    _model("npf-naive", "npf", "non-parametric factors D, F, H (no shadowing)", "Bagher 2016",
-           True),
-    _model("npf-bivariate", "npf", "non-parametric bivariate D(θh, θd) and F", "Bagher 2016",
-           True),
+    _model("npf", "npf:fit_npf_independent_g", "non-parametric factors D, F, G (independent G)",
+           "Bagher 2016", True),
+    _model("npf-g-from-d", "npf:fit_npf_g_from_d", "non-parametric factors, G derived from D",
+           "Bagher 2016", True),
+    _model("npf-naive", "npf:fit_npf_naive", "non-parametric factors D, F, H (no shadowing)",
+           "Bagher 2016", True),
+    _model("npf-bivariate", "npf:fit_npf_bivariate", "non-parametric bivariate D(θh, θd) and F",
+           "Bagher 2016", True),
 )}
 
 
@@ -179,60 +186,38 @@ def register_fitter(name: str, fn: Callable[..., Any], summary_fn: Callable | No
     return entry
 
 
-def _ensure_loaded() -> None:
-    from . import import_all
+def _resolve(reference: str):
+    """The object a ``"module:function"`` reference (within :mod:`brdffit.fit`) names."""
+    from importlib import import_module
 
-    import_all()
+    module, attr = reference.split(":")
+    return getattr(import_module(f"{__package__}.{module}"), attr)
 
 
-def _load_module_of(name: str) -> None:
-    """Import the fitting module that declares ``name`` (every module when undeclared)."""
-    info = MODELS.get(name)
-    if info is not None:
-        from importlib import import_module
-
-        try:
-            import_module(f"{__package__}.{info.module}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"{__package__}.{info.module}":
-                raise
-    if name not in FITTERS:
-        _ensure_loaded()
+def _declared(info: ModelInfo) -> Fitter:
+    fn = _resolve(info.function)
+    doc = (inspect.getdoc(fn) or info.description).split("\n")[0]
+    # one BLAS thread: the fits make many small calls that BLAS threads only slow down
+    return Fitter(info.name, with_single_blas_thread(fn), _resolve(info.summary), doc,
+                  info.isotropic_only)
 
 
 def get(name: str) -> Fitter:
-    """The :class:`Fitter` registered under ``name``; ``KeyError`` lists the known names.
-
-    Imports only the fitting module :data:`MODELS` declares for ``name`` (every fitting
-    module for an undeclared name)."""
-    if name not in FITTERS:
-        _load_module_of(name)
+    """The :class:`Fitter` of ``name``: registered (:func:`register_fitter`), or declared in
+    :data:`MODELS` (only its module is imported); ``KeyError`` lists the known names."""
+    if name not in FITTERS and name in MODELS and _module_exists(MODELS[name].module):
+        FITTERS[name] = _declared(MODELS[name])
     try:
         return FITTERS[name]
     except KeyError:
-        raise KeyError(f"unknown model {name!r}; known: {sorted(FITTERS)}") from None
+        raise KeyError(f"unknown model {name!r}; known: {known_names()}") from None
 
 
 def known_names() -> list[str]:
     """Model names a command line may use, *without importing any fitting module*: the
-    declared models whose module exists, and every model registered so far (in
-    :data:`MODELS` order, then sorted). An unlisted name may still be registered by a module
-    that is not declared: :func:`list_fitters` imports them all."""
+    declared models whose module exists, then every other registered one (sorted)."""
     names = [n for n, m in MODELS.items() if n in FITTERS or _module_exists(m.module)]
     return names + sorted(set(FITTERS) - set(names))
-
-
-def load_undeclared_modules() -> None:
-    """Import the fitting modules (:data:`brdffit.fit._MODULES`) that declare no model in
-    :data:`MODELS`, so that :func:`known_names` includes what they register."""
-    from importlib import import_module
-
-    from . import _MODULES
-
-    declared = {m.module for m in MODELS.values()}
-    for module in _MODULES:
-        if module not in declared and _module_exists(module):
-            import_module(f"{__package__}.{module}")
 
 
 def describe(name: str) -> ModelInfo:
@@ -240,7 +225,8 @@ def describe(name: str) -> ModelInfo:
     if name in MODELS:
         return MODELS[name]
     entry = get(name)
-    return ModelInfo(name, getattr(entry.fit, "__module__", "?").rsplit(".", 1)[-1],
+    module = getattr(entry.fit, "__module__", "?")
+    return ModelInfo(name, module, f"{module}:{getattr(entry.fit, '__name__', '?')}", "",
                      entry.description, "", entry.isotropic_only)
 
 
@@ -250,9 +236,8 @@ def get_fitter(name: str) -> Callable[..., Any]:
 
 
 def list_fitters() -> list[str]:
-    """Names of every registered model (after importing all fitting modules)."""
-    _ensure_loaded()
-    return sorted(FITTERS)
+    """Names of every model: declared (whose module exists) and registered."""
+    return sorted(known_names())
 
 
 def fit(name: str, brdf, options: dict | None = None):

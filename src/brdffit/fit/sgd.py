@@ -126,7 +126,7 @@ from ..microfacet.sgd import SGD, sgd_log_p22, sgd_mu_lambda
 from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
 
 __all__ = ["fit_sgd", "fit_beckmann_two_slice", "fit_ggx_two_slice", "fit_cook_torrance",
-           "fit_two_slice", "summary"]
+           "fit_beckmann_ct", "fit_ggx_ct", "fit_two_slice", "summary"]
 
 _CHANNELS = ("r", "g", "b")
 ALPHA_BOUNDS = {"sgd": (1e-4, 3.0), "beckmann": (1e-3, 3.0), "ggx": (1e-4, 3.0)}
@@ -1252,26 +1252,13 @@ def summary(model) -> dict:
     return out
 
 
-def _fit_beckmann_ct(brdf, **kw):
-    """Full-data weighted least-squares Cook-Torrance with Beckmann (per channel)."""
+def fit_beckmann_ct(brdf, **kw):
+    """Cook-Torrance (Beckmann) full-data weighted least squares, per channel
+    (:func:`fit_cook_torrance` with ``"beckmann"``)."""
     return fit_cook_torrance(brdf, "beckmann", **kw)
 
 
-def _fit_ggx_ct(brdf, **kw):
-    """Full-data weighted least-squares Cook-Torrance with GGX (per channel)."""
+def fit_ggx_ct(brdf, **kw):
+    """Cook-Torrance (GGX) full-data weighted least squares, per channel
+    (:func:`fit_cook_torrance` with ``"ggx"``)."""
     return fit_cook_torrance(brdf, "ggx", **kw)
-
-
-def _register_fitters() -> None:
-    from .registry import register_fitter
-
-    for name, fn, doc in (
-            ("sgd", fit_sgd, "Bagher et al. 2012 Shifted Gamma Distribution, two-slice fit per channel"),
-            ("beckmann-2s", fit_beckmann_two_slice, "Bagher et al. 2012 two-slice fit with a Beckmann distribution"),
-            ("ggx-2s", fit_ggx_two_slice, "Bagher et al. 2012 two-slice fit with a GGX distribution"),
-            ("beckmann-ct", _fit_beckmann_ct, "Cook-Torrance (Beckmann) full-data weighted least squares, per channel"),
-            ("ggx-ct", _fit_ggx_ct, "Cook-Torrance (GGX) full-data weighted least squares, per channel")):
-        register_fitter(name, fn, summary, doc, isotropic_only=True)
-
-
-_register_fitters()

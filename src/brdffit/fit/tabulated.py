@@ -741,17 +741,3 @@ def summary(model) -> dict:
     if fres is not None:
         out["fresnel_0"] = np.asarray(fres.eval(np.array(1.0)), dtype=float).tolist()
     return out
-
-
-def _register_fitters() -> None:
-    from .registry import register_fitter
-
-    register_fitter("tabulated", fit_tabulated, summary,
-                    "Dupuy et al. 2015 tabulated microfacet fit by power iteration")
-    register_fitter("ggx", fit_ggx, summary,
-                    "Dupuy et al. 2015 fit converted to anisotropic GGX by slope moments")
-    register_fitter("beckmann", fit_beckmann, summary,
-                    "Dupuy et al. 2015 fit converted to anisotropic Beckmann by slope moments")
-
-
-_register_fitters()

@@ -79,7 +79,8 @@ from ...microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiv
 from . import _solver
 from ._solver import MFState, NaiveState, Samples
 
-__all__ = ["fit_npf", "VARIANTS", "ALL_STARTS", "summary"]
+__all__ = ["fit_npf", "fit_npf_independent_g", "fit_npf_g_from_d", "fit_npf_naive",
+           "fit_npf_bivariate", "VARIANTS", "ALL_STARTS", "summary"]
 
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
 ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
@@ -624,26 +625,23 @@ def summary(model) -> dict:
     return out
 
 
-def _register_cli() -> None:
-    """Register the CLI fitters ``npf``, ``npf-g-from-d``, ``npf-naive``, ``npf-bivariate``
-    with :mod:`brdffit.fit.registry` when it exists."""
-    try:
-        from ..registry import register_fitter
-    except ImportError:
-        return
-    for cli_name, var in CLI_VARIANTS.items():
-        def fn(brdf, _v=var, **kw):
-            if "iterations" in kw:                        # the CLI's --iterations
-                kw["max_iter"] = int(kw.pop("iterations"))
-            if isinstance(kw.get("starts"), str):         # -O starts=slices,ones
-                kw["starts"] = tuple(x for x in kw["starts"].split(",") if x)
-            return fit_npf(brdf, variant=_v, **kw)
-        fn.__name__ = f"fit_{cli_name.replace('-', '_')}"
-        fn.__doc__ = f"fit_npf(variant={var!r}) (Bagher, Snyder & Nowrouzezahrai 2016)"
-        try:
-            register_fitter(cli_name, fn, summary)
-        except Exception:  # noqa: BLE001 - a registry API mismatch must not break imports
-            pass
+def _variant_fitter(variant: str, name: str):
+    """``fit_npf`` with ``variant`` fixed, taking the command line's spelling of two options:
+    ``iterations`` (``--iterations``) for ``max_iter`` and ``starts`` as a comma list."""
+    def fit(brdf, **kw):
+        if "iterations" in kw:
+            kw["max_iter"] = int(kw.pop("iterations"))
+        if isinstance(kw.get("starts"), str):
+            kw["starts"] = tuple(x for x in kw["starts"].split(",") if x)
+        return fit_npf(brdf, variant=variant, **kw)
+
+    fit.__name__ = fit.__qualname__ = name
+    fit.__doc__ = (f"fit_npf(variant={variant!r}): the {variant} factor model of Bagher, "
+                   "Snyder & Nowrouzezahrai 2016 (the models of brdffit.fit.registry.MODELS).")
+    return fit
 
 
-_register_cli()
+fit_npf_independent_g = _variant_fitter("independent-g", "fit_npf_independent_g")
+fit_npf_g_from_d = _variant_fitter("g-from-d", "fit_npf_g_from_d")
+fit_npf_naive = _variant_fitter("naive", "fit_npf_naive")
+fit_npf_bivariate = _variant_fitter("bivariate", "fit_npf_bivariate")
