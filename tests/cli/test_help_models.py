@@ -48,7 +48,7 @@ def test_help_shows_defaults(monkeypatch, capsys):
     text = " ".join(" ".join(_help(["fit"], monkeypatch, capsys)).split())
     assert "[default: ggx-diffuse]" in text
     text = " ".join(" ".join(_help(["batch"], monkeypatch, capsys)).split())
-    assert "[default: tabulated,ggx,beckmann]" in text and "[default: 2; 1..256]" in text
+    assert "[default: ggx-diffuse,tabulated,ggx,beckmann]" in text and "[default: 2; 1..256]" in text
 
 
 def test_batch_help_does_not_send_to_fit_help(monkeypatch, capsys):

@@ -51,8 +51,10 @@ EXIT_CODES = {EXIT_OK: "all done", EXIT_ERROR: "error", EXIT_USAGE: "usage error
               "model, bad option or value, output folder locked)",
               EXIT_FAILED_TASKS: "some tasks failed (the rest is done)"}
 _ABORTED = 130  # interrupted (Ctrl-C), as a shell reports SIGINT
-#: The models ``compare`` and ``batch`` fit unless ``--models`` says otherwise.
-DEFAULT_MODELS = "tabulated,ggx,beckmann"
+#: The models ``compare`` and ``batch`` fit unless ``--models`` says otherwise: the default
+#: model of ``brdffit fit`` (engine-ready, physically valid by construction) first, then the
+#: tabulated fit of Dupuy 2015 and its two analytic conversions.
+DEFAULT_MODELS = "ggx-diffuse,tabulated,ggx,beckmann"
 
 _SUMMARY = "Fit compact microfacet models to measured BRDFs (MERL, RGL, UTIA, Neural-BRDF)."
 _EXIT_TEXT = ("Exit status: 0 all done, 1 error, 2 usage (unknown model, bad option or value, "
