@@ -92,10 +92,8 @@ def _distribution_parameters(d) -> dict:
         out["units"] = ("alpha: SGD shape alpha (Bagher 2012 Eq. 8, dimensionless); p: exponent; "
                         "lam, c, k: Eq. 9 G1 approximation")
     if kind in ("tabulated", "tabulated_aniso"):
-        from ..microfacet.conversions import ggx_parameters
-
         try:
-            ax, ay, rho = ggx_parameters(d)
+            ax, ay, rho = d.ggx_parameters()
             out["ggx_equivalent"] = {"alpha_x": ax, "alpha_y": ay, "rho": rho}
         except Exception:  # noqa: BLE001 - informative only
             pass

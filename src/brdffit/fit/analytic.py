@@ -1030,11 +1030,12 @@ def _moment_start(brdf, kind: str, anisotropic: bool):
     Isotropic input: only the NDF of :func:`~brdffit.fit.tabulated.fit_tabulated` is needed
     (backscattering at a 90-node Gauss rule, 4 power iterations, Eq. 14-18 / Alg. 3), not its
     Fresnel table; anisotropic input: the full tabulated fit."""
-    from ..microfacet.conversions import beckmann_parameters, ggx_parameters
     from ..microfacet.tabulated import TabulatedSlopeDistribution, radial_rule
     from .tabulated import backscatter, fit_tabulated, luminance, solve_slope_pdf
 
-    conv = ggx_parameters if kind == "ggx" else beckmann_parameters
+    def conv(dist):
+        return dist.ggx_parameters() if kind == "ggx" else dist.beckmann_parameters()
+
     try:
         with np.errstate(all="ignore"):
             if anisotropic:

@@ -351,35 +351,6 @@ def _rgb(value):
     return [float(x) for x in a]
 
 
-def _lobe_figures(lobe) -> dict:
-    """(α, F0, ρd) of one :class:`~brdffit.microfacet.MicrofacetBRDF`-like lobe."""
-    import numpy as np
-
-    out: dict[str, Any] = {}
-    dist = getattr(lobe, "distribution", None)
-    if dist is not None:
-        kind = getattr(dist, "kind", None) or type(dist).__name__.lower()
-        if hasattr(dist, "table") and hasattr(dist, "slope_moments"):
-            from ..microfacet.conversions import ggx_parameters  # tabulated: GGX equivalent
-
-            out["alpha"] = [float(x) for x in ggx_parameters(dist)]
-            out["alpha_kind"] = "ggx-equivalent"
-        elif hasattr(dist, "alpha_x"):
-            out["alpha"] = [float(dist.alpha_x), float(getattr(dist, "alpha_y", dist.alpha_x)),
-                            float(getattr(dist, "rho", 0.0) or 0.0)]
-            out["alpha_kind"] = kind
-        elif hasattr(dist, "alpha") and np.isscalar(dist.alpha):
-            out["alpha"] = [float(dist.alpha), float(dist.alpha), 0.0]
-            out["alpha_kind"] = kind
-    fres = getattr(lobe, "fresnel", None)
-    f0 = np.ones(3) if fres is None else np.asarray(fres.eval(np.array(1.0)), dtype=np.float64)
-    ks = getattr(lobe, "specular", None)
-    out["f0"] = _rgb(f0 * (1.0 if ks is None else np.asarray(ks, dtype=np.float64)))
-    rd = getattr(lobe, "diffuse", None)
-    out["rho_d"] = _rgb(0.0 if rd is None else rd)
-    return out
-
-
 def figures(model) -> dict:
     """The figures users look for in a fitted ``model``, the same way for every model.
 
@@ -401,6 +372,10 @@ def figures(model) -> dict:
       lobe's ``{"alpha", "weight", "f0"}`` (the other figures are the base lobe's); else
       ``None``.
     * ``table_bytes``: :func:`table_bytes`.
+
+    Each model class says its own figures (``figures()``: ``MicrofacetBRDF`` and its
+    distribution's, the per-channel models, the NPF factor models); this function adds the
+    coat of a coated fit and the table bytes.
     """
     import numpy as np
 
@@ -411,27 +386,14 @@ def figures(model) -> dict:
     parts = coat_parts(model)
     if parts is not None:
         base, coat = parts
-        out.update(_lobe_figures(base))
+        out.update(base.figures())
         alpha, weight = coat_alpha_weight(coat)
         out["coat"] = {"alpha": alpha, "weight": weight, "f0": float(np.max(coat.fresnel.f0))}
         out["table_bytes"] = 0
         return out
-    lobes = getattr(model, "lobes", None)
-    members = getattr(model, "models", None)
-    per_channel = lobes if isinstance(lobes, (list, tuple)) and len(lobes) == 3 else (
-        members if isinstance(members, (list, tuple)) and len(members) == 3 else None)
-    if per_channel is not None:  # channel c of the model is channel c of lobe c
-        rows = [_lobe_figures(lobe) for lobe in per_channel]
-        if all(r.get("alpha") for r in rows):
-            out["alpha_rgb"] = [float(r["alpha"][0]) for r in rows]
-            kinds = {r.get("alpha_kind") for r in rows}
-            out["alpha_kind"] = kinds.pop() if len(kinds) == 1 else "mixed"
-        out["f0"] = [r["f0"][c] for c, r in enumerate(rows)]
-        out["rho_d"] = [r["rho_d"][c] for c, r in enumerate(rows)]
-    elif getattr(model, "distribution", None) is not None:
-        out.update(_lobe_figures(model))
-    elif getattr(model, "fit_kind", "").startswith("npf") and hasattr(model, "rho_d"):
-        out["rho_d"] = _rgb(np.pi * np.asarray(model.rho_d, dtype=np.float64))  # f = ρd + ...
+    own = getattr(model, "figures", None)
+    if callable(own):
+        out.update(own())
     try:
         out["table_bytes"] = table_bytes(model)
     except Exception:  # noqa: BLE001 - a model that cannot describe its state

@@ -54,8 +54,7 @@ from ..brdf import BRDF, measured_mask
 from ..errors import FitError
 from ..grid import (N_PHI_D, N_THETA_H, merl_phi_d, merl_theta_d, merl_theta_h,
                     tabulate_merl_grid)
-from ..microfacet.conversions import (beckmann_parameters, ggx_parameters, to_beckmann,
-                                      to_ggx)
+from ..microfacet.conversions import to_beckmann, to_ggx
 from ..microfacet.per_channel import PerChannelBRDF
 from ..microfacet.tabulated import (TabulatedSlopeDistribution,
                                     azimuthal_clamped_cosine_integral, radial_rule)
@@ -724,8 +723,8 @@ def summary(model) -> dict:
         out["model"] = "tabulated"
         out["table"] = list(dist.table.shape)
         out["rule"] = dist.rule
-        bx, by, br = beckmann_parameters(dist)
-        gx, gy, gr = ggx_parameters(dist)
+        bx, by, br = dist.beckmann_parameters()
+        gx, gy, gr = dist.ggx_parameters()
         out["beckmann_alpha"] = [bx, by, br]
         out["ggx_alpha"] = [gx, gy, gr]
     elif dist is not None:

@@ -52,6 +52,20 @@ class SlopeDistribution(abc.ABC):
     def sample(self, u) -> np.ndarray:
         """Slopes ``(..., 2)`` distributed with :meth:`pdf`, from uniform ``u`` ``(..., 2)``."""
 
+    # -- figures -----------------------------------------------------------------------------
+    def figures(self) -> dict:
+        """The roughness users look for: ``{"alpha": [αx, αy, ρ], "alpha_kind": kind}``, the
+        slope scales and correlation (Walter 2007 / Dupuy 2015 α, not "roughness"; glTF's is
+        √α for GGX); ``{}`` for a distribution without them."""
+        kind = getattr(self, "kind", None) or type(self).__name__.lower()
+        if hasattr(self, "alpha_x"):
+            return {"alpha": [float(self.alpha_x), float(getattr(self, "alpha_y", self.alpha_x)),
+                              float(getattr(self, "rho", 0.0) or 0.0)], "alpha_kind": kind}
+        alpha = getattr(self, "alpha", None)
+        if alpha is not None and np.isscalar(alpha):
+            return {"alpha": [float(alpha), float(alpha), 0.0], "alpha_kind": kind}
+        return {}
+
     # -- hemisphere --------------------------------------------------------------------------
     def D(self, m) -> np.ndarray:
         """Normal distribution ``D(m) = P(m̃) / cos⁴θm`` (Eq. 7); 0 for ``m_z <= 0``."""

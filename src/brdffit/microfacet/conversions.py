@@ -1,10 +1,10 @@
 """Conversions of a tabulated microfacet model (Dupuy, Heitz, Iehl, Poulin, Ostromoukhov 2015).
 
-* Analytic roughness by slope moments (Appendix C): :func:`beckmann_parameters` and
-  :func:`ggx_parameters` give ``(αx, αy, ρ)`` of a
-  :class:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution`; :func:`to_beckmann` and
-  :func:`to_ggx` turn a tabulated ``MicrofacetBRDF`` into a Beckmann or GGX one with the same
-  Fresnel.
+* Analytic roughness by slope moments (Appendix C): :func:`to_beckmann` and :func:`to_ggx`
+  turn a tabulated ``MicrofacetBRDF`` into a Beckmann or GGX one with the same Fresnel, with
+  the ``(αx, αy, ρ)`` of the distribution's
+  :meth:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution.beckmann_parameters` /
+  :meth:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution.ggx_parameters`.
 * Roughness editing (Eq. 9): :func:`with_roughness` scales the table by ``(αx, αy)``, scalars
   or per-texel arrays, without refitting.
 """
@@ -18,7 +18,7 @@ from .ggx import GGX
 from .model import MicrofacetBRDF
 from .tabulated import TabulatedSlopeDistribution
 
-__all__ = ["beckmann_parameters", "ggx_parameters", "to_beckmann", "to_ggx", "with_roughness"]
+__all__ = ["to_beckmann", "to_ggx", "with_roughness"]
 
 
 def _parts(model):
@@ -29,34 +29,13 @@ def _parts(model):
     return dist, fres
 
 
-def _clip_rho(rho):
-    return float(np.clip(rho, -0.999, 0.999)) if np.isfinite(rho) else 0.0
-
-
-def beckmann_parameters(dist: TabulatedSlopeDistribution) -> tuple[float, float, float]:
-    """``(αx, αy, ρ)`` from the second slope moments (App. C, LEAN mapping):
-    ``E x̃² = αx²/2``, ``E ỹ² = αy²/2``, ``E x̃ỹ = ραxαy/2`` (exact when P is Beckmann)."""
-    m = dist.slope_moments()
-    ax, ay = np.sqrt(2.0 * m["Exx"]), np.sqrt(2.0 * m["Eyy"])
-    return float(ax), float(ay), _clip_rho(2.0 * m["Exy"] / (ax * ay))
-
-
-def ggx_parameters(dist: TabulatedSlopeDistribution) -> tuple[float, float, float]:
-    """``(αx, αy, ρ)`` from first absolute moments and angular moments (App. C):
-    ``αx = E|x̃|``, ``αy = E|ỹ|``, ``ρ = (αy/αx) b1/(b1² + b2²)`` (exact when P is GGX)."""
-    m = dist.slope_moments()
-    ax, ay = m["E|x|"], m["E|y|"]
-    b1, b2 = m["b1"], m["b2"]
-    return float(ax), float(ay), _clip_rho((ay / ax) * b1 / (b1 * b1 + b2 * b2))
-
-
 def _analytic_model(model, kind):
     dist, fres = _parts(model)
     if kind == "beckmann":
-        ax, ay, rho = beckmann_parameters(dist)
+        ax, ay, rho = dist.beckmann_parameters()
         d = Beckmann(ax, ay, rho)
     else:
-        ax, ay, rho = ggx_parameters(dist)
+        ax, ay, rho = dist.ggx_parameters()
         d = GGX(ax, ay, rho)
     out = MicrofacetBRDF(d, fres)
     for attr in ("name", "source"):

@@ -246,6 +246,23 @@ def _rgb_or_none(name, value):
 # ----------------------------------------------------------------------------------------
 # MicrofacetBRDF
 # ----------------------------------------------------------------------------------------
+def _rgb_list(v) -> list[float]:
+    return [float(x) for x in np.broadcast_to(np.asarray(v, dtype=np.float64), (3,))]
+
+
+def channel_figures(lobes) -> dict[str, Any]:
+    """The figures of a per-channel model whose channel c is channel c of ``lobes[c]``: one
+    isotropic α per channel (``alpha_rgb``), ``f0`` and ``rho_d`` from each lobe's channel."""
+    rows = [lobe.figures() for lobe in lobes]
+    out: dict[str, Any] = {"f0": [r["f0"][c] for c, r in enumerate(rows)],
+                           "rho_d": [r["rho_d"][c] for c, r in enumerate(rows)]}
+    if all(r.get("alpha") for r in rows):
+        out["alpha_rgb"] = [float(r["alpha"][0]) for r in rows]
+        kinds = {r.get("alpha_kind") for r in rows}
+        out["alpha_kind"] = kinds.pop() if len(kinds) == 1 else "mixed"
+    return out
+
+
 class MicrofacetBRDF(BRDF, SerializableModel):
     """Microfacet BRDF of Dupuy 2015 Eq. 1 with an optional Lambertian term.
 
@@ -406,6 +423,17 @@ class MicrofacetBRDF(BRDF, SerializableModel):
         return wo, self.pdf(wi, wo)
 
     # -- metadata / serialisation ------------------------------------------------------------
+    def figures(self) -> dict[str, Any]:
+        """α of the distribution (:meth:`SlopeDistribution.figures`), ``f0`` = ks·F(θd = 0)
+        and ``rho_d`` per channel (0 without a diffuse term)."""
+        out: dict[str, Any] = dict(self.distribution.figures())
+        f0 = (np.ones(3) if self.fresnel is None
+              else np.asarray(self.fresnel.eval(np.array(1.0)), dtype=np.float64))
+        ks = 1.0 if self.specular is None else np.asarray(self.specular, dtype=np.float64)
+        out["f0"] = _rgb_list(f0 * ks)
+        out["rho_d"] = _rgb_list(0.0 if self.diffuse is None else self.diffuse)
+        return out
+
     def describe(self) -> dict[str, Any]:
         d = super().describe()
         d.update(distribution=repr(self.distribution), fresnel=repr(self.fresnel),

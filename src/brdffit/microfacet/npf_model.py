@@ -352,7 +352,16 @@ def _estimate_diffuse_fraction(brdf, diffuse_albedo: float) -> float:
 
 
 # -- the models -------------------------------------------------------------------------------
-class NPFMicrofacetBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
+class _DiffuseFigures:
+    """``figures()`` of a factor model with a diffuse term ``ρd`` (``f = ρd + …``, so the
+    Lambertian albedo is π ρd); no α, no F0: the factors are defined up to a scale
+    (Bagher 2016 §4.3)."""
+
+    def figures(self) -> dict:
+        return {"rho_d": [float(np.pi * x) for x in np.asarray(self.rho_d, dtype=np.float64)]}
+
+
+class NPFMicrofacetBRDF(_DiffuseFigures, _HalfVectorSampling, SerializableModel, IsotropicBRDF):
     """Non-parametric factor microfacet BRDF (Bagher et al. 2016, Eq. 3).
 
     Parameters: tables ``D`` (90, 3), ``F`` (90, 3), ``G`` (90, 3) (see the module docstring
@@ -438,7 +447,7 @@ class NPFMicrofacetBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
         return d
 
 
-class NPFNaiveBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
+class NPFNaiveBRDF(_DiffuseFigures, _HalfVectorSampling, SerializableModel, IsotropicBRDF):
     """The naive orthogonal factor model (Bagher et al. 2016, Eq. 4):
     ``ρ = ρd + ρs D(θh) F(θd) H(φd)``, H tabulated at 180 φd samples in [0, π)."""
 

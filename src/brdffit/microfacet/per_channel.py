@@ -10,7 +10,7 @@ import numpy as np
 from ..brdf import BRDF
 from ..schema import ListOf, Nested, Opt, Schema, Text
 from ..serialization import SerializableModel
-from .model import MicrofacetBRDF
+from .model import MicrofacetBRDF, channel_figures
 
 __all__ = ["PerChannelBRDF"]
 
@@ -65,6 +65,10 @@ class PerChannelBRDF(BRDF, SerializableModel):
             if np.any(sel):
                 wo[sel] = m.sample(wi[sel], u2[sel])[0]
         return wo, self.pdf(wi, wo)
+
+    def figures(self) -> dict:
+        """Channel c's figures from model c (:func:`~brdffit.microfacet.model.channel_figures`)."""
+        return channel_figures(self.models)
 
     def to_state(self):
         params, arrays = {"name": self.name, "source": self.source, "models": []}, {}

@@ -24,8 +24,8 @@ from ..schema import (ALBEDO_MAX, F1_MAX, SPECULAR_MAX, Choice, Component, ListO
 from ..serialization import SerializableModel
 from .fresnel import GeneralizedSchlickFresnel
 from .ggx import GGX
-from .model import (MicrofacetBRDF, _lookup_distribution, distribution_from_state,
-                    distribution_to_state)
+from .model import (MicrofacetBRDF, _lookup_distribution, channel_figures,
+                    distribution_from_state, distribution_to_state)
 from .sgd import EQ9_C_MAX, SGD, SGDApproxG1
 
 __all__ = ["PerChannelMicrofacetBRDF"]
@@ -187,6 +187,11 @@ class PerChannelMicrofacetBRDF(IsotropicBRDF, SerializableModel):
 
     def params(self) -> dict:
         return {"channels": self.channel_params(), "g1": self.g1}
+
+    def figures(self) -> dict:
+        """Channel c's figures from lobe c (:func:`~brdffit.microfacet.model.channel_figures`;
+        F0 is ``(4ρs/π)·F0`` of Bagher 2012 Eq. 1, the lobe's ks·F(0))."""
+        return channel_figures(self.lobes)
 
     def to_state(self):
         chans, arrays = [], {}

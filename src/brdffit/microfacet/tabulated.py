@@ -56,6 +56,10 @@ _LOG_FLOOR = 1e-30  # relative floor of P before taking logs
 _SIGMA_DENSE = 4096  # uniform-u resampling of the σ table used for lookups
 
 
+def _clip_rho(rho):
+    return float(np.clip(rho, -0.999, 0.999)) if np.isfinite(rho) else 0.0
+
+
 def radial_rule(n: int, rule: str = "merl"):
     """Nodes and weights of the radial quadrature in ``u = sqrt(2θ/π)``.
 
@@ -754,6 +758,26 @@ class TabulatedSlopeDistribution(SlopeDistribution):
         return {"E|x|": float(ax * ex), "E|y|": float(ay * ey), "Exx": float(ax * ax * exx),
                 "Eyy": float(ay * ay * eyy), "Exy": float(ax * ay * exy),
                 "b1": float(b1), "b2": float(b2)}
+
+    def beckmann_parameters(self) -> tuple[float, float, float]:
+        """``(αx, αy, ρ)`` from the second slope moments (App. C, LEAN mapping):
+        ``E x̃² = αx²/2``, ``E ỹ² = αy²/2``, ``E x̃ỹ = ραxαy/2`` (exact when P is Beckmann)."""
+        m = self.slope_moments()
+        ax, ay = np.sqrt(2.0 * m["Exx"]), np.sqrt(2.0 * m["Eyy"])
+        return float(ax), float(ay), _clip_rho(2.0 * m["Exy"] / (ax * ay))
+
+    def ggx_parameters(self) -> tuple[float, float, float]:
+        """``(αx, αy, ρ)`` from first absolute moments and angular moments (App. C):
+        ``αx = E|x̃|``, ``αy = E|ỹ|``, ``ρ = (αy/αx) b1/(b1² + b2²)`` (exact when P is GGX)."""
+        m = self.slope_moments()
+        ax, ay = m["E|x|"], m["E|y|"]
+        b1, b2 = m["b1"], m["b2"]
+        return float(ax), float(ay), _clip_rho((ay / ax) * b1 / (b1 * b1 + b2 * b2))
+
+    def figures(self) -> dict:
+        """The GGX equivalent by slope moments (:meth:`ggx_parameters`):
+        ``{"alpha": [αx, αy, ρ], "alpha_kind": "ggx-equivalent"}``."""
+        return {"alpha": list(self.ggx_parameters()), "alpha_kind": "ggx-equivalent"}
 
     # -- state -------------------------------------------------------------------------------
     def params(self) -> dict:
