@@ -26,7 +26,7 @@ import numpy as np
 from .geometry import half_diff_to_io, io_to_half_diff
 
 __all__ = ["BRDF", "IsotropicBRDF", "cosine_hemisphere_sample", "cosine_hemisphere_pdf",
-           "cosine_pairs", "stratified_square", "measured_mask"]
+           "cosine_pairs", "stratified_square", "measured_mask", "sample_arguments"]
 
 
 def _as_dirs(wi, wo) -> tuple[np.ndarray, np.ndarray]:
@@ -35,6 +35,15 @@ def _as_dirs(wi, wo) -> tuple[np.ndarray, np.ndarray]:
     if wi.shape[-1:] != (3,) or wo.shape[-1:] != (3,):
         raise ValueError(f"directions must have a last axis of size 3, got {wi.shape} and {wo.shape}")
     return np.broadcast_arrays(wi, wo)
+
+
+def sample_arguments(wi, u) -> tuple[np.ndarray, np.ndarray]:
+    """``(wi, u)`` of a ``sample(wi, u)`` call as float64, broadcast against each other
+    (``wi`` ``(..., 3)``, ``u`` ``(..., 2)``; read-only views)."""
+    wi = np.asarray(wi, dtype=np.float64)
+    u = np.asarray(u, dtype=np.float64)
+    shape = np.broadcast_shapes(wi.shape, u.shape[:-1] + (3,))
+    return np.broadcast_to(wi, shape), np.broadcast_to(u, shape[:-1] + (2,))
 
 
 def cosine_hemisphere_sample(u) -> np.ndarray:

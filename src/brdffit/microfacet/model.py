@@ -52,7 +52,8 @@ from typing import Any
 
 import numpy as np
 
-from ..brdf import BRDF, IsotropicBRDF, _as_dirs, cosine_hemisphere_pdf, cosine_hemisphere_sample
+from ..brdf import (BRDF, IsotropicBRDF, _as_dirs, cosine_hemisphere_pdf, cosine_hemisphere_sample,
+                    sample_arguments)
 from ..geometry import half_diff_to_io, slope_to_normal
 from ..schema import (ALBEDO_MAX, ALPHA_MAX, ALPHA_MIN, SPECULAR_MAX, RGB, Bool, Component,
                       ListOf, Number, Opt, Schema, StateError, Text)
@@ -402,11 +403,7 @@ class MicrofacetBRDF(BRDF, SerializableModel):
 
     def sample(self, wi, u) -> tuple[np.ndarray, np.ndarray]:
         """Draw ``wo`` for ``wi`` from ``u`` ``(..., 2)``; returns ``(wo, pdf)``."""
-        wi = np.asarray(wi, dtype=np.float64)
-        u = np.asarray(u, dtype=np.float64)
-        shape = np.broadcast_shapes(wi.shape, u.shape[:-1] + (3,))
-        wi = np.broadcast_to(wi, shape)
-        u = np.broadcast_to(u, shape[:-1] + (2,))
+        wi, u = sample_arguments(wi, u)
         wi_up = np.where((wi[..., 2] > 0)[..., None], wi, [0.0, 0.0, 1.0])
         if self.diffuse is None:
             wo = self._sample_spec(wi_up, u)
@@ -567,20 +564,16 @@ class SumBRDF(BRDF, SerializableModel):
         return sum(p[..., k] * c.pdf(wi, wo) for k, c in enumerate(self.components))
 
     def sample(self, wi, u) -> tuple[np.ndarray, np.ndarray]:
-        wi = np.asarray(wi, dtype=np.float64)
-        u = np.asarray(u, dtype=np.float64)
-        shape = np.broadcast_shapes(wi.shape, u.shape[:-1] + (3,))
-        wi = np.broadcast_to(wi, shape)
-        u = np.broadcast_to(u, shape[:-1] + (2,))
+        wi, u = sample_arguments(wi, u)
         p = self._probs(wi)
         cdf = np.cumsum(p, -1)
         k = np.minimum(np.sum(u[..., :1] >= cdf, -1), len(self.components) - 1)
-        lo = np.take_along_axis(np.concatenate([np.zeros(shape[:-1] + (1,)), cdf], -1),
+        lo = np.take_along_axis(np.concatenate([np.zeros(wi.shape[:-1] + (1,)), cdf], -1),
                                 k[..., None], -1)[..., 0]
         pk = np.take_along_axis(p, k[..., None], -1)[..., 0]
         u0 = np.clip((u[..., 0] - lo) / np.where(pk > 0, pk, 1.0), 0.0, 1.0 - 1e-16)
         u2 = np.stack([u0, u[..., 1]], -1)
-        wo = np.zeros(shape)
+        wo = np.zeros(wi.shape)
         for j, c in enumerate(self.components):      # loop over lobes, not samples
             sel = k == j
             if np.any(sel):

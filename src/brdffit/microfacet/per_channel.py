@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..brdf import BRDF
+from ..brdf import BRDF, sample_arguments
 from ..schema import ListOf, Nested, Opt, Schema, Text
 from ..serialization import SerializableModel
 from .model import MicrofacetBRDF, channel_figures
@@ -52,14 +52,10 @@ class PerChannelBRDF(BRDF, SerializableModel):
         return sum(m.pdf(wi, wo) for m in self.models) / 3.0
 
     def sample(self, wi, u):
-        wi = np.asarray(wi, dtype=np.float64)
-        u = np.asarray(u, dtype=np.float64)
-        shape = np.broadcast_shapes(wi.shape, u.shape[:-1] + (3,))
-        wi = np.broadcast_to(wi, shape)
-        u = np.broadcast_to(u, shape[:-1] + (2,))
+        wi, u = sample_arguments(wi, u)
         k = np.minimum((u[..., 0] * 3.0).astype(np.int64), 2)
         u2 = np.stack([np.clip(u[..., 0] * 3.0 - k, 0.0, 1.0 - 1e-16), u[..., 1]], -1)
-        wo = np.zeros(shape)
+        wo = np.zeros(wi.shape)
         for c, m in enumerate(self.models):  # three lobes, not a loop over samples
             sel = k == c
             if np.any(sel):

@@ -17,7 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from ..brdf import IsotropicBRDF, _as_dirs, cosine_hemisphere_pdf, cosine_hemisphere_sample
+from ..brdf import (IsotropicBRDF, _as_dirs, cosine_hemisphere_pdf, cosine_hemisphere_sample,
+                    sample_arguments)
 from ..geometry import half_diff_to_io, slope_to_normal
 from ..schema import (ALBEDO_MAX, F1_MAX, SPECULAR_MAX, Choice, Component, ListOf, Nested, Number,
                       Opt, Schema, Text)
@@ -144,11 +145,7 @@ class PerChannelMicrofacetBRDF(IsotropicBRDF, SerializableModel):
         return np.where((wi[..., 2] > 0) & (wo[..., 2] > 0), p, 0.0)
 
     def sample(self, wi, u) -> tuple[np.ndarray, np.ndarray]:
-        wi = np.asarray(wi, dtype=np.float64)
-        u = np.asarray(u, dtype=np.float64)
-        shape = np.broadcast_shapes(wi.shape, u.shape[:-1] + (3,))
-        wi = np.broadcast_to(wi, shape)
-        u = np.broadcast_to(u, shape[:-1] + (2,))
+        wi, u = sample_arguments(wi, u)
         probs = self._lobe_probabilities()
         cdf = np.concatenate([[0.0], np.cumsum(probs)])
         cdf[-1] = 1.0
