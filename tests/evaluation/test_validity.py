@@ -52,7 +52,17 @@ def test_negative_values_and_a_broken_reciprocity_are_found():
     assert found["non_negative"].figure < 0 and found["reciprocity"].figure > 0.01
 
 
-def test_fit_prints_the_warnings_and_json_carries_them(capsys):
+@pytest.fixture
+def quick_alternatives(monkeypatch):
+    """The quality warning's other candidates cut to the fast one (these tests are about the
+    physical checks; tests/evaluation/test_validity.py::test_a_large_error_names_a_better_model
+    covers the candidates)."""
+    from brdffit.cli import fit as F
+
+    monkeypatch.setattr(F, "ALTERNATIVES", ("ggx-diffuse",))
+
+
+def test_fit_prints_the_warnings_and_json_carries_them(capsys, quick_alternatives):
     assert main(["fit", "synthetic:plastic-beckmann", "-m", "tabulated", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert isinstance(doc["warnings"], list)
@@ -62,7 +72,8 @@ def test_fit_prints_the_warnings_and_json_carries_them(capsys):
     assert "warning" not in out.err
 
 
-def test_the_default_fit_of_a_diffuse_material_with_the_tabulated_model_warns(capsys):
+def test_the_default_fit_of_a_diffuse_material_with_the_tabulated_model_warns(capsys,
+                                                                              quick_alternatives):
     """A diffuse material fitted without a diffuse term: F absorbs the base (F0 > 1)."""
     assert main(["fit", "synthetic:plastic-beckmann", "-m", "tabulated"]) == 0
     err = capsys.readouterr().err
