@@ -26,7 +26,8 @@ import numpy as np
 from .geometry import half_diff_to_io, io_to_half_diff
 
 __all__ = ["BRDF", "IsotropicBRDF", "cosine_hemisphere_sample", "cosine_hemisphere_pdf",
-           "cosine_pairs", "stratified_square", "measured_mask", "sample_arguments"]
+           "cosine_pairs", "jittered_grid", "stratified_square", "measured_mask",
+           "sample_arguments"]
 
 
 def _as_dirs(wi, wo) -> tuple[np.ndarray, np.ndarray]:
@@ -55,13 +56,18 @@ def cosine_hemisphere_sample(u) -> np.ndarray:
     return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=-1)
 
 
+def jittered_grid(rng, side: int, dim: int = 2) -> np.ndarray:
+    """``side**dim`` points of ``[0, 1)^dim``, one uniform point (from ``rng``) per cell of a
+    regular grid, cells in row-major order: ``(side**dim, dim)``."""
+    cells = np.stack(np.meshgrid(*([np.arange(side)] * dim), indexing="ij"), -1)
+    cells = cells.reshape(-1, dim)
+    return (cells + rng.random(cells.shape)) / side
+
+
 def stratified_square(n: int, seed: int = 0) -> np.ndarray:
-    """``⌊√n⌋²`` jittered points of the unit square, one per cell of a ``⌊√n⌋ × ⌊√n⌋`` grid
-    (``(m, 2)``; the jitter from ``numpy.random.default_rng(seed)``)."""
-    side = int(np.sqrt(n))
-    rng = np.random.default_rng(seed)
-    cells = np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1)
-    return (cells.reshape(-1, 2) + rng.random((side * side, 2))) / side
+    """``⌊√n⌋²`` jittered points of the unit square (:func:`jittered_grid` with
+    ``numpy.random.default_rng(seed)``), ``(m, 2)``."""
+    return jittered_grid(np.random.default_rng(seed), int(np.sqrt(n)))
 
 
 def cosine_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:

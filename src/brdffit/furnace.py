@@ -45,10 +45,11 @@ import dataclasses
 
 import numpy as np
 
-from .brdf import cosine_hemisphere_pdf, cosine_hemisphere_sample, stratified_square
+from .brdf import (cosine_hemisphere_pdf, cosine_hemisphere_sample, jittered_grid,
+                   stratified_square)
 
-__all__ = ["albedo_quadrature", "albedo_sampled", "sampled_albedo", "estimator_values", "stratified_uniforms",
-           "sample_mean", "check", "FurnaceResult", "furnace"]
+__all__ = ["albedo_quadrature", "albedo_sampled", "sampled_albedo", "estimator_values",
+           "stratified_uniforms", "sample_mean", "check", "FurnaceResult", "furnace"]
 
 
 def _incident(theta_i: float) -> np.ndarray:
@@ -112,8 +113,7 @@ def stratified_uniforms(rng, n: int, dim: int) -> np.ndarray:
     """``side**dim ≤ n`` jittered-grid points in ``[0, 1)^dim`` (one uniform point per cell
     of a regular grid, ``side = ⌊n^(1/dim)⌋``), in random order."""
     side = max(int(np.floor(n ** (1.0 / dim) + 1e-9)), 1)
-    g = np.stack(np.meshgrid(*([np.arange(side)] * dim), indexing="ij"), -1).reshape(-1, dim)
-    return rng.permutation((g + rng.random(g.shape)) / side)
+    return rng.permutation(jittered_grid(rng, side, dim))
 
 
 def albedo_sampled(brdf, theta_i: float, n: int = 1 << 18, seed: int = 0,
