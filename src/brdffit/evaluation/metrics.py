@@ -543,10 +543,7 @@ def error_regions(reference, test, n_samples: int = 1 << 16, seed: int = 0) -> d
     L1) when the fit's changes by less than 0.6 of that (``colour_shift``). A heuristic
     reading of the residual, not a fit of the missing component.
     """
-    wi, wo = measured_pairs(reference, *_sobol_pairs(n_samples, seed))
-    fr = np.nan_to_num(np.asarray(reference.eval(wi, wo), dtype=np.float64))
-    ft = np.nan_to_num(np.asarray(test.eval(wi, wo), dtype=np.float64))
-    return _regions_from(region_of(wi, wo), fr, ft, wi)
+    return BRDFMetrics(reference, n_samples, seed, ("error_regions",)).error_regions(test)
 
 
 class BRDFMetrics:
@@ -581,6 +578,8 @@ class BRDFMetrics:
         t0 = time.perf_counter()
         self._wi, self._wo = measured_pairs(reference, *_sobol_pairs(n_samples, seed))
         self._ref_vals = np.nan_to_num(np.asarray(reference.eval(self._wi, self._wo), float))
+        self._regions = region_of(self._wi, self._wo)
+        self._last: tuple = (None, None)       # (fit, its values on the pairs)
         self.timings["cos_rel_error_setup"] = time.perf_counter() - t0
         self._l2 = None
         if "normalized_l2" in self.metrics:
@@ -614,14 +613,12 @@ class BRDFMetrics:
             self.timings["compressive_objective_setup"] = time.perf_counter() - t0
 
     def _test_values(self, test) -> np.ndarray:
-        if getattr(self, "_last", (None,))[0] is not test:    # one evaluation per fit
+        if self._last[0] is not test:          # one evaluation per fit for every metric
             self._last = (test, np.nan_to_num(np.asarray(test.eval(self._wi, self._wo), float)))
         return self._last[1]
 
     def error_regions(self, test) -> dict:
         """:func:`error_regions` on the prepared sample pairs."""
-        if getattr(self, "_regions", None) is None:
-            self._regions = region_of(self._wi, self._wo)
         return _regions_from(self._regions, self._ref_vals, self._test_values(test), self._wi)
 
     def cos_rel_error(self, test, per_channel: bool = False):
