@@ -78,17 +78,24 @@ def tabulate_merl_grid(brdf, chunk: int = 1 << 18) -> tuple[np.ndarray, np.ndarr
 
 
 def _evaluate(brdf, chunk: int) -> tuple[np.ndarray, np.ndarray]:
-    th, td, pd = np.meshgrid(merl_theta_h(), merl_theta_d(), merl_phi_d(), indexing="ij")
+    values, measured = _evaluate_nodes(brdf, slice(None), slice(None), slice(None), chunk)
+    return values, measured & np.all(np.isfinite(values), axis=-1) & np.all(values >= 0, axis=-1)
+
+
+def _evaluate_nodes(brdf, ih, jd, kp, chunk: int) -> tuple[np.ndarray, np.ndarray]:
+    """``eval_hd`` at the nodes ``θh[ih] × θd[jd] × φd[kp]`` in chunks of ``chunk`` samples,
+    and the BRDF's measured domain there."""
+    th, td, pd = np.meshgrid(merl_theta_h()[ih], merl_theta_d()[jd], merl_phi_d()[kp],
+                             indexing="ij")
+    shape = th.shape
     th, td, pd = th.ravel(), td.ravel(), pd.ravel()
     out = np.empty((th.size, 3))
     for s in range(0, th.size, chunk):
         sl = slice(s, s + chunk)
         out[sl] = brdf.eval_hd(th[sl], td[sl], pd[sl])
-    out = out.reshape(N_THETA_H, N_THETA_D, N_PHI_D, 3)
-    valid = np.all(np.isfinite(out), axis=-1) & np.all(out >= 0, axis=-1)
-    if getattr(brdf, "measured_domain", None) is not None:
-        valid &= _measured_hd(brdf, th, td, pd).reshape(valid.shape)
-    return out, valid
+    if getattr(brdf, "measured_domain", None) is None:
+        return out.reshape(shape + (3,)), np.ones(shape, dtype=bool)
+    return out.reshape(shape + (3,)), _measured_hd(brdf, th, td, pd).reshape(shape)
 
 
 def _stored_table(brdf):
@@ -103,24 +110,19 @@ def _measured_hd(brdf, th, td, pd) -> np.ndarray:
                            np.broadcast_shapes(np.shape(th), np.shape(td), np.shape(pd)))
 
 
-def merl_node_values(brdf, ih=slice(None), jd=slice(None), kp=slice(None)
-                     ) -> tuple[np.ndarray, np.ndarray]:
+def merl_node_values(brdf, ih=slice(None), jd=slice(None), kp=slice(None),
+                     chunk: int = 1 << 18) -> tuple[np.ndarray, np.ndarray]:
     """The BRDF at the MERL nodes ``θh[ih] × θd[jd] × φd[kp]`` (index arrays or slices).
 
     Returns ``(values (…, 3), measured (…))`` on that sub-grid. A MERL table
     (``merl_table``) is read as stored and ``measured`` is its valid mask; any other isotropic
-    BRDF is evaluated with ``eval_hd`` and ``measured`` is its measured domain
-    (:meth:`brdffit.brdf.IsotropicBRDF.measured_hd`, all True when it has none). Values are
-    returned as they come: callers clean non-finite or negative ones their own way.
+    BRDF is evaluated with ``eval_hd`` (``chunk`` samples at a time) and ``measured`` is its
+    measured domain (:meth:`brdffit.brdf.IsotropicBRDF.measured_hd`, all True when it has
+    none). Values are returned as they come: callers clean non-finite or negative ones their
+    own way.
     """
     table = _stored_table(brdf)
     if table is not None:
         values, valid = table
         return np.asarray(values)[ih][:, jd][:, :, kp], np.asarray(valid)[ih][:, jd][:, :, kp]
-    th, td, pd = np.meshgrid(merl_theta_h()[ih], merl_theta_d()[jd], merl_phi_d()[kp],
-                             indexing="ij")
-    values = np.asarray(brdf.eval_hd(th.ravel(), td.ravel(), pd.ravel()), dtype=np.float64)
-    values = values.reshape(th.shape + (-1,))
-    if getattr(brdf, "measured_domain", None) is None:
-        return values, np.ones(th.shape, dtype=bool)
-    return values, _measured_hd(brdf, th, td, pd)
+    return _evaluate_nodes(brdf, ih, jd, kp, chunk)

@@ -207,6 +207,16 @@ def fast_half_diff(wi, wo):
     return th.reshape(shape), td.reshape(shape), pd.reshape(shape), above
 
 
+def _nearest_sample(th, td, pd) -> np.ndarray:
+    """Flat index of the stored sample MERL's own lookup reads at ``(θh, θd, φd)`` (finite
+    angles): the floor of each continuous index (snapped up by ``_SNAP`` so that a node maps
+    to itself), clamped to the table, φd periodic."""
+    i = np.minimum(np.floor(theta_h_to_index(th) + _SNAP), N_THETA_H - 1).astype(np.intp)
+    j = np.minimum(np.floor(theta_d_to_index(td) + _SNAP), N_THETA_D - 1).astype(np.intp)
+    k = np.floor(phi_d_to_index(pd) + _SNAP).astype(np.intp) % N_PHI_D
+    return k + N_PHI_D * (j + N_THETA_D * i)
+
+
 def _pack(values: np.ndarray, valid: np.ndarray) -> np.ndarray:
     flat_v = values.reshape(-1, values.shape[-1])
     flat_m = valid.reshape(-1)
@@ -334,10 +344,7 @@ class MERLBRDF(IsotropicBRDF):
     def measured_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
         th, td, pd = np.broadcast_arrays(*(np.nan_to_num(np.asarray(a, np.float64))
                                            for a in (theta_h, theta_d, phi_d)))
-        i = np.minimum(np.floor(theta_h_to_index(th) + _SNAP), N_THETA_H - 1).astype(np.intp)
-        j = np.minimum(np.floor(theta_d_to_index(td) + _SNAP), N_THETA_D - 1).astype(np.intp)
-        k = np.floor(phi_d_to_index(pd) + _SNAP).astype(np.intp) % N_PHI_D
-        return self._valid[i, j, k]
+        return self._valid.reshape(-1)[_nearest_sample(th, td, pd)]
 
     def eval(self, wi, wo) -> np.ndarray:
         """f_r(wi, wo) via the table lookup in Rusinkiewicz coordinates; 0 below the horizon."""
@@ -353,17 +360,11 @@ class MERLBRDF(IsotropicBRDF):
         if not finite.all():  # NaN angles evaluate to 0 (and never index out of the table)
             th, td, pd = (np.where(finite, a, 0.0) for a in (th, td, pd))
             return np.where(finite[..., None], self.eval_hd(th, td, pd), 0.0)
-        u = theta_h_to_index(th)
-        v = theta_d_to_index(td)
-        w = phi_d_to_index(pd)
         table = self._table()
         if self._interpolation == "nearest":
-            i = np.minimum(np.floor(u + _SNAP), N_THETA_H - 1).astype(np.intp)
-            j = np.minimum(np.floor(v + _SNAP), N_THETA_D - 1).astype(np.intp)
-            k = np.floor(w + _SNAP).astype(np.intp) % N_PHI_D
-            row = table[k + N_PHI_D * (j + N_THETA_D * i)]
-            return row[..., :3]  # invalid rows hold 0
-        return _merl_trilinear(table, u, v, w)
+            return table[_nearest_sample(th, td, pd)][..., :3]  # invalid rows hold 0
+        return _merl_trilinear(table, theta_h_to_index(th), theta_d_to_index(td),
+                               phi_d_to_index(pd))
 
     def describe(self) -> dict:
         d = super().describe()
