@@ -778,46 +778,58 @@ def _coat_solve(H, g, zz, bound: float = np.inf):
     (ρd, A, C) and one coat weight w for the three channels (``H`` (10, 10), ``g`` (10,),
     ``zz`` = Σ w z²): ``(E, x)``, x = (ρd, A, C) × 3 then w; ρd ∈ [0, ALBEDO_MAX],
     A, C ≥ 0 with A + C = ks ≤ 1 (the base's F ≤ 1; :func:`_on_unit_sum_faces`), w ∈ [0, 1].
-    Bounded-variable least squares on the Cholesky factor of ``H``, skipped when the unconstrained minimum is feasible (then it is the answer: the problem is
-    convex) or is not below ``bound`` (then no feasible point is: ``(inf, None)``)."""
-    n = g.size
-    try:
-        L = np.linalg.cholesky(H + 1e-13 * np.trace(H) / n * np.eye(n))
-    except np.linalg.LinAlgError:
+    Bounded-variable least squares on the Cholesky factor of ``H`` (:func:`_bvls`), skipped
+    when the unconstrained minimum is feasible (then it is the answer: the problem is convex)
+    or is not below ``bound`` (then no feasible point is: ``(inf, None)``)."""
+    factor = _cholesky(H, g)
+    if factor is None:
         return np.inf, None
-    rhs = np.linalg.solve(L, g)
+    L, rhs = factor
     if zz - rhs @ rhs > bound + 1e-9 * zz:
         return np.inf, None
-    hi = np.array([ALBEDO_MAX, np.inf, np.inf] * 3 + [1.0])
+    lo, hi = np.zeros(g.size), np.array([ALBEDO_MAX, np.inf, np.inf] * 3 + [1.0])
     x = np.linalg.solve(L.T, rhs)
-    if not np.all((x >= 0.0) & (x <= hi)):
-        x = _bvls(H, g, np.zeros(n), hi)
+    if not np.all((x >= lo) & (x <= hi)):
+        x, _ = _bvls(H, g, lo, hi, factor)
     faces: list[tuple[int, int]] = []
     while x is not None:                 # F ≤ 1: ks = A + C ≤ 1 per channel
         over = [(3 * c + 1, 3 * c + 2) for c in range(3)
-                if x[3 * c + 1] + x[3 * c + 2] > 1.0 + 1e-12 and (3 * c + 1, 3 * c + 2) not in faces]
+                if x[3 * c + 1] + x[3 * c + 2] > 1.0 + 1e-12
+                and (3 * c + 1, 3 * c + 2) not in faces]
         if not over:
             break
         faces += over
-        x, _ = _on_unit_sum_faces(lambda *a: (_bvls(*a), 0.0), H, g, np.zeros(n), hi, faces)
+        x, _ = _on_unit_sum_faces(_bvls, H, g, lo, hi, faces)
     if x is None:
         return np.inf, None
     E = float(zz - 2.0 * g @ x + x @ H @ x)
     return (max(E, 0.0), x) if np.isfinite(E) else (np.inf, None)
 
 
-def _bvls(H, g, lo, hi):
-    """``argmin ½xᵀHx − gᵀx`` on the box by bounded-variable least squares on the Cholesky
-    factor of ``H`` (``None`` when ``H`` is not positive definite)."""
-    from scipy.optimize import lsq_linear
-
+def _cholesky(H, g):
+    """``(L, L⁻¹ g)`` with ``L Lᵀ = H`` (regularised by 1e-13 of its mean diagonal), or
+    ``None`` when ``H`` is not positive definite."""
     n = g.size
     try:
         L = np.linalg.cholesky(H + 1e-13 * np.trace(H) / n * np.eye(n))
     except np.linalg.LinAlgError:
         return None
-    rhs = np.linalg.solve(L, g)
-    return np.clip(lsq_linear(L.T, rhs, bounds=(lo, hi), tol=1e-12, method="bvls").x, lo, hi)
+    return L, np.linalg.solve(L, g)
+
+
+def _bvls(H, g, lo, hi, factor=None):
+    """``argmin ½xᵀHx − gᵀx`` on the box ``lo ≤ x ≤ hi`` by bounded-variable least squares on
+    the Cholesky factor of ``H`` (``factor``: :func:`_cholesky`'s, when already made):
+    ``(x, value)``, ``(None, inf)`` when ``H`` is not positive definite (the interface of
+    :func:`_box_qp`)."""
+    from scipy.optimize import lsq_linear
+
+    factor = factor or _cholesky(H, g)
+    if factor is None:
+        return None, np.inf
+    L, rhs = factor
+    x = np.clip(lsq_linear(L.T, rhs, bounds=(lo, hi), tol=1e-12, method="bvls").x, lo, hi)
+    return x, 0.5 * x @ H @ x - g @ x
 
 
 def _coat_system(cols_c, data):
