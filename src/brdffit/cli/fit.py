@@ -146,10 +146,10 @@ def quick_error(reference, model, n_pairs: int = QUICK_ERROR_PAIRS) -> dict:
 
     * A MERL table (``merl_table()``): quadrature on its own valid nodes (no interpolation of
       the input; :func:`_grid_error`).
-    * Over the reference's measured domain only (:meth:`brdffit.brdf.BRDF.measured`).
     * Anything else: ``n_pairs`` fixed quasi-random direction pairs drawn ∝ cos θi cos θo
-      (:func:`brdffit.brdf.cosine_pairs`) instead of the metric's 2^17 scrambled Sobol pairs (SciPy's
-      generator costs ~0.3 s to import).
+      (:func:`brdffit.brdf.cosine_pairs`) instead of the metric's 2^17 scrambled Sobol pairs
+      (SciPy's generator costs ~0.3 s to import), those in the reference's measured domain
+      only (:meth:`brdffit.brdf.BRDF.measured`).
 
     Both agree with the full metric within a few % (tests/cli/test_fit_cli.py).
     """
