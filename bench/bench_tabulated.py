@@ -18,17 +18,24 @@ Sections (all re-runnable; timings depend on the machine's load):
 * ``speed``: median wall time of complete fits (P, σ/G1, Fresnel, sampling tables):
   isotropic on MERL-grid input (a table with ``merl_table``, N = 90, file reading excluded),
   anisotropic 90×90 on an analytic anisotropic GGX material.
+* ``validity`` (real data): per MERL stand-in and RGL material, the paper's lobe alone
+  (``diffuse=False, fresnel_max=100``) next to the default fit (F ≤ 1 + the Lambertian term):
+  the CLI's cosine-weighted relative error (``brdffit.cli.fit.quick_error``, over the
+  measured domain), the failed physical checks (``brdffit.evaluation.validity``), ρd, the
+  refits and the CPU time of each, side by side in one run.
 * ``--real``: all 100 Neural-BRDF MERL materials and the 7 RGL materials: failures, NaN,
   P ≥ 0, ∫P (interpolant), iterations needed for tol 1e-4 / 1e-6, and for RGL the
   difference between the fitted NDF and the file's stored ``ndf`` table.
 
 Usage: ``.venv/bin/python bench/bench_tabulated.py [--real] [--sections defaults]``
+(``--sections validity`` runs the real-data validity section alone).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import statistics
 import sys
 import time
@@ -407,6 +414,46 @@ def real_data(limit=None):
     return res
 
 
+def validity_real(limit=None):
+    """The paper's lobe alone vs the default fit on every real material (module docstring)."""
+    from brdffit.cli.fit import quick_error
+    from brdffit.evaluation.validity import check_validity
+    from brdffit.io import load
+    from brdffit.io.nbrdf import list_materials
+
+    z = SHARED / "nbrdf" / "merl_nbrdf.zip"
+    names = list_materials(z)[:limit] if limit else list_materials(z)
+    specs = [f"{z}:{n}" for n in names]
+    specs += [str(p) for p in sorted((SHARED / "rgl").glob("*.bsdf"))[: limit or None]]
+    fits = {"paper": {"diffuse": False, "fresnel_max": 100.0}, "default": {}}
+    rows, load0 = [], os.getloadavg()
+    for spec in specs:
+        brdf = load(spec)
+        row = {"material": spec.rsplit(":", 1)[-1] if ":" in spec else Path(spec).stem}
+        for label, options in fits.items():
+            t = time.process_time()
+            m = fit_tabulated(brdf, **options)
+            cpu = time.process_time() - t
+            row[label] = {"cos_rel_error": quick_error(brdf, m)["cos_rel_error"],
+                          "failed_checks": [v.check for v in check_validity(m)],
+                          "rho_d": (m.fit_info.get("diffuse") or {}).get("rho_d"),
+                          "refits": (m.fit_info.get("diffuse") or {}).get("refits"),
+                          "cpu_s": cpu}
+        rows.append(row)
+        print(row["material"], {k: round(row[k]["cos_rel_error"], 4) for k in fits},
+              row["paper"]["failed_checks"], flush=True)
+    summary = {}
+    for label in fits:
+        err = [r[label]["cos_rel_error"] for r in rows]
+        summary[label] = {"invalid_fits": sum(bool(r[label]["failed_checks"]) for r in rows),
+                          "mean_error": float(np.mean(err)), "median_error": float(np.median(err)),
+                          "cpu_s_total": float(sum(r[label]["cpu_s"] for r in rows))}
+    summary["default_worse_by_2pc"] = [
+        r["material"] for r in rows
+        if r["default"]["cos_rel_error"] > 1.02 * r["paper"]["cos_rel_error"]]
+    return {"rows": rows, "summary": summary, "load_average": [load0, os.getloadavg()]}
+
+
 def _stats(values):
     v = [x for x in values if x is not None]
     if not v:
@@ -464,6 +511,9 @@ def main(argv=None):
     if "speed" in sections:
         results["speed"] = speed()
         print("  speed", json.dumps(results["speed"], indent=1), flush=True)
+    if "validity" in sections or args.real or args.only_real:
+        results["validity"] = validity_real(args.limit)
+        print(json.dumps(results["validity"]["summary"], indent=1), flush=True)
     if args.real or args.only_real:
         results["real"] = real_data(args.limit)
         print(json.dumps({k: v for k, v in results["real"].items() if k.endswith("summary")},

@@ -70,13 +70,15 @@ def stratified_square(n: int, seed: int = 0) -> np.ndarray:
     return jittered_grid(np.random.default_rng(seed), int(np.sqrt(n)))
 
 
-def cosine_pairs(n: int) -> tuple[np.ndarray, np.ndarray]:
+def cosine_pairs(n: int, start: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
     """``n`` direction pairs ``(wi, wo)``, each cosine-distributed, from the 4-D Kronecker
     (R4) sequence of the generalised golden ratio ``g`` (``g**5 = g + 1``): deterministic and
-    low-discrepancy, NumPy only (SciPy's Sobol generator costs ~0.3 s to import)."""
+    low-discrepancy, NumPy only (SciPy's Sobol generator costs ~0.3 s to import). ``start``
+    is the sequence's offset in [0, 1): two offsets give two different pair sets (one to fit
+    on, one to measure the error on)."""
     g = 1.1673039782614187
     alpha = 1.0 / g ** np.arange(1, 5)
-    u = (0.5 + np.arange(1, n + 1)[:, None] * alpha[None, :]) % 1.0
+    u = (start + np.arange(1, n + 1)[:, None] * alpha[None, :]) % 1.0
     u = np.clip(u, 1e-12, 1 - 1e-12)
     return cosine_hemisphere_sample(u[:, :2]), cosine_hemisphere_sample(u[:, 2:])
 

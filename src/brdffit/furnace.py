@@ -48,7 +48,7 @@ import numpy as np
 from .brdf import (cosine_hemisphere_pdf, cosine_hemisphere_sample, jittered_grid,
                    stratified_square)
 
-__all__ = ["albedo_quadrature", "albedo_sampled", "sampled_albedo", "estimator_values",
+__all__ = ["albedo_quadrature", "albedo_sampled", "sampled_albedo", "hold_diffuse", "estimator_values",
            "stratified_uniforms", "sample_mean", "check", "FurnaceResult", "furnace"]
 
 
@@ -232,6 +232,26 @@ class FurnaceResult:
                 f"quad={np.round(self.quadrature, 6).tolist()} "
                 f"rel.err={np.round(self.rel_error, 5).tolist()} "
                 f"rel.se={np.round(self.rel_se, 5).tolist()} {'PASS' if self.passed else 'FAIL'}")
+
+
+#: incidences (degrees) and samples of the furnace a fitted ρd is held to (:func:`hold_diffuse`)
+HOLD_ANGLES_DEG = (0.0, 30.0, 45.0, 60.0, 70.0, 75.0, 80.0, 85.0, 88.0)
+HOLD_SAMPLES = 4096
+
+
+def hold_diffuse(rho_d, specular_lobes) -> tuple[np.ndarray, np.ndarray]:
+    """``(ρd, lowering)``: ρd per channel lowered where ``ρd + Σ a_spec(θi)`` exceeds 1 at an
+    incidence of :data:`HOLD_ANGLES_DEG`, so that the directional albedo of the lobes plus a
+    Lambertian ρd/π stays ≤ 1 (the Lambertian term adds exactly ρd to it at every θi).
+    ``a_spec`` is the lobes' albedo (:func:`sampled_albedo`, :data:`HOLD_SAMPLES` samples);
+    a lobe with F ≤ 1 and a Smith G never exceeds 1 alone. Only ρd moves (the lobes are
+    kept), the least change that holds the furnace; ``lowering`` is what was taken off."""
+    angles = np.radians(HOLD_ANGLES_DEG)
+    spec = sum(sampled_albedo(lobe, angles, HOLD_SAMPLES)[0] for lobe in specular_lobes)
+    cap = np.clip(1.0 - spec.max(axis=0), 0.0, None)
+    rho_d = np.asarray(rho_d, dtype=np.float64)
+    held = np.minimum(rho_d, cap)
+    return held, rho_d - held
 
 
 def check(estimate, se, quadrature, tol: float = 0.01, k: float = 4.0) -> bool:

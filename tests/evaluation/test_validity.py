@@ -72,10 +72,15 @@ def test_fit_prints_the_warnings_and_json_carries_them(capsys, quick_alternative
     assert "warning" not in out.err
 
 
-def test_the_default_fit_of_a_diffuse_material_with_the_tabulated_model_warns(capsys,
-                                                                              quick_alternatives):
-    """A diffuse material fitted without a diffuse term: F absorbs the base (F0 > 1)."""
+def test_the_tabulated_fit_is_valid_and_the_papers_lobe_alone_warns(capsys, quick_alternatives):
+    """A diffuse material: the default tabulated fit carries the base in its Lambertian term
+    (F ≤ 1, all checks pass); the paper's lobe alone with an unbounded F absorbs it (F0 > 1)."""
     assert main(["fit", "synthetic:plastic-beckmann", "-m", "tabulated"]) == 0
+    out = capsys.readouterr()
+    assert "F ≤ 1, albedo ≤ 1, f ≥ 0, reciprocal: all passed" in out.out
+    assert not [ln for ln in out.err.splitlines() if "fresnel" in ln or "albedo" in ln]
+    assert main(["fit", "synthetic:plastic-beckmann", "-m", "tabulated",
+                 "-O", "diffuse=false", "-O", "fresnel_max=100"]) == 0
     err = capsys.readouterr().err
     lines = [ln for ln in err.splitlines() if ln.startswith("brdffit: warning:")]
     assert lines and all("(tabulated fit): " in ln for ln in lines)

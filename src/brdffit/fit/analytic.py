@@ -54,7 +54,8 @@ any coat that lowers the objective.)
 the Schlick ``A + C ≤ 1`` per channel is a constraint of the exact linear solve, the exact
 Fresnel forms bound ks by 1), and the white furnace holds: the fitted ρd is lowered, where
 needed, so that ρd plus the specular lobes' directional albedo stays ≤ 1 at every incidence
-of ``FURNACE_ANGLES_DEG`` (:func:`_hold_furnace`; ``fit_info["rho_d_furnace_lowering"]``;
+of ``brdffit.furnace.HOLD_ANGLES_DEG`` (:func:`brdffit.furnace.hold_diffuse`;
+``fit_info["rho_d_furnace_lowering"]``;
 the objective reported is that of the held model). The checks of
 :mod:`brdffit.evaluation.validity` then pass on every fit.
 
@@ -126,6 +127,7 @@ import numpy as np
 from scipy import optimize
 
 from ..errors import FitError
+from ..furnace import hold_diffuse
 from ..geometry import half_diff_to_io
 from ..brdf import measured_mask
 from ..grid import (N_PHI_D, N_THETA_D, N_THETA_H, merl_node_values, merl_phi_d, merl_theta_d,
@@ -148,9 +150,6 @@ RHO_MAX = 0.95
 #: bounds of the dielectric index η and of the specular scale ks (ks ≤ 1: F ≤ 1 at every
 #: angle, every exact and Schlick Fresnel reaching 1 at grazing)
 ETA_BOUNDS = (1.001, 4.0)
-#: incidences (degrees) and samples of the furnace the fitted ρd is held to (:func:`_hold_furnace`)
-FURNACE_ANGLES_DEG = (0.0, 30.0, 45.0, 60.0, 70.0, 75.0, 80.0, 85.0, 88.0)
-FURNACE_SAMPLES = 4096
 KS_MAX = 1.0
 _MAX_THETA_IO_DEG = 89.0
 _SCAN = 32
@@ -1165,7 +1164,7 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
     if not all(np.isfinite(values)):
         raise FitError(f"{label}: {kind}-diffuse fit produced non-finite parameters")
     dist = _distribution(kind, ax, ay, rho)
-    rho_d, lowered = _hold_furnace(rho_d, [MicrofacetBRDF(dist, F, specular=ks)])
+    rho_d, lowered = hold_diffuse(rho_d, [MicrofacetBRDF(dist, F, specular=ks)])
     model = MicrofacetBRDF(dist, F, diffuse=rho_d, specular=ks,
                            correlated=True, name=name or f"{label}-{kind}-diffuse",
                            source=getattr(brdf, "source", None))
@@ -1206,7 +1205,7 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
     base_dist, base_fresnel = _distribution(kind, a_base), SchlickFresnel(np.clip(F0, 0.0, 1.0))
     coat_lobe = MicrofacetBRDF(_distribution(kind, a_coat), SchlickFresnel(np.full(3, COAT_F0)),
                                specular=np.full(3, float(x[9])), correlated=True, name="coat")
-    rho_d, lowered = _hold_furnace(rho_d, [MicrofacetBRDF(base_dist, base_fresnel, specular=ks),
+    rho_d, lowered = hold_diffuse(rho_d, [MicrofacetBRDF(base_dist, base_fresnel, specular=ks),
                                            coat_lobe])
     base = MicrofacetBRDF(base_dist, base_fresnel, diffuse=rho_d, specular=ks, correlated=True,
                           name="base")
@@ -1242,23 +1241,6 @@ def _objective_of(model, data) -> float:
     """The objective ``Σ_c Σ_j w_cj (f_c(j) − ρ*_cj)²`` of a built model on the sample set."""
     f = np.asarray(model.eval(data["wi"], data["wo"]), dtype=np.float64)
     return float(np.sum(data["w"] * (f - data["z"]) ** 2))
-
-
-def _hold_furnace(rho_d, specular_lobes) -> tuple[np.ndarray, np.ndarray]:
-    """``(ρd, lowering)``: ρd per channel lowered where ``ρd + Σ a_spec(θi)`` exceeds 1 at an
-    incidence of :data:`FURNACE_ANGLES_DEG`, so that the fit's directional albedo stays ≤ 1
-    (the Lambertian term adds exactly ρd to it at every θi). ``a_spec`` is the specular lobes'
-    albedo (:func:`brdffit.furnace.sampled_albedo`, :data:`FURNACE_SAMPLES` samples); each lobe
-    has F ≤ 1 and a Smith G, so it alone never exceeds 1. Deviation from the least-squares
-    optimum: only ρd moves (the specular part is kept), the least change that holds the
-    furnace; ``lowering`` is what was taken off (0 on most materials)."""
-    from ..furnace import sampled_albedo
-
-    angles = np.radians(FURNACE_ANGLES_DEG)
-    spec = sum(sampled_albedo(lobe, angles, FURNACE_SAMPLES)[0] for lobe in specular_lobes)
-    cap = np.clip(1.0 - spec.max(axis=0), 0.0, None)
-    held = np.minimum(np.asarray(rho_d, dtype=np.float64), cap)
-    return held, np.asarray(rho_d, dtype=np.float64) - held
 
 
 def fit_ggx_diffuse(brdf, **kwargs) -> MicrofacetBRDF | SumBRDF:

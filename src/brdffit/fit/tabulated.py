@@ -50,10 +50,14 @@ import time
 
 import numpy as np
 
-from ..brdf import BRDF, measured_mask
+from ..brdf import BRDF, IsotropicBRDF, cosine_pairs, measured_mask
 from ..errors import FitError
+from ..furnace import hold_diffuse
+from ..geometry import half_diff_to_io
 from ..grid import (N_PHI_D, N_THETA_H, merl_phi_d, merl_theta_d, merl_theta_h,
                     tabulate_merl_grid)
+from ..losses.l2 import merl_grid_weights
+from ..losses.objective import weighted_median
 from ..microfacet.conversions import to_beckmann, to_ggx
 from ..microfacet.per_channel import PerChannelBRDF
 from ..microfacet.tabulated import (TabulatedSlopeDistribution,
@@ -430,8 +434,6 @@ def extract_fresnel(brdf: BRDF, dist: TabulatedSlopeDistribution, *, merl=None,
         th = (np.arange(n_h) / n_h) ** 2 * (np.pi / 2)
         phh = 2.0 * np.pi * np.arange(n_ph) / n_ph
         pd = 2.0 * np.pi * np.arange(n_pd) / n_pd
-        from ..geometry import half_diff_to_io
-
         sums = np.zeros((len(td), 3))
         counts = np.zeros(len(td), dtype=np.int64)
         TH, PH, PD = np.meshgrid(th, phh, pd, indexing="ij")
@@ -530,13 +532,142 @@ def _merge_convergence(infos) -> dict:
     return out
 
 
+# ------------------------------------------------------------------------------------------
+# The Lambertian term
+# ------------------------------------------------------------------------------------------
+#: Direction pairs of the ρd fit when the input has no MERL grid (cosine-distributed, in the
+#: measured domain), and the offset of their sequence (the CLI's error estimate uses 0.5).
+DIFFUSE_PAIRS, DIFFUSE_PAIRS_START = 16384, 0.25
+#: On a MERL grid, ρd is fitted on every this-th φd node (90 × 90 × 45 nodes).
+DIFFUSE_PHI_STRIDE = 4
+#: At most this many refits of the lobe on ``f − ρd/π``; a refit is kept when it lowers the
+#: error by more than ``DIFFUSE_MIN_GAIN`` (relative).
+MAX_DIFFUSE_REFITS, DIFFUSE_MIN_GAIN = 6, 1e-3
+#: A ρd below this (an albedo of 1e-4, far below any measurement's accuracy) is 0: no term.
+DIFFUSE_MIN = 1e-4
+#: Each refit after the first starts from ρd plus this multiple of the last change of ρd (the
+#: plain iteration ρd ← π·median(f − f_lobe(ρd)) contracts by about 0.6 per step).
+_STEP_GAIN = 1.5
+
+
+class _WithoutLambert(BRDF):
+    """``f − ρd/π``: what a Lambertian term ρd/π leaves of ``brdf`` to the microfacet lobe
+    (the measured domain kept; a MERL table stays a table, read at its own samples)."""
+
+    def __init__(self, brdf: BRDF, rho_d):
+        self.brdf, self.offset = brdf, np.asarray(rho_d, dtype=np.float64) / np.pi
+        self.name, self.source = getattr(brdf, "name", "brdf"), getattr(brdf, "source", None)
+        self.measured_domain = getattr(brdf, "measured_domain", None)
+        if callable(getattr(brdf, "merl_table", None)):
+            self.merl_table = self._merl_table
+
+    def _merl_table(self):
+        values, valid = self.brdf.merl_table()
+        return np.asarray(values, dtype=np.float64) - self.offset, valid
+
+    def eval(self, wi, wo) -> np.ndarray:
+        return np.asarray(self.brdf.eval(wi, wo), dtype=np.float64) - self.offset
+
+    def measured(self, wi, wo) -> np.ndarray:
+        return self.brdf.measured(wi, wo)
+
+
+class _IsotropicWithoutLambert(_WithoutLambert, IsotropicBRDF):
+    def eval_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
+        return np.asarray(self.brdf.eval_hd(theta_h, theta_d, phi_d), np.float64) - self.offset
+
+    def measured_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
+        return self.brdf.measured_hd(theta_h, theta_d, phi_d)
+
+
+def _without_lambert(brdf: BRDF, rho_d) -> _WithoutLambert:
+    cls = _IsotropicWithoutLambert if isinstance(brdf, IsotropicBRDF) else _WithoutLambert
+    return cls(brdf, rho_d)
+
+
+def _set_diffuse(model, rho_d) -> None:
+    for lobe in getattr(model, "models", [model]):      # a PerChannelBRDF: each channel's
+        lobe.diffuse = None if not np.any(rho_d > 0) else np.array(rho_d, dtype=np.float64)
+
+
+def _diffuse_data(brdf: BRDF, merl):
+    """``(wi, wo, f, w)``: the pairs ρd is fitted on and their weights in the cosine-weighted
+    L1 error. A MERL grid (``merl``): its valid nodes, every :data:`DIFFUSE_PHI_STRIDE`-th
+    φd, weighted by :func:`brdffit.losses.l2.merl_grid_weights` (no evaluation of the
+    input); else :data:`DIFFUSE_PAIRS` cosine-distributed pairs of the measured domain, each
+    of weight 1."""
+    if merl is not None:
+        values, valid = merl
+        w, (th, td, pd) = merl_grid_weights(DIFFUSE_PHI_STRIDE)
+        values = np.asarray(values, dtype=np.float64)[:, :, ::DIFFUSE_PHI_STRIDE]
+        keep = (np.asarray(valid, dtype=bool)[:, :, ::DIFFUSE_PHI_STRIDE] & (w > 0)
+                & np.all(np.isfinite(values), -1))
+        th, td, pd = (np.broadcast_to(a, keep.shape)[keep] for a in (th, td, pd))
+        wi, wo = half_diff_to_io(th, 0.0, td, pd)
+        return wi, wo, values[keep], w[keep]
+    wi, wo = cosine_pairs(DIFFUSE_PAIRS, DIFFUSE_PAIRS_START)
+    keep = measured_mask(brdf, wi, wo)
+    if keep is not None:
+        wi, wo = wi[keep], wo[keep]
+    f = np.nan_to_num(np.asarray(brdf.eval(wi, wo), dtype=np.float64))
+    return wi, wo, f, np.ones(len(wi))
+
+
+def _split_diffuse(brdf: BRDF, model, info: dict, refit, merl=None):
+    """``(model, info)`` with a Lambertian term ρd/π added to the fitted lobe.
+
+    On the pairs of :func:`_diffuse_data`, ρd/π per channel is the weighted median of the
+    residual ``f − f_lobe``: the constant that minimises the cosine-weighted L1 error, the
+    product's error measure (0 below :data:`DIFFUSE_MIN`). It
+    is then held by the white furnace (:func:`brdffit.furnace.hold_diffuse`). While ρd > 0,
+    the lobe is refitted on ``f − ρ/π`` (``refit(ρ)``, backscatter and Fresnel alike) and ρd
+    taken again, with ``ρ`` the last ρd plus :data:`_STEP_GAIN` times its last change (an
+    extrapolated fixed-point step); a refit is kept while it lowers the error on those pairs
+    by more than :data:`DIFFUSE_MIN_GAIN`, at most :data:`MAX_DIFFUSE_REFITS` times.
+
+    Deviation from Dupuy 2015: the paper's model has no diffuse term, its Fresnel residual
+    absorbs it (§4.4). With F ≤ 1 that energy would be lost; the term keeps it and the model
+    physical. On materials that need none, ρd is 0 and the lobe is the paper's.
+    """
+    wi, wo, f, w = _diffuse_data(brdf, merl)
+    scale = float((np.abs(f) * w[:, None]).sum())
+
+    def with_lambert(lobe):
+        f_lobe = np.nan_to_num(np.asarray(lobe.eval(wi, wo), dtype=np.float64))
+        residual = f - f_lobe
+        rho_d = np.pi * np.array([weighted_median(residual[:, c], w) for c in range(3)])
+        rho_d = np.where(rho_d >= DIFFUSE_MIN, rho_d, 0.0)
+        rho_d, lowered = hold_diffuse(rho_d, [lobe]) if rho_d.any() else (rho_d, 0.0 * rho_d)
+        error = float((np.abs(residual - rho_d / np.pi) * w[:, None]).sum() / scale
+                      if scale > 0 else 0.0)
+        return rho_d, lowered, error
+
+    rho_d, lowered, error = with_lambert(model)
+    errors, refits, step = [error], 0, None
+    while refits < MAX_DIFFUSE_REFITS and np.any(rho_d > 0):
+        target = rho_d if step is None else rho_d + step * _STEP_GAIN
+        candidate, candidate_info = refit(np.maximum(target, 0.0))
+        c_rho_d, c_lowered, c_error = with_lambert(candidate)
+        errors.append(c_error)
+        if c_error >= error * (1.0 - DIFFUSE_MIN_GAIN):
+            break
+        step = c_rho_d - rho_d
+        model, info, rho_d, lowered, error = (candidate, candidate_info, c_rho_d, c_lowered,
+                                              c_error)
+        refits += 1
+    _set_diffuse(model, rho_d)
+    info["diffuse"] = {"rho_d": rho_d.tolist(), "furnace_lowering": lowered.tolist(),
+                       "refits": refits, "errors": errors, "pairs": int(len(w))}
+    return model, info
+
+
 def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
                   tol: float | None = None,
                   anisotropic: bool | None = None, per_channel: bool = False, n_phi: int = 90,
                   rule: str = "auto", hotspot: str = "G2",
                   max_iterations: int = DEFAULT_MAX_ITERATIONS,
-                  fresnel_max: float = 100.0, p_floor: float = 1e-6,
-                  fresnel_max_theta_deg: float | None = 89.0) -> BRDF:
+                  fresnel_max: float = 1.0, p_floor: float = 1e-6,
+                  fresnel_max_theta_deg: float | None = 89.0, diffuse: bool = True) -> BRDF:
     """Fit the tabulated microfacet model of Dupuy et al. 2015 to ``brdf``.
 
     Parameters
@@ -572,8 +703,12 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
         backscattering under its own ``eval``) or ``"G1"`` (the paper's Eq. 11, which biases
         α by about −2 % at GGX α = 0.2 and −16 % at α = 0.8 for a G2 microsurface).
     fresnel_max:
-        Upper clamp of the extracted Fresnel table (Eq. 19-20 divide by the model; near
-        zero slope density the ratio is unbounded).
+        Upper clamp of the extracted Fresnel table. Default 1: a reflectance, so that the
+        model is physical (with a Smith G and a normalised D, F ≤ 1 keeps the lobe's
+        directional albedo ≤ 1). The paper's F (Eq. 19-20) is a ratio to the model and is
+        unbounded: on diffuse materials it absorbs the diffuse part and exceeds 1 (F0 up to 2
+        on RGL ``paper_white``); ``fresnel_max`` > 1 keeps such an F, which the validity
+        checks then report.
     p_floor:
         Samples where the fitted slope PDF is below ``p_floor · max P`` are left out of the
         Fresnel average (the ratio is undefined there).
@@ -584,16 +719,23 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
         reach 1e4-1e14 within 3° of the horizon, the cut lowers the fit's cosine-weighted
         relative error from 1.7-12 to 0.07-0.45; on the Neural-BRDF MERL set it changes it by
         under 3 %.
+    diffuse:
+        Add a Lambertian term ρd/π for what the lobe cannot carry (default; :func:`_split_diffuse`):
+        the least-absolute-deviation ρd of the residual, held by the white furnace, with the
+        lobe refitted on ``f − ρd/π`` while that lowers the error. ``False``: the paper's
+        lobe alone.
 
     Returns
     -------
     BRDF
-        A ``MicrofacetBRDF(TabulatedSlopeDistribution, TabulatedFresnel)`` (a
-        ``PerChannelBRDF`` of three with ``per_channel=True``) with
+        A ``MicrofacetBRDF(TabulatedSlopeDistribution, TabulatedFresnel, diffuse=ρd)`` (a
+        ``PerChannelBRDF`` of three with ``per_channel=True``), physically valid by
+        construction with the defaults (F ≤ 1, directional albedo ≤ 1), with
     ``fit_info`` (eigenvalue = F0 of the paper, timings, and the convergence report of
     :func:`convergence_info`: ``converged``, ``success``, ``status``, ``message``,
     ``criterion``, ``tol``, ``iterations``/``nit``, ``max_iterations``, ``cap_reached``,
-    ``final_relative_change``, ``relative_change`` per iteration) and ``fit_options``.
+    ``final_relative_change``, ``relative_change`` per iteration; ``diffuse``: ρd, the
+    refits and the errors of :func:`_split_diffuse`) and ``fit_options``.
     The distribution's sampling tables are built on first use
     (:meth:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution.prepare_sampling`).
     """
@@ -612,25 +754,26 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
                "anisotropic": bool(anisotropic), "per_channel": bool(per_channel),
                "n_phi": int(n_phi) if anisotropic else None, "rule": rule, "hotspot": hotspot,
                "max_iterations": int(max_iterations), "fresnel_max": fresnel_max,
-               "p_floor": p_floor, "fresnel_max_theta_deg": fresnel_max_theta_deg}
+               "p_floor": p_floor, "fresnel_max_theta_deg": fresnel_max_theta_deg,
+               "diffuse": bool(diffuse)}
     kw = dict(n=n, n_phi=n_phi, rule=rule, iterations=iterations, tol=tol,
               max_iterations=max_iterations, anisotropic=anisotropic, hotspot=hotspot,
-              merl=merl, fresnel_kwargs={"fresnel_max": fresnel_max, "p_floor": p_floor,
-                                        "max_theta_deg": fresnel_max_theta_deg})
+              fresnel_kwargs={"fresnel_max": fresnel_max, "p_floor": p_floor,
+                              "max_theta_deg": fresnel_max_theta_deg})
     name = getattr(brdf, "name", "brdf")
     source = getattr(brdf, "source", None)
-    if per_channel:
-        models, infos = [], []
-        for c in range(3):
-            dist, F, info = _fit_one(brdf, c, **kw)
-            models.append(_make_model(dist, F, f"{name}[{'RGB'[c]}]", source))
-            infos.append(info)
-        model = PerChannelBRDF(models, name=name, source=source)
-        info = {"channels": infos, "eigenvalue": [i["eigenvalue"] for i in infos]}
-        info.update(_merge_convergence(infos))
-    else:
-        dist, F, info = _fit_one(brdf, None, **kw)
-        model = _make_model(dist, F, name, source)
+
+    def lobe_of(data, merl_values):
+        return _fit_lobe(data, merl_values, per_channel, kw, name, source)
+
+    model, info = lobe_of(brdf, merl)
+    if diffuse:
+        def refit(rho_d):
+            residual = (None if merl is None else
+                        (merl[0] - np.asarray(rho_d) / np.pi, merl[1]))
+            return lobe_of(_without_lambert(brdf, rho_d), residual)
+
+        model, info = _split_diffuse(brdf, model, info, refit, merl)
     info["time"] = time.perf_counter() - t0
     info["time_total"] = info["time"]
     if merl is not None:
@@ -638,6 +781,22 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
     model.fit_info = info
     model.fit_options = options
     return model
+
+
+def _fit_lobe(data, merl, per_channel, kw, name, source):
+    """``(model, info)``: the tabulated lobe(s) of ``data`` (one distribution from the
+    luminance, or one per channel)."""
+    if per_channel:
+        models, infos = [], []
+        for c in range(3):
+            dist, F, info = _fit_one(data, c, merl=merl, **kw)
+            models.append(_make_model(dist, F, f"{name}[{'RGB'[c]}]", source))
+            infos.append(info)
+        info = {"channels": infos, "eigenvalue": [i["eigenvalue"] for i in infos]}
+        info.update(_merge_convergence(infos))
+        return PerChannelBRDF(models, name=name, source=source), info
+    dist, F, info = _fit_one(data, None, merl=merl, **kw)
+    return _make_model(dist, F, name, source), info
 
 
 def fit_beckmann(brdf: BRDF, **kwargs) -> MicrofacetBRDF:
@@ -664,12 +823,14 @@ def fit_beckmann(brdf: BRDF, **kwargs) -> MicrofacetBRDF:
     >>> import brdffit
     >>> plastic = brdffit.synthetic("plastic-beckmann")       # Beckmann α = 0.18 + Lambert
     >>> round(float(brdffit.fit_beckmann(plastic).distribution.alpha_x), 2)
-    1.16
+    1.03
     >>> round(float(brdffit.fit_beckmann_diffuse(plastic).distribution.alpha_x), 2)
     0.18
 
-    The slope moments absorb the Lambertian term into the distribution; a material with a
-    diffuse part is fitted by :func:`brdffit.fit.analytic.fit_beckmann_diffuse`.
+    The tabulated lobe is fitted to the backscattering, diffuse part included, and its slope
+    moments keep much of that in the distribution (the Lambertian term of :func:`fit_tabulated`
+    takes only what the lobe leaves); a material with a diffuse part is fitted by
+    :func:`brdffit.fit.analytic.fit_beckmann_diffuse`.
     """
     return to_beckmann(fit_tabulated(brdf, **kwargs))
 

@@ -1,9 +1,9 @@
 """Conversions of a tabulated microfacet model (Dupuy, Heitz, Iehl, Poulin, Ostromoukhov 2015).
 
 * Analytic roughness by slope moments (Appendix C): :func:`to_beckmann` and :func:`to_ggx`
-  turn a tabulated ``MicrofacetBRDF`` into a Beckmann or GGX one with the same Fresnel, with
-  the ``(αx, αy, ρ)`` of the distribution's
-  :meth:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution.beckmann_parameters` /
+  turn a tabulated ``MicrofacetBRDF`` into a Beckmann or GGX one with the same Fresnel and
+  Lambertian ρd (held again by the white furnace under the new lobe), with the ``(αx, αy, ρ)``
+  of the distribution's :meth:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution.beckmann_parameters` /
   :meth:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution.ggx_parameters`.
 * Roughness editing (Eq. 9): :func:`with_roughness` scales the table by ``(αx, αy)``, scalars
   or per-texel arrays, without refitting.
@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..furnace import hold_diffuse
 from .beckmann import Beckmann
 from .ggx import GGX
 from .model import MicrofacetBRDF
@@ -38,6 +39,9 @@ def _analytic_model(model, kind):
         ax, ay, rho = dist.ggx_parameters()
         d = GGX(ax, ay, rho)
     out = MicrofacetBRDF(d, fres)
+    lowered = None
+    if getattr(model, "diffuse", None) is not None:   # held again under the converted lobe
+        out.diffuse, lowered = hold_diffuse(model.diffuse, [out])
     for attr in ("name", "source"):
         try:
             setattr(out, attr, getattr(model, attr, None))
@@ -45,6 +49,8 @@ def _analytic_model(model, kind):
             pass
     info = dict(getattr(model, "fit_info", None) or {})
     info.update({"alpha_x": ax, "alpha_y": ay, "rho": rho, "converted_from": "tabulated"})
+    if lowered is not None:
+        info["rho_d_furnace_lowering"] = lowered.tolist()
     out.fit_info = info
     out.fit_options = dict(getattr(model, "fit_options", None) or {}, model=kind)
     return out
@@ -58,8 +64,8 @@ def with_roughness(model, alpha_x, alpha_y=None):
     and every table are shared with ``model``.
     """
     dist, fres = _parts(model)
-    out = MicrofacetBRDF(dist.with_roughness(alpha_x, alpha_y), fres, name=model.name,
-                         source=model.source)
+    out = MicrofacetBRDF(dist.with_roughness(alpha_x, alpha_y), fres,
+                         getattr(model, "diffuse", None), name=model.name, source=model.source)
     out.fit_info = getattr(model, "fit_info", None)
     out.fit_options = getattr(model, "fit_options", None)
     return out
