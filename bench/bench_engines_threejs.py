@@ -18,6 +18,11 @@ Per material (``fit`` = ``brdffit.fit(material, model="ggx-diffuse")``, the file
   peak pixel;
 * ``model_vs_three``: PSNR of :class:`ThreeJSBRDF` (our model of three's shader, noise-free
   shader :func:`shade_sphere`) against the three.js image: how well the model explains it;
+* ``shader_vs_mitsuba_fit``: the noise-free shader of the fit (16 × 16 samples per pixel)
+  against Mitsuba's render of it (a check of the shader; limited by Mitsuba's noise on sharp
+  highlights), ``three_vs_converged_fit``: three.js against that converged image, and
+  ``three_grid_vs_converged``: the model on three's sample grid against it on the 16 × 16 one
+  (what the engine's pixel sampling alone costs);
 * ``estimate``: the cheap estimate of the engine's PSNR vs the fit (model vs the fit, both
   through :func:`shade_sphere`, no browser, no Monte Carlo) and its error to the measured one;
 * ``gltf_spec_vs_fit``: the glTF specification's BRDF (:class:`GLTFBRDF`, what the exporter
@@ -54,7 +59,7 @@ if not DATA.is_dir():
 NBRDF = DATA / "nbrdf" / "merl_nbrdf.zip"
 RGL = DATA / "rgl"
 ISSUE_MERL = ["ss440", "gold-metallic-paint", "maroon-plastic", "white-paint"]
-FIELDS = ["material", "psnr", "psnr_se", "mean_r", "mean_g", "mean_b", "rim_r", "rim_g", "rim_b",
+FIELDS = ["material", "psnr", "psnr_se", "psnr_vs_converged", "mean_r", "mean_g", "mean_b", "rim_r", "rim_g", "rim_b",
           "flip", "model_vs_three", "estimate", "estimate_error", "gltf_spec_vs_fit",
           "no_multiscatter", "pow5_fresnel", "no_geometry_roughness", "three_s"]
 
@@ -91,10 +96,17 @@ def bench_material(name, spec, args) -> dict:
     out["three_info"] = r.info
     mask = r.mask & (ra >= 0.999)
     kw = {"resolution": args.res, "supersample": args.ss}
-    fit_img, _ = TB.shade_sphere(fit, geometry_roughness=False, **kw)
+    # the fit's pixel integrals converged (a 16 × 16 grid at least), as Mitsuba's estimate
+    fit_img, _ = TB.shade_sphere(fit, geometry_roughness=False, resolution=args.res,
+                                 supersample=max(16, args.ss))
     est, _ = TB.shade_sphere(model, **kw)
     out["model_vs_three"] = rendered_psnr(r.image, est, mask)
     out["shader_vs_mitsuba_fit"] = rendered_psnr(refs.mean(0), fit_img, mask)
+    # three vs the converged fit (no Monte Carlo noise), and what three's sample grid alone
+    # costs (the model on three's grid vs on the 16 × 16 one)
+    out["three_vs_converged_fit"] = rendered_psnr(fit_img, r.image, mask)
+    fine, _ = TB.shade_sphere(model, resolution=args.res, supersample=max(16, args.ss))
+    out["three_grid_vs_converged"] = rendered_psnr(fine, est, mask)
     e = rendered_psnr(fit_img, est, mask)
     out["estimate"] = {"psnr": e, "error_db": e - c["psnr"]}
     spec_img, _ = TB.shade_sphere(gltf_equivalent(fit), geometry_roughness=False, **kw)
@@ -116,6 +128,7 @@ def bench_material(name, spec, args) -> dict:
 def _row(r: dict) -> dict:
     c = r["three"]
     return {"material": r["material"], "psnr": c["psnr"], "psnr_se": c["psnr_se"],
+            "psnr_vs_converged": r["three_vs_converged_fit"],
             "mean_r": c["mean_ratio"][0], "mean_g": c["mean_ratio"][1],
             "mean_b": c["mean_ratio"][2], "rim_r": c["rim_ratio"][0], "rim_g": c["rim_ratio"][1],
             "rim_b": c["rim_ratio"][2], "flip": c["flip"], "model_vs_three": r["model_vs_three"],
@@ -144,6 +157,9 @@ def summarise(results: list[dict]) -> dict:
 
     return {"materials": n, "errors": len(results) - n, "psnr": ms(p),
             "lowest": ok[int(np.argmin(p))]["material"],
+            "psnr_vs_converged_fit": ms([r["three_vs_converged_fit"] for r in ok]),
+            "shader_vs_mitsuba_fit": ms([r["shader_vs_mitsuba_fit"] for r in ok]),
+            "three_grid_vs_converged": ms([r["three_grid_vs_converged"] for r in ok]),
             "mean_ratio_range": [float(mr.min()), float(mr.max())],
             "materials_mean_ratio_within_3pct": int(np.sum(np.all(np.abs(mr - 1) <= 0.03, 1))),
             "rim_ratio_range": [float(rim.min()), float(rim.max())],
@@ -162,9 +178,9 @@ def main(argv=None) -> int:
                     help="comma-separated Neural-BRDF MERL names, or 'all' (default: the issue's 4)")
     ap.add_argument("--no-rgl", action="store_true", help="skip the 7 RGL files")
     ap.add_argument("--res", type=int, default=128)
-    ap.add_argument("--ss", type=int, default=4, help="three.js samples per pixel side")
-    ap.add_argument("--spp", type=int, default=64, help="Mitsuba samples per pixel per batch")
-    ap.add_argument("--batches", type=int, default=4, help="Mitsuba batches (independent seeds)")
+    ap.add_argument("--ss", type=int, default=8, help="three.js samples per pixel side")
+    ap.add_argument("--spp", type=int, default=256, help="Mitsuba samples per pixel per batch")
+    ap.add_argument("--batches", type=int, default=8, help="Mitsuba batches (independent seeds)")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "engines_threejs.json")
     args = ap.parse_args(argv)
 
@@ -202,7 +218,8 @@ def main(argv=None) -> int:
                   f"{'/'.join(f'{x:.3f}' for x in c['mean_ratio'])} | rim "
                   f"{'/'.join(f'{x:.3f}' for x in c['rim_ratio'])} | FLIP {c['flip'] or float('nan'):.4f}"
                   f" | model vs three {r['model_vs_three']:6.2f} | estimate {r['estimate']['psnr']:6.2f}"
-                  f" | spec vs fit {r['gltf_spec_vs_fit']:6.2f} | {r['wall_s']:.1f}s", flush=True)
+                  f" | spec vs fit {r['gltf_spec_vs_fit']:6.2f} | vs converged fit "
+                  f"{r['three_vs_converged_fit']:6.2f} | {r['wall_s']:.1f}s", flush=True)
         else:
             print(f"{name:28s} ERROR {r['error']}", flush=True)
         doc = {"benchmark": "engines_threejs",

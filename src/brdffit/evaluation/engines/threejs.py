@@ -69,7 +69,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["SCENES", "ThreeRender", "EngineUnavailable", "three_dir", "three_version",
-           "chromium_path", "available", "scene_json", "render_gltf", "sphere_geometry_px",
+           "chromium_path", "available", "scene_json", "render_gltf", "run_page", "sphere_geometry_px",
            "compare_render", "reference_renders"]
 
 SCENES = ("sphere-distant", "sphere-point")
@@ -147,7 +147,7 @@ def scene_json(scene: str = "sphere-distant", resolution: int = 128, supersample
     else:
         light = {"type": "point", "position": [float(x) for x in POINT_LIGHT["position"]],
                  "intensity": float(POINT_LIGHT["intensity"])}
-    return {"width": n, "height": n, "material_index": int(material_index),
+    return {"name": scene, "width": n, "height": n, "material_index": int(material_index),
             "sphere_segments": list(seg),
             "camera": {"origin": [0.0, 0.0, float(CAMERA_DISTANCE)], "target": [0.0, 0.0, 0.0],
                        "up": [0.0, 1.0, 0.0], "fov": float(CAMERA_FOV)},
@@ -211,16 +211,18 @@ class _Handler(BaseHTTPRequestHandler):
         if path in ("/", "/index.html"):
             return self._file(_PAGE, "index.html")
         if path == "/page/render.js":
-            return self._file(_PAGE, "render.js")
+            return self._file(_PAGE, s.script)
         if path == "/scene.json":
             return self._send(json.dumps(s.scene).encode(), "application/json")
-        if path == "/material.gltf":
+        if path in s.data:
+            return self._send(s.data[path], "application/json")
+        if path == "/material.gltf" and s.gltf_name:
             return self._file(s.gltf_dir, s.gltf_name)
         if path.startswith("/three/"):
             rel = path[len("/three/"):]
             if rel.startswith(("build/", "examples/jsm/")):
                 return self._file(s.three, rel)
-        elif path.startswith("/") and "/" not in path[1:]:
+        elif s.gltf_name and path.startswith("/") and "/" not in path[1:]:
             return self._file(s.gltf_dir, path[1:])    # buffers/images next to the .gltf
         self._send(b"not found", "text/plain", 404)
 
@@ -238,10 +240,13 @@ class _Handler(BaseHTTPRequestHandler):
 class _Server(ThreadingHTTPServer):
     daemon_threads = True
 
-    def __init__(self, scene: dict, gltf: Path, three: Path):
+    def __init__(self, scene: dict, three: Path, script: str, gltf: Path | None = None,
+                 data: dict[str, bytes] | None = None):
         super().__init__(("127.0.0.1", 0), _Handler)
-        self.scene, self.three = scene, three
-        self.gltf_dir, self.gltf_name = gltf.parent.resolve(), gltf.name
+        self.scene, self.three, self.script = scene, three, script
+        self.gltf_dir = gltf.parent.resolve() if gltf is not None else None
+        self.gltf_name = gltf.name if gltf is not None else None
+        self.data = dict(data or {})
         self.posted: dict[str, bytes] = {}
         self.done = threading.Event()
 
@@ -261,15 +266,25 @@ def render_gltf(gltf, scene: str = "sphere-distant", resolution: int = 128,
     three.js in headless Chromium (see the module docstring). Raises
     :class:`EngineUnavailable` when three.js or Chromium is missing, ``RuntimeError`` with the
     page's error when the page fails, ``TimeoutError`` after ``timeout`` seconds."""
-    ok, why = available()
-    if not ok:
-        raise EngineUnavailable(why)
     path = Path(gltf)
     if not path.is_file() or path.suffix.lower() != ".gltf":
         raise ValueError(f"render_gltf: expected an existing .gltf file, got {str(gltf)!r}")
     sc = scene_json(scene, resolution, supersample, segments, material_index)
+    return run_page("render.js", sc, resolution, supersample, gltf=path, timeout=timeout)
+
+
+def run_page(script: str, sc: dict, resolution: int, supersample: int, gltf: Path | None = None,
+             data: dict[str, bytes] | None = None, timeout: float = 120.0) -> ThreeRender:
+    """Serve ``threejs_page/index.html`` with ``script`` (a file of ``threejs_page/``) as its
+    module, the scene ``sc`` at ``/scene.json``, the ``three`` package, the glTF file's folder
+    and ``data`` (path → JSON bytes); run it in headless Chromium until it posts ``/result``
+    (Float32 RGBA, rows bottom to top) or ``/error``; box-average ``supersample``² samples per
+    pixel."""
+    ok, why = available()
+    if not ok:
+        raise EngineUnavailable(why)
     three = three_dir()
-    server = _Server(sc, path, three)
+    server = _Server(sc, three, script, gltf, data)
     th = threading.Thread(target=server.serve_forever, daemon=True)
     th.start()
     t0 = time.perf_counter()
@@ -284,7 +299,7 @@ def render_gltf(gltf, scene: str = "sphere-distant", resolution: int = 128,
             _stop(proc)
             if not finished:
                 err = proc.stderr.read().decode(errors="replace")[-2000:] if proc.stderr else ""
-                raise TimeoutError(f"three.js page: no result after {timeout:.0f} s "
+                raise TimeoutError(f"{script}: no result after {timeout:.0f} s "
                                    f"(Chromium's stderr: {err})")
     finally:
         if proc is not None:
@@ -293,16 +308,16 @@ def render_gltf(gltf, scene: str = "sphere-distant", resolution: int = 128,
         server.server_close()
     seconds = time.perf_counter() - t0
     if "error" in server.posted:
-        raise RuntimeError("three.js page failed: " + server.posted["error"].decode(errors="replace"))
+        raise RuntimeError(f"{script} failed: " + server.posted["error"].decode(errors="replace"))
     n = sc["width"]
     raw = np.frombuffer(server.posted["result"], dtype="<f4")
     if raw.size != n * n * 4:
-        raise RuntimeError(f"three.js page: expected {n * n * 4} floats, got {raw.size}")
+        raise RuntimeError(f"{script}: expected {n * n * 4} floats, got {raw.size}")
     px = raw.reshape(n, n, 4)[::-1]            # WebGL rows run bottom to top
     s = int(supersample)
     px = px.reshape(resolution, s, resolution, s, 4).mean(axis=(1, 3), dtype=np.float64)
     info = json.loads(server.posted.get("info", b"{}").decode() or "{}")
-    info |= {"scene": scene, "resolution": int(resolution), "supersample": s,
+    info |= {"scene": sc.get("name"), "resolution": int(resolution), "supersample": s,
              "segments": list(sc["sphere_segments"]), "seconds": seconds,
              "three_package": three_version(three)}
     return ThreeRender(image=px[..., :3].astype(np.float32),
