@@ -1,6 +1,7 @@
 """three.js round trip (issue 34): glTF exports of ggx-diffuse fits rendered by three.js
 (``MeshPhysicalMaterial``, WebGL 2 on SwiftShader, headless Chromium) in ``sphere-distant``,
-against our Mitsuba render of the fit.
+against our Mitsuba render of the fit; and their MaterialX exports rendered by MaterialX's own
+ESSL shaders in the same browser.
 
 Run: ``.venv/bin/python bench/bench_engines_threejs.py`` (the issue's four MERL stand-ins and
 the 7 RGL files); ``--merl all`` for the 100 Neural-BRDF MERL materials, ``--merl a,b`` for a
@@ -30,7 +31,11 @@ Per material (``fit`` = ``brdffit.fit(material, model="ggx-diffuse")``, the file
 * ``ablations``: the model vs the fit with one of three's departures from the specification
   switched off (``no_multiscatter``, ``pow5_fresnel``, ``no_geometry_roughness``,
   ``no_min_roughness``): which departure costs what;
-* timings (fit, export, three.js, Mitsuba) and the load average before and after.
+* ``materialx`` (``--materialx``, default on): the same figures for the MaterialX export
+  (``write_materialx``) rendered by MaterialX's own ESSL shaders in the browser
+  (:mod:`brdffit.evaluation.engines.materialx_web`), with ``model_vs_engine`` and
+  ``estimate`` from :class:`OpenPBRBRDF` (the exporter's model of MaterialX's GLSL);
+* timings (fit, export, three.js, MaterialX, Mitsuba) and the load average before and after.
 """
 
 from __future__ import annotations
@@ -59,7 +64,9 @@ if not DATA.is_dir():
 NBRDF = DATA / "nbrdf" / "merl_nbrdf.zip"
 RGL = DATA / "rgl"
 ISSUE_MERL = ["ss440", "gold-metallic-paint", "maroon-plastic", "white-paint"]
-FIELDS = ["material", "psnr", "psnr_se", "psnr_vs_converged", "mean_r", "mean_g", "mean_b", "rim_r", "rim_g", "rim_b",
+FIELDS = ["material", "psnr", "psnr_se", "psnr_vs_converged", "mx_psnr", "mx_psnr_se",
+          "mx_mean_r", "mx_mean_g", "mx_mean_b", "mx_rim_r", "mx_flip", "mx_model_vs_engine",
+          "mean_r", "mean_g", "mean_b", "rim_r", "rim_g", "rim_b",
           "flip", "model_vs_three", "estimate", "estimate_error", "gltf_spec_vs_fit",
           "no_multiscatter", "pow5_fresnel", "no_geometry_roughness", "three_s"]
 
@@ -122,6 +129,25 @@ def bench_material(name, spec, args) -> dict:
         abl[key] = {"psnr_vs_fit": rendered_psnr(fit_img, img, mask),
                     "mean_ratio": (img[mask].sum(0) / fit_img[mask].sum(0)).tolist()}
     out["ablations"] = abl
+    if args.materialx:
+        from brdffit.evaluation.engines import materialx_web as MX
+        from brdffit.export.materialx import openpbr_equivalent, write_materialx
+
+        with tempfile.TemporaryDirectory() as tmp:
+            mpath = Path(tmp) / "m.mtlx"
+            write_materialx(fit, mpath, fidelity=False)
+            t = time.perf_counter()
+            rm = MX.render_mtlx(mpath, "sphere-distant", resolution=args.res, supersample=args.ss)
+            out["timings"]["materialx_s"] = time.perf_counter() - t
+        cm = T.compare_render(rm.image, rm.alpha, refs, ra)
+        cm.pop("crn")
+        eq, _ = TB.shade_sphere(openpbr_equivalent(fit), geometry_roughness=False, **kw)
+        mmask = rm.mask & (ra >= 0.999)
+        e = rendered_psnr(fit_img, eq, mmask)
+        out["materialx"] = cm | {"vs_converged_fit": rendered_psnr(fit_img, rm.image, mmask),
+                                 "model_vs_engine": rendered_psnr(rm.image, eq, mmask),
+                                 "estimate": {"psnr": e, "error_db": e - cm["psnr"]},
+                                 "info": rm.info}
     return out
 
 
@@ -137,7 +163,14 @@ def _row(r: dict) -> dict:
             "no_multiscatter": r["ablations"]["no_multiscatter"]["psnr_vs_fit"],
             "pow5_fresnel": r["ablations"]["pow5_fresnel"]["psnr_vs_fit"],
             "no_geometry_roughness": r["ablations"]["no_geometry_roughness"]["psnr_vs_fit"],
-            "three_s": r["timings"]["three_s"]}
+            "three_s": r["timings"]["three_s"]} | ({
+                "mx_psnr": r["materialx"]["psnr"], "mx_psnr_se": r["materialx"]["psnr_se"],
+                "mx_mean_r": r["materialx"]["mean_ratio"][0],
+                "mx_mean_g": r["materialx"]["mean_ratio"][1],
+                "mx_mean_b": r["materialx"]["mean_ratio"][2],
+                "mx_rim_r": r["materialx"]["rim_ratio"][0], "mx_flip": r["materialx"]["flip"],
+                "mx_model_vs_engine": r["materialx"]["model_vs_engine"]}
+                if "materialx" in r else {})
 
 
 def summarise(results: list[dict]) -> dict:
@@ -169,7 +202,32 @@ def summarise(results: list[dict]) -> dict:
             "estimate_error_db": ms(est), "estimate_within_2db": int(np.sum(np.abs(est) <= 2)),
             "gltf_spec_vs_fit": ms([r["gltf_spec_vs_fit"] for r in ok]),
             "ablations_psnr_vs_fit": {k: ms([r["ablations"][k]["psnr_vs_fit"] for r in ok])
-                                      for k in ok[0]["ablations"]}}
+                                      for k in ok[0]["ablations"]},
+            "materialx": _summarise_engine([r["materialx"] for r in ok if "materialx" in r])}
+
+
+def _summarise_engine(rs: list[dict]) -> dict | None:
+    """PSNR, ratios, rim, FLIP and the estimate's error over materials of one engine."""
+    if not rs:
+        return None
+    n = len(rs)
+
+    def ms(x):
+        x = np.asarray(x, float)
+        return {"mean": float(x.mean()), "se": float(x.std(ddof=1) / np.sqrt(n)) if n > 1
+                else None, "min": float(x.min()), "max": float(x.max())}
+
+    mr = np.array([r["mean_ratio"] for r in rs])
+    rim = np.array([r["rim_ratio"] for r in rs])
+    est = [r["estimate"]["error_db"] for r in rs]
+    return {"materials": n, "psnr": ms([r["psnr"] for r in rs]),
+            "psnr_vs_converged_fit": ms([r["vs_converged_fit"] for r in rs]),
+            "mean_ratio_range": [float(mr.min()), float(mr.max())],
+            "rim_ratio_range": [float(rim.min()), float(rim.max())],
+            "flip": ms([r["flip"] for r in rs if r["flip"] is not None]),
+            "model_vs_engine": ms([r["model_vs_engine"] for r in rs]),
+            "estimate_error_db": ms(est),
+            "estimate_within_2db": int(np.sum(np.abs(est) <= 2))}
 
 
 def main(argv=None) -> int:
@@ -177,6 +235,8 @@ def main(argv=None) -> int:
     ap.add_argument("--merl", default=",".join(ISSUE_MERL),
                     help="comma-separated Neural-BRDF MERL names, or 'all' (default: the issue's 4)")
     ap.add_argument("--no-rgl", action="store_true", help="skip the 7 RGL files")
+    ap.add_argument("--no-materialx", dest="materialx", action="store_false",
+                    help="skip the MaterialX round trip")
     ap.add_argument("--res", type=int, default=128)
     ap.add_argument("--ss", type=int, default=8, help="three.js samples per pixel side")
     ap.add_argument("--spp", type=int, default=256, help="Mitsuba samples per pixel per batch")
@@ -220,6 +280,14 @@ def main(argv=None) -> int:
                   f" | model vs three {r['model_vs_three']:6.2f} | estimate {r['estimate']['psnr']:6.2f}"
                   f" | spec vs fit {r['gltf_spec_vs_fit']:6.2f} | vs converged fit "
                   f"{r['three_vs_converged_fit']:6.2f} | {r['wall_s']:.1f}s", flush=True)
+            if "materialx" in r:
+                m = r["materialx"]
+                print(f"{'':28s} MaterialX vs fit {m['psnr']:6.2f} ± {m['psnr_se'] or 0:.2f} dB | mean "
+                      f"{'/'.join(f'{x:.3f}' for x in m['mean_ratio'])} | rim "
+                      f"{'/'.join(f'{x:.3f}' for x in m['rim_ratio'])} | FLIP "
+                      f"{m['flip'] or float('nan'):.4f} | model vs engine {m['model_vs_engine']:6.2f}"
+                      f" | estimate {m['estimate']['psnr']:6.2f} | vs converged fit "
+                      f"{m['vs_converged_fit']:6.2f}", flush=True)
         else:
             print(f"{name:28s} ERROR {r['error']}", flush=True)
         doc = {"benchmark": "engines_threejs",
