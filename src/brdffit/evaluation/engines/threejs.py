@@ -292,13 +292,15 @@ def run_page(script: str, sc: dict, resolution: int, supersample: int, gltf: Pat
     try:
         with tempfile.TemporaryDirectory(prefix="brdffit-chromium-") as profile:
             url = f"http://127.0.0.1:{server.server_address[1]}/index.html"
-            proc = subprocess.Popen(_chromium_args(chromium_path(), Path(profile)) + [url],
-                                    stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                                    start_new_session=True)
-            finished = server.done.wait(timeout)
-            _stop(proc)
+            log = Path(profile) / "chromium-stderr.txt"      # a file: a pipe could fill up
+            with open(log, "wb") as err_fh:
+                proc = subprocess.Popen(_chromium_args(chromium_path(), Path(profile)) + [url],
+                                        stdout=subprocess.DEVNULL, stderr=err_fh,
+                                        start_new_session=True)
+                finished = server.done.wait(timeout)
+                _stop(proc)
             if not finished:
-                err = proc.stderr.read().decode(errors="replace")[-2000:] if proc.stderr else ""
+                err = log.read_bytes().decode(errors="replace")[-2000:]
                 raise TimeoutError(f"{script}: no result after {timeout:.0f} s "
                                    f"(Chromium's stderr: {err})")
     finally:
