@@ -62,5 +62,7 @@ def test_generate_essl_validates_and_binds_the_light(roundtrip, tmp_path):
     assert any(k.endswith("specular_roughness") for k in sh["uniforms"])
     with pytest.raises(ValueError, match="sphere-distant"):
         MX.generate_essl(path, "sphere-env")
+    with pytest.raises(ValueError, match="inverse-square"):
+        MX.generate_essl(path, "sphere-point")
     with pytest.raises(ValueError, match="mtlx"):
         MX.generate_essl(tmp_path / "missing.mtlx")

@@ -5,7 +5,7 @@ A real MaterialX implementation for the round trip of issue 34: MaterialX's ESSL
 MaterialX's own web viewer runs) turns the ``surfacematerial`` of an exported ``.mtlx``
 (``brdffit export FIT --to materialx``: an ``open_pbr_surface``) into a vertex and a pixel
 shader, with the standard data libraries (``mx.loadLibraries``) and one bound light shader
-(``ND_directional_light`` for ``sphere-distant``, ``ND_point_light`` for ``sphere-point``);
+(``ND_directional_light``, for ``sphere-distant``);
 no environment lighting (``SPECULAR_ENVIRONMENT_NONE``), no shadow map, no transparency,
 linear output (``hwSrgbEncodeOutput`` off). The page (``threejs_page/mtlx.js``) compiles them
 unchanged as a three.js ``RawShaderMaterial`` (three supplies only the sphere, the camera
@@ -16,8 +16,10 @@ document's uniform values, which the generator reports with the shader, and the 
   E}``; MaterialX's ``mx_directional_light`` gives ``intensity = color · intensity`` towards
   ``−direction`` and the surface shader adds ``intensity · f · (N·L)`` (the BSDF closures'
   ``response`` carry the cosine), i.e. irradiance E on a surface facing the light;
-* ``point``: ``position``, ``intensity = I``, ``decay_rate = 2`` (``mx_point_light``:
-  ``I / d²``).
+* ``sphere-point`` is refused: MaterialX's ``mx_point_light`` (1.39.5) attenuates by
+  ``(d + 1)^decay_rate``, not ``d²``, so no uniform setting gives Mitsuba's ``I / d²`` over
+  the sphere (d = 5.1-6.0 on its lit side: the two differ by 36-43 %, varying across the
+  image).
 
 Why this implementation: it is MaterialX's reference code generation (the shaders of
 MaterialXView and of the MaterialX web viewer, the same BSDF library every MaterialX GLSL
@@ -42,11 +44,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .threejs import SCENES, ThreeRender, run_page, scene_json
+from .threejs import ThreeRender, run_page, scene_json
 
 __all__ = ["generate_essl", "render_mtlx"]
 
-_LIGHTS = {"sphere-distant": ("ND_directional_light", 1), "sphere-point": ("ND_point_light", 2)}
+_LIGHTS = {"sphere-distant": ("ND_directional_light", 1)}
 
 
 def _value(port):
@@ -71,7 +73,8 @@ def generate_essl(mtlx, scene: str = "sphere-distant") -> dict:
     import MaterialX.PyMaterialXGenShader as mx_gen
 
     if scene not in _LIGHTS:
-        raise ValueError(f"MaterialX round trip: expected one of {', '.join(_LIGHTS)}, got {scene!r}")
+        raise ValueError(f"MaterialX round trip: expected sphere-distant, got {scene!r} "
+                         "(MaterialX's point light is not inverse-square: see the module doc)")
     path = Path(mtlx)
     if not path.is_file() or path.suffix.lower() != ".mtlx":
         raise ValueError(f"generate_essl: expected an existing .mtlx file, got {str(mtlx)!r}")
@@ -127,22 +130,16 @@ def generate_essl(mtlx, scene: str = "sphere-distant") -> dict:
 def render_mtlx(mtlx, scene: str = "sphere-distant", resolution: int = 128,
                 supersample: int = 4, segments: tuple[int, int] = (256, 128),
                 timeout: float = 120.0) -> ThreeRender:
-    """Render the MaterialX document ``mtlx`` on the unit sphere of ``scene`` with MaterialX's
-    ESSL shaders in headless Chromium (module docstring); linear float pixels."""
-    from ..render.scenes import DISTANT_LIGHT, POINT_LIGHT
+    """Render the MaterialX document ``mtlx`` on the unit sphere of ``scene``
+    (``sphere-distant``) with MaterialX's ESSL shaders in headless Chromium (module
+    docstring); linear float pixels."""
+    from ..render.scenes import DISTANT_LIGHT
 
-    if scene not in SCENES:
-        raise ValueError(f"MaterialX round trip: expected one of {', '.join(SCENES)}, got {scene!r}")
-    sh = generate_essl(mtlx, scene)
+    sh = generate_essl(mtlx, scene)            # validates scene (sphere-distant) and the file
     sc = scene_json(scene, resolution, supersample, segments)
-    if scene == "sphere-distant":
-        d = np.asarray(DISTANT_LIGHT["direction"], float)
-        light = {"type": sh["light_type"], "direction": (d / np.linalg.norm(d)).tolist(),
-                 "color": [1.0, 1.0, 1.0], "intensity": float(DISTANT_LIGHT["irradiance"])}
-    else:
-        light = {"type": sh["light_type"], "position": [float(x) for x in POINT_LIGHT["position"]],
-                 "color": [1.0, 1.0, 1.0], "intensity": float(POINT_LIGHT["intensity"]),
-                 "decay_rate": 2.0}
+    d = np.asarray(DISTANT_LIGHT["direction"], float)
+    light = {"type": sh["light_type"], "direction": (d / np.linalg.norm(d)).tolist(),
+             "color": [1.0, 1.0, 1.0], "intensity": float(DISTANT_LIGHT["irradiance"])}
     payload = {"vertex": sh["vertex"], "fragment": sh["fragment"], "uniforms": sh["uniforms"],
                "light": light}
     r = run_page("mtlx.js", sc, resolution, supersample,
