@@ -59,12 +59,10 @@ async function main() {
   uniforms.u_viewPosition = { value: cam.position.clone() };
   uniforms.u_numActiveLightSources = { value: 1 };
   uniforms.u_refractionTwoSided = { value: false };
-  const L = { type: sh.light.type, color: new THREE.Vector3().fromArray(sh.light.color),
-              intensity: sh.light.intensity };
-  if (sh.light.direction) L.direction = new THREE.Vector3().fromArray(sh.light.direction);
-  if (sh.light.position) L.position = new THREE.Vector3().fromArray(sh.light.position);
-  if (sh.light.decay_rate !== undefined) L.decay_rate = sh.light.decay_rate;
-  uniforms.u_lightData = { value: [L] };
+  // MaterialX's LightData of a directional light: direction of travel, colour, intensity
+  uniforms.u_lightData = { value: [{
+    type: sh.light.type, direction: new THREE.Vector3().fromArray(sh.light.direction),
+    color: new THREE.Vector3().fromArray(sh.light.color), intensity: sh.light.intensity }] };
 
   // three writes the '#version 300 es' line itself (glslVersion GLSL3) before its own
   // defines: the generator's line is taken off so that it stays the first line
