@@ -1,16 +1,17 @@
 """The three.js round trip: a glTF export rendered by three.js (WebGL 2 on SwiftShader in
 headless Chromium) lines up with our Mitsuba render of the fit and with our model of three.js.
 
-One small material (a ggx-diffuse fit of the built-in Beckmann plastic, a dielectric with the
-KHR specular/ior extensions), 64² pixels with 4 × 4 samples each; the full sweep over MERL
+One small material (a red plastic in the form of a ggx-diffuse fit: GGX α = 0.19, coloured
+Schlick F0, Lambert; exported as a dielectric with the KHR specular/ior extensions), 64² pixels
+with 4 × 4 samples each; the full sweep over MERL
 stand-ins and RGL is ``bench/bench_engines_threejs.py``.
 
-Tolerances (stated, measured on this material: three vs fit 38.4 dB, mean ratio 1.018 / 1.012 /
-1.005, three vs its model 85.7 dB):
+Tolerances (stated, measured on this material: three vs fit 50.9 ± 0.2 dB, mean ratio 1.004 /
+1.010 / 1.013, three vs its model 83.7 dB, the estimate 51.1 dB):
 * alignment: covered area (sum of alpha) within 0.2 % of the analytic πR² for both renders,
   brightest pixel within 1 px;
 * three.js vs :class:`ThreeJSBRDF` (our model of its shader): ≥ 75 dB;
-* three.js vs our render of the fit: ≥ 35 dB, per-channel mean ratio within ±4 %, and the
+* three.js vs our render of the fit: ≥ 45 dB, per-channel mean ratio within ±4 %, and the
   cheap estimate (model vs fit, noise-free shader) within 1 dB of the measured PSNR.
 """
 
@@ -19,10 +20,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import brdffit
 from brdffit.evaluation.engines import threejs as T
 from brdffit.evaluation.engines import threejs_brdf as TB
 from brdffit.evaluation.metrics import rendered_psnr
+from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel
 
 OK, WHY = T.available()
 pytestmark = pytest.mark.skipif(not OK, reason=WHY)
@@ -34,7 +35,10 @@ def roundtrip(tmp_path_factory):
     from brdffit.export.gltf import write_gltf
 
     out = tmp_path_factory.mktemp("threejs")
-    fit = brdffit.fit(brdffit.synthetic("plastic-beckmann"), model="ggx-diffuse")
+    # a ggx-diffuse fit's form (GGX + Schlick + Lambert), built directly: a fit and the
+    # coated export's lobe choice would add ~5 s
+    fit = MicrofacetBRDF(GGX(0.19, 0.19), SchlickFresnel([0.035, 0.063, 0.093]),
+                         diffuse=[0.43, 0.043, 0.024])
     path = out / "plastic.gltf"
     write_gltf(fit, path, fidelity=False)
     return fit, path, T.render_gltf(path, "sphere-distant", resolution=RES, supersample=4)
@@ -51,16 +55,18 @@ def test_three_renders_the_physical_material_in_float(roundtrip):
 
 
 def test_engine_matches_its_model(roundtrip):
-    """ThreeJSBRDF reproduces three's shading; with (1 − x)⁵ for three's Fresnel, or without
-    the geometry roughness, it does not (the check can fail; measured 61 and 52 dB). The
-    multiple-scattering compensation is small on this smooth plastic (79 dB without it)."""
+    """ThreeJSBRDF reproduces three's shading; with (1 − x)⁵ for three's Fresnel, without
+    the geometry roughness or without the multiple-scattering compensation it does not (the
+    check can fail; measured 62, 49 and 67 dB)."""
     _, path, r = roundtrip
     full, _ = TB.shade_sphere(TB.from_gltf(path), resolution=RES)
     assert rendered_psnr(r.image, full, r.mask) >= 75.0
     pow5, _ = TB.shade_sphere(TB.from_gltf(path, sg_fresnel=False), resolution=RES)
     no_g, _ = TB.shade_sphere(TB.from_gltf(path), resolution=RES, geometry_roughness=False)
+    no_ms, _ = TB.shade_sphere(TB.from_gltf(path, multiscatter=False), resolution=RES)
     assert rendered_psnr(r.image, pow5, r.mask) < 70.0
     assert rendered_psnr(r.image, no_g, r.mask) < 70.0
+    assert rendered_psnr(r.image, no_ms, r.mask) < 70.0
 
 
 @pytest.mark.render
@@ -77,7 +83,7 @@ def test_alignment_and_tolerance_vs_our_render(roundtrip):
     assert abs(c["coverage"]["fit"] / area - 1) < 0.002, c["coverage"]
     pe, pf = c["peak_pixel"]["engine"], c["peak_pixel"]["fit"]
     assert max(abs(pe[0] - pf[0]), abs(pe[1] - pf[1])) <= 1, c["peak_pixel"]
-    assert c["psnr"] >= 35.0, c
+    assert c["psnr"] >= 45.0, c
     assert np.all(np.abs(np.array(c["mean_ratio"]) - 1) < 0.04), c["mean_ratio"]
     assert c["flip"] is None or 0.0 <= c["flip"] < 0.3
     # the cheap estimate: our model of three.js against the fit, noise-free, no browser
