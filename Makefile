@@ -46,8 +46,8 @@ sysdeps:
 	else echo "NOTE: not root, skipping Debian packages:$$missing (rendering and report tests will be skipped)"; fi
 
 # gltf-validator and three into .npm/ (need node and npm: present in the machine image; when npm
-# is missing and we are root, Debian's nodejs + npm are installed first). Each package is
-# installed when its package.json is absent, so adding a package here installs it on the next run.
+# is missing and we are root, Debian's nodejs + npm are installed first). Both are installed
+# (again) when gltf-validator is absent or three is not at THREE_VERSION.
 NPM_PACKAGES := gltf-validator@$(GLTF_VALIDATOR_VERSION) three@$(THREE_VERSION)
 npmdeps:
 	@if [ -f $(GLTF_VALIDATOR) ] && grep -q '"version": "$(THREE_VERSION)"' $(THREE) 2>/dev/null; then \
