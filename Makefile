@@ -8,6 +8,10 @@ STAMP := $(VENV)/.installed-stamp
 NPM_PREFIX := .npm
 GLTF_VALIDATOR := $(NPM_PREFIX)/node_modules/gltf-validator/package.json
 GLTF_VALIDATOR_VERSION := 2.0.0-dev.3.10
+# three.js (npm), the engine of the three.js round trip (tests/evaluation/test_engines_threejs.py,
+# bench/bench_engines_threejs.py): served from .npm/ to headless Chromium, offline
+THREE := $(NPM_PREFIX)/node_modules/three/package.json
+THREE_VERSION := 0.187.0
 DEBIAN_PACKAGES := libllvm19 chromium glslang-tools
 
 .PHONY: demo test bench sysdeps npmdeps install clean
@@ -41,17 +45,20 @@ sysdeps:
 		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
 	else echo "NOTE: not root, skipping Debian packages:$$missing (rendering and report tests will be skipped)"; fi
 
-# gltf-validator into .npm/ (needs node and npm: present in the machine image; when npm is
-# missing and we are root, Debian's nodejs + npm are installed first).
+# gltf-validator and three into .npm/ (need node and npm: present in the machine image; when npm
+# is missing and we are root, Debian's nodejs + npm are installed first). Both are installed
+# (again) when gltf-validator is absent or three is not at THREE_VERSION.
+NPM_PACKAGES := gltf-validator@$(GLTF_VALIDATOR_VERSION) three@$(THREE_VERSION)
 npmdeps:
-	@if [ -f $(GLTF_VALIDATOR) ]; then echo "gltf-validator present in $(NPM_PREFIX)/"; \
+	@if [ -f $(GLTF_VALIDATOR) ] && grep -q '"version": "$(THREE_VERSION)"' $(THREE) 2>/dev/null; then \
+		echo "gltf-validator and three@$(THREE_VERSION) present in $(NPM_PREFIX)/"; \
 	else if ! command -v npm >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
 		echo "Installing Debian packages: nodejs npm"; apt-get update -qq && \
 		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq nodejs npm >/dev/null; fi; \
-	if command -v npm >/dev/null 2>&1; then echo "Installing gltf-validator@$(GLTF_VALIDATOR_VERSION) into $(NPM_PREFIX)/"; \
+	if command -v npm >/dev/null 2>&1; then echo "Installing $(NPM_PACKAGES) into $(NPM_PREFIX)/"; \
 		npm install --prefix $(NPM_PREFIX) --no-audit --no-fund --no-save --silent \
-			gltf-validator@$(GLTF_VALIDATOR_VERSION) || echo "NOTE: npm install gltf-validator failed (the glTF validation test will be skipped)"; \
-	else echo "NOTE: npm not found, skipping gltf-validator (the glTF validation test will be skipped)"; fi; fi
+			$(NPM_PACKAGES) || echo "NOTE: npm install failed (the glTF validation and three.js tests will be skipped)"; \
+	else echo "NOTE: npm not found, skipping $(NPM_PACKAGES) (the glTF validation and three.js tests will be skipped)"; fi; fi
 
 clean:
 	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache $(NPM_PREFIX)

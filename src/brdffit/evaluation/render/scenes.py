@@ -83,6 +83,13 @@ __all__ = ["SCENES", "scene_dict", "procedural_envmap", "load_envmap", "torus_kn
 ENVMAP_DIR = Path(os.environ.get("BRDFFIT_ENVMAP_DIR", "")
                   or Path(__file__).resolve().parents[5] / "shared" / "data" / "envmaps")
 SCENES = ("sphere-env", "sphere-point", "sphere-distant", "knot", "sphere-svrough")
+#: the camera of every scene: at (0, 0, CAMERA_DISTANCE) looking at the origin, +y up, square
+#: film, CAMERA_FOV degrees (Mitsuba's horizontal field of view = the vertical one)
+CAMERA_DISTANCE, CAMERA_FOV = 4.2, 30.0
+#: ``sphere-point``: position and radiant intensity (W/sr per RGB channel) of the point light
+POINT_LIGHT = {"position": (3.0, 3.5, 4.0), "intensity": 40.0}
+#: ``sphere-distant``: direction of travel of the light and irradiance on a surface facing it
+DISTANT_LIGHT = {"direction": (-0.5, -0.6, -0.62), "irradiance": 3.0}
 
 
 def envmap_names() -> list[str]:
@@ -203,7 +210,8 @@ def _read_envmap(spec: str) -> np.ndarray:
     return read_exr(path)
 
 
-def _camera(resolution: int, spp: int, distance: float = 4.2, fov: float = 30.0, crop=None):
+def _camera(resolution: int, spp: int, distance: float = CAMERA_DISTANCE, fov: float = CAMERA_FOV,
+            crop=None):
     """The scenes' camera; ``crop=(x0, y0, width, height)`` renders only that window of the
     same film (same pixels and camera rays)."""
     mi, _ = _load()
@@ -266,12 +274,12 @@ def scene_dict(bsdf, scene: str = "sphere-env", envmap=None, spp: int = 256,
         d["emitter"] = _env_emitter(envmap)
         d["object"] = _sphere(bsdf)
     elif scene == "sphere-point":
-        d["emitter"] = {"type": "point", "position": [3.0, 3.5, 4.0],
-                        "intensity": {"type": "rgb", "value": [40.0, 40.0, 40.0]}}
+        d["emitter"] = {"type": "point", "position": list(POINT_LIGHT["position"]),
+                        "intensity": {"type": "rgb", "value": [POINT_LIGHT["intensity"]] * 3}}
         d["object"] = _sphere(bsdf)
     elif scene == "sphere-distant":
-        d["emitter"] = {"type": "directional", "direction": [-0.5, -0.6, -0.62],
-                        "irradiance": {"type": "rgb", "value": [3.0, 3.0, 3.0]}}
+        d["emitter"] = {"type": "directional", "direction": list(DISTANT_LIGHT["direction"]),
+                        "irradiance": {"type": "rgb", "value": [DISTANT_LIGHT["irradiance"]] * 3}}
         d["object"] = _sphere(bsdf)
     elif scene == "knot":
         d["emitter"] = _env_emitter(envmap)

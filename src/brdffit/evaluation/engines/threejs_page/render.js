@@ -1,0 +1,91 @@
+// Renders material 0 of /material.gltf on a sphere in the scene of /scene.json with three.js
+// (MeshPhysicalMaterial, WebGL 2) into a float render target, and posts the linear RGBA
+// pixels (Float32, rows bottom to top as WebGL reads them) to /result. Errors go to /error.
+// The scene description is data (JSON), never code: see brdffit.evaluation.engines.threejs.
+import * as THREE from 'three';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+
+async function post(path, body, type) {
+  await fetch(path, { method: 'POST', headers: { 'Content-Type': type }, body });
+}
+
+async function main() {
+  const scene = await (await fetch('/scene.json')).json();
+  const W = scene.width, H = scene.height;
+  const canvas = document.createElement('canvas');
+  canvas.width = W; canvas.height = H;
+  document.body.appendChild(canvas);
+  const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, alpha: true,
+                                             preserveDrawingBuffer: true });
+  renderer.setPixelRatio(1);
+  renderer.setSize(W, H, false);
+  renderer.toneMapping = THREE.NoToneMapping;
+  renderer.setClearColor(0x000000, 0.0);
+  const gl = renderer.getContext();
+  if (!renderer.extensions.has('EXT_color_buffer_float')) {
+    throw new Error('WebGL 2 without EXT_color_buffer_float: no float render target');
+  }
+
+  const loader = new GLTFLoader();
+  const gltf = await loader.loadAsync('/material.gltf');
+  const material = await gltf.parser.getDependency('material', scene.material_index);
+  if (!material.isMeshStandardMaterial) {
+    throw new Error('material ' + scene.material_index + ' is a ' + material.type +
+                    ', expected a MeshStandardMaterial or MeshPhysicalMaterial');
+  }
+
+  const world = new THREE.Scene();
+  world.background = null;
+  const sphere = new THREE.Mesh(
+    new THREE.SphereGeometry(1.0, scene.sphere_segments[0], scene.sphere_segments[1]), material);
+  world.add(sphere);
+
+  const cam = new THREE.PerspectiveCamera(scene.camera.fov, W / H, 0.1, 100.0);
+  cam.position.fromArray(scene.camera.origin);
+  cam.up.fromArray(scene.camera.up);
+  cam.lookAt(new THREE.Vector3().fromArray(scene.camera.target));
+
+  const L = scene.light;
+  if (L.type === 'directional') {
+    // three's DirectionalLight shines from its position towards its target; its intensity is
+    // the irradiance on a surface facing it (physically based lights, no pi factor)
+    const light = new THREE.DirectionalLight(0xffffff, L.irradiance);
+    light.position.fromArray(L.direction.map((x) => -x));
+    light.target.position.set(0, 0, 0);
+    world.add(light); world.add(light.target);
+  } else if (L.type === 'point') {
+    // PointLight(colour, intensity, distance = 0: no cut-off, decay = 2: inverse square)
+    const light = new THREE.PointLight(0xffffff, L.intensity, 0, 2);
+    light.position.fromArray(L.position);
+    world.add(light);
+  } else {
+    throw new Error('unknown light type ' + L.type);
+  }
+
+  const target = new THREE.WebGLRenderTarget(W, H, {
+    type: THREE.FloatType, format: THREE.RGBAFormat, depthBuffer: true,
+    minFilter: THREE.NearestFilter, magFilter: THREE.NearestFilter, samples: 0 });
+  renderer.setRenderTarget(target);
+  renderer.clear();
+  renderer.render(world, cam);
+  const pixels = new Float32Array(W * H * 4);
+  renderer.readRenderTargetPixels(target, 0, 0, W, H, pixels);
+  renderer.setRenderTarget(null);
+
+  const dbg = gl.getExtension('WEBGL_debug_renderer_info');
+  const info = {
+    three: THREE.REVISION, material_type: material.type,
+    gl_renderer: dbg ? gl.getParameter(dbg.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER),
+    gl_version: gl.getParameter(gl.VERSION),
+    material: { color: material.color.toArray(), metalness: material.metalness,
+                roughness: material.roughness, ior: material.ior,
+                specularIntensity: material.specularIntensity,
+                specularColor: material.specularColor ? material.specularColor.toArray() : null,
+                clearcoat: material.clearcoat, clearcoatRoughness: material.clearcoatRoughness,
+                anisotropy: material.anisotropy },
+  };
+  await post('/info', JSON.stringify(info), 'application/json');
+  await post('/result', pixels.buffer, 'application/octet-stream');
+}
+
+main().catch((e) => post('/error', String(e && e.stack ? e.stack : e), 'text/plain'));
