@@ -56,7 +56,7 @@ def test_render_stage_writes_a_report_and_resumes(tmp_path):
     out = tmp_path / "run"
     cmd = [sys.executable, "-m", "brdffit", "batch", "synthetic:gold-ggx,plastic-beckmann",
            "--out", str(out), "--workers", "2", "--quiet", "--render", "--spp", "4",
-           "--batches", "4", "--resolution", "24", "--scenes", "sphere-env,knot"]
+           "--batches", "4", "--resolution", "24", "--scenes", "sphere-env,knot", "--no-metrics"]
     log = subprocess.run(cmd + ["--models", "ggx"], check=True, timeout=300,
                          capture_output=True, text=True)
     assert "2 fit + 2 render tasks: 4 run (0 failed)" in log.stdout

@@ -91,7 +91,7 @@ MATERIALS = "synthetic:gold-ggx,plastic-beckmann,sgd-paint,two-lobe-ggx"
 
 def _batch_cmd(out, models="ggx"):
     return [sys.executable, "-m", "brdffit", "batch", MATERIALS, "--models", models,
-            "--out", str(out), "--workers", "2", "--quiet"]
+            "--out", str(out), "--workers", "2", "--quiet", "--no-metrics"]
 
 
 def _comparable(rec):
