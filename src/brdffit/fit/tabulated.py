@@ -538,8 +538,9 @@ def _merge_convergence(infos) -> dict:
 #: Direction pairs of the ρd fit when the input has no MERL grid (cosine-distributed, in the
 #: measured domain), and the offset of their sequence (the CLI's error estimate uses 0.5).
 DIFFUSE_PAIRS, DIFFUSE_PAIRS_START = 16384, 0.25
-#: On a MERL grid, ρd is fitted on every this-th φd node (90 × 90 × 45 nodes).
-DIFFUSE_PHI_STRIDE = 4
+#: On a MERL grid, ρd is fitted on the nodes of every θh, every 3rd θd from the 2nd and
+#: every 8th φd (90 × 30 × 23 nodes; the CLI's error estimate reads the θd rows from the 1st).
+DIFFUSE_THETA_D_ROWS, DIFFUSE_PHI_STRIDE = slice(1, None, 3), 8
 #: At most this many refits of the lobe on ``f − ρd/π``; a refit is kept when it lowers the
 #: error by more than ``DIFFUSE_MIN_GAIN`` (relative).
 MAX_DIFFUSE_REFITS, DIFFUSE_MIN_GAIN = 6, 1e-3
@@ -592,15 +593,17 @@ def _set_diffuse(model, rho_d) -> None:
 
 def _diffuse_data(brdf: BRDF, merl):
     """``(wi, wo, f, w)``: the pairs ρd is fitted on and their weights in the cosine-weighted
-    L1 error. A MERL grid (``merl``): its valid nodes, every :data:`DIFFUSE_PHI_STRIDE`-th
-    φd, weighted by :func:`brdffit.losses.l2.merl_grid_weights` (no evaluation of the
-    input); else :data:`DIFFUSE_PAIRS` cosine-distributed pairs of the measured domain, each
+    L1 error. A MERL grid (``merl``): its valid nodes of :data:`DIFFUSE_THETA_D_ROWS` and
+    every :data:`DIFFUSE_PHI_STRIDE`-th φd, weighted by
+    :func:`brdffit.losses.l2.merl_grid_weights` (no evaluation of the input); else :data:`DIFFUSE_PAIRS` cosine-distributed pairs of the measured domain, each
     of weight 1."""
     if merl is not None:
         values, valid = merl
+        rows, cols = DIFFUSE_THETA_D_ROWS, slice(None, None, DIFFUSE_PHI_STRIDE)
         w, (th, td, pd) = merl_grid_weights(DIFFUSE_PHI_STRIDE)
-        values = np.asarray(values, dtype=np.float64)[:, :, ::DIFFUSE_PHI_STRIDE]
-        keep = (np.asarray(valid, dtype=bool)[:, :, ::DIFFUSE_PHI_STRIDE] & (w > 0)
+        w, td = w[:, rows], td[:, rows]
+        values = np.asarray(values, dtype=np.float64)[:, rows, cols]
+        keep = (np.asarray(valid, dtype=bool)[:, rows, cols] & (w > 0)
                 & np.all(np.isfinite(values), -1))
         th, td, pd = (np.broadcast_to(a, keep.shape)[keep] for a in (th, td, pd))
         wi, wo = half_diff_to_io(th, 0.0, td, pd)
