@@ -133,6 +133,7 @@ from ..grid import (N_PHI_D, N_THETA_D, N_THETA_H, merl_node_values, merl_phi_d,
 from ..microfacet.coat import COAT_F0
 from ..microfacet.shadowing import EllipticalSlopeDistribution
 from ..schema import ALBEDO_MAX, INDEX_MAX
+from .result import record
 
 if TYPE_CHECKING:
     from ..microfacet import MicrofacetBRDF, SumBRDF
@@ -1193,12 +1194,12 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
                          "coat": coat}
     model.fit_info["coat"] = None
     if coat == "off" or anisotropic or f90 != "free":
-        return model
+        return _done(model, model.fit_info)
     t3 = time.perf_counter()
     found = _search_coat(kind, data)
     if found is None:                     # no finite coated candidate: the search still took time
         model.fit_info["time"] = time.perf_counter() - t0
-        return model
+        return _done(model, model.fit_info)
     E_coat, (a_base, a_coat), x = found
     rho_d, A, C = x[0:9:3], x[1:9:3], x[2:9:3]
     ks = A + C
@@ -1224,7 +1225,7 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
     info = model.fit_info
     info.update(coat=coat_info, time=time.perf_counter() - t0)
     if not coat_info["kept"]:
-        return model
+        return _done(model, info)
     info.update(
         method=f"{kind} + Lambert + coat ({kind}, white, F0 {COAT_F0}), Schlick Fresnel, "
                "compressive objective (Bagher 2016 Eq. 7-12), variable projection",
@@ -1234,8 +1235,17 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
         objective_normalised=(float(E_coat / data["ref_energy"]) if data["ref_energy"] > 0
                               else None))
     info["objective_by_fresnel"]["schlick+coat"] = float(E_coat)
-    coated.fit_info, coated.fit_options = info, model.fit_options
-    return coated
+    coated.fit_options = model.fit_options
+    return _done(coated, info)
+
+
+def _done(model, info: dict):
+    """``model`` with ``info`` and its outcome recorded (:func:`brdffit.fit.result.record`):
+    the fit is a bounded multi-start search with exact linear solves, which has no
+    convergence criterion of its own (``converged`` None); the message names the method and
+    ``fun`` is the objective of the model returned."""
+    return record(model, info, success=True, converged=None, message=info["method"],
+                  fun=info["objective"], time=info["time"])
 
 
 def _objective_of(model, data) -> float:

@@ -289,8 +289,12 @@ def summarize(name: str, model) -> dict:
     entry = get(name)
     if entry.summary is not None:
         return dict(entry.summary(model))
-    info = getattr(model, "fit_info", None) or {}
-    return {"model": name, "time_s": info.get("time", info.get("time_s"))}
+    from .result import fit_result
+
+    try:
+        return {"model": name, "time_s": fit_result(model).time}
+    except ValueError:                      # not made by a fit
+        return {"model": name, "time_s": None}
 
 
 # -- fitting orchestration (used by compare and batch) --------------------------------------

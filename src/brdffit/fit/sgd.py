@@ -124,6 +124,7 @@ from ..microfacet.gamma import upper_gamma
 from ..microfacet.ggx import GGX
 from ..microfacet.sgd import SGD, sgd_log_p22, sgd_mu_lambda
 from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
+from .result import record
 
 __all__ = ["fit_sgd", "fit_beckmann_two_slice", "fit_ggx_two_slice", "fit_cook_torrance",
            "fit_beckmann_ct", "fit_ggx_ct", "fit_two_slice", "summary"]
@@ -1021,12 +1022,14 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
             ch["distribution"]._lambda_table
     t4 = time.perf_counter()
     refine_runs = [cd["run"] for cd in refined if "run" in cd]
-    model.fit_info = {"method": f"two-slice ({distribution})", "weighting": weighting,
-                      "time": t4 - t0, "time_step1": t1 - t0, "time_step2": t2 - t1,
-                      "time_g1_approx": t3 - t2, "time_g1_tables": t4 - t3,
-                      "step1": [{k: v for k, v in r.items()} for r in s1],
-                      "selection": chosen,
-                      **_sgd_convergence([r["runs"] for r in s1], refine_runs)}
+    info = {"method": f"two-slice ({distribution})", "weighting": weighting,
+            "time": t4 - t0, "time_step1": t1 - t0, "time_step2": t2 - t1,
+            "time_g1_approx": t3 - t2, "time_g1_tables": t4 - t3,
+            "step1": [{k: v for k, v in r.items()} for r in s1],
+            "selection": chosen,
+            **_sgd_convergence([r["runs"] for r in s1], refine_runs)}
+    record(model, info, success=info["success"], converged=info["converged"],
+           message=info["message"], nit=info["nit"], time=info["time"])
     model.fit_options = {"distribution": distribution, "weighting": weighting,
                          "starts": starts, "grid": list(grid), "selection": selection,
                          "linear": linear, "bounded": bounded, "scan_grid": scan_grid,
@@ -1224,8 +1227,10 @@ def fit_cook_torrance(brdf, distribution: str = "beckmann", *, theta_d_stride: i
                          "F0": F0, "F1": 0.0})
     model = PerChannelMicrofacetBRDF(channels, name=name or f"{label}-{distribution}-ct",
                                      source=getattr(brdf, "source", None))
-    model.fit_info = {"method": f"full-data weighted least squares ({distribution})",
-                      "time": time.perf_counter() - t0, "n_samples": int(len(th))}
+    info = {"method": f"full-data weighted least squares ({distribution})",
+            "time": time.perf_counter() - t0, "n_samples": int(len(th))}
+    record(model, info, success=True, converged=None, message=info["method"],
+           time=info["time"])
     model.fit_options = {"distribution": distribution, "theta_d_stride": theta_d_stride,
                          "phi_stride": phi_stride, "starts": starts}
     _check_finite(model, label)

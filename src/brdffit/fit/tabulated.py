@@ -58,6 +58,7 @@ from ..microfacet.conversions import to_beckmann, to_ggx
 from ..microfacet.per_channel import PerChannelBRDF
 from ..microfacet.tabulated import (TabulatedSlopeDistribution,
                                     azimuthal_clamped_cosine_integral, radial_rule)
+from .result import record
 
 __all__ = ["fit_tabulated", "fit_ggx", "fit_beckmann", "solve_slope_pdf", "iteration_plan",
            "convergence_info", "extract_fresnel", "luminance", "backscatter", "DEFAULT_TOL",
@@ -635,9 +636,9 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
     info["time_total"] = info["time"]
     if merl is not None:
         info["merl_grid"] = True
-    model.fit_info = info
     model.fit_options = options
-    return model
+    return record(model, info, success=info["success"], converged=info["converged"],
+                  message=info["message"], nit=info["nit"], time=info["time"])
 
 
 def fit_beckmann(brdf: BRDF, **kwargs) -> MicrofacetBRDF:

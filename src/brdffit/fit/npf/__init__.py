@@ -76,6 +76,7 @@ from ...losses.objective import ObjectiveOptions, prepare_objective
 from ...grid import tabulate_merl_grid
 from ...progress import step_callback
 from ...microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF
+from ..result import fit_result, record
 from . import _solver
 from ._solver import MFState, NaiveState, Samples
 
@@ -341,10 +342,11 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         info.update(_convergence(extra, tol, max_iter, variant))
         info.update(objective=float(E.sum()), objective_per_channel=E.tolist(),
                     normalised_objective=float(E.sum() / ref.sum()),
-                    time_s=time.perf_counter() - t_start)
-        model.fit_info = info
+                    time=time.perf_counter() - t_start)
         model.fit_options = options
-        return model
+        return record(model, info, success=info["success"], converged=info["converged"],
+                      message=info["message"], nit=info["nit"], fun=info["objective"],
+                      time=info["time"])
 
     if variant == "bivariate":
         B, E = _solver.fit_bivariate_table(obj)
@@ -614,12 +616,13 @@ def summary(model) -> dict:
     """Key figures of a fitted NPF model (for the CLI): objective, AWLS iterations, the
     Levenberg–Marquardt polish's iterations, whether the fit converged (and why not)."""
     info = model.fit_info or {}
+    seconds = fit_result(model).time if isinstance(model.fit_info, dict) else None
     out = {"model": model.fit_kind, "variant": getattr(model, "variant", None),
            "objective": info.get("objective"),
            "normalised_objective": info.get("normalised_objective"),
            "iterations": info.get("iterations"), "line_searches": info.get("line_searches"),
            "polish_iterations": (info.get("polish") or {}).get("iterations"),
-           "converged": info.get("converged"), "time_s": info.get("time_s")}
+           "converged": info.get("converged"), "time_s": seconds}
     if info.get("converged") is False:
         out["message"] = info.get("message")
     return out
