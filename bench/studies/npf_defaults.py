@@ -165,7 +165,7 @@ def main(argv=None) -> int:
                 row.update(reference_objective=rfi["objective"],
                            ratio_to_reference=fi["objective"] / rfi["objective"],
                            reference_converged=rfi.get("converged"),
-                           reference_time_s=rfi.get("time_s"))
+                           reference_time_s=rfi.get("time", rfi.get("time_s")))
             rows.append(row)
             print(f"{name:28s} {model:13s} cpu {row['cpu_s']:6.1f} s  wall {row['wall_s']:6.1f} s"
                   f"  conv {fi['converged']!s:5s} it {fi['nit']:5d}"

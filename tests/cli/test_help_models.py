@@ -130,3 +130,37 @@ def test_declared_typical_figures_are_the_bench_measurements():
         assert (info.typical_bytes, info.typical_table_bytes) == (m["fit_file_bytes"],
                                                                   m["table_bytes"]), name
         assert info.typical_time_s == float(f"{m['fit_cpu_s']:.2g}"), name
+
+
+def test_models_options_come_from_the_options_dataclasses(monkeypatch, capsys):
+    """`brdffit models --options` lists each model's command-line options from its options
+    dataclass, with its default and range, within 80 columns."""
+    import dataclasses
+
+    from brdffit.fit import options as fit_options
+
+    monkeypatch.setenv("COLUMNS", "80")
+    assert main(["models", "--options", "-m", "tabulated,npf"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert all(len(line) <= 80 for line in lines)
+    text = "\n".join(lines)
+    assert "-O n (int, default 90, in [8, 1024])" in text
+    assert "-O seed (int, default 0, in [0, 4294967295])" in text
+    assert "callback" not in text and "verbose" not in text      # Python-only options
+    assert main(["models", "--json", "--options", "-m", "ggx-ct"]) == 0
+    (row,) = json.loads(capsys.readouterr().out)["models"]
+    assert [(o["name"], o["default"]) for o in row["options"]] == [
+        (f.name, f.default) for f in dataclasses.fields(fit_options.CookTorranceOptions)]
+
+
+def test_typical_figures_are_absent_without_the_bench_results(monkeypatch, tmp_path):
+    """An installed package has no bench/: the typical figures are then None ("–")."""
+    monkeypatch.setattr(registry, "TYPICAL_FILE", tmp_path / "missing.json")
+    registry.typical_figures.cache_clear()
+    try:
+        assert registry.typical_figures() == {}
+        assert registry.MODELS["ggx"].typical_time_s is None
+    finally:
+        monkeypatch.undo()
+        registry.typical_figures.cache_clear()
+    assert registry.MODELS["ggx"].typical_time_s is not None

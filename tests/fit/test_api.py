@@ -52,6 +52,51 @@ def test_fit_by_name_equals_the_registry_fitter_and_reports(model):
         assert res.fun == pytest.approx(info["objective"]) and res.converged is None
     assert isinstance(res.message, str) and res.message
     assert "success" in repr(res)
+    # the fitter recorded its result in one shape; the method's own keys give the same
+    from brdffit.fit.result import RESULT_FIELDS, _legacy_fields
+
+    assert list(info["result"]) == list(RESULT_FIELDS) and res.info is info
+    assert {k: getattr(res, k) for k in RESULT_FIELDS} == _legacy_fields(info)
+    assert "time_s" not in info and res.time == info["time"]
+
+
+def test_the_recorded_result_is_read_and_saved_and_old_fit_files_still_give_one(tmp_path):
+    """fit_result reads the fitter's record (not the method's keys); the record is saved
+    in the fit file; a file written before fits recorded it (NPF: ``time_s``) still gives
+    its result from the method's keys."""
+    import json
+    import zipfile
+
+    from brdffit.io.fitfile import load_fit, save_fit
+
+    m = brdffit.fit("synthetic:gold-ggx", model="npf-naive", max_iter=3)
+    m.fit_info["nit"] = 10**6                     # the method's key; the record stands
+    assert brdffit.fit_result(m).nit == m.fit_info["result"]["nit"] != 10**6
+    path = save_fit(m, tmp_path / "new.npz")
+    loaded = brdffit.fit_result(load_fit(path))
+    assert loaded.nit == m.fit_info["result"]["nit"] and loaded.time == m.fit_info["time"]
+    # the same file as written before: no record, NPF's time under "time_s"
+    with zipfile.ZipFile(path) as z:
+        members = {n: z.read(n) for n in z.namelist()}
+    header = json.loads(np.load(path)["__header__"].tobytes())
+    info = header["fit_info"]
+    del info["result"]
+    info["time_s"] = info.pop("time")
+    info["nit"] = 7
+    blob = json.dumps(header, sort_keys=True).encode()
+    import io as _io
+
+    buf = _io.BytesIO()
+    np.save(buf, np.frombuffer(blob, dtype=np.uint8))
+    members["__header__.npy"] = buf.getvalue()
+    with zipfile.ZipFile(tmp_path / "old.npz", "w") as z:
+        for n, data in members.items():
+            z.writestr(n, data)
+    old = brdffit.fit_result(load_fit(tmp_path / "old.npz"))
+    assert old.nit == 7 and old.time == info["time_s"] and old.message == info["message"]
+    # a record that is not one (a hand-edited file) falls back to the method's keys
+    m.fit_info["result"] = {"success": "yes"}
+    assert brdffit.fit_result(m).nit == 10**6
 
 
 def test_capped_fit_is_reported_not_converged():

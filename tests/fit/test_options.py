@@ -1,5 +1,6 @@
 """brdffit.fit.options: every fitter option typed and bounded, one check for every entry
-(issue 32.3)."""
+(issue 32.3); one options dataclass per fitting function, whose defaults are the function's
+(issue 33)."""
 
 from __future__ import annotations
 
@@ -8,7 +9,11 @@ import pytest
 import brdffit
 from brdffit.cli import main
 from brdffit.fit import registry
-from brdffit.fit.options import RANGES, OptionError, fitter_parameters, option_kind
+import dataclasses
+import inspect
+
+from brdffit.fit import options as fit_options
+from brdffit.fit.options import RANGES, OptionError, option_table, signature_options
 from brdffit.fit.registry import check_options
 
 
@@ -49,12 +54,67 @@ def test_every_numeric_option_of_every_model_has_a_range():
     """A new numeric option must be given a range here (or it is unbounded)."""
     missing = set()
     for name in registry.known_names():
-        params, _ = fitter_parameters(registry.get(name).fit)
-        for opt, param in params.items():
-            if option_kind(param)[0] in ("int", "float") and opt not in RANGES \
+        cls, _ = registry.options_class(name)
+        for opt, option in option_table(cls).items():
+            if option.kind in ("int", "float") and opt not in RANGES \
                     and opt not in ("polish_bound",):
                 missing.add(opt)
     assert not missing, sorted(missing)
+
+
+#: The function whose signature each options class declares, and the parameters before the
+#: options (the BRDF, and the distribution or variant the model fixes).
+_SIGNATURES = {"TabulatedOptions": ("tabulated", "fit_tabulated", 1),
+               "DiffuseOptions": ("analytic", "fit_analytic_diffuse", 2),
+               "TwoSliceOptions": ("sgd", "fit_two_slice", 2),
+               "CookTorranceOptions": ("sgd", "fit_cook_torrance", 2),
+               "NPFOptions": ("npf", "fit_npf", 2)}
+
+
+@pytest.mark.parametrize("cls_name", sorted(_SIGNATURES))
+def test_options_classes_are_the_fitting_functions_signatures(cls_name):
+    """Names, order, defaults of each options dataclass are those of the function it
+    declares (a default changed in one place only fails here)."""
+    from importlib import import_module
+
+    module, function, skip = _SIGNATURES[cls_name]
+    fn = getattr(import_module(f"brdffit.fit.{module}"), function)
+    params = list(inspect.signature(fn).parameters.values())[skip:]
+    fields = dataclasses.fields(getattr(fit_options, cls_name))
+    assert [p.name for p in params] == [f.name for f in fields]
+    for p, f in zip(params, fields):
+        assert p.default == f.default, (p.name, p.default, f.default)
+    assert dataclasses.is_dataclass(getattr(fit_options, cls_name))
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        getattr(fit_options, cls_name)().name = "x"
+
+
+def test_every_model_declares_its_options_class_and_its_wrappers_forward_to_it():
+    """The classes the registry declares are those of the function each model's fitting
+    function calls (the SGD wrapper's own defaults included)."""
+    from brdffit.fit import sgd
+
+    for name, info in registry.MODELS.items():
+        cls, open_ended = registry.options_class(name)
+        assert info.options == f"options:{cls.__name__}" and not open_ended
+    sig = inspect.signature(sgd.fit_sgd).parameters
+    fields = {f.name: f.default for f in dataclasses.fields(fit_options.TwoSliceOptions)}
+    for p in ("weighting", "starts", "g1_approximation"):
+        assert sig[p].default == fields[p]
+
+
+def test_a_plugin_without_a_class_gets_one_from_its_signature():
+    def fit_mine(brdf, *, strength: float = 0.5, label="x", **kw):
+        return brdf
+
+    cls, open_ended = signature_options(fit_mine)
+    table = option_table(cls)
+    assert open_ended and list(table) == ["strength", "label"]
+    assert (table["strength"].kind, table["label"].kind) == ("float", "str")
+    assert fit_options.check_values(cls, {"strength": "0.25", "other": 1}, model="mine",
+                                    open_ended=True) == {"strength": 0.25, "other": 1}
+    with pytest.raises(OptionError, match="strength: expected a number, found 'x'"):
+        fit_options.check_values(cls, {"strength": "x"}, model="mine")
 
 
 def test_the_cli_the_python_api_and_compare_all_check(tmp_path, capsys):

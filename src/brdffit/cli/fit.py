@@ -56,13 +56,15 @@ def parse_options(items: list[str] | None) -> dict:
     return out
 
 
-def accepted_options(fn) -> tuple[set, bool]:
-    """``(names, open_ended)``: the keyword options a fitting function accepts
-    (:func:`brdffit.fit.options.fitter_parameters`)."""
-    from ..fit.options import NOT_OPTIONS, fitter_parameters
+def accepted_options(model: str) -> tuple[set, bool]:
+    """``(names, open_ended)``: the options of model ``model`` a command line may give
+    (its options dataclass, :func:`brdffit.fit.registry.options_class`, without the
+    Python-only ones)."""
+    from ..fit.options import option_table
+    from ..fit.registry import options_class
 
-    params, open_ended = fitter_parameters(fn)
-    return set(params) - NOT_OPTIONS, open_ended
+    cls, open_ended = options_class(model)
+    return {n for n, o in option_table(cls).items() if not o.python_only}, open_ended
 
 
 def check_options(model: str, options: dict) -> dict:
@@ -308,7 +310,7 @@ def run_fit(spec: str, model: str = DEFAULT_MODEL, out: Path | None = None,
             raise
         from . import usage_error
 
-        names, _ = accepted_options(entry.fit)
+        names, _ = accepted_options(model)
         raise usage_error("--option", f"model {model!r} has no option {bad!r}; accepted: "
                                       f"{', '.join(sorted(names)) or 'none'}") from None
     elapsed = time.perf_counter() - t0

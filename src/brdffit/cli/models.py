@@ -8,7 +8,8 @@ paper. The typical figures are *declared* in the registry, measured by
 measures them now instead: it fits every model (or ``--models a,b``) to ``--on`` (default
 ``synthetic:gold-ggx``), saves each fit to a temporary folder and reports the fit-file and
 table bytes, the fit's CPU time and the error against the input
-(:func:`brdffit.cli.fit.quick_error`).
+(:func:`brdffit.cli.fit.quick_error`). ``--options`` adds each model's fitting options,
+read from its options dataclass (:mod:`brdffit.fit.options`): name, type, default, range.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from __future__ import annotations
 import json
 import sys
 
-__all__ = ["register", "models_cmd", "model_table", "measure"]
+__all__ = ["register", "models_cmd", "model_table", "measure", "model_options"]
 
 
 def model_table() -> list[dict]:
@@ -34,6 +35,18 @@ def model_table() -> list[dict]:
                      "table_bytes": info.typical_table_bytes,
                      "fit_cpu_s": info.typical_time_s, "figures": "declared"})
     return rows
+
+
+def model_options(name: str) -> list[dict]:
+    """The options of model ``name`` a command line may give (``-O key=value``), from its
+    options dataclass: ``{"name", "type", "default", "none_ok", "text"}`` per option."""
+    from ..fit.options import describe_option, option_table
+    from ..fit.registry import options_class
+
+    cls, _ = options_class(name)
+    return [{"name": o.name, "type": o.kind, "default": o.default, "none_ok": o.none_ok,
+             "text": describe_option(o)}
+            for o in option_table(cls).values() if not o.python_only]
 
 
 def measure(rows: list[dict], spec: str, say=lambda msg: None) -> list[dict]:
@@ -86,7 +99,9 @@ def _num(v, unit: str = "") -> str:
 
 def format_table(rows: list[dict]) -> list[str]:
     """The text of ``brdffit models`` (80 columns): a line of figures and a line of
-    description per model."""
+    description per model, then its options when the rows have them (``--options``)."""
+    import textwrap
+
     lines = [f"{'MODEL':<17}{'ISO':<4}{'FILE B':>8}{'TABLE B':>9}{'FIT CPU':>10}  PAPER"]
     for r in rows:
         lines.append(f"{r['name']:<17}{'yes' if r['isotropic_only'] else 'no':<4}"
@@ -95,6 +110,9 @@ def format_table(rows: list[dict]) -> list[str]:
         extra = r.get("error") or (f"error vs input {100 * r['cos_rel_error']:.2f} %"
                                    if r.get("cos_rel_error") is not None else "")
         lines.append(f"  {r['description']}" + (f" ({extra})" if extra else ""))
+        for o in r.get("options") or ():
+            lines.extend(textwrap.wrap(o["text"], 79, initial_indent="    -O ",
+                                       subsequent_indent="         "))
     return lines
 
 
@@ -110,10 +128,13 @@ def register(commands) -> None:
                      help="--measure: the input to fit.")
     cmd.add_argument("-m", "--models", default="", metavar="A,B",
                      help="Only these models (comma-separated).")
+    cmd.add_argument("--options", dest="with_options", action="store_true",
+                     help="Also list each model's fitting options (-O KEY=VALUE): type, "
+                          "default, range.")
 
 
 def models_cmd(as_json: bool = False, do_measure: bool = False, on: str = "synthetic:gold-ggx",
-               models: str = "") -> None:
+               models: str = "", with_options: bool = False) -> None:
     """List the models: paper, isotropy, fit size and time.
 
     The sizes and times are typical figures declared in the registry (measured by
@@ -128,6 +149,8 @@ def models_cmd(as_json: bool = False, do_measure: bool = False, on: str = "synth
         rows = [r for r in rows if r["name"] in keep]
     if do_measure:
         rows = measure(rows, on, say=lambda msg: print(msg, file=sys.stderr))
+    if with_options:
+        rows = [dict(r, options=model_options(r["name"])) for r in rows]
     if as_json:
         print(json.dumps({"models": rows, "source": None if do_measure
                           else registry.TYPICAL_SOURCE}, indent=1))

@@ -68,14 +68,17 @@ def fit(brdf: BRDF | str, model: str = "ggx-diffuse", **options) -> BRDF:
         ``brdffit fit --model``.
     **options
         Keyword options of the model's fitting function (e.g. ``tol=1e-8`` for
-        ``tabulated``, ``max_iter=200`` for the NPF models); see ``help`` of
-        :func:`fit_tabulated`, :func:`fit_sgd`, :func:`fit_npf`, :func:`fit_ggx_diffuse`.
+        ``tabulated``, ``max_iter=200`` for the NPF models), declared with their types and
+        defaults by the model's options dataclass (:mod:`brdffit.fit.options`; ``brdffit
+        models --options`` lists them); see ``help`` of :func:`fit_tabulated`,
+        :func:`fit_sgd`, :func:`fit_npf`, :func:`fit_ggx_diffuse`.
 
     Returns
     -------
     BRDF
-        The fitted model, with ``fit_info`` (the method's report) and ``fit_options``;
-        :func:`brdffit.fit_result` gives its :class:`~brdffit.fit.result.FitResult`.
+        The fitted model, with ``fit_info`` (the method's report, with the recorded
+        outcome under ``"result"``) and ``fit_options``; :func:`brdffit.fit_result` gives its
+        :class:`~brdffit.fit.result.FitResult`.
 
     Raises
     ------

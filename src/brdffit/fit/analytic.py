@@ -135,6 +135,7 @@ from ..grid import (N_PHI_D, N_THETA_D, N_THETA_H, merl_node_values, merl_phi_d,
 from ..microfacet.coat import COAT_F0
 from ..microfacet.shadowing import EllipticalSlopeDistribution
 from ..schema import ALBEDO_MAX, INDEX_MAX
+from .result import record
 
 if TYPE_CHECKING:
     from ..microfacet import MicrofacetBRDF, SumBRDF
@@ -1106,20 +1107,8 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
     MicrofacetBRDF
         See :func:`fit_ggx_diffuse`.
     """
-    from ..microfacet import (ConductorFresnel, DielectricFresnel, MicrofacetBRDF, SchlickFresnel,
-                              SumBRDF)
-
     t0 = time.perf_counter()
-    kind = str(distribution).lower()
-    if kind not in ("ggx", "beckmann"):
-        raise ValueError(f"distribution must be 'ggx' or 'beckmann', found {distribution!r}")
-    if fresnel not in ("auto", "schlick", "dielectric", "conductor"):
-        raise ValueError(f"fresnel must be 'auto', 'schlick', 'dielectric' or 'conductor', "
-                         f"found {fresnel!r}")
-    if f90 not in ("one", "free"):
-        raise ValueError(f"f90 must be 'one' or 'free', found {f90!r}")
-    if coat not in ("auto", "off", "on"):
-        raise ValueError(f"coat must be 'auto', 'off' or 'on', found {coat!r}")
+    kind = _check_choices(distribution, fresnel, f90, coat)
     if anisotropic is None:
         anisotropic = not bool(getattr(brdf, "isotropic", False))
     label = getattr(brdf, "name", None) or "brdf"
@@ -1138,6 +1127,43 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
         results, tried = _search(kind, data, fresnel, f90, mom, starts, bool(anisotropic))
     except FitError as exc:
         raise FitError(f"{label}: {kind}-diffuse fit: {exc}") from None
+    model, E = _one_lobe_model(kind, results, data, bool(anisotropic), label,
+                               name or f"{label}-{kind}-diffuse", getattr(brdf, "source", None))
+    model.fit_info.update(
+        moment_start=None if mom is None else [float(m) for m in mom], starts=tried,
+        time_samples=t1 - t0, time_moments=t2 - t1, time=time.perf_counter() - t0, coat=None)
+    model.fit_options = {"model": f"{kind}-diffuse", "distribution": kind,
+                         "anisotropic": bool(anisotropic), "fresnel": fresnel, "f90": f90,
+                         "starts": int(starts), "moments": bool(moments),
+                         "theta_d_stride": theta_d_stride, "phi_d_stride": phi_d_stride,
+                         "coat": coat}
+    if coat == "off" or anisotropic or f90 != "free":
+        return _done(model, model.fit_info)
+    return _with_coat(model, E, kind, data, coat, t0)
+
+
+def _check_choices(distribution, fresnel, f90, coat) -> str:
+    """The distribution's kind (``"ggx"`` or ``"beckmann"``), the choices checked."""
+    kind = str(distribution).lower()
+    if kind not in ("ggx", "beckmann"):
+        raise ValueError(f"distribution must be 'ggx' or 'beckmann', found {distribution!r}")
+    if fresnel not in ("auto", "schlick", "dielectric", "conductor"):
+        raise ValueError(f"fresnel must be 'auto', 'schlick', 'dielectric' or 'conductor', "
+                         f"found {fresnel!r}")
+    if f90 not in ("one", "free"):
+        raise ValueError(f"f90 must be 'one' or 'free', found {f90!r}")
+    if coat not in ("auto", "off", "on"):
+        raise ValueError(f"coat must be 'auto', 'off' or 'on', found {coat!r}")
+    return kind
+
+
+def _one_lobe_model(kind, results, data, anisotropic, label, name, source):
+    """``(model, objective)``: the one-lobe model of the best Fresnel form of ``results``
+    (``{form: (objective, (αx, αy, ρ, η), linear parameters)}``; the conductor only by a
+    margin of :data:`CONDUCTOR_MARGIN`, for its six more parameters), its ρd held under the
+    furnace (:func:`brdffit.furnace.hold_diffuse`), with the first part of its ``fit_info``."""
+    from ..microfacet import ConductorFresnel, DielectricFresnel, MicrofacetBRDF, SchlickFresnel
+
     finite = {k: v for k, v in results.items() if v is not None and np.isfinite(v[0])}
     if not finite:
         raise FitError(f"{label}: {kind}-diffuse fit found no finite solution")
@@ -1165,9 +1191,8 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
         raise FitError(f"{label}: {kind}-diffuse fit produced non-finite parameters")
     dist = _distribution(kind, ax, ay, rho)
     rho_d, lowered = hold_diffuse(rho_d, [MicrofacetBRDF(dist, F, specular=ks)])
-    model = MicrofacetBRDF(dist, F, diffuse=rho_d, specular=ks,
-                           correlated=True, name=name or f"{label}-{kind}-diffuse",
-                           source=getattr(brdf, "source", None))
+    model = MicrofacetBRDF(dist, F, diffuse=rho_d, specular=ks, correlated=True, name=name,
+                           source=source)
     if lowered.any():
         E = _objective_of(model, data)
     model.fit_info = {
@@ -1180,24 +1205,24 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
         "F0": f0_eff.tolist(), "ks": None if ks is None else ks.tolist(), "objective": float(E),
         "objective_normalised": float(E / data["ref_energy"]) if data["ref_energy"] > 0 else None,
         "objective_by_fresnel": {k: float(v[0]) for k, v in finite.items()},
-        "rho_d_furnace_lowering": lowered.tolist(),
-        "n_samples": data["n"], "anisotropic": bool(anisotropic),
-        "moment_start": None if mom is None else [float(m) for m in mom],
-        "starts": tried, "time_samples": t1 - t0, "time_moments": t2 - t1,
-        "time": time.perf_counter() - t0}
-    model.fit_options = {"model": f"{kind}-diffuse", "distribution": kind,
-                         "anisotropic": bool(anisotropic), "fresnel": fresnel, "f90": f90,
-                         "starts": int(starts), "moments": bool(moments),
-                         "theta_d_stride": theta_d_stride, "phi_d_stride": phi_d_stride,
-                         "coat": coat}
-    model.fit_info["coat"] = None
-    if coat == "off" or anisotropic or f90 != "free":
-        return model
+        "rho_d_furnace_lowering": lowered.tolist(), "n_samples": data["n"],
+        "anisotropic": bool(anisotropic)}
+    return model, E
+
+
+def _with_coat(model, E, kind, data, coat, t0):
+    """``model`` or, when a second, white specular lobe (a clear coat of F0
+    :data:`COAT_F0`) lowers the objective ``E`` by :data:`COAT_MARGIN` (any amount for
+    ``coat="on"``) and by more than :data:`COAT_MIN_GAIN` of the data's energy, the
+    ``SumBRDF`` of the refitted base lobe and the coat lobe; ``fit_info["coat"]`` says what
+    was found and whether it was kept."""
+    from ..microfacet import MicrofacetBRDF, SchlickFresnel, SumBRDF
+
     t3 = time.perf_counter()
     found = _search_coat(kind, data)
     if found is None:                     # no finite coated candidate: the search still took time
         model.fit_info["time"] = time.perf_counter() - t0
-        return model
+        return _done(model, model.fit_info)
     E_coat, (a_base, a_coat), x = found
     rho_d, A, C = x[0:9:3], x[1:9:3], x[2:9:3]
     ks = A + C
@@ -1223,7 +1248,7 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
     info = model.fit_info
     info.update(coat=coat_info, time=time.perf_counter() - t0)
     if not coat_info["kept"]:
-        return model
+        return _done(model, info)
     info.update(
         method=f"{kind} + Lambert + coat ({kind}, white, F0 {COAT_F0}), Schlick Fresnel, "
                "compressive objective (Bagher 2016 Eq. 7-12), variable projection",
@@ -1233,8 +1258,17 @@ def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool |
         objective_normalised=(float(E_coat / data["ref_energy"]) if data["ref_energy"] > 0
                               else None))
     info["objective_by_fresnel"]["schlick+coat"] = float(E_coat)
-    coated.fit_info, coated.fit_options = info, model.fit_options
-    return coated
+    coated.fit_options = model.fit_options
+    return _done(coated, info)
+
+
+def _done(model, info: dict):
+    """``model`` with ``info`` and its outcome recorded (:func:`brdffit.fit.result.record`):
+    the fit is a bounded multi-start search with exact linear solves, which has no
+    convergence criterion of its own (``converged`` None); the message names the method and
+    ``fun`` is the objective of the model returned."""
+    return record(model, info, success=True, converged=None, message=info["method"],
+                  fun=info["objective"], time=info["time"])
 
 
 def _objective_of(model, data) -> float:

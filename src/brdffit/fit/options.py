@@ -1,14 +1,24 @@
-"""The options of the fitters: their names, types and ranges, checked before any work.
+"""The options of the fitters: one frozen dataclass per fitting function, checked before any work.
 
-A fitter's options are the keyword parameters of its function (after the BRDF) and, when it
-takes ``**kwargs``, those of the functions it forwards them to (:func:`fitter_parameters`).
-Each option's **type** comes from its annotation (``int``, ``float``, ``bool``, ``str``,
-``tuple[int, int]``, ``Iterable[str]``; ``| None`` accepts ``None`` = the default) and its
-**range** from :data:`RANGES`, one table for every fitter (an option name means the same
-thing wherever it appears). :func:`check_fitter_options` is the one check of ``brdffit fit
--O``, ``compare --fit-options``, the demo's and the batch's options and
-:func:`brdffit.fit.fit`, by model name through :func:`brdffit.fit.registry.check_options`
-(this module knows fitting functions, not the registry).
+Each declared model of :data:`brdffit.fit.registry.MODELS` names its options class
+(``options="options:TabulatedOptions"``, resolved on first use). A class's fields are the
+keyword options of the fitting function, with its **types** (``int``, ``float``, ``bool``,
+``str``, ``tuple[int, int]``, ``tuple[str, ...]``; ``| None`` accepts ``None``, which
+means the function's own default) and its **defaults**, exactly those of the function's
+signature (tests/fit/test_options.py checks them against it). Models fitted by the same
+function share its class (``ggx`` and ``beckmann`` are the tabulated fit converted; the
+NPF variants are one function). The **ranges** are one table, :data:`RANGES`, for every
+fitter: an option name means the same thing wherever it appears.
+
+:func:`check_values` is the one check of ``brdffit fit -O``, ``compare --fit-options``, the
+demo's and the batch's options and :func:`brdffit.fit.fit`, by model name through
+:func:`brdffit.fit.registry.check_options`. Options that take Python objects (callbacks,
+objective settings, in-memory data) are marked :data:`PYTHON_ONLY` and are unknown names on
+a command line. A fitter registered by a plug-in without a class gets one made from its
+signature (:func:`signature_options`).
+
+This module imports neither NumPy nor the fitting modules: ``brdffit models --options``
+lists the options without loading the fitting stack.
 
 >>> from brdffit.fit.registry import check_options
 >>> check_options("ggx-diffuse", {"starts": 2, "theta_d_stride": 3})
@@ -19,15 +29,17 @@ Traceback (most recent call last):
 brdffit.fit.options.OptionError: phi_d_stride: expected an integer in [1, 180], found -3
 """
 
-from __future__ import annotations
-
-import ast
+import dataclasses
 import inspect
 import math
-import textwrap
+import types
+import typing
 from collections.abc import Mapping
+from typing import Any, Union
 
-__all__ = ["OptionError", "RANGES", "fitter_parameters", "check_fitter_options", "option_kind"]
+__all__ = ["OptionError", "RANGES", "PYTHON_ONLY", "Option", "TabulatedOptions",
+           "DiffuseOptions", "TwoSliceOptions", "CookTorranceOptions", "NPFOptions",
+           "option_table", "signature_options", "check_values", "describe_option"]
 
 
 class OptionError(ValueError):
@@ -63,89 +75,207 @@ SPECIAL = {"polish_bound": (lambda v: v == 0 or 1 < v <= 1e6,
 #: no compression).
 LOW_OPEN = {"tol", "p_floor", "dr_epsilon", "fresnel_max", "max_theta_io_deg",
             "restrict_deg", "p", "fresnel_max_theta_deg"}
-#: Parameters that are not options of a command line (objects, callbacks).
-NOT_OPTIONS = {"callback", "data", "objective", "source", "verbose"}
+#: Field metadata of an option that takes a Python object (or only makes sense from
+#: Python): accepted by :func:`brdffit.fit.fit`, an unknown name on a command line.
+PYTHON_ONLY = {"python_only": True}
 
 
-def fitter_parameters(fn, _seen: frozenset = frozenset(), _skip: int = 1
-                      ) -> tuple[dict[str, inspect.Parameter], bool]:
-    """``(parameters, open_ended)``: the keyword options a fitting function accepts.
+def _python(default=None):
+    return dataclasses.field(default=default, metadata=PYTHON_ONLY)
 
-    The named parameters after the BRDF (private ``_x`` ones excluded); when the function
-    takes ``**kwargs``, those of the module-level functions it forwards them to
-    (``f(brdf, **kwargs)`` in its source), recursively. ``open_ended`` is True when some
-    ``**kwargs`` could not be followed: then unknown names cannot be ruled out up front.
+
+# -- the options of each fitting function ---------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class TabulatedOptions:
+    """Options of :func:`brdffit.fit.tabulated.fit_tabulated` (models ``tabulated``,
+    ``ggx``, ``beckmann``; the last two convert the tabulated fit by slope moments)."""
+
+    n: int = 90
+    iterations: int | None = None
+    tol: float | None = None
+    anisotropic: bool | None = None
+    per_channel: bool = False
+    n_phi: int = 90
+    rule: str = "auto"
+    hotspot: str = "G2"
+    max_iterations: int = 1000
+    fresnel_max: float = 1.0
+    p_floor: float = 1e-6
+    fresnel_max_theta_deg: float | None = 89.0
+    diffuse: bool = True
+
+
+@dataclasses.dataclass(frozen=True)
+class DiffuseOptions:
+    """Options of :func:`brdffit.fit.analytic.fit_analytic_diffuse` (models
+    ``ggx-diffuse``, ``beckmann-diffuse``; the distribution is the model's)."""
+
+    anisotropic: bool | None = None
+    fresnel: str = "auto"
+    f90: str = "free"
+    starts: int = 3
+    moments: bool = True
+    theta_d_stride: int | None = None
+    phi_d_stride: int | None = None
+    theta_h_stride: int = 3
+    n_phi_h: int = 12
+    objective: Any = _python()
+    coat: str = "auto"
+    name: str | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class TwoSliceOptions:
+    """Options of :func:`brdffit.fit.sgd.fit_two_slice` (models ``sgd``, ``beckmann-2s``,
+    ``ggx-2s``; the distribution is the model's)."""
+
+    weighting: str = "cosine"
+    starts: int = 3
+    grid: tuple[int, int] = (18, 8)
+    g1_approximation: bool = True
+    selection: str = "full"
+    linear: str = "full"
+    bounded: bool = True
+    selection_strides: tuple[int, int] = (4, 15)
+    scan_grid: bool = True
+    refine: int = 0
+    name: str | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class CookTorranceOptions:
+    """Options of :func:`brdffit.fit.sgd.fit_cook_torrance` (models ``beckmann-ct``,
+    ``ggx-ct``; the distribution is the model's)."""
+
+    theta_d_stride: int = 4
+    phi_stride: int = 15
+    starts: int = 2
+    name: str | None = None
+
+
+@dataclasses.dataclass(frozen=True)
+class NPFOptions:
+    """Options of :func:`brdffit.fit.npf.fit_npf` (models ``npf``, ``npf-g-from-d``,
+    ``npf-naive``, ``npf-bivariate``; the variant is the model's). ``None`` for
+    ``max_iter``, ``polish``, ``polish_bound`` and ``dr_epsilon`` means the variant's
+    default (:data:`brdffit.fit.npf.DEFAULT_MAX_ITER`, ``DEFAULT_POLISH``...)."""
+
+    data: Any = _python()
+    compressive: bool = True
+    restrict_deg: float | None = None
+    p: float = 1.4
+    max_theta_io_deg: float = 89.0
+    max_iter: int | None = None
+    tol: float = 1e-6
+    starts: tuple[str, ...] | None = None
+    n_random: int = 4
+    seed: int = 0
+    g_smoothing: float = 1.0
+    dr_epsilon: float | None = None
+    start_max_iter: int | None = 100
+    polish: int | None = None
+    polish_bound: float | None = None
+    extrapolate: bool = True
+    init: str = "slices"
+    name: str | None = None
+    callback: Any = _python()
+    verbose: bool = _python(False)
+
+
+# -- reading a class ---------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class Option:
+    """One option as the checks and the listings read it.
+
+    ``kind``: ``"bool"``, ``"int"``, ``"float"``, ``"str"``, ``"int-pair"``, ``"names"`` (a
+    sequence of strings) or ``"any"``; ``none_ok``: ``None`` is accepted (the function's
+    default); ``python_only``: not an option of a command line.
     """
-    fn = inspect.unwrap(fn)
-    if fn in _seen:
-        return {}, False
-    try:
-        params = list(inspect.signature(fn).parameters.values())
-    except (TypeError, ValueError):
-        return {}, True
-    found: dict[str, inspect.Parameter] = {}
-    var_kw = None
-    for i, p in enumerate(params):
-        if p.kind is p.VAR_KEYWORD:
-            var_kw = p.name
-        elif (p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and i >= _skip
-              and not p.name.startswith("_")):
-            found[p.name] = p
-    if var_kw is None:
-        return found, False
-    try:
-        tree = ast.parse(textwrap.dedent(inspect.getsource(fn)))
-    except (OSError, TypeError, SyntaxError):
-        return found, True
-    open_ended, forwarded = False, False
-    for node in ast.walk(tree):
-        if not (isinstance(node, ast.Call) and any(
-                k.arg is None and isinstance(k.value, ast.Name) and k.value.id == var_kw
-                for k in node.keywords)):
-            continue
-        forwarded = True
-        callee = getattr(fn, "__globals__", {}).get(node.func.id) \
-            if isinstance(node.func, ast.Name) else None
-        if not callable(callee):
-            open_ended = True
-            continue
-        sub, sub_open = fitter_parameters(callee, _seen | {fn}, len(node.args))
-        given = {k.arg for k in node.keywords if k.arg}
-        for name, p in sub.items():
-            if name not in given:
-                found.setdefault(name, p)
-        open_ended |= sub_open
-    return found, open_ended or not forwarded
+
+    name: str
+    kind: str
+    none_ok: bool
+    default: Any
+    python_only: bool = False
 
 
-def option_kind(param: inspect.Parameter) -> tuple[str, bool]:
-    """``(kind, none_ok)`` of a parameter: kind ``"bool"``, ``"int"``, ``"float"``,
-    ``"str"``, ``"int-pair"``, ``"names"`` (a sequence of strings) or ``"any"``."""
-    ann = param.annotation
-    text = ann if isinstance(ann, str) else ("" if ann is param.empty else
-                                             getattr(ann, "__name__", str(ann)))
-    default = param.default
-    none_ok = "None" in text or default is None
-    if "tuple[int, int]" in text:
-        return "int-pair", none_ok
-    if "Iterable[str]" in text or "Sequence[str]" in text or "list[str]" in text:
-        return "names", none_ok
-    words = set(text.replace("|", " ").replace("[", " ").replace("]", " ").split())
-    for kind in ("bool", "float", "int", "str"):
-        if kind in words:
-            return kind, none_ok
-    if isinstance(default, bool):
-        return "bool", none_ok
-    for typ, kind in ((int, "int"), (float, "float"), (str, "str")):
-        if isinstance(default, typ):
+_SCALARS = ((bool, "bool"), (int, "int"), (float, "float"), (str, "str"))
+
+
+def _kind_of(annotation, default) -> tuple[str, bool]:
+    """``(kind, none_ok)`` of a type (a union with ``None`` accepts ``None``)."""
+    args = typing.get_args(annotation)
+    none_ok = default is None
+    if typing.get_origin(annotation) in (Union, types.UnionType):
+        none_ok |= type(None) in args
+        args = [a for a in args if a is not type(None)]
+        annotation = args[0] if len(args) == 1 else Any
+        args = typing.get_args(annotation)
+    if typing.get_origin(annotation) in (tuple, list, typing.get_origin(typing.Sequence[str])):
+        if args and all(a is str for a in args if a is not Ellipsis):
+            return "names", none_ok
+        if args == (int, int):
+            return "int-pair", none_ok
+        return "any", True
+    for typ, kind in _SCALARS:
+        if annotation is typ:
             return kind, none_ok
     return "any", True
 
 
+def option_table(cls) -> dict[str, Option]:
+    """The :class:`Option` of every field of an options dataclass ``cls``, in field order."""
+    hints = typing.get_type_hints(cls)
+    out = {}
+    for f in dataclasses.fields(cls):
+        kind, none_ok = _kind_of(hints[f.name], f.default)
+        out[f.name] = Option(f.name, kind, none_ok, f.default,
+                             bool(f.metadata.get("python_only")))
+    return out
+
+
+def signature_options(fn) -> tuple[type, bool]:
+    """``(cls, open_ended)`` for a fitting function without a declared class (a plug-in's):
+    a dataclass of its keyword parameters after the BRDF (private ``_x`` ones excluded),
+    typed by their annotations or, without one, by their defaults. ``open_ended`` is True
+    when the function takes ``**kwargs``: then unknown names cannot be ruled out up front."""
+    try:
+        params = list(inspect.signature(inspect.unwrap(fn)).parameters.values())[1:]
+    except (TypeError, ValueError):
+        return dataclasses.make_dataclass("NoOptions", []), True
+    fields, open_ended = [], False
+    for p in params:
+        if p.kind is p.VAR_KEYWORD:
+            open_ended = True
+        elif p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and not p.name.startswith("_"):
+            default = None if p.default is p.empty else p.default
+            ann = p.annotation
+            if ann is p.empty or isinstance(ann, str):
+                ann = type(default) if isinstance(default, (bool, int, float, str)) else Any
+            fields.append((p.name, ann, dataclasses.field(default=default)))
+    name = f"{getattr(fn, '__name__', 'fit')}_options"
+    return dataclasses.make_dataclass(name, fields, frozen=True), open_ended
+
+
+def describe_option(option: Option) -> str:
+    """One line about an option: ``name (kind, default D, range R)``."""
+    kind = {"int-pair": "two integers", "names": "list of names"}.get(option.kind, option.kind)
+    parts = [kind + (" or null" if option.none_ok and option.default is not None else "")]
+    parts.append(f"default {option.default!r}" if option.default is not None
+                 else "default: the fitter's")
+    if option.name in SPECIAL:
+        parts.append(SPECIAL[option.name][1])
+    elif option.name in RANGES and option.kind in ("int", "float"):
+        parts.append(f"in {_range_text(option.name)}")
+    return f"{option.name} ({', '.join(parts)})"
+
+
+# -- checking values ---------------------------------------------------------------------------
 def _range_text(name: str) -> str:
     low, high = RANGES[name]
     left = "(" if name in LOW_OPEN else "["
     right = ")" if math.isinf(high) else "]"
+
     def fmt(v) -> str:
         if math.isinf(v):
             return "inf"
@@ -154,46 +284,69 @@ def _range_text(name: str) -> str:
     return f"{left}{fmt(low)}, {fmt(high)}{right}"
 
 
-def _check_number(name: str, value, kind: str):
+def _expected(name: str, kind: str) -> str:
+    what = "an integer" if kind == "int" else "a number"
+    return what + (f" in {_range_text(name)}" if name in RANGES else "")
+
+
+def _as_number(name: str, value, kind: str):
+    """``value`` as an int or float (strings such as ``"1e-6"`` from a command line)."""
     if isinstance(value, bool) or not isinstance(value, (int, float, str)):
-        raise OptionError(f"{name}: expected {'an integer' if kind == 'int' else 'a number'}"
-                          f"{' in ' + _range_text(name) if name in RANGES else ''}, found "
-                          f"{value!r}")
-    if isinstance(value, str):  # "inf", "1e-6" from a command line
+        raise OptionError(f"{name}: expected {_expected(name, kind)}, found {value!r}")
+    if isinstance(value, str):
         try:
             value = float(value)
         except ValueError:
             raise OptionError(f"{name}: expected a number, found {value!r}") from None
-    if kind == "int":
-        if isinstance(value, float):
-            if not (math.isfinite(value) and value.is_integer()):
-                raise OptionError(f"{name}: expected an integer"
-                                  f"{' in ' + _range_text(name) if name in RANGES else ''}, "
-                                  f"found {value!r}")
-            value = int(value)
-    elif math.isnan(value):
-        raise OptionError(f"{name}: expected a number"
-                          f"{' in ' + _range_text(name) if name in RANGES else ''}, found nan")
+    if kind == "int" and isinstance(value, float):
+        if not (math.isfinite(value) and value.is_integer()):
+            raise OptionError(f"{name}: expected {_expected(name, kind)}, found {value!r}")
+        value = int(value)
+    elif kind == "float" and math.isnan(value):
+        raise OptionError(f"{name}: expected {_expected(name, kind)}, found nan")
+    return value
+
+
+def _check_number(name: str, value, kind: str):
+    value = _as_number(name, value, kind)
     if name in SPECIAL:
         test, expected = SPECIAL[name]
         if not test(value):
             raise OptionError(f"{name}: expected {expected}, found {value!r}")
     elif name in RANGES:
         low, high = RANGES[name]
-        ok = (value > low if name in LOW_OPEN else value >= low) and value <= high
-        if not ok:
-            what = "an integer" if kind == "int" else "a number"
-            raise OptionError(f"{name}: expected {what} in {_range_text(name)}, found {value!r}")
+        if not ((value > low if name in LOW_OPEN else value >= low) and value <= high):
+            raise OptionError(f"{name}: expected {_expected(name, kind)}, found {value!r}")
     elif kind == "float" and not math.isfinite(value):
         raise OptionError(f"{name}: expected a finite number, found {value!r}")
     return value
 
 
-def check_value(name: str, param: inspect.Parameter, value):
-    """``value`` of option ``name`` checked (and ``"1e-6"``-like strings made numbers)."""
-    kind, none_ok = option_kind(param)
+def _check_pair(name: str, value) -> tuple:
+    if not (isinstance(value, (list, tuple)) and len(value) == 2):
+        raise OptionError(f"{name}: expected two integers, e.g. [18, 8], found {value!r}")
+    if any(isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 10_000
+           for v in value):
+        raise OptionError(f"{name}: expected two integers in [1, 10000], found {value!r}")
+    return tuple(value)
+
+
+def _check_names(name: str, value) -> tuple:
+    if isinstance(value, str):
+        value = [value]
+    if not (isinstance(value, (list, tuple)) and value and len(value) <= 100
+            and all(isinstance(v, str) and len(v) <= 200 for v in value)):
+        raise OptionError(f"{name}: expected a list of names, e.g. [\"ones\"], found "
+                          f"{value!r}")
+    return tuple(value)
+
+
+def check_value(option: Option, value):
+    """``value`` of ``option`` checked (type, range) and converted (``"1e-6"`` → 1e-6,
+    ``5.0`` → 5 for an integer, lists → tuples)."""
+    name, kind = option.name, option.kind
     if value is None:
-        if none_ok:
+        if option.none_ok:
             return None
         raise OptionError(f"{name}: expected a value, found null")
     if kind in ("int", "float"):
@@ -208,44 +361,30 @@ def check_value(name: str, param: inspect.Parameter, value):
                               f"{value!r}")
         return value
     if kind == "int-pair":
-        if not (isinstance(value, (list, tuple)) and len(value) == 2):
-            raise OptionError(f"{name}: expected two integers, e.g. [18, 8], found {value!r}")
-        out = []
-        for v in value:
-            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 10_000:
-                raise OptionError(f"{name}: expected two integers in [1, 10000], found "
-                                  f"{value!r}")
-            out.append(v)
-        return tuple(out)
+        return _check_pair(name, value)
     if kind == "names":
-        if isinstance(value, str):
-            value = [value]
-        if not (isinstance(value, (list, tuple)) and value and len(value) <= 100
-                and all(isinstance(v, str) and len(v) <= 200 for v in value)):
-            raise OptionError(f"{name}: expected a list of names, e.g. [\"ones\"], found "
-                              f"{value!r}")
-        return tuple(value)
+        return _check_names(name, value)
     return value
 
 
-def check_fitter_options(fn, options: Mapping, *, model: str,
-                         command_line: bool = False) -> dict:
-    """The options of a fit with the fitting function ``fn`` (of the model named ``model``,
-    for messages), checked: names the fitter takes, types and ranges (module docstring);
-    with ``command_line``, the parameters that take Python objects (:data:`NOT_OPTIONS`) are
-    unknown names. Returns the options with numbers from strings converted; raises
-    :class:`OptionError` (one line, naming the option)."""
-    params, open_ended = fitter_parameters(fn)
-    offered = {n: p for n, p in params.items() if n not in NOT_OPTIONS}
-    if command_line:
-        params = offered
+def check_values(cls, options: Mapping, *, model: str, open_ended: bool = False,
+                 command_line: bool = False) -> dict:
+    """The ``options`` of a fit checked against the options dataclass ``cls`` of model
+    ``model`` (named in messages): names it declares, types and ranges; with
+    ``command_line``, :data:`PYTHON_ONLY` options are unknown names; with ``open_ended``
+    (a plug-in taking ``**kwargs``), unknown names pass unchecked. Returns only the
+    options given, numbers from strings converted; raises :class:`OptionError` (one line,
+    naming the option)."""
+    table = option_table(cls)
+    offered = {n: o for n, o in table.items() if not o.python_only}
+    known = offered if command_line else table
     out = {}
     for name, value in options.items():
-        if name not in params:
+        if name not in known:
             if open_ended:
                 out[name] = value
                 continue
             raise OptionError(f"model {model!r} has no option {name!r}; accepted: "
                               f"{', '.join(sorted(offered)) or 'none'}")
-        out[name] = check_value(name, params[name], value)
+        out[name] = check_value(known[name], value)
     return out

@@ -3,14 +3,16 @@
 **Declared models.** :data:`MODELS` is one table of every built-in model, in the spirit of
 colour-science's ``*_METHODS`` mappings: its fitting function and its summary function as
 ``"module:function"`` references inside :mod:`brdffit.fit`, resolved on first use, a
-one-line description, the paper, whether it fits isotropic BRDFs only, and typical figures
-(fit-file size, fit time) measured by ``bench/bench_cli.py --models`` (cited in
-:data:`TYPICAL_SOURCE`). Nothing registers itself on import: the CLI's help, ``brdffit
+one-line description, the paper, whether it fits isotropic BRDFs only and its options
+dataclass. The typical figures (fit-file size, fit time) are read from the results file of
+``bench/bench_cli.py --models`` (:data:`TYPICAL_FILE`, cited in :data:`TYPICAL_SOURCE`). Nothing registers itself on import: the CLI's help, ``brdffit
 models`` and the model-name checks read the table without importing SciPy, Numba or the
 fitting stack, and :func:`get` imports only the module of the model asked for.
 
 * ``fit(brdf, **options) -> model``: fits a BRDF; ``options`` are keyword arguments of the
-  fitting function (e.g. ``iterations=4``). :func:`fit` accepts them as a dict.
+  fitting function (e.g. ``iterations=4``), declared, typed and defaulted by the model's
+  options dataclass (:mod:`brdffit.fit.options`; :func:`check_options` checks them).
+  :func:`fit` accepts them as a dict.
 * ``summary(model) -> dict``: a short JSON-able summary of a fitted model (what the CLI
   prints).
 
@@ -28,9 +30,12 @@ channel, the Lambertian albedo ρd per channel and the bytes of its fit-file tab
 from __future__ import annotations
 
 import dataclasses
+import functools
 import inspect
+import json
 import time
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any, Callable
 
 from .._blas import with_single_blas_thread
@@ -38,19 +43,24 @@ from .._blas import with_single_blas_thread
 # NumPy is imported inside the functions that need it: `brdffit --help` reads MODELS.
 
 __all__ = ["Fitter", "FITTERS", "ModelInfo", "MODELS", "PAPERS", "TYPICAL_SOURCE",
-           "register_fitter", "get_fitter", "get", "list_fitters", "known_names", "describe", "fit", "fit_model", "is_isotropic_only",
+           "TYPICAL_FILE", "typical_figures", "register_fitter", "get_fitter", "get",
+           "list_fitters", "known_names", "describe", "fit", "fit_model", "is_isotropic_only",
            "summarize", "model_params", "small_json", "figures", "table_bytes",
-           "check_options"]
+           "check_options", "options_class"]
 
 
 @dataclasses.dataclass(frozen=True)
 class ModelInfo:
     """What is known about a model before its fitting module is imported.
 
-    ``typical_bytes``: size of its fit file (``.npz``) and ``typical_table_bytes``: bytes of
-    the tables (arrays) inside it, for a fit of an isotropic MERL material;
-    ``typical_time_s``: CPU seconds of that fit on the machine of the bench
-    (:data:`TYPICAL_SOURCE`); ``None`` when not measured.
+    ``function``, ``summary`` and ``options`` are ``"module:name"`` references within
+    :mod:`brdffit.fit`: the fitting function, the summary function and the frozen dataclass
+    of the fitting options (:mod:`brdffit.fit.options`; ``None`` for a plug-in, whose
+    options are read from its signature). ``typical_bytes`` (size of its fit file, ``.npz``),
+    ``typical_table_bytes`` (bytes of the tables inside it) and ``typical_time_s`` (CPU
+    seconds, 2 significant digits) are those of one fit of an isotropic MERL material read
+    from the benchmark's results file (:func:`typical_figures`); ``None`` when not measured
+    or when that file is absent.
     """
 
     name: str
@@ -60,14 +70,50 @@ class ModelInfo:
     description: str      # one line (<= 58 characters: `--help` at 80 columns)
     paper: str            # keys of PAPERS, comma-separated
     isotropic_only: bool = False
-    typical_bytes: int | None = None
-    typical_table_bytes: int | None = None
-    typical_time_s: float | None = None
+    options: str | None = None   # its options dataclass, "module:Class"
 
+    @property
+    def typical_bytes(self) -> int | None:
+        return typical_figures().get(self.name, (None, None, None))[0]
+
+    @property
+    def typical_table_bytes(self) -> int | None:
+        return typical_figures().get(self.name, (None, None, None))[1]
+
+    @property
+    def typical_time_s(self) -> float | None:
+        return typical_figures().get(self.name, (None, None, None))[2]
+
+
+#: The benchmark's results file the typical figures come from (``"models"`` of
+#: ``bench/bench_cli.py --models``). It is in a source checkout (and so in an editable
+#: install, ``make install``); an installed wheel has no ``bench/``, and then every typical
+#: figure is ``None`` (``brdffit models`` shows "–" and ``--measure`` measures them).
+TYPICAL_FILE = Path(__file__).resolve().parents[3] / "bench" / "results" / "cli.json"
 
 #: Where the typical figures of :data:`MODELS` come from.
 TYPICAL_SOURCE = ("bench/bench_cli.py --models: CPU time of one fit of the MERL file of "
                   "gold-metallic-paint on a 2-core machine (bench/results/cli.json)")
+
+
+@functools.cache
+def typical_figures() -> dict[str, tuple[int, int, float]]:
+    """``{model: (fit-file bytes, table bytes, fit CPU seconds)}`` read from
+    :data:`TYPICAL_FILE` (CPU seconds to 2 significant digits, as shown); empty when the
+    file is absent or unreadable, and without the models whose figures are incomplete."""
+    try:
+        rows = json.loads(TYPICAL_FILE.read_text(encoding="utf-8"))["models"]["figures"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}
+    out = {}
+    for name, m in rows.items() if isinstance(rows, dict) else ():
+        try:
+            out[name] = (int(m["fit_file_bytes"]), int(m["table_bytes"]),
+                         float(f"{float(m['fit_cpu_s']):.2g}"))
+        except (KeyError, TypeError, ValueError):
+            continue
+    return out
+
 
 #: The papers of :data:`MODELS` (``ModelInfo.paper`` names them by first author and year).
 PAPERS = {
@@ -83,58 +129,44 @@ PAPERS = {
                  "Transactions on Graphics 1(1), 1982",
 }
 
-#: Typical figures of each model, ``(fit-file bytes, table bytes, fit CPU seconds)``: one fit
-#: of the MERL file of gold-metallic-paint on this project's 2-core machine, measured by
-#: ``bench/bench_cli.py --models`` (bench/results/cli.json, "models"; CPU time, 2 significant
-#: digits; tests/cli/test_help_models.py checks they match that file).
-_TYPICAL = {
-    "tabulated": (4396, 1800, 0.019), "ggx": (3195, 1080, 0.018),
-    "beckmann": (3211, 1080, 0.014), "ggx-diffuse": (2966, 0, 1.1),
-    "beckmann-diffuse": (3098, 0, 1.0), "sgd": (5957, 0, 0.46),
-    "beckmann-2s": (5243, 0, 0.11), "ggx-2s": (5099, 0, 0.064),
-    "beckmann-ct": (1547, 0, 0.72), "ggx-ct": (1457, 0, 0.55), "npf": (56601, 3264, 52.0),
-    "npf-g-from-d": (7214, 3264, 3.0), "npf-naive": (7182, 4344, 1.0),
-    "npf-bivariate": (98912, 97200, 0.63),
-}
 
-
-def _model(name, function, description, paper, isotropic_only=False) -> ModelInfo:
+def _model(name, function, options, description, paper, isotropic_only=False) -> ModelInfo:
     module = function.split(":")[0]
-    size, tables, seconds = _TYPICAL.get(name, (None, None, None))
     return ModelInfo(name, module, function, f"{module}:summary", description, paper,
-                     isotropic_only, size, tables, seconds)
+                     isotropic_only, f"options:{options}")
 
 
 #: Every built-in model, in the order the CLI lists them (summary function: the module's
-#: ``summary``).
+#: ``summary``; options: a dataclass of :mod:`brdffit.fit.options`).
 MODELS: dict[str, ModelInfo] = {m.name: m for m in (
-    _model("tabulated", "tabulated:fit_tabulated", "tabulated NDF + Fresnel by power iteration",
-           "Dupuy 2015"),
-    _model("ggx", "tabulated:fit_ggx", "GGX from the tabulated fit's slope moments",
-           "Dupuy 2015"),
-    _model("beckmann", "tabulated:fit_beckmann", "Beckmann from the tabulated fit's slope moments",
-           "Dupuy 2015"),
-    _model("ggx-diffuse", "analytic:fit_ggx_diffuse",
+    _model("tabulated", "tabulated:fit_tabulated", "TabulatedOptions",
+           "tabulated NDF + Fresnel by power iteration", "Dupuy 2015"),
+    _model("ggx", "tabulated:fit_ggx", "TabulatedOptions",
+           "GGX from the tabulated fit's slope moments", "Dupuy 2015"),
+    _model("beckmann", "tabulated:fit_beckmann", "TabulatedOptions",
+           "Beckmann from the tabulated fit's slope moments", "Dupuy 2015"),
+    _model("ggx-diffuse", "analytic:fit_ggx_diffuse", "DiffuseOptions",
            "GGX + Lambert (+ coat), Schlick/dielectric/conductor", "Dupuy 2015, Bagher 2016"),
-    _model("beckmann-diffuse", "analytic:fit_beckmann_diffuse",
+    _model("beckmann-diffuse", "analytic:fit_beckmann_diffuse", "DiffuseOptions",
            "Beckmann + Lambert (+ coat), Schlick/diel./conductor", "Dupuy 2015, Bagher 2016"),
-    _model("sgd", "sgd:fit_sgd", "Shifted Gamma Distribution per channel", "Bagher 2012", True),
-    _model("beckmann-2s", "sgd:fit_beckmann_two_slice", "Beckmann per channel, two-slice fit",
+    _model("sgd", "sgd:fit_sgd", "TwoSliceOptions", "Shifted Gamma Distribution per channel",
            "Bagher 2012", True),
-    _model("ggx-2s", "sgd:fit_ggx_two_slice", "GGX per channel, two-slice fit", "Bagher 2012",
-           True),
-    _model("beckmann-ct", "sgd:fit_beckmann_ct",
+    _model("beckmann-2s", "sgd:fit_beckmann_two_slice", "TwoSliceOptions",
+           "Beckmann per channel, two-slice fit", "Bagher 2012", True),
+    _model("ggx-2s", "sgd:fit_ggx_two_slice", "TwoSliceOptions",
+           "GGX per channel, two-slice fit", "Bagher 2012", True),
+    _model("beckmann-ct", "sgd:fit_beckmann_ct", "CookTorranceOptions",
            "Cook-Torrance Beckmann per channel, least squares", "Cook 1982, Bagher 2012", True),
-    _model("ggx-ct", "sgd:fit_ggx_ct", "Cook-Torrance GGX per channel, least squares",
-           "Cook 1982, Bagher 2012", True),
-    _model("npf", "npf:fit_npf_independent_g", "non-parametric factors D, F, G (independent G)",
-           "Bagher 2016", True),
-    _model("npf-g-from-d", "npf:fit_npf_g_from_d", "non-parametric factors, G derived from D",
-           "Bagher 2016", True),
-    _model("npf-naive", "npf:fit_npf_naive", "non-parametric factors D, F, H (no shadowing)",
-           "Bagher 2016", True),
-    _model("npf-bivariate", "npf:fit_npf_bivariate", "non-parametric bivariate D(θh, θd) and F",
-           "Bagher 2016", True),
+    _model("ggx-ct", "sgd:fit_ggx_ct", "CookTorranceOptions",
+           "Cook-Torrance GGX per channel, least squares", "Cook 1982, Bagher 2012", True),
+    _model("npf", "npf:fit_npf_independent_g", "NPFOptions",
+           "non-parametric factors D, F, G (independent G)", "Bagher 2016", True),
+    _model("npf-g-from-d", "npf:fit_npf_g_from_d", "NPFOptions",
+           "non-parametric factors, G derived from D", "Bagher 2016", True),
+    _model("npf-naive", "npf:fit_npf_naive", "NPFOptions",
+           "non-parametric factors D, F, H (no shadowing)", "Bagher 2016", True),
+    _model("npf-bivariate", "npf:fit_npf_bivariate", "NPFOptions",
+           "non-parametric bivariate D(θh, θd) and F", "Bagher 2016", True),
 )}
 
 
@@ -156,15 +188,22 @@ class Fitter:
     summary: Callable[[Any], dict] | None = None
     description: str = ""
     isotropic_only: bool = False  # needs eval_hd on an isotropic input (two-slice, NPF, ...)
+    #: the options dataclass (:mod:`brdffit.fit.options`); ``None``: read from the signature
+    options: type | None = None
+
+    def option_class(self) -> tuple[type, bool]:
+        """``(cls, open_ended)``: the options dataclass of this fitter and whether it also
+        takes names it does not declare (a plug-in's ``**kwargs``)."""
+        if self.options is not None:
+            return self.options, False
+        from .options import signature_options
+
+        return signature_options(self.fit)
 
     def accepts(self, option: str) -> bool:
-        """True when the fitting function takes keyword ``option`` (or ``**kwargs``)."""
-        try:
-            sig = inspect.signature(self.fit)
-        except (TypeError, ValueError):  # pragma: no cover - builtins
-            return True
-        return option in sig.parameters or any(
-            p.kind is inspect.Parameter.VAR_KEYWORD for p in sig.parameters.values())
+        """True when the fitter takes keyword ``option`` (declared, or open-ended)."""
+        cls, open_ended = self.option_class()
+        return open_ended or option in {f.name for f in dataclasses.fields(cls)}
 
 
 FITTERS: dict[str, Fitter] = {}
@@ -199,7 +238,7 @@ def _declared(info: ModelInfo) -> Fitter:
     doc = (inspect.getdoc(fn) or info.description).split("\n")[0]
     # one BLAS thread: the fits make many small calls that BLAS threads only slow down
     return Fitter(info.name, with_single_blas_thread(fn), _resolve(info.summary), doc,
-                  info.isotropic_only)
+                  info.isotropic_only, _resolve(info.options) if info.options else None)
 
 
 def get(name: str) -> Fitter:
@@ -250,8 +289,12 @@ def summarize(name: str, model) -> dict:
     entry = get(name)
     if entry.summary is not None:
         return dict(entry.summary(model))
-    info = getattr(model, "fit_info", None) or {}
-    return {"model": name, "time_s": info.get("time", info.get("time_s"))}
+    from .result import fit_result
+
+    try:
+        return {"model": name, "time_s": fit_result(model).time}
+    except ValueError:                      # not made by a fit
+        return {"model": name, "time_s": None}
 
 
 # -- fitting orchestration (used by compare and batch) --------------------------------------
@@ -312,12 +355,25 @@ def is_isotropic_only(name: str) -> bool:
         return False
 
 
-def check_options(name: str, options: Mapping, command_line: bool = False) -> dict:
-    """The options of a fit with model ``name`` checked and converted
-    (:func:`brdffit.fit.options.check_fitter_options`); ``KeyError`` for an unknown model."""
-    from .options import check_fitter_options  # not at import: `brdffit --help` reads MODELS
+def options_class(name: str) -> tuple[type, bool]:
+    """``(cls, open_ended)``: the options dataclass of model ``name`` (declared in
+    :data:`MODELS`, imported from the light :mod:`brdffit.fit.options` without the fitting
+    module; a plug-in's made from its signature) and whether unknown names may pass."""
+    info = MODELS.get(name)
+    if name not in FITTERS and info is not None and info.options and _module_exists(info.module):
+        return _resolve(info.options), False
+    return get(name).option_class()
 
-    return check_fitter_options(get(name).fit, options, model=name, command_line=command_line)
+
+def check_options(name: str, options: Mapping, command_line: bool = False) -> dict:
+    """The options of a fit with model ``name`` checked against its options dataclass and
+    converted (:func:`brdffit.fit.options.check_values`); ``KeyError`` for an unknown model.
+    """
+    from .options import check_values  # not at import: `brdffit --help` reads MODELS
+
+    cls, open_ended = options_class(name)
+    return check_values(cls, options, model=name, open_ended=open_ended,
+                        command_line=command_line)
 
 
 def fit_model(name: str, reference, options: Mapping | None = None):

@@ -124,6 +124,7 @@ from ..microfacet.gamma import upper_gamma
 from ..microfacet.ggx import GGX
 from ..microfacet.sgd import SGD, sgd_log_p22, sgd_mu_lambda
 from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
+from .result import record
 
 __all__ = ["fit_sgd", "fit_beckmann_two_slice", "fit_ggx_two_slice", "fit_cook_torrance",
            "fit_beckmann_ct", "fit_ggx_ct", "fit_two_slice", "summary"]
@@ -896,118 +897,28 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
     cost). Raises :class:`FitError` when the slices hold no valid data.
     """
     t0 = time.perf_counter()
-    if selection not in ("full", "slice"):
-        raise ValueError(f"selection must be 'full' or 'slice', found {selection!r}")
-    if linear not in ("full", "slice"):
-        raise ValueError(f"linear must be 'full' or 'slice', found {linear!r}")
-    if linear == "full" and selection != "full":
-        raise ValueError("linear='full' needs selection='full'")
-    if distribution not in ALPHA_BOUNDS:
-        raise ValueError(f"distribution must be one of {sorted(ALPHA_BOUNDS)}, found "
-                         f"{distribution!r}")
+    _check_two_slice_choices(distribution, selection, linear)
     sl = two_slices(brdf)
-    m_h = np.asarray(sl["m_h"], dtype=np.float64)
-    if m_h.ndim == 1:
-        m_h = m_h[:, None]
-    valid_h = np.broadcast_to(np.asarray(sl["valid_h"]).reshape(len(m_h), -1), m_h.shape)
-    valid_h = valid_h & np.isfinite(m_h) & (sl["theta_h"] < np.pi / 2 - 1e-6)[:, None]
     label = getattr(brdf, "name", "brdf")
-    if np.any(valid_h.sum(axis=0) < 4) or not np.any(m_h[valid_h] > 0):
-        raise FitError(f"{label}: the θd = 0 slice has too few valid samples "
-                       f"(expected ≥ 4 per channel, found {valid_h.sum(axis=0).tolist()})")
-    m_h = np.where(valid_h, m_h, 0.0)
+    m_h, valid_h = _theta_d0_slice(sl, label)
     w = _weights(weighting, sl["theta_h"], m_h, valid_h)
     n_grid = grid if distribution == "sgd" else (grid[0] * 2, 1)
     s1 = _step1(distribution, sl["theta_h"], m_h, w, n_grid, starts)
     t1 = time.perf_counter()
-    m_d = np.asarray(sl["m_d"], dtype=np.float64).reshape(len(sl["theta_d"]), -1)
-    valid_d = np.broadcast_to(np.asarray(sl["valid_d"]).reshape(len(m_d), -1), m_d.shape)
     data, scan = None, None
     if selection == "full":
         data = _selection_data(brdf, *selection_strides)
         if scan_grid and linear == "full":
             scan = _full_scan(distribution, data, n_grid, starts)
-    channels, approx, chosen, refined = [], [], [], []
-    row_cache: dict = {}
-
-    shape_cache: dict = {}
-
-    def shape_of(cand):                 # the shape does not depend on the channel
-        key = (cand["alpha"], cand["p"])
-        if key not in shape_cache:
-            shape_cache[key] = _spec_shape(distribution, cand["alpha"], cand["p"], data)
-        return shape_cache[key]
-
-    def evaluate(c, cand):
-        rho_d = cand.get("rho_d", 0.0)
-        abe, rows = None, None
-        if bounded:
-            key = (cand["alpha"], cand["p"])
-            if key not in row_cache:
-                row_cache[key] = _albedo_rows(distribution, cand["alpha"], cand["p"],
-                                              None if data is None else data["g1_cache"])
-            rows = row_cache[key]
-        if linear == "slice":
-            abe = _step2(distribution, sl["theta_d"], m_d[:, c], valid_d[:, c], cand, rows)
-        score = np.nan
-        if data is not None:
-            shape = shape_of(cand)
-            if linear == "full":
-                rho_d, abe = _linear_full(data, c, shape, rows)
-            score = _score(data, c, shape, rho_d, abe)
-        return score, rho_d, abe
-
+    scorer = _Scorer(distribution, sl, data, bounded, linear)
     all_cands = []
     for c in range(3):
         cands = [{**cd, "source": "slice"} for cd in s1[c]["candidates"]] \
             if selection == "full" else [s1[c]]
-        if scan is not None:
-            cands += scan[c]
-        all_cands.append(cands)
-    # Exact pruning of the bounded evaluations (the albedo rows are the costly part): the
-    # unbounded least-squares cost of a candidate is a lower bound of its bounded cost, so a
-    # candidate whose lower bound exceeds the best bounded cost found so far cannot win.
-    prune = bool(_PRUNE and bounded and linear == "full" and data is not None and not refine)
-    lower: dict = {}
-    if prune:
-        keys = list(dict.fromkeys((cd["alpha"], cd["p"]) for cs in all_cands for cd in cs))
-        lb = _scan_linear(data, np.stack([shape_of({"alpha": a, "p": p}) for a, p in keys]))
-        lower = {key: np.where(np.isfinite(lb[i]), lb[i], -np.inf) for i, key in enumerate(keys)}
-        slack = 1e-10 * _gram_data(data)["sWmm"]       # rounding of the normal equations
-    n_evaluated = []
-    for c in range(3):
-        cands = all_cands[c]
-        if prune:
-            order = sorted(range(len(cands)), key=lambda k: (
-                lower[(cands[k]["alpha"], cands[k]["p"])][c], k))
-            scored, best = [], np.inf
-            for k in order:
-                if lower[(cands[k]["alpha"], cands[k]["p"])][c] > best * (1 + 1e-6) + slack[c]:
-                    break
-                t = (*evaluate(c, cands[k]), k, cands[k])
-                scored.append(t)
-                best = min(best, float(np.nan_to_num(t[0], nan=np.inf)))
-            scored.sort(key=lambda t: (np.nan_to_num(t[0], nan=np.inf), t[3]))
-        else:
-            scored = sorted(((*evaluate(c, cd), k, cd) for k, cd in enumerate(cands)),
-                            key=lambda t: (np.nan_to_num(t[0], nan=np.inf), t[3]))
-        n_evaluated.append(len(scored))
-        if refine and data is not None and linear == "full":
-            for t in scored[:refine]:
-                cd = _refine_full(distribution, data, c, t[4])
-                refined.append(cd)
-                scored.append((*evaluate(c, cd), len(cands), cd))
-                cands.append(cd)
-            scored.sort(key=lambda t: (np.nan_to_num(t[0], nan=np.inf), t[3]))
-        score, rho_d, abe, k, cand = scored[0]
-        rho_s, F0, F1 = _coefs_to_fresnel(*abe)
-        dist = _make_distribution(distribution, cand["alpha"], cand["p"])
-        channels.append({"distribution": dist, "rho_d": rho_d, "rho_s": rho_s,
-                         "F0": F0, "F1": F1})
-        chosen.append({"candidate": int(k), "n_candidates": len(cands),
-                       "n_evaluated": n_evaluated[c],
-                       "source": cand.get("source", "slice"), "selection_cost": float(score)})
+        all_cands.append(cands + (scan[c] if scan is not None else []))
+    channels, chosen, refined = _select(scorer, all_cands, refine)
     t2 = time.perf_counter()
+    approx = []
     if distribution == "sgd" and g1_approximation:
         for ch in channels:
             approx.append(ch["distribution"].g1_approximation(n=256))
@@ -1021,12 +932,14 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
             ch["distribution"]._lambda_table
     t4 = time.perf_counter()
     refine_runs = [cd["run"] for cd in refined if "run" in cd]
-    model.fit_info = {"method": f"two-slice ({distribution})", "weighting": weighting,
-                      "time": t4 - t0, "time_step1": t1 - t0, "time_step2": t2 - t1,
-                      "time_g1_approx": t3 - t2, "time_g1_tables": t4 - t3,
-                      "step1": [{k: v for k, v in r.items()} for r in s1],
-                      "selection": chosen,
-                      **_sgd_convergence([r["runs"] for r in s1], refine_runs)}
+    info = {"method": f"two-slice ({distribution})", "weighting": weighting,
+            "time": t4 - t0, "time_step1": t1 - t0, "time_step2": t2 - t1,
+            "time_g1_approx": t3 - t2, "time_g1_tables": t4 - t3,
+            "step1": [{k: v for k, v in r.items()} for r in s1],
+            "selection": chosen,
+            **_sgd_convergence([r["runs"] for r in s1], refine_runs)}
+    record(model, info, success=info["success"], converged=info["converged"],
+           message=info["message"], nit=info["nit"], time=info["time"])
     model.fit_options = {"distribution": distribution, "weighting": weighting,
                          "starts": starts, "grid": list(grid), "selection": selection,
                          "linear": linear, "bounded": bounded, "scan_grid": scan_grid,
@@ -1034,6 +947,139 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
                          "selection_strides": list(selection_strides)}
     _check_finite(model, label)
     return model
+
+
+def _check_two_slice_choices(distribution, selection, linear) -> None:
+    if selection not in ("full", "slice"):
+        raise ValueError(f"selection must be 'full' or 'slice', found {selection!r}")
+    if linear not in ("full", "slice"):
+        raise ValueError(f"linear must be 'full' or 'slice', found {linear!r}")
+    if linear == "full" and selection != "full":
+        raise ValueError("linear='full' needs selection='full'")
+    if distribution not in ALPHA_BOUNDS:
+        raise ValueError(f"distribution must be one of {sorted(ALPHA_BOUNDS)}, found "
+                         f"{distribution!r}")
+
+
+def _theta_d0_slice(sl, label) -> tuple[np.ndarray, np.ndarray]:
+    """``(m_h, valid_h)``: the θd = 0 slice per channel (0 where not valid) and its valid
+    samples (finite, below the horizon); :class:`FitError` when a channel has fewer than 4
+    valid samples or no positive one."""
+    m_h = np.asarray(sl["m_h"], dtype=np.float64)
+    if m_h.ndim == 1:
+        m_h = m_h[:, None]
+    valid_h = np.broadcast_to(np.asarray(sl["valid_h"]).reshape(len(m_h), -1), m_h.shape)
+    valid_h = valid_h & np.isfinite(m_h) & (sl["theta_h"] < np.pi / 2 - 1e-6)[:, None]
+    if np.any(valid_h.sum(axis=0) < 4) or not np.any(m_h[valid_h] > 0):
+        raise FitError(f"{label}: the θd = 0 slice has too few valid samples "
+                       f"(expected ≥ 4 per channel, found {valid_h.sum(axis=0).tolist()})")
+    return np.where(valid_h, m_h, 0.0), valid_h
+
+
+class _Scorer:
+    """The step-2 evaluation of a candidate ``(α, p)`` for a channel: its linear
+    coefficients (on the θh = 0 slice, or on the full selection data) and its selection
+    cost; the specular shapes and the albedo rows of the bounds are cached per candidate
+    (they do not depend on the channel)."""
+
+    def __init__(self, distribution, sl, data, bounded, linear):
+        self.distribution, self.sl, self.data = distribution, sl, data
+        self.bounded, self.linear = bounded, linear
+        self.m_d = np.asarray(sl["m_d"], dtype=np.float64).reshape(len(sl["theta_d"]), -1)
+        self.valid_d = np.broadcast_to(np.asarray(sl["valid_d"]).reshape(len(self.m_d), -1),
+                                       self.m_d.shape)
+        self.rows: dict = {}
+        self.shapes: dict = {}
+
+    def shape_of(self, cand):
+        key = (cand["alpha"], cand["p"])
+        if key not in self.shapes:
+            self.shapes[key] = _spec_shape(self.distribution, cand["alpha"], cand["p"],
+                                           self.data)
+        return self.shapes[key]
+
+    def evaluate(self, c, cand):
+        """``(score, ρd, (a, b, e))`` of candidate ``cand`` for channel ``c``."""
+        data, rho_d = self.data, cand.get("rho_d", 0.0)
+        abe, rows = None, None
+        if self.bounded:
+            key = (cand["alpha"], cand["p"])
+            if key not in self.rows:
+                self.rows[key] = _albedo_rows(self.distribution, cand["alpha"], cand["p"],
+                                              None if data is None else data["g1_cache"])
+            rows = self.rows[key]
+        if self.linear == "slice":
+            abe = _step2(self.distribution, self.sl["theta_d"], self.m_d[:, c],
+                         self.valid_d[:, c], cand, rows)
+        score = np.nan
+        if data is not None:
+            shape = self.shape_of(cand)
+            if self.linear == "full":
+                rho_d, abe = _linear_full(data, c, shape, rows)
+            score = _score(data, c, shape, rho_d, abe)
+        return score, rho_d, abe
+
+
+def _by_score(t):
+    return (np.nan_to_num(t[0], nan=np.inf), t[3])
+
+
+def _select(scorer: _Scorer, all_cands, refine: int):
+    """``(channels, chosen, refined)``: per channel the candidate of lowest selection cost
+    (with ``refine`` local refinements of the best ones on the full data) as the channel's
+    parameters, the record of the choice, and the refined candidates.
+
+    Exact pruning of the bounded evaluations (the albedo rows are the costly part): the
+    unbounded least-squares cost of a candidate is a lower bound of its bounded cost, so a
+    candidate whose lower bound exceeds the best bounded cost found so far cannot win."""
+    data, dist = scorer.data, scorer.distribution
+    prune = bool(_PRUNE and scorer.bounded and scorer.linear == "full" and data is not None
+                 and not refine)
+    lower, slack = {}, None
+    if prune:
+        keys = list(dict.fromkeys((cd["alpha"], cd["p"]) for cs in all_cands for cd in cs))
+        lb = _scan_linear(data, np.stack([scorer.shape_of({"alpha": a, "p": p})
+                                          for a, p in keys]))
+        lower = {key: np.where(np.isfinite(lb[i]), lb[i], -np.inf) for i, key in enumerate(keys)}
+        slack = 1e-10 * _gram_data(data)["sWmm"]       # rounding of the normal equations
+    channels, chosen, refined = [], [], []
+    for c in range(3):
+        cands = all_cands[c]
+        scored = (_pruned_scores(scorer, c, cands, lower, slack[c]) if prune else
+                  sorted(((*scorer.evaluate(c, cd), k, cd) for k, cd in enumerate(cands)),
+                         key=_by_score))
+        n_evaluated = len(scored)
+        if refine and data is not None and scorer.linear == "full":
+            for t in scored[:refine]:
+                cd = _refine_full(dist, data, c, t[4])
+                refined.append(cd)
+                scored.append((*scorer.evaluate(c, cd), len(cands), cd))
+                cands.append(cd)
+            scored.sort(key=_by_score)
+        score, rho_d, abe, k, cand = scored[0]
+        rho_s, F0, F1 = _coefs_to_fresnel(*abe)
+        channels.append({"distribution": _make_distribution(dist, cand["alpha"], cand["p"]),
+                         "rho_d": rho_d, "rho_s": rho_s, "F0": F0, "F1": F1})
+        chosen.append({"candidate": int(k), "n_candidates": len(cands),
+                       "n_evaluated": n_evaluated,
+                       "source": cand.get("source", "slice"), "selection_cost": float(score)})
+    return channels, chosen, refined
+
+
+def _pruned_scores(scorer: _Scorer, c, cands, lower, slack):
+    """The candidates of channel ``c`` evaluated in the order of their lower bounds, until a
+    lower bound exceeds the best cost found (:func:`_select`); sorted by cost."""
+    order = sorted(range(len(cands)), key=lambda k: (
+        lower[(cands[k]["alpha"], cands[k]["p"])][c], k))
+    scored, best = [], np.inf
+    for k in order:
+        if lower[(cands[k]["alpha"], cands[k]["p"])][c] > best * (1 + 1e-6) + slack:
+            break
+        t = (*scorer.evaluate(c, cands[k]), k, cands[k])
+        scored.append(t)
+        best = min(best, float(np.nan_to_num(t[0], nan=np.inf)))
+    scored.sort(key=_by_score)
+    return scored
 
 
 _PRUNE = True                          # exact pruning of candidate evaluations (tests)
@@ -1224,8 +1270,10 @@ def fit_cook_torrance(brdf, distribution: str = "beckmann", *, theta_d_stride: i
                          "F0": F0, "F1": 0.0})
     model = PerChannelMicrofacetBRDF(channels, name=name or f"{label}-{distribution}-ct",
                                      source=getattr(brdf, "source", None))
-    model.fit_info = {"method": f"full-data weighted least squares ({distribution})",
-                      "time": time.perf_counter() - t0, "n_samples": int(len(th))}
+    info = {"method": f"full-data weighted least squares ({distribution})",
+            "time": time.perf_counter() - t0, "n_samples": int(len(th))}
+    record(model, info, success=True, converged=None, message=info["method"],
+           time=info["time"])
     model.fit_options = {"distribution": distribution, "theta_d_stride": theta_d_stride,
                          "phi_stride": phi_stride, "starts": starts}
     _check_finite(model, label)

@@ -62,6 +62,7 @@ from ..microfacet.conversions import to_beckmann, to_ggx
 from ..microfacet.per_channel import PerChannelBRDF
 from ..microfacet.tabulated import (TabulatedSlopeDistribution,
                                     azimuthal_clamped_cosine_integral, radial_rule)
+from .result import record
 
 __all__ = ["fit_tabulated", "fit_ggx", "fit_beckmann", "solve_slope_pdf", "iteration_plan",
            "convergence_info", "extract_fresnel", "luminance", "backscatter", "DEFAULT_TOL",
@@ -202,6 +203,44 @@ def convergence_info(changes, iterations: int | None, tol: float | None,
             "relative_change": changes}
 
 
+def _kernel(b, r, w_r, row, g2: bool):
+    """``(apply, integral)``: the power iteration's operator ``p → K p`` and ``∫ p`` on the
+    radial rule ``(r, w_r)`` (Eq. 16-18, 22-24; ``row`` = 4 b cos⁶θ; ``g2``: the
+    height-correlated hotspot of :func:`solve_slope_pdf`)."""
+    if b.ndim == 1:
+        # K'_ij = 4 b_i cos⁶θi w_j J(tanθi tanθj)   (Eq. 23 in slope form, closed-form φ integral)
+        J = azimuthal_clamped_cosine_integral(r[:, None] * r[None, :])
+        if g2:
+            J = 2.0 * J - 2.0 * np.pi
+        K = row[:, None] * (J * w_r[None, :])
+
+        def apply(p):
+            return K @ p
+
+        def integral(p):
+            return 2.0 * np.pi * np.dot(w_r, p)
+    else:
+        n_phi = b.shape[1]
+        dphi = 2.0 * np.pi * np.arange(n_phi) / n_phi
+        k = np.maximum(1.0 + (r[:, None, None] * r[None, :, None]) * np.cos(dphi), 0.0)
+        kh = np.fft.rfft(k, axis=-1)
+
+        def integral(p):
+            return float(np.sum(w_r[:, None] * p) * 2.0 * np.pi / n_phi)
+
+        def apply(p):
+            ph = np.fft.rfft(p * w_r[:, None], axis=-1)
+            # einsum, not a batched matmul: the latter goes through multi-threaded OpenBLAS,
+            # measured 200x slower (3.3 s vs 0.015 s CPU per solve) on a loaded 2-core machine
+            s = np.fft.irfft(np.einsum("ijm,jm->im", kh, ph), n=n_phi, axis=-1)
+            s *= 2.0 * np.pi / n_phi
+            if g2:
+                s = 2.0 * s - integral(p)
+            return np.maximum(row * s, 0.0)
+
+    return apply, integral
+
+
 def solve_slope_pdf(b, rule: str = "merl", iterations: int | None = None,
                     tol: float | None = None, max_iterations: int = DEFAULT_MAX_ITERATIONS,
                     hotspot: str = "G2"):
@@ -236,38 +275,7 @@ def solve_slope_pdf(b, rule: str = "merl", iterations: int | None = None,
     if hotspot not in ("G1", "G2"):
         raise ValueError(f"hotspot must be 'G1' or 'G2', got {hotspot!r}")
     n_iter, tol = iteration_plan(iterations, tol, max_iterations)
-    g2 = hotspot == "G2"
-    if b.ndim == 1:
-        # K'_ij = 4 b_i cos⁶θi w_j J(tanθi tanθj)   (Eq. 23 in slope form, closed-form φ integral)
-        J = azimuthal_clamped_cosine_integral(r[:, None] * r[None, :])
-        if g2:
-            J = 2.0 * J - 2.0 * np.pi
-        K = row[:, None] * (J * w_r[None, :])
-
-        def apply(p):
-            return K @ p
-
-        def integral(p):
-            return 2.0 * np.pi * np.dot(w_r, p)
-    else:
-        n_phi = b.shape[1]
-        dphi = 2.0 * np.pi * np.arange(n_phi) / n_phi
-        k = np.maximum(1.0 + (r[:, None, None] * r[None, :, None]) * np.cos(dphi), 0.0)
-        kh = np.fft.rfft(k, axis=-1)
-
-        def integral(p):
-            return float(np.sum(w_r[:, None] * p) * 2.0 * np.pi / n_phi)
-
-        def apply(p):
-            ph = np.fft.rfft(p * w_r[:, None], axis=-1)
-            # einsum, not a batched matmul: the latter goes through multi-threaded OpenBLAS,
-            # measured 200x slower (3.3 s vs 0.015 s CPU per solve) on a loaded 2-core machine
-            s = np.fft.irfft(np.einsum("ijm,jm->im", kh, ph), n=n_phi, axis=-1)
-            s *= 2.0 * np.pi / n_phi
-            if g2:
-                s = 2.0 * s - integral(p)
-            return np.maximum(row * s, 0.0)
-
+    apply, integral = _kernel(b, r, w_r, row, hotspot == "G2")
     p = np.ones_like(b)
     p /= integral(p)
     changes: list[float] = []
@@ -677,23 +685,21 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
     ----------
     brdf:
         Any :class:`~brdffit.brdf.BRDF` (MERL tables, networks, analytic models...).
-    n:
-        Number of elevation nodes (paper: 90 for MERL, 360 for Table 1).
+    n, n_phi:
+        Elevation nodes (paper: 90 for MERL, 360 for Table 1); azimuth nodes when 2D.
     iterations, tol, max_iterations:
         Stopping rule of the power iteration (:func:`iteration_plan`). **Default: converged**
         — iterate until the relative change ``max|p_k − p_{k−1}| / max p_k`` of the
         normalised slope PDF is ≤ ``tol`` (:data:`DEFAULT_TOL` = 1e-6 when None), at most
         ``max_iterations`` = 1000 (a safety cap; ``fit_info["cap_reached"]`` and a
-        ``message`` say when it is hit). **Paper mode**: ``iterations=4`` (with ``tol`` None,
-        CLI ``--iterations 4``) runs exactly the paper's 4 iterations (Dupuy 2015 Alg. 1),
-        which on MERL materials leaves a relative change of ~3.5e-3 and GGX round-trip α
-        errors up to ~1 %. Both given: stop at ``tol`` or after ``iterations``.
+        ``message`` say when it is hit). **Paper mode**: ``iterations=4`` (with ``tol`` None)
+        runs exactly the paper's 4 iterations (Dupuy 2015 Alg. 1; on MERL, a relative change
+        of ~3.5e-3 is left). Both given: stop at ``tol`` or after ``iterations``.
     anisotropic:
         2D ``(θ, φ)`` fit (``n × n_phi``) or 1D radial fit; default ``not brdf.isotropic``.
     per_channel:
-        One distribution per RGB channel (a
-        :class:`~brdffit.microfacet.per_channel.PerChannelBRDF`); default one
-        distribution from the luminance of the backscatter (the paper's choice).
+        One distribution per RGB channel (a ``PerChannelBRDF``); default one distribution
+        from the luminance of the backscatter (the paper's choice).
     rule:
         Radial rule: ``"merl"`` (rectangles on θ = (π/2)u², supplemental Eq. 17-22),
         ``"gauss"`` (Gauss-Legendre in u: exact eigenvalue and moments, better for heavy
@@ -701,10 +707,9 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
         (``merl_table``) with ``n = 90`` (read at their own samples, supplemental Eq. 20-22),
         else ``"gauss"``.
     hotspot:
-        Backscattering shadowing model: ``"G2"`` (default; Eq. 2, the height-correlated term
-        the fitted model is evaluated and rendered with, so the fit reproduces the input's
-        backscattering under its own ``eval``) or ``"G1"`` (the paper's Eq. 11, which biases
-        α by about −2 % at GGX α = 0.2 and −16 % at α = 0.8 for a G2 microsurface).
+        Backscattering shadowing: ``"G2"`` (default; Eq. 2, the height-correlated term the
+        model is evaluated with, so the fit reproduces the input's backscattering) or ``"G1"``
+        (the paper's Eq. 11: α −2 % at GGX α = 0.2, −16 % at α = 0.8 on a G2 microsurface).
     fresnel_max:
         Upper clamp of the extracted Fresnel table. Default 1: a reflectance, so that the
         model is physical (with a Smith G and a normalised D, F ≤ 1 keeps the lobe's
@@ -717,16 +722,13 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
         Fresnel average (the ratio is undefined there).
     fresnel_max_theta_deg:
         Samples with θi or θo above this angle are left out of the Fresnel average (default
-        89°, the cut of Bagher et al. 2016 Eq. 7-12; ``None`` uses every sample as the paper).
-        Measured tables are least reliable at grazing angles: on the RGL files, whose values
-        reach 1e4-1e14 within 3° of the horizon, the cut lowers the fit's cosine-weighted
-        relative error from 1.7-12 to 0.07-0.45; on the Neural-BRDF MERL set it changes it by
-        under 3 %.
+        89°, the cut of Bagher et al. 2016 Eq. 7-12; ``None`` uses every sample as the paper):
+        measured tables are least reliable at grazing angles (docs/design/tabulated-fit.md).
     diffuse:
-        Add a Lambertian term ρd/π for what the lobe cannot carry (default; :func:`_split_diffuse`):
-        the least-absolute-deviation ρd of the residual, held by the white furnace, with the
-        lobe refitted on ``f − ρd/π`` while that lowers the error. ``False``: the paper's
-        lobe alone.
+        Add a Lambertian term ρd/π for what the lobe cannot carry (default;
+        :func:`_split_diffuse`): the least-absolute-deviation ρd of the residual, held by the
+        white furnace, with the lobe refitted on ``f − ρd/π`` while that lowers the error.
+        ``False``: the paper's lobe alone.
 
     Returns
     -------
@@ -734,17 +736,12 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
         A ``MicrofacetBRDF(TabulatedSlopeDistribution, TabulatedFresnel, diffuse=ρd)`` (a
         ``PerChannelBRDF`` of three with ``per_channel=True``), physically valid by
         construction with the defaults (F ≤ 1, directional albedo ≤ 1), with
-    ``fit_info`` (eigenvalue = F0 of the paper, timings, and the convergence report of
-    :func:`convergence_info`: ``converged``, ``success``, ``status``, ``message``,
-    ``criterion``, ``tol``, ``iterations``/``nit``, ``max_iterations``, ``cap_reached``,
-    ``final_relative_change``, ``relative_change`` per iteration; ``diffuse``: ρd, the
-    refits and the errors of :func:`_split_diffuse`) and ``fit_options``.
-    The distribution's sampling tables are built on first use
-    (:meth:`~brdffit.microfacet.tabulated.TabulatedSlopeDistribution.prepare_sampling`).
+        ``fit_options`` and ``fit_info``: the eigenvalue (F0 of the paper), timings, the
+        convergence report of :func:`convergence_info` and ``diffuse`` (ρd, the refits and
+        the errors of :func:`_split_diffuse`). The sampling tables are built on first use.
     """
     t0 = time.perf_counter()
-    if anisotropic is None:
-        anisotropic = not bool(getattr(brdf, "isotropic", False))
+    anisotropic = not bool(getattr(brdf, "isotropic", False)) if anisotropic is None else anisotropic
     if rule == "auto":
         has_merl = getattr(brdf, "merl_table", None) is not None
         rule = "merl" if (has_merl and n == N_THETA_H and not anisotropic) else "gauss"
@@ -752,54 +749,48 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
     if not anisotropic and getattr(brdf, "isotropic", False):
         merl = tabulate_merl_grid(brdf)
     _, tol_eff = iteration_plan(iterations, tol, max_iterations)  # validates early
-    options = {"n": int(n), "iterations": None if iterations is None else int(iterations),
-               "tol": tol_eff,
-               "anisotropic": bool(anisotropic), "per_channel": bool(per_channel),
-               "n_phi": int(n_phi) if anisotropic else None, "rule": rule, "hotspot": hotspot,
-               "max_iterations": int(max_iterations), "fresnel_max": fresnel_max,
-               "p_floor": p_floor, "fresnel_max_theta_deg": fresnel_max_theta_deg,
-               "diffuse": bool(diffuse)}
     kw = dict(n=n, n_phi=n_phi, rule=rule, iterations=iterations, tol=tol,
               max_iterations=max_iterations, anisotropic=anisotropic, hotspot=hotspot,
               fresnel_kwargs={"fresnel_max": fresnel_max, "p_floor": p_floor,
                               "max_theta_deg": fresnel_max_theta_deg})
-    name = getattr(brdf, "name", "brdf")
-    source = getattr(brdf, "source", None)
-
-    def lobe_of(data, merl_values):
-        return _fit_lobe(data, merl_values, per_channel, kw, name, source)
-
-    model, info = lobe_of(brdf, merl)
+    model, info = _fit_channels(brdf, merl, per_channel, kw)
     if diffuse:
         def refit(rho_d):
             residual = (None if merl is None else
                         (merl[0] - np.asarray(rho_d) / np.pi, merl[1]))
-            return lobe_of(_without_lambert(brdf, rho_d), residual)
+            return _fit_channels(_without_lambert(brdf, rho_d), residual, per_channel, kw)
 
         model, info = _split_diffuse(brdf, model, info, refit, merl)
-    info["time"] = time.perf_counter() - t0
-    info["time_total"] = info["time"]
+    info["time"] = info["time_total"] = time.perf_counter() - t0
     if merl is not None:
         info["merl_grid"] = True
-    model.fit_info = info
-    model.fit_options = options
-    return model
+    model.fit_options = {
+        "n": int(n), "iterations": None if iterations is None else int(iterations),
+        "tol": tol_eff, "anisotropic": bool(anisotropic), "per_channel": bool(per_channel),
+        "n_phi": int(n_phi) if anisotropic else None, "rule": rule, "hotspot": hotspot,
+        "max_iterations": int(max_iterations), "fresnel_max": fresnel_max, "p_floor": p_floor,
+        "fresnel_max_theta_deg": fresnel_max_theta_deg, "diffuse": bool(diffuse)}
+    return record(model, info, success=info["success"], converged=info["converged"],
+                  message=info["message"], nit=info["nit"], time=info["time"])
 
 
-def _fit_lobe(data, merl, per_channel, kw, name, source):
-    """``(model, info)``: the tabulated lobe(s) of ``data`` (one distribution from the
-    luminance, or one per channel)."""
-    if per_channel:
-        models, infos = [], []
-        for c in range(3):
-            dist, F, info = _fit_one(data, c, merl=merl, **kw)
-            models.append(_make_model(dist, F, f"{name}[{'RGB'[c]}]", source))
-            infos.append(info)
-        info = {"channels": infos, "eigenvalue": [i["eigenvalue"] for i in infos]}
-        info.update(_merge_convergence(infos))
-        return PerChannelBRDF(models, name=name, source=source), info
-    dist, F, info = _fit_one(data, None, merl=merl, **kw)
-    return _make_model(dist, F, name, source), info
+def _fit_channels(data: BRDF, merl, per_channel: bool, kw: dict) -> tuple[BRDF, dict]:
+    """``(model, fit_info)`` of :func:`_fit_one` on ``data`` (and its MERL grid ``merl``)
+    with the options ``kw``: one distribution from the luminance, or one per channel in a
+    :class:`PerChannelBRDF` (their convergence reports merged, :func:`_merge_convergence`)."""
+    name = getattr(data, "name", "brdf")
+    source = getattr(data, "source", None)
+    if not per_channel:
+        dist, F, info = _fit_one(data, None, merl=merl, **kw)
+        return _make_model(dist, F, name, source), info
+    models, infos = [], []
+    for c in range(3):
+        dist, F, info = _fit_one(data, c, merl=merl, **kw)
+        models.append(_make_model(dist, F, f"{name}[{'RGB'[c]}]", source))
+        infos.append(info)
+    info = {"channels": infos, "eigenvalue": [i["eigenvalue"] for i in infos]}
+    info.update(_merge_convergence(infos))
+    return PerChannelBRDF(models, name=name, source=source), info
 
 
 def fit_beckmann(brdf: BRDF, **kwargs) -> MicrofacetBRDF:

@@ -62,11 +62,12 @@ docs/design/npf-fit.md
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 import warnings
 from concurrent.futures import ThreadPoolExecutor
-from typing import Iterable
+from typing import Any, Iterable
 
 import numpy as np
 
@@ -76,6 +77,7 @@ from ...losses.objective import ObjectiveOptions, prepare_objective
 from ...grid import tabulate_merl_grid
 from ...progress import step_callback
 from ...microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF
+from ..result import fit_result, record
 from . import _solver
 from ._solver import MFState, NaiveState, Samples
 
@@ -247,15 +249,13 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
 
     Parameters
     ----------
-    brdf:
-        An isotropic BRDF (tabulated on the MERL grid with
-        :func:`brdffit.grid.tabulate_merl_grid`) or a load spec for :func:`brdffit.io.load`.
+    brdf, data:
+        An isotropic BRDF (tabulated on the MERL grid, :func:`brdffit.grid.tabulate_merl_grid`)
+        or a load spec; or ``data = (values (90, 90, 180, 3), valid (90, 90, 180))``.
     variant:
         ``"independent-g"``, ``"g-from-d"``, ``"naive"`` or ``"bivariate"``, or the same
         by their model names ``"npf"``, ``"npf-g-from-d"``, ``"npf-naive"``,
         ``"npf-bivariate"`` (:data:`CLI_VARIANTS`).
-    data:
-        Optional ``(values (90, 90, 180, 3), valid (90, 90, 180))`` instead of ``brdf``.
     compressive, restrict_deg, p, max_theta_io_deg:
         Objective options (:class:`~brdffit.losses.objective.ObjectiveOptions`): wC on/off
         (Fig. 7), restricted angular range (Fig. 15), compressive power, θi/θo cut (89°).
@@ -267,176 +267,250 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         ``n_random`` random starts, all-ones, SGD fit, G-from-D fit, data slices). The best
         final objective is kept. Deterministic for a given ``seed``.
     start_max_iter:
-        Independent-G: every start first runs this many AWLS iterations (default 100); the
-        per-channel best then continues up to ``max_iter`` (``None``: every start runs
-        ``max_iter`` iterations, as the paper's full runs).
+        Independent-G: every start first runs this many AWLS iterations, then the per-channel
+        best continues up to ``max_iter`` (``None``: every start runs ``max_iter``, as the paper).
     polish:
-        Levenberg–Marquardt iterations run after AWLS (all factors of a channel at once, in
-        log-parameters; accepted only where they lower the objective; they stop early when
-        the relative decrease stays below ``tol`` for 2 iterations or no damped step lowers
-        the objective; no step makes ρ exceed what a fit file holds). Default per variant
-        (:data:`DEFAULT_POLISH`): G-from-D 60 (G following D through Smith's integrals,
-        differentiated exactly twice), independent-G 100; both damped Newton within
-        ``polish_bound``. AWLS stops where alternating updates no longer help, not at a
-        minimum of Eq. 7; the polish goes on from there (see the module notes). ``0``: the
-        paper's AWLS only.
+        Cap of the damped Newton (Levenberg–Marquardt) iterations after AWLS, all factors
+        of a channel at once, accepted only where they lower the objective (module notes).
+        Default per variant, :data:`DEFAULT_POLISH`; ``0``: the paper's AWLS only.
     polish_bound:
-        Trust region of the polish: every sample of the bounded factors stays within a
-        factor ``polish_bound`` of its AWLS value (``0``: unbounded). Default per variant
-        (:data:`DEFAULT_POLISH_BOUND`) 2: independent-G bounds D, F, G and ρs (its Eq. 7
-        runs, along the near-ambiguity of F(θd) and G(θi)G(θo), to factors that are no
-        longer a Fresnel and a shadowing term), G-from-D bounds F only (its grazing samples
-        otherwise rise against the rest) (:data:`POLISH_BOUNDED`).
+        Trust region of the polish: the bounded factors (:data:`POLISH_BOUNDED`) stay
+        within this factor of their AWLS values; ``0``: unbounded. Default per variant,
+        :data:`DEFAULT_POLISH_BOUND`.
     extrapolate:
         Over-relaxation of all factors after each AWLS sweep, accepted only if it lowers the
         objective (extension, default on; off = the paper's sweeps). Independent-G: from the
         first sweep; G-from-D: from sweep :data:`G_FROM_D_EXTRAPOLATE_AFTER` (50) on.
-    g_smoothing:
-        σ (in G samples) of the Gaussian smoothing of G in independent-G (0 disables).
-    dr_epsilon:
-        Dynamic-range clamp (default 1e-6 for independent-G, 0 for G-from-D and naive).
+    g_smoothing, dr_epsilon:
+        σ (in G samples) of the Gaussian smoothing of G in independent-G (0 disables); the
+        dynamic-range clamp (default 1e-6 for independent-G, 0 for G-from-D and naive).
     init:
         Start of G-from-D / naive: ``"slices"`` (default), ``"ones"`` or ``"random"``.
-    n_random, seed:
-        Number of random independent-G starts and the seed of every random start.
-    name:
-        Name of the fitted model (default: the input's name).
-    callback:
+    n_random, seed, name:
+        Random independent-G starts, the seed of every random start, the model's name.
+    callback, verbose:
         ``callback(iteration, objective)`` after every AWLS / LM iteration (any variant but
-        bivariate); progress listeners (:mod:`brdffit.progress`) receive the same steps.
-    verbose:
-        Print one line per independent-G start.
+        bivariate; progress listeners, :mod:`brdffit.progress`, receive the same steps);
+        print one line per independent-G start.
 
     Returns
     -------
-    NPFMicrofacetBRDF, NPFNaiveBRDF or NPFBivariateBRDF with ``fit_info`` (objective, history,
-    iterations, line searches, timings, starts, convergence) and ``fit_options``.
+    NPFMicrofacetBRDF, NPFNaiveBRDF or NPFBivariateBRDF, with ``fit_info`` and ``fit_options``.
     """
     variant = CLI_VARIANTS.get(variant, variant)       # the model names work too
     if variant not in VARIANTS:
         raise ValueError(f"variant: expected one of {VARIANTS} or the model names "
                          f"{tuple(CLI_VARIANTS)}, found {variant!r}")
+    objective = ObjectiveOptions(p=p, compressive=compressive, restrict_deg=restrict_deg,
+                                 max_theta_io_deg=max_theta_io_deg)
+    pb = _problem(brdf, data, variant, name=name, seed=seed, callback=callback, eps=dr_epsilon,
+                  objective=objective, max_iter=max_iter, tol=tol, polish=polish,
+                  polish_bound=polish_bound)
+    if variant == "bivariate":
+        return _fit_bivariate(pb)
+    if variant == "naive":
+        return _fit_naive(pb, init)
+    if variant == "g-from-d":
+        return _fit_g_from_d(pb, init, extrapolate)
+    return _fit_independent_g(pb, starts, n_random=n_random, g_smoothing=g_smoothing,
+                              start_max_iter=start_max_iter, extrapolate=extrapolate,
+                              verbose=verbose)
+
+
+@dataclasses.dataclass
+class _Problem:
+    """What every variant of :func:`fit_npf` shares: the input on the MERL grid, the
+    prepared objective (Eq. 7-12) and its reference energy, the model's name and source,
+    the resolved stopping rule, dynamic-range clamp and polish, and the ``fit_info`` and
+    ``fit_options`` being filled."""
+
+    variant: str
+    values: np.ndarray
+    valid: np.ndarray
+    brdf: BRDF | None
+    obj: Any
+    name: str
+    source: str | None
+    eps: float
+    max_iter: int
+    tol: float
+    seed: int
+    polish: int
+    polish_bound: float | None
+    callback: Any
+    reference: np.ndarray       # the reference energy per channel (the objective's scale)
+    info: dict
+    options: dict
+    t_start: float
+
+    def finish(self, model, E, extra: dict):
+        """``model`` with its ``fit_info`` (the runs' ``extra``, the convergence report,
+        the objective of Eq. 7 per channel ``E``, the time) and ``fit_options``."""
+        E = np.asarray(E, dtype=np.float64)
+        info = self.info
+        info.update(extra)
+        info.update(_convergence(extra, self.tol, self.max_iter, self.variant))
+        info.update(objective=float(E.sum()), objective_per_channel=E.tolist(),
+                    normalised_objective=float(E.sum() / self.reference.sum()),
+                    time=time.perf_counter() - self.t_start)
+        model.fit_options = self.options
+        return record(model, info, success=info["success"], converged=info["converged"],
+                      message=info["message"], nit=info["nit"], fun=info["objective"],
+                      time=info["time"])
+
+
+def _problem(brdf, data, variant, *, name, seed, callback, objective, eps, max_iter, tol,
+             polish, polish_bound) -> _Problem:
+    """The :class:`_Problem` of a fit: the input read and tabulated, the objective prepared,
+    the per-variant defaults of ``dr_epsilon``, ``max_iter``, ``polish`` and
+    ``polish_bound`` applied (:data:`DEFAULT_MAX_ITER`, :data:`DEFAULT_POLISH`,
+    :data:`DEFAULT_POLISH_BOUND`)."""
     t_start = time.perf_counter()
     values, valid, brdf_obj = _resolve_input(brdf, data)
     source = getattr(brdf_obj, "source", None) or (brdf if isinstance(brdf, str) else None)
     mat_name = name or getattr(brdf_obj, "name", None) or "npf"
-    opts = ObjectiveOptions(p=p, compressive=compressive, max_theta_io_deg=max_theta_io_deg,
-                            restrict_deg=restrict_deg)
-    obj = prepare_objective(values, valid, opts, source=source)
-    eps = dr_epsilon if dr_epsilon is not None else (1e-6 if variant == "independent-g" else 0.0)
+    obj = prepare_objective(values, valid, objective, source=source)
+    eps = eps if eps is not None else (1e-6 if variant == "independent-g" else 0.0)
     max_iter = max_iter or DEFAULT_MAX_ITER.get(variant, 1)
     polish = DEFAULT_POLISH.get(variant, 0) if polish is None else int(polish)
     if polish < 0:
         raise ValueError(f"polish: expected an integer >= 0, found {polish}")
     polish_bound = _polish_bound(polish_bound, variant)
-    options = {"variant": variant, "objective": opts.to_dict(), "max_iter": max_iter, "tol": tol,
-               "dr_epsilon": eps, "seed": seed}
+    options = {"variant": variant, "objective": objective.to_dict(), "max_iter": max_iter,
+               "tol": tol, "dr_epsilon": eps, "seed": seed}
     ref = obj.reference_energy()
-    info: dict = {"variant": variant, "n_samples": obj.n_samples, "rho_bar": obj.rho_bar.tolist(),
-                  "reference_energy": ref.tolist()}
+    info: dict = {"variant": variant, "n_samples": obj.n_samples,
+                  "rho_bar": obj.rho_bar.tolist(), "reference_energy": ref.tolist()}
+    return _Problem(variant, values, valid, brdf_obj, obj, mat_name, source, eps, max_iter,
+                    tol, seed, polish, polish_bound, callback, ref, info, options, t_start)
 
-    def finish(model, E, extra):
-        E = np.asarray(E, dtype=np.float64)
-        info.update(extra)
-        info.update(_convergence(extra, tol, max_iter, variant))
-        info.update(objective=float(E.sum()), objective_per_channel=E.tolist(),
-                    normalised_objective=float(E.sum() / ref.sum()),
-                    time_s=time.perf_counter() - t_start)
-        model.fit_info = info
-        model.fit_options = options
-        return model
 
-    if variant == "bivariate":
-        B, E = _solver.fit_bivariate_table(obj)
-        _check_state([B], "bivariate fit")
-        model = NPFBivariateBRDF(np.moveaxis(B, 0, -1), name=mat_name, source=source)
-        return finish(model, E, {"iterations": 1, "line_searches": 0,
-                                 "history": [float(E.sum())], "stop_reason": "closed form"})
+def _fit_bivariate(pb: _Problem):
+    """Eq. 5: B(θh, θd) and F by one weighted least-squares solve per bin (closed form)."""
+    B, E = _solver.fit_bivariate_table(pb.obj)
+    _check_state([B], "bivariate fit")
+    model = NPFBivariateBRDF(np.moveaxis(B, 0, -1), name=pb.name, source=pb.source)
+    return pb.finish(model, E, {"iterations": 1, "line_searches": 0,
+                                "history": [float(E.sum())], "stop_reason": "closed form"})
 
-    if variant == "naive":
-        options["init"] = init
-        W, WZ = _solver.dense_tensors(obj)
-        st0 = _start_state(init, values, valid, np.random.default_rng(seed))
-        st = NaiveState(D=st0.D, F=st0.F, H=np.ones((3, 180)), rho_d=st0.rho_d, rho_s=st0.rho_s)
-        res = _solver.run_naive(st, W, WZ, ref, eps=eps, tol=tol, max_iter=max_iter,
-                                callback=step_callback(callback, "naive AWLS",
-                                                       max_iter))
-        st = res.state
-        _check_state([st.D, st.F, st.H, st.rho_d, st.rho_s], "naive fit")
-        E = _solver.naive_exact_objective(st, obj)
-        model = NPFNaiveBRDF(st.D.T, st.F.T, st.H.T, st.rho_d, st.rho_s, name=mat_name,
-                             source=source)
-        return finish(model, E, _run_info(res))
 
-    smp = Samples.from_objective(obj)
-    if variant == "g-from-d":
-        options.update(init=init, extrapolate=extrapolate, polish=polish,
-                       polish_bound=polish_bound)
-        st = _start_state(init, values, valid, np.random.default_rng(seed))
-        res = _solver.run_g_from_d(st, smp, eps=eps, tol=tol, max_iter=max_iter,
-                                   extrapolate_after=(G_FROM_D_EXTRAPOLATE_AFTER if extrapolate
-                                                      else None),
-                                   callback=step_callback(callback, "G-from-D AWLS",
-                                                          max_iter))
-        extra = _run_info(res)
-        st, E = res.state, res.E
-        if polish > 0:
-            st, E = _polish(st, E, smp, extra, eps=eps, polish=polish, tol=tol,
-                            g_from_d=True, bound=polish_bound, callback=callback)
-        _check_state(_arrays(st), "G-from-D fit")
-        return finish(_mf_model(st, "g-from-d", mat_name, source), E, extra)
+def _fit_naive(pb: _Problem, init: str):
+    """Eq. 4: D(θh) F(θd) H(φd) by AWLS from the ``init`` start."""
+    pb.options["init"] = init
+    W, WZ = _solver.dense_tensors(pb.obj)
+    st0 = _start_state(init, pb.values, pb.valid, np.random.default_rng(pb.seed))
+    st = NaiveState(D=st0.D, F=st0.F, H=np.ones((3, 180)), rho_d=st0.rho_d, rho_s=st0.rho_s)
+    res = _solver.run_naive(st, W, WZ, pb.reference, eps=pb.eps, tol=pb.tol,
+                            max_iter=pb.max_iter,
+                            callback=step_callback(pb.callback, "naive AWLS", pb.max_iter))
+    st = res.state
+    _check_state([st.D, st.F, st.H, st.rho_d, st.rho_s], "naive fit")
+    E = _solver.naive_exact_objective(st, pb.obj)
+    model = NPFNaiveBRDF(st.D.T, st.F.T, st.H.T, st.rho_d, st.rho_s, name=pb.name,
+                         source=pb.source)
+    return pb.finish(model, E, _run_info(res))
 
-    # independent-G with multiple starts
+
+def _fit_g_from_d(pb: _Problem, init: str, extrapolate: bool):
+    """Eq. 3 with G derived from D (Smith): AWLS from the ``init`` start, then the polish."""
+    pb.options.update(init=init, extrapolate=extrapolate, polish=pb.polish,
+                      polish_bound=pb.polish_bound)
+    smp = Samples.from_objective(pb.obj)
+    st = _start_state(init, pb.values, pb.valid, np.random.default_rng(pb.seed))
+    res = _solver.run_g_from_d(st, smp, eps=pb.eps, tol=pb.tol, max_iter=pb.max_iter,
+                               extrapolate_after=(G_FROM_D_EXTRAPOLATE_AFTER if extrapolate
+                                                  else None),
+                               callback=step_callback(pb.callback, "G-from-D AWLS",
+                                                      pb.max_iter))
+    extra = _run_info(res)
+    st, E = res.state, res.E
+    if pb.polish > 0:
+        st, E = _polish(st, E, smp, extra, eps=pb.eps, polish=pb.polish, tol=pb.tol,
+                        g_from_d=True, bound=pb.polish_bound, callback=pb.callback)
+    _check_state(_arrays(st), "G-from-D fit")
+    return pb.finish(_mf_model(st, "g-from-d", pb.name, pb.source), E, extra)
+
+
+def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max_iter,
+                       extrapolate, verbose):
+    """Eq. 3 with an independent G (§4.3): every start screened for ``start_max_iter`` AWLS
+    iterations (:func:`_multi_start`), the per-channel best continued up to ``max_iter``
+    (:func:`_continue_best`), then the polish."""
     starts = tuple(ALL_STARTS if starts is None else starts)
     bad = [s for s in starts if s not in ALL_STARTS]
     if bad or not starts:
         raise ValueError(f"starts: expected a non-empty subset of {ALL_STARTS}, found {starts}")
-    screen = start_max_iter if start_max_iter is not None else max_iter
-    screen = min(screen, max_iter)
-    options.update(starts=list(starts), n_random=n_random, g_smoothing=g_smoothing,
-                   start_max_iter=screen, polish=polish, polish_bound=polish_bound,
-                   extrapolate=extrapolate)
-    rng = np.random.default_rng(seed)
-    start_states: list[tuple[str, MFState | None, str]] = []
+    screen = start_max_iter if start_max_iter is not None else pb.max_iter
+    screen = min(screen, pb.max_iter)
+    pb.options.update(starts=list(starts), n_random=n_random, g_smoothing=g_smoothing,
+                      start_max_iter=screen, polish=pb.polish, polish_bound=pb.polish_bound,
+                      extrapolate=extrapolate)
+    smp = Samples.from_objective(pb.obj)
+    start_states = _start_states(pb, starts, n_random, smp)
+
+    def run(label, st, max_iter, what):
+        return _solver.run_independent_g(st, smp, eps=pb.eps, smoothing=g_smoothing,
+                                         tol=pb.tol, max_iter=max_iter,
+                                         extrapolate=extrapolate,
+                                         callback=step_callback(pb.callback, what, max_iter))
+
+    runs, (bst, bE, blab) = _multi_start(
+        start_states, lambda label, st: run(label, st, screen, f"start {label}"), verbose,
+        f"{pb.source or pb.name}: independent-G fit")
+    extra = {"starts": runs, "best_start_per_channel": blab}
+    bst, bE = _continue_best(runs, (bst, bE, blab), extra, screen, pb.max_iter,
+                             lambda st, n: run("best", st, n, "best start, continued"))
+    if pb.polish > 0:
+        bst, bE = _polish(bst, bE, smp, extra, eps=pb.eps, polish=pb.polish, tol=pb.tol,
+                          g_from_d=False, bound=pb.polish_bound, callback=pb.callback)
+    _check_state(_arrays(bst), "independent-G fit")
+    return pb.finish(_mf_model(bst, "independent-g", pb.name, pb.source), bE, extra)
+
+
+def _start_states(pb: _Problem, starts, n_random, smp) -> list[tuple[str, MFState | None, str]]:
+    """``(label, state, note)`` of every independent-G start, in the order of ``starts``
+    (``state`` None: the start is unavailable, ``note`` says why); the G-from-D start's
+    run is recorded in ``info["g_from_d_start"]``."""
+    rng = np.random.default_rng(pb.seed)
+    out: list[tuple[str, MFState | None, str]] = []
     for s in starts:
         if s == "random":
             for k in range(n_random):
-                start_states.append((f"random-{k}", _random_start(rng), f"uniform(0.05, 1), seed {seed}"))
+                out.append((f"random-{k}", _random_start(rng),
+                            f"uniform(0.05, 1), seed {pb.seed}"))
         elif s == "ones":
-            start_states.append(("ones", _ones_start(), "all ones"))
+            out.append(("ones", _ones_start(), "all ones"))
         elif s == "slices":
-            start_states.append(("slices", _slice_start(values, valid),
-                                 "D from θd=0, F from θh=0, G=1"))
+            out.append(("slices", _slice_start(pb.values, pb.valid),
+                        "D from θd=0, F from θh=0, G=1"))
         elif s == "sgd":
-            st, note = _sgd_start(brdf_obj, values, valid)
-            start_states.append(("sgd", st, note))
+            st, note = _sgd_start(pb.brdf, pb.values, pb.valid)
+            out.append(("sgd", st, note))
         elif s == "g-from-d":
-            gres = _solver.run_g_from_d(_slice_start(values, valid), smp, eps=0.0, tol=tol,
-                                        max_iter=DEFAULT_MAX_ITER["g-from-d"],
-                                        callback=step_callback(
-                                            None, "G-from-D for the g-from-d start",
-                                            DEFAULT_MAX_ITER["g-from-d"]))
-            g = gres.state
-            info["g_from_d_start"] = {"objective": float(gres.E.sum()),
-                                      "iterations": gres.iterations, "time_s": gres.seconds}
-            start_states.append(("g-from-d", MFState(np.maximum(g.D, eps), np.maximum(g.F, eps),
-                                                     np.maximum(g.G, eps), g.rho_d, g.rho_s),
-                                 "G-from-D fit"))
-    runs = []
-    best = None
+            n = DEFAULT_MAX_ITER["g-from-d"]
+            gres = _solver.run_g_from_d(_slice_start(pb.values, pb.valid), smp, eps=0.0,
+                                        tol=pb.tol, max_iter=n, callback=step_callback(
+                                            None, "G-from-D for the g-from-d start", n))
+            g, eps = gres.state, pb.eps
+            pb.info["g_from_d_start"] = {"objective": float(gres.E.sum()),
+                                         "iterations": gres.iterations, "time_s": gres.seconds}
+            out.append(("g-from-d", MFState(np.maximum(g.D, eps), np.maximum(g.F, eps),
+                                            np.maximum(g.G, eps), g.rho_d, g.rho_s),
+                        "G-from-D fit"))
+    return out
 
-    def run_start(labelled):
-        label, st = labelled
-        return _solver.run_independent_g(st, smp, eps=eps, smoothing=g_smoothing, tol=tol,
-                                         max_iter=screen, extrapolate=extrapolate,
-                                         callback=step_callback(
-                                             callback, f"start {label}", screen))
 
-    # The starts are independent: run them on parallel threads (the AWLS kernels release the
-    # GIL) and merge the results in the fixed order of ``starts``, so the fit is deterministic.
+def _multi_start(start_states, run_start, verbose: bool, what: str):
+    """The multi-start driver: ``run_start(label, state)`` for every available start, on
+    parallel threads (the AWLS kernels release the GIL), merged in the fixed order of the
+    starts so that the fit is deterministic; the best objective is kept **per channel**
+    (the channels are independent problems). Returns ``(runs, (state, E, labels))``: a
+    record per start and the best state, its objective per channel and the start each
+    channel came from. Raises :class:`FitError` when no start gives finite factors."""
     todo = [(label, st) for label, st, _ in start_states if st is not None]
     with ThreadPoolExecutor(max_workers=max(1, min(_n_threads(), len(todo)))) as pool:
-        results = iter(list(pool.map(run_start, todo)))
+        results = iter(list(pool.map(lambda t: run_start(*t), todo)))
+    runs, best = [], None
     for label, st, note in start_states:
         if st is None:
             runs.append({"start": label, "status": note})
@@ -451,37 +525,42 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
             print(f"[npf] start {label}: E={entry['objective']:.6g} it={res.iterations} "
                   f"t={res.seconds:.1f}s ({res.reason})")
         if ok:
-            # keep the best objective per channel (channels are independent problems)
-            if best is None:
-                best = (MFState(*(np.array(a) for a in _arrays(res.state))), res.E.copy(),
-                        [label] * 3)
-            else:
-                bst, bE, blab = best
-                better = res.E < bE
-                for nm in ("D", "F", "G"):
-                    setattr(bst, nm, np.where(better[:, None], getattr(res.state, nm),
-                                              getattr(bst, nm)))
-                for nm in ("rho_d", "rho_s"):
-                    setattr(bst, nm, np.where(better, getattr(res.state, nm), getattr(bst, nm)))
-                bE[:] = np.where(better, res.E, bE)
-                best = (bst, bE, [label if b else l for b, l in zip(better, blab)])
+            best = _keep_better(best, res, label)
     if best is None:
-        raise FitError(f"{source or mat_name}: independent-G fit: no start produced a valid "
-                       f"model ({[r.get('status') for r in runs]})")
+        raise FitError(f"{what}: no start produced a valid model "
+                       f"({[r.get('status') for r in runs]})")
+    return runs, best
+
+
+def _keep_better(best, res, label):
+    """``(state, E, labels)``: per channel, the better of ``best`` and the run ``res``."""
+    if best is None:
+        return (MFState(*(np.array(a) for a in _arrays(res.state))), res.E.copy(), [label] * 3)
+    bst, bE, blab = best
+    better = res.E < bE
+    for nm in ("D", "F", "G"):
+        setattr(bst, nm, np.where(better[:, None], getattr(res.state, nm), getattr(bst, nm)))
+    for nm in ("rho_d", "rho_s"):
+        setattr(bst, nm, np.where(better, getattr(res.state, nm), getattr(bst, nm)))
+    bE[:] = np.where(better, res.E, bE)
+    return bst, bE, [label if b else lab for b, lab in zip(better, blab)]
+
+
+def _continue_best(runs, best, extra: dict, screen: int, max_iter: int, run):
+    """The per-channel best of the screened starts continued for the rest of ``max_iter``
+    (``run(state, iterations)``) unless the starts it came from converged; the result is
+    kept only where it does not raise the objective. Fills ``extra`` (``iterations``,
+    ``line_searches``, ``history``, ``stop_reason``, ``continuation``); returns
+    ``(state, E)``."""
     bst, bE, blab = best
     ok_runs = [r for r in runs if r.get("status") == "ok"]
     history = next((r["history"] for r in ok_runs if r["start"] == blab[1]),
                    ok_runs[0]["history"])
-    extra = {"starts": runs, "best_start_per_channel": blab}
     iters = sum(r["iterations"] for r in ok_runs)
     line_searches = sum(r["line_searches"] for r in ok_runs)
     if screen < max_iter and not all(r.get("stop_reason", "").startswith(("relative", "exact"))
                                      for r in ok_runs if r["start"] in blab):
-        res = _solver.run_independent_g(bst, smp, eps=eps, smoothing=g_smoothing, tol=tol,
-                                        max_iter=max_iter - screen, extrapolate=extrapolate,
-                                        callback=step_callback(
-                                            callback, "best start, continued",
-                                            max_iter - screen))
+        res = run(bst, max_iter - screen)
         if np.all(np.isfinite(res.E)) and np.all(res.E <= bE * (1 + 1e-9)):
             bst, bE = res.state, res.E
         extra["continuation"] = _run_info(res)
@@ -496,11 +575,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
                       best_reasons[0] if best_reasons else "max_iter")
     extra.update(iterations=int(iters), line_searches=int(line_searches), history=history,
                  stop_reason=reason)
-    if polish > 0:
-        bst, bE = _polish(bst, bE, smp, extra, eps=eps, polish=polish, tol=tol,
-                          g_from_d=False, bound=polish_bound, callback=callback)
-    _check_state(_arrays(bst), "independent-G fit")
-    return finish(_mf_model(bst, "independent-g", mat_name, source), bE, extra)
+    return bst, bE
 
 
 def _polish_bound(value, variant) -> float | None:
@@ -614,12 +689,13 @@ def summary(model) -> dict:
     """Key figures of a fitted NPF model (for the CLI): objective, AWLS iterations, the
     Levenberg–Marquardt polish's iterations, whether the fit converged (and why not)."""
     info = model.fit_info or {}
+    seconds = fit_result(model).time if isinstance(model.fit_info, dict) else None
     out = {"model": model.fit_kind, "variant": getattr(model, "variant", None),
            "objective": info.get("objective"),
            "normalised_objective": info.get("normalised_objective"),
            "iterations": info.get("iterations"), "line_searches": info.get("line_searches"),
            "polish_iterations": (info.get("polish") or {}).get("iterations"),
-           "converged": info.get("converged"), "time_s": info.get("time_s")}
+           "converged": info.get("converged"), "time_s": seconds}
     if info.get("converged") is False:
         out["message"] = info.get("message")
     return out
