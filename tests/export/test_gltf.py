@@ -238,17 +238,23 @@ def test_exports_pass_the_khronos_validator(tmp_path):
     }
     seen = set()
     for key, model in models.items():
-        out = tmp_path / f"{key}.gltf"
-        info = export(model, "gltf", out, fidelity=False)
-        seen.update(info["extensions"])
-        report = validate(out)
-        assert report["issues"]["numErrors"] == 0, (key, _errors(report))
-        assert report["issues"]["numWarnings"] == 0, (key, report["issues"]["messages"])
+        for mesh in ("sphere", "none"):
+            out = tmp_path / f"{key}-{mesh}.gltf"
+            info = export(model, "gltf", out, fidelity=False, mesh=mesh)
+            seen.update(info["extensions"])
+            report = validate(out)
+            assert report["issues"]["numErrors"] == 0, (key, mesh, _errors(report))
+            assert report["issues"]["numWarnings"] == 0, (key, mesh,
+                                                          report["issues"]["messages"])
+            info = report["info"]
+            assert info["materialCount"] == 1, (key, mesh, info)
+            # the sphere: a scene with one drawn primitive using the material
+            assert info.get("drawCallCount", 0) == (1 if mesh == "sphere" else 0), (key, info)
     assert seen == {"KHR_materials_anisotropy", "KHR_materials_specular", "KHR_materials_ior",
                     "KHR_materials_clearcoat"}
     # the check can fail: the validator reports an out-of-range factor and an undeclared
     # extension as errors
-    doc = json.loads((tmp_path / "aniso-dielectric.gltf").read_text())
+    doc = json.loads((tmp_path / "aniso-dielectric-sphere.gltf").read_text())
     doc["materials"][0]["pbrMetallicRoughness"]["roughnessFactor"] = 2.0
     doc["extensionsUsed"].remove("KHR_materials_ior")
     (tmp_path / "bad.gltf").write_text(json.dumps(doc))
@@ -365,3 +371,55 @@ def test_coated_fit_exported_as_one_lobe_when_that_is_closer():
 
     assert "coated fit exported as" in p["notes"][-1]
     assert err(p) <= err(coat_only) * 1.05
+
+
+def test_preview_sphere_is_the_scenes_sphere():
+    """Unit radius, normals = positions, u = 0.5 facing +Z (the camera), v = 0 at +Y, every
+    triangle counter-clockwise seen from outside, tangents along ∂p/∂u, and the mesh covers
+    the sphere: the triangles' area approaches 4π."""
+    from brdffit.export.gltf import uv_sphere
+
+    m = uv_sphere(32, 16)
+    p, n, uv, t = m["positions"], m["normals"], m["texcoords"], m["tangents"]
+    np.testing.assert_allclose(np.linalg.norm(p, axis=1), 1.0, atol=1e-6)
+    np.testing.assert_allclose(n, p, atol=0)
+    front = np.argmax(p[:, 2])
+    assert abs(uv[front, 0] - 0.5) < 1e-6 and abs(uv[front, 1] - 0.5) < 1e-6
+    assert np.all(uv[p[:, 1] > 1 - 1e-6, 1] == 0.0)
+    tri = m["indices"].reshape(-1, 3).astype(int)
+    cross = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
+    assert np.all(np.sum(cross * p[tri].mean(1), -1) > 0)
+    area = 0.5 * np.linalg.norm(cross, axis=1).sum()
+    assert 0.97 * 4 * np.pi < area < 4 * np.pi
+    # ∂p/∂u by finite differences along a ring at the equator
+    ring = np.flatnonzero(np.abs(p[:, 1]) < 1e-6)
+    k = ring[np.argsort(uv[ring, 0])]
+    dp = p[k[1:]] - p[k[:-1]]
+    dp /= np.linalg.norm(dp, axis=1, keepdims=True)
+    mid = 0.5 * (t[k[1:], :3] + t[k[:-1], :3])
+    assert np.all(np.sum(dp * mid, -1) > 0.99)
+    # glTF's bitangent w (n × t) points along +v (down the sphere)
+    b = t[:, 3:] * np.cross(n, t[:, :3])
+    assert np.all(b[ring, 1] < -0.99)
+    with pytest.raises(ValueError, match="segments"):
+        uv_sphere(2, 16)
+
+
+def test_mesh_option_is_checked_and_none_leaves_the_material_alone(tmp_path):
+    from brdffit.errors import ExportError
+
+    model = brdffit.synthetic("plastic-beckmann")
+    with pytest.raises(ExportError, match="mesh"):
+        export(model, "gltf", tmp_path / "a.gltf", fidelity=False, mesh="cube")
+    export(model, "gltf", tmp_path / "b.gltf", fidelity=False, mesh="none")
+    doc = json.loads((tmp_path / "b.gltf").read_text())
+    assert "meshes" not in doc and "nodes" not in doc and len(doc["materials"]) == 1
+    # the placeholder image is a PNG that decodes to one white pixel
+    import base64
+    import zlib
+
+    png = base64.b64decode(doc["images"][0]["uri"].split(",", 1)[1])
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    idat = png.index(b"IDAT")
+    size = int.from_bytes(png[idat - 4:idat], "big")
+    assert zlib.decompress(png[idat + 4:idat + 4 + size]) == b"\x00\xff\xff\xff\xff"

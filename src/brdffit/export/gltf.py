@@ -91,7 +91,7 @@ from ._common import (LUMA, base_for_albedo, check_output_path, closer_to,
 
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material",
            "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0",
-           "METAL_MIN_F90"]
+           "METAL_MIN_F90", "MESHES", "uv_sphere"]
 
 MATERIAL_METAL_F0 = 0.08
 #: with the KHR extensions (``specular=True``), a fit is exported as a metal only when the
@@ -578,15 +578,144 @@ def gltf_material(model, name: str | None = None, fidelity: bool = True,
     return mat
 
 
+#: the preview meshes a glTF export can carry (``mesh`` option of :func:`write_gltf`)
+MESHES = ("sphere", "none")
+#: the preview sphere's divisions: around the vertical axis, and from pole to pole
+SPHERE_SEGMENTS, SPHERE_RINGS = 64, 32
+
+
+def uv_sphere(segments: int = SPHERE_SEGMENTS, rings: int = SPHERE_RINGS) -> dict:
+    """The preview mesh: a unit UV sphere laid out like the scenes' sphere
+    (:mod:`brdffit.evaluation.render.scenes`): poles on ±Y (glTF's up), ``u`` around the
+    vertical axis with ``u = 0.5`` facing +Z (the scenes' camera), ``v`` from the top (0) to
+    the bottom (1), the seam at −Z. With ``θ = π v``, ``φ = 2π u``: position = normal =
+    ``(−sin θ sin φ, cos θ, −sin θ cos φ)``; tangent = the unit ``∂p/∂u`` ``(−cos φ, 0, sin φ)``
+    (defined at the poles too) with ``w = −1``, so that glTF's bitangent ``w (n × t)`` points
+    along ``+v``. Triangles counter-clockwise seen from outside, one per quad at the poles
+    (no degenerate triangles). Returns float32 ``positions``, ``normals``, ``tangents``
+    (x, y, z, w), ``texcoords`` and uint16 ``indices``."""
+    segments, rings = int(segments), int(rings)
+    if segments < 3 or rings < 2 or (segments + 1) * (rings + 1) > 65535:
+        raise ValueError(f"uv_sphere: expected segments >= 3, rings >= 2 and at most 65535 "
+                         f"vertices, got {segments} x {rings}")
+    u = np.arange(segments + 1) / segments
+    v = np.arange(rings + 1) / rings
+    V, U = np.meshgrid(v, u, indexing="ij")
+    th, ph = np.pi * V, 2.0 * np.pi * U
+    pos = np.stack([-np.sin(th) * np.sin(ph), np.cos(th), -np.sin(th) * np.cos(ph)], -1)
+    tan = np.stack([-np.cos(ph), np.zeros_like(ph), np.sin(ph), -np.ones_like(ph)], -1)
+    uv = np.stack([U, V], -1)
+    i = np.arange(rings)[:, None]
+    j = np.arange(segments)[None, :]
+    a, b = i * (segments + 1) + j, i * (segments + 1) + j + 1          # upper edge of a quad
+    c, d = a + segments + 1, b + segments + 1                          # lower edge
+    first = np.stack([a, c, d], -1)[:-1]           # (c, d) meet at the bottom pole: none there
+    second = np.stack([a, d, b], -1)[1:]           # (a, b) meet at the top pole: none there
+    tri = np.concatenate([first.reshape(-1, 3), second.reshape(-1, 3)])
+    p = pos.reshape(-1, 3)
+    normal = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
+    if np.any(np.sum(normal * p[tri[:, 0]], -1) <= 0):   # an inward or degenerate triangle
+        raise AssertionError("uv_sphere: triangle winding is not counter-clockwise outside")
+    return {"positions": p.astype(np.float32), "normals": p.astype(np.float32),
+            "tangents": tan.reshape(-1, 4).astype(np.float32),
+            "texcoords": uv.reshape(-1, 2).astype(np.float32),
+            "indices": tri.reshape(-1).astype(np.uint16)}
+
+
+def _mesh_document(tangents: bool) -> dict:
+    """The glTF objects of the preview sphere (:func:`uv_sphere`): one buffer (a base64
+    data URI, so that the export stays one file), its views and accessors, one mesh whose
+    primitive uses material 0, one node and one scene. ``tangents``: write the TANGENT
+    attribute (needed by ``KHR_materials_anisotropy``; else viewers derive it)."""
+    import base64
+
+    m = uv_sphere()
+    attrs = [("POSITION", "positions", "VEC3"), ("NORMAL", "normals", "VEC3"),
+             ("TEXCOORD_0", "texcoords", "VEC2")]
+    if tangents:
+        attrs.append(("TANGENT", "tangents", "VEC4"))
+    blob, views, accessors, attributes = bytearray(), [], [], {}
+    for name, key, kind in attrs:
+        data = np.ascontiguousarray(m[key], "<f4")
+        views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": data.nbytes,
+                      "target": 34962})
+        acc = {"bufferView": len(views) - 1, "componentType": 5126, "count": len(data),
+               "type": kind}
+        if name == "POSITION":
+            acc["min"] = [float(x) for x in data.min(0)]
+            acc["max"] = [float(x) for x in data.max(0)]
+        attributes[name] = len(accessors)
+        accessors.append(acc)
+        blob += data.tobytes()
+    idx = np.ascontiguousarray(m["indices"], "<u2")
+    views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": idx.nbytes,
+                  "target": 34963})
+    accessors.append({"bufferView": len(views) - 1, "componentType": 5123,
+                      "count": len(idx), "type": "SCALAR"})
+    blob += idx.tobytes()
+    blob += b"\0" * (-len(blob) % 4)
+    uri = "data:application/octet-stream;base64," + base64.b64encode(bytes(blob)).decode()
+    return {"scene": 0, "scenes": [{"name": "preview", "nodes": [0]}],
+            "nodes": [{"name": "preview sphere", "mesh": 0}],
+            "meshes": [{"name": "preview sphere",
+                        "primitives": [{"attributes": attributes,
+                                        "indices": len(accessors) - 1, "material": 0}]}],
+            "accessors": accessors, "bufferViews": views,
+            "buffers": [{"byteLength": len(blob), "uri": uri}]}
+
+
+def _one_pixel_png() -> bytes:
+    """A 1×1 opaque white RGBA PNG (PNG specification: signature, IHDR, one zlib IDAT, IEND;
+    each chunk's CRC-32 over its type and data)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+
+    header = struct.pack(">IIBBBBB", 1, 1, 8, 6, 0, 0, 0)   # 1×1, 8 bits, RGBA, no interlace
+    pixels = zlib.compress(b"\x00\xff\xff\xff\xff")       # filter byte 0, then R, G, B, A
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", pixels)
+            + chunk(b"IEND", b""))
+
+
+def _placeholder_image() -> dict:
+    """An ``images`` entry no material uses: Blender's glTF importer (5.0), asked to import
+    unused materials (``import_unused_materials=True``), takes the length of the file's
+    ``images`` array, which must then exist; glTF forbids an empty array, so it holds one
+    1×1 white PNG (a data URI, ~100 bytes). The validator reports it as unused (an
+    information, not an error)."""
+    import base64
+
+    return {"name": "placeholder (unused)",
+            "uri": "data:image/png;base64," + base64.b64encode(_one_pixel_png()).decode()}
+
+
 def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
-               optimize: bool = False, specular: bool = True, **_ignored) -> dict:
-    """Write a minimal valid glTF 2.0 JSON (``asset`` + one ``material``), atomically;
-    ``optimize`` refines the rule-based parameters (:func:`optimize_parameters`),
-    ``specular=False`` leaves the dielectric extensions out (core glTF only)."""
+               optimize: bool = False, specular: bool = True, mesh: str = "sphere",
+               **_ignored) -> dict:
+    """Write a glTF 2.0 JSON file atomically: ``asset``, one ``material`` and, with
+    ``mesh="sphere"`` (default), the preview sphere that uses it (:func:`uv_sphere`, in
+    the file as a data URI), so that a viewer or an importer shows the material; with
+    ``mesh="none"`` the material alone (an importer then creates nothing); an unused
+    placeholder image (:func:`_placeholder_image`) keeps Blender's importer from failing
+    when it imports unused materials. ``optimize``
+    refines the rule-based parameters (:func:`optimize_parameters`), ``specular=False``
+    leaves the dielectric extensions out (core glTF only)."""
+    if mesh not in MESHES:
+        from ..errors import ExportError
+
+        raise ExportError(f"glTF mesh: expected one of {', '.join(MESHES)}, found {mesh!r}")
     check_output_path(path)
     mat = gltf_material(model, fidelity=fidelity, anisotropy=anisotropy, optimize=optimize,
                         specular=specular)
-    doc = {"asset": {"version": "2.0", "generator": "brdffit export"}, "materials": [mat]}
+    doc = {"asset": {"version": "2.0", "generator": "brdffit export"}}
+    if mesh == "sphere":
+        doc.update(_mesh_document(tangents="KHR_materials_anisotropy" in mat.get("extensions",
+                                                                                  {})))
+    doc["materials"] = [mat]
+    doc["images"] = [_placeholder_image()]
     if "extensions" in mat:
         doc["extensionsUsed"] = list(mat["extensions"])
     path = check_output_path(path)
@@ -601,6 +730,6 @@ def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
     with writing(path), atomic_write(path, "wb") as fh:
         fh.write(data)
     return {"files": [str(path)], "target": "gltf", "material": mat["pbrMetallicRoughness"],
-            "extensions": sorted(mat.get("extensions", {})),
+            "extensions": sorted(mat.get("extensions", {})), "mesh": mesh,
             "notes": mat["extras"]["brdffit"]["notes"],
             "fidelity": mat["extras"]["brdffit"].get("fidelity")}
