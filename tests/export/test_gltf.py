@@ -264,20 +264,51 @@ def test_exports_pass_the_khronos_validator(tmp_path):
 
 def test_metal_like_fit_with_low_grazing_reflectance_stays_dielectric():
     """F0 looks metallic (0.2) but F90 is 0.3 (ks·Schlick, as ggx-diffuse finds on metallic
-    paints): glTF's metal would force F90 = 1; with the extensions it is a dielectric whose
-    specularFactor carries F90 and whose base keeps ρd (compensated for the layer) — and it
-    is closer to the fit."""
+    paints): glTF's metal would force F90 = 1; with the extensions it is a dielectric that
+    keeps F0 and whose base keeps ρd (compensated for the layer) — and it is closer to the
+    fit. Its flat Fresnel (F0/F90 = 2/3) would need ior 9.9: with the bound ior = 3 the
+    specularFactor (f90) rises to F0 / 0.25 = 0.8 (noted); with max_ior = 10 it is 0.3."""
     fit = MicrofacetBRDF(GGX(0.1), SchlickFresnel(2.0 / 3.0), diffuse=[0.05, 0.04, 0.03],
                          specular=[0.3, 0.3, 0.3])
-    p = gltf_parameters(fit)
-    assert p["metallicFactor"] == 0.0
-    assert p["specular"]["specularFactor"] == pytest.approx(0.3, rel=1e-9)
-    np.testing.assert_allclose(p["baseColorFactor"][:3],
-                               np.array([0.05, 0.04, 0.03]) / _kept_by_schlick(0.2, 0.3), rtol=2e-3)
     core = gltf_parameters(fit, specular=False)            # core glTF only: the metal rule
     assert core["metallicFactor"] == 1.0
-    mine = gltf_fidelity(fit, metrics=("normalized_l2",))["normalized_l2"]
-    assert mine < 0.5 * gltf_fidelity(fit, metrics=("normalized_l2",), specular=False)["normalized_l2"]
+    core_err = gltf_fidelity(fit, metrics=("normalized_l2",), specular=False)["normalized_l2"]
+    for max_ior, f90 in ((3.0, 0.8), (10.0, 0.3)):
+        p = gltf_parameters(fit, max_ior=max_ior)
+        assert p["metallicFactor"] == 0.0
+        assert p["specular"]["ior"] <= max_ior
+        assert p["specular"]["specularFactor"] == pytest.approx(f90, rel=1e-9)
+        np.testing.assert_allclose(_gltf_brdf(p).dielectric_f0_f90()[0], 0.2, rtol=1e-9)
+        assert any("raised from 0.3 to 0.8" in n for n in p["notes"]) == (max_ior == 3.0)
+        np.testing.assert_allclose(p["baseColorFactor"][:3],
+                                   np.array([0.05, 0.04, 0.03]) / _kept_by_schlick(0.2, f90),
+                                   rtol=2e-3)
+        mine = gltf_fidelity(fit, metrics=("normalized_l2",), max_ior=max_ior)["normalized_l2"]
+        assert mine < (0.7 if max_ior == 3.0 else 0.1) * core_err, (max_ior, mine, core_err)
+
+
+@pytest.mark.parametrize("F0, F90", [([0.2, 0.2, 0.2], [0.3, 0.3, 0.3]),
+                                     ([0.5, 0.4, 0.3], [0.55, 0.5, 0.45]),
+                                     ([0.03, 0.04, 0.05], [1.0, 1.0, 1.0]),
+                                     ([0.9, 0.9, 0.9], [0.9, 0.9, 0.9])])
+def test_exported_ior_and_factors_stay_in_range(F0, F90):
+    """ior in [1, 3], specular factors in [0, 1]; F0 kept when it is at most 0.25 (F0 of
+    ior 3), else scaled down with its hue kept and a note saying so."""
+    fit = MicrofacetBRDF(GGX(0.2), SchlickFresnel(np.divide(F0, F90)), diffuse=[0.3, 0.2, 0.1],
+                         specular=list(F90))
+    p = gltf_parameters(fit)
+    if p["metallicFactor"] == 1.0:
+        return
+    sp = p["specular"]
+    assert 1.0 <= sp["ior"] <= 3.0
+    assert 0.0 <= sp["specularFactor"] <= 1.0
+    assert all(0.0 <= c <= 1.0 for c in sp["specularColorFactor"])
+    f0 = _gltf_brdf(p).dielectric_f0_f90()[0]
+    if max(F0) <= 0.25:
+        np.testing.assert_allclose(f0, F0, rtol=1e-9)
+    else:
+        np.testing.assert_allclose(f0, np.multiply(F0, 0.25 / max(F0)), rtol=1e-9)
+        assert any("scaled down" in n for n in p["notes"])
 
 
 def _albedo_on_grid(brdf, k=16):

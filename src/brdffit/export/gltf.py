@@ -52,8 +52,14 @@ D(0) = 1/(πα²), heavier GGX tails; the loss is measured):
   ``specularFactor = min(1, max(max F90, max F0))`` (f90 of the dielectric: exact when the
   fit's F90 is grey), ``r = F0 / specularFactor``, ``ior = (1 + √max r)/(1 − √max r)``
   (``KHR_materials_ior``; F0 of the ior = the largest channel of r) and
-  ``specularColorFactor = r / max r`` ≤ 1, so ``f0_d = F0`` exactly. A dielectric fit of
-  index η and grey ks gives back ``ior = η`` and ``specularFactor = ks``. The extensions are
+  ``specularColorFactor = r / max r`` ≤ 1, so ``f0_d = F0`` exactly. The index stays
+  within [1, ``IOR_MAX`` = 3] (F0 ≤ 0.25): a flatter Fresnel curve (F0 close to F90, as
+  ggx-diffuse fits of metallic paints find) would need ior 10-40 or more, which only the
+  specification's f90 = specularFactor turns into a flat curve (Blender keeps f90 = 1, see
+  :mod:`brdffit.evaluation.engines.blender`); there ``ior = 3`` and ``specularFactor`` is
+  raised to ``max F0 / 0.25``, F0 kept and f90 raised (noted; when F0 > 0.25 it is scaled
+  down to 0.25, hue kept, noted). A dielectric fit of index η ≤ 3 and grey ks gives back
+  ``ior = η`` and ``specularFactor = ks``. The extensions are
   written only when they differ from the defaults (ior 1.5, factors 1). With
   ``specular=False`` the core's fixed f0 = 0.04, f90 = 1 are used (lossy, reported);
 * what stays lossy (measured): glTF weights the diffuse term by ``(1 − F_d)`` (the fit adds
@@ -91,9 +97,13 @@ from ._common import (LUMA, base_for_albedo, check_output_path, closer_to,
 
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material",
            "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0",
-           "METAL_MIN_F90", "MESHES", "uv_sphere"]
+           "METAL_MIN_F90", "IOR_MAX", "MESHES", "uv_sphere"]
 
 MATERIAL_METAL_F0 = 0.08
+#: the largest glTF ``ior`` exported (F0 = 0.25): common dielectrics lie in 1.3-2.5; a
+#: larger index only imitates a flat Fresnel curve, which engines do not all render (Blender
+#: keeps f90 = 1) and artists do not expect
+IOR_MAX = 3.0
 #: with the KHR extensions (``specular=True``), a fit is exported as a metal only when the
 #: luminance of its F90 is at least this (glTF's metal reaches 1 at grazing)
 METAL_MIN_F90 = 0.8
@@ -280,9 +290,18 @@ def _anisotropy(d):
     return ab, float(np.sqrt((at - ab) / (1.0 - ab))), rot
 
 
-def _specular_extension(F0, F90) -> dict:
+def _specular_extension(F0, F90, max_ior: float = IOR_MAX) -> dict:
     """KHR_materials_specular / KHR_materials_ior parameters whose dielectric ``f0_d`` is
-    ``F0`` exactly and ``f90_d`` the largest channel of F90 (see the module docstring)."""
+    ``F0`` and ``f90_d`` the largest channel of F90, within what engines and artists expect
+    (see the module docstring): ``ior`` in [1, ``max_ior``], factors in [0, 1].
+
+    ``specularFactor`` s = min(1, max(max F90, max F0)) and ``r = F0 / s``; when max r ≤
+    F0(IOR_MAX) = ((IOR_MAX − 1)/(IOR_MAX + 1))², ``ior`` is the index of F0 = max r and
+    ``specularColorFactor = r / max r``: F0 and F90 exact. A flatter Fresnel (max r above
+    F0(max_ior)) would need a larger index; then ``ior = max_ior`` and s is raised to
+    ``max F0 / F0(max_ior)`` (≤ 1), which keeps F0 exactly and raises f90 to s; when even
+    s = 1 is not enough (max F0 > F0(max_ior)), F0 is scaled down to F0(max_ior) in its
+    largest channel (hue kept). The entry ``"note"`` says which, with the values lost."""
     F0 = np.clip(np.asarray(F0, float), 0.0, 1.0)
     F90 = np.clip(np.asarray(F90, float), 0.0, 1.0)
     sf = float(min(1.0, max(float(F90.max()), float(F0.max()))))
@@ -292,12 +311,32 @@ def _specular_extension(F0, F90) -> dict:
     rmax = float(r.max())
     if rmax <= 0.0:
         return {"specularFactor": sf, "specularColorFactor": [0.0, 0.0, 0.0], "ior": 1.5}
+    max_ior = float(max_ior)
+    if not (np.isfinite(max_ior) and max_ior > 1.0):
+        raise ValueError(f"max_ior: expected a finite index > 1, got {max_ior}")
+    f0_max = ((max_ior - 1.0) / (max_ior + 1.0)) ** 2
+    note = None
+    if rmax > f0_max:
+        wanted = (1.0 + np.sqrt(min(rmax, 1.0 - 1e-9))) / (1.0 - np.sqrt(min(rmax, 1.0 - 1e-9)))
+        raised = float(min(1.0, F0.max() / f0_max))
+        note = (f"ior {max_ior:g} (the largest exported, max_ior) instead of {wanted:.4g}: "
+                f"specularFactor (glTF's f90) raised from {sf:.4g} to {raised:.4g}")
+        sf = raised
+        if F0.max() > f0_max:
+            note += (f", and F0 {np.round(F0, 4).tolist()} scaled down to "
+                     f"{np.round(F0 * f0_max / F0.max(), 4).tolist()} (F0 of ior {max_ior:g})")
+            F0 = F0 * f0_max / F0.max()
+        r = F0 / sf
+        rmax = float(r.max())
     q = float(np.sqrt(min(rmax, 1.0 - 1e-9)))
-    ior = (1.0 + q) / (1.0 - q)
+    ior = min((1.0 + q) / (1.0 - q), max_ior)
     f0_ior = ((ior - 1.0) / (ior + 1.0)) ** 2
-    color = np.clip(r / f0_ior, 0.0, None)
-    return {"specularFactor": sf, "specularColorFactor": [float(c) for c in color],
-            "ior": float(ior)}
+    color = np.clip(r / f0_ior, 0.0, 1.0)
+    out = {"specularFactor": sf, "specularColorFactor": [float(c) for c in color],
+           "ior": float(ior)}
+    if note:
+        out["note"] = note
+    return out
 
 
 def _is_default_specular(ext) -> bool:
@@ -326,7 +365,8 @@ def reflectances(m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return F0, F90, rd
 
 
-def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> dict:
+def gltf_parameters(model, anisotropy: bool = True, specular: bool = True,
+                    max_ior: float = IOR_MAX) -> dict:
     """``{"baseColorFactor", "metallicFactor", "roughnessFactor", "alpha", "notes",
     "anisotropy", "specular", ...}`` of a fit by the rules of the module docstring; with
     ``anisotropy`` an anisotropic or correlated GGX uses ``KHR_materials_anisotropy``
@@ -342,9 +382,11 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
     if parts is not None:
         # glTF's clearcoat (Fresnel of N·V, layered) departs from the fit's added coat on
         # rough, heavy coats: export whichever is closer to the fit, the coat or one lobe
-        cands = {"clearcoat": _with_clearcoat(gltf_parameters(parts[0], anisotropy, specular),
+        cands = {"clearcoat": _with_clearcoat(gltf_parameters(parts[0], anisotropy, specular,
+                                                              max_ior),
                                               parts[1]),
-                 "one lobe": gltf_parameters(single_lobe_of(model), anisotropy, specular)}
+                 "one lobe": gltf_parameters(single_lobe_of(model), anisotropy, specular,
+                                             max_ior)}
         label, p, err = closer_to(model, cands, _brdf_of)
         other = next(k for k in err if k != label)
         p = dict(p, notes=p["notes"] + [f"coated fit exported as {label} (cos_rel_error vs the "
@@ -380,7 +422,9 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
     else:
         base = np.clip(rd, 0.0, 1.0)
         if specular:
-            spec = _specular_extension(F0, F90)
+            spec = _specular_extension(F0, F90, max_ior)
+            if "note" in spec:
+                notes.append(spec.pop("note"))
             notes.append(f"dielectric: F0 {np.round(F0c, 4).tolist()} via KHR_materials_specular"
                          f" + KHR_materials_ior (ior={spec['ior']:.4g}), F90 = specularFactor "
                          f"{spec['specularFactor']:.4g} (fit: {np.round(F90, 4).tolist()}); "
@@ -519,9 +563,9 @@ def optimize_parameters(model, p: dict, n: int = 8192, seed: int = 0) -> dict:
 
 
 def gltf_equivalent(model, anisotropy: bool = True, optimize: bool = False,
-                    specular: bool = True) -> GLTFBRDF:
+                    specular: bool = True, max_ior: float = IOR_MAX) -> GLTFBRDF:
     """The :class:`GLTFBRDF` a glTF viewer renders for the exported material."""
-    p = gltf_parameters(model, anisotropy, specular)
+    p = gltf_parameters(model, anisotropy, specular, max_ior)
     if optimize:
         p = optimize_parameters(model, p)
     return _brdf_of(p, name=f"{getattr(model, 'name', 'model')}-gltf")
@@ -530,25 +574,27 @@ def gltf_equivalent(model, anisotropy: bool = True, optimize: bool = False,
 def gltf_fidelity(model, n_samples: int = 1 << 15,
                   metrics=("cos_rel_error", "normalized_l2"), anisotropy: bool = True,
                   optimize: bool = False, specular: bool = True,
-                  parameters: dict | None = None) -> dict:
+                  parameters: dict | None = None, max_ior: float = IOR_MAX) -> dict:
     """BRDF-space loss of fidelity of the glTF material vs the fit
     (:func:`brdffit.evaluation.metrics.brdf_metrics`, the fit as reference); ``parameters``:
     the material's, when already mapped (else they are, with the other options)."""
     from ..evaluation.metrics import brdf_metrics
 
-    exported = (gltf_equivalent(model, anisotropy, optimize, specular) if parameters is None
+    exported = (gltf_equivalent(model, anisotropy, optimize, specular, max_ior)
+                if parameters is None
                 else _brdf_of(parameters))
     r = brdf_metrics(model, exported, n_samples, metrics=metrics)
     return {k: r.get(k) for k in metrics}
 
 
 def gltf_material(model, name: str | None = None, fidelity: bool = True,
-                  anisotropy: bool = True, optimize: bool = False, specular: bool = True) -> dict:
+                  anisotropy: bool = True, optimize: bool = False, specular: bool = True,
+                  max_ior: float = IOR_MAX) -> dict:
     """The glTF 2.0 ``material`` object (``pbrMetallicRoughness`` + ``extras.brdffit`` with
     α, conventions, approximations and the measured BRDF-space fidelity; the
     ``KHR_materials_anisotropy`` extension for anisotropic fits when ``anisotropy``,
     ``KHR_materials_specular`` and ``KHR_materials_ior`` for dielectrics when ``specular``)."""
-    p = gltf_parameters(model, anisotropy, specular)
+    p = gltf_parameters(model, anisotropy, specular, max_ior)
     if optimize:
         p = optimize_parameters(model, p)
     extras = {"alpha": p["alpha"], "F0_fit": p["F0"], "F90_fit": p["F90"],
@@ -694,7 +740,7 @@ def _placeholder_image() -> dict:
 
 def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
                optimize: bool = False, specular: bool = True, mesh: str = "sphere",
-               **_ignored) -> dict:
+               max_ior: float = IOR_MAX, **_ignored) -> dict:
     """Write a glTF 2.0 JSON file atomically: ``asset``, one ``material`` and, with
     ``mesh="sphere"`` (default), the preview sphere that uses it (:func:`uv_sphere`, in
     the file as a data URI), so that a viewer or an importer shows the material; with
@@ -702,14 +748,16 @@ def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
     placeholder image (:func:`_placeholder_image`) keeps Blender's importer from failing
     when it imports unused materials. ``optimize``
     refines the rule-based parameters (:func:`optimize_parameters`), ``specular=False``
-    leaves the dielectric extensions out (core glTF only)."""
+    leaves the dielectric extensions out (core glTF only), ``max_ior`` bounds the exported
+    ``ior`` (:func:`_specular_extension`; a larger bound keeps a flat Fresnel's f90 for
+    engines that follow the specification, at the cost of indices artists do not expect)."""
     if mesh not in MESHES:
         from ..errors import ExportError
 
         raise ExportError(f"glTF mesh: expected one of {', '.join(MESHES)}, found {mesh!r}")
     check_output_path(path)
     mat = gltf_material(model, fidelity=fidelity, anisotropy=anisotropy, optimize=optimize,
-                        specular=specular)
+                        specular=specular, max_ior=max_ior)
     doc = {"asset": {"version": "2.0", "generator": "brdffit export"}}
     if mesh == "sphere":
         doc.update(_mesh_document(tangents="KHR_materials_anisotropy" in mat.get("extensions",
