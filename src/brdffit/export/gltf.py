@@ -57,9 +57,8 @@ D(0) = 1/(πα²), heavier GGX tails; the loss is measured):
   ggx-diffuse fits of metallic paints find) would need ior 10-40 or more, which only the
   specification's f90 = specularFactor turns into a flat curve (Blender keeps f90 = 1, see
   :mod:`brdffit.evaluation.engines.blender`); there ``ior = 3`` and ``specularFactor`` is
-  raised to ``max F0 / 0.25``, F0 kept and f90 raised (noted); a fit with F0 > 0.25 in a
-  channel, which no dielectric within the bound has, is exported as a **metal** (noted):
-  F0 kept in the base colour, f90 = 1 as Blender draws any dielectric. A dielectric fit of index η ≤ 3 and grey ks gives back
+  raised to ``max F0 / 0.25``, F0 kept and f90 raised (noted; when F0 > 0.25 it is scaled
+  down to 0.25, hue kept, noted). A dielectric fit of index η ≤ 3 and grey ks gives back
   ``ior = η`` and ``specularFactor = ks``. The extensions are
   written only when they differ from the defaults (ior 1.5, factors 1). With
   ``specular=False`` the core's fixed f0 = 0.04, f90 = 1 are used (lossy, reported);
@@ -300,9 +299,9 @@ def _specular_extension(F0, F90, max_ior: float = IOR_MAX) -> dict:
     F0(IOR_MAX) = ((IOR_MAX − 1)/(IOR_MAX + 1))², ``ior`` is the index of F0 = max r and
     ``specularColorFactor = r / max r``: F0 and F90 exact. A flatter Fresnel (max r above
     F0(max_ior)) would need a larger index; then ``ior = max_ior`` and s is raised to
-    ``max F0 / F0(max_ior)`` (≤ 1), which keeps F0 exactly and raises f90 to s (the entry
-    ``"note"`` says so, with the value lost). ``ValueError`` when max F0 > F0(max_ior): no
-    dielectric within the bound has it (:func:`gltf_parameters` exports a metal)."""
+    ``max F0 / F0(max_ior)`` (≤ 1), which keeps F0 exactly and raises f90 to s; when even
+    s = 1 is not enough (max F0 > F0(max_ior)), F0 is scaled down to F0(max_ior) in its
+    largest channel (hue kept). The entry ``"note"`` says which, with the values lost."""
     F0 = np.clip(np.asarray(F0, float), 0.0, 1.0)
     F90 = np.clip(np.asarray(F90, float), 0.0, 1.0)
     sf = float(min(1.0, max(float(F90.max()), float(F0.max()))))
@@ -316,9 +315,6 @@ def _specular_extension(F0, F90, max_ior: float = IOR_MAX) -> dict:
     if not (np.isfinite(max_ior) and max_ior > 1.0):
         raise ValueError(f"max_ior: expected a finite index > 1, got {max_ior}")
     f0_max = ((max_ior - 1.0) / (max_ior + 1.0)) ** 2
-    if F0.max() > f0_max * (1.0 + 1e-12):
-        raise ValueError(f"F0 {F0.tolist()} above F0 {f0_max:.4g} of ior {max_ior:g}: not a "
-                         "dielectric within the bound (gltf_parameters exports it as a metal)")
     note = None
     if rmax > f0_max:
         wanted = (1.0 + np.sqrt(min(rmax, 1.0 - 1e-9))) / (1.0 - np.sqrt(min(rmax, 1.0 - 1e-9)))
@@ -326,6 +322,10 @@ def _specular_extension(F0, F90, max_ior: float = IOR_MAX) -> dict:
         note = (f"ior {max_ior:g} (the largest exported, max_ior) instead of {wanted:.4g}: "
                 f"specularFactor (glTF's f90) raised from {sf:.4g} to {raised:.4g}")
         sf = raised
+        if F0.max() > f0_max:
+            note += (f", and F0 {np.round(F0, 4).tolist()} scaled down to "
+                     f"{np.round(F0 * f0_max / F0.max(), 4).tolist()} (F0 of ior {max_ior:g})")
+            F0 = F0 * f0_max / F0.max()
         r = F0 / sf
         rmax = float(r.max())
     q = float(np.sqrt(min(rmax, 1.0 - 1e-9)))
@@ -412,12 +412,6 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True,
     # a metal's F90 is 1 in glTF: with the extensions, a fit whose grazing reflectance is far
     # below 1 keeps it (and its diffuse term) as a dielectric with specularFactor = F90
     metal = is_metal(m, F0c, rd, np.clip(F90, 0.0, None) if specular else None)
-    f0_bound = ((max_ior - 1.0) / (max_ior + 1.0)) ** 2
-    if specular and not metal and float(F0c.max()) > f0_bound:
-        metal = True
-        notes.append(f"F0 {np.round(F0c, 4).tolist()} above {f0_bound:.4g}, the F0 of the "
-                     f"largest exported ior {max_ior:g}: exported as a metal (glTF's f90 = 1; "
-                     f"fit's F90: {np.round(F90, 4).tolist()})")
     spec = None
     if metal:
         base = F0c
