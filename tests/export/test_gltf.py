@@ -292,23 +292,20 @@ def test_metal_like_fit_with_low_grazing_reflectance_stays_dielectric():
                                      ([0.03, 0.04, 0.05], [1.0, 1.0, 1.0]),
                                      ([0.9, 0.9, 0.9], [0.9, 0.9, 0.9])])
 def test_exported_ior_and_factors_stay_in_range(F0, F90):
-    """ior in [1, 3], specular factors in [0, 1]; F0 kept when it is at most 0.25 (F0 of
-    ior 3), else scaled down with its hue kept and a note saying so."""
+    """ior in [1, 3] when F0 ≤ 0.25 (F0 of ior 3), above only with a note; specular
+    factors in [0, 1]; F0 kept."""
     fit = MicrofacetBRDF(GGX(0.2), SchlickFresnel(np.divide(F0, F90)), diffuse=[0.3, 0.2, 0.1],
                          specular=list(F90))
     p = gltf_parameters(fit)
     if p["metallicFactor"] == 1.0:
         return
     sp = p["specular"]
-    assert 1.0 <= sp["ior"] <= 3.0
+    assert 1.0 <= sp["ior"]
+    assert (sp["ior"] <= 3.0) == (max(F0) <= 0.25)
+    assert (sp["ior"] <= 3.0) != any("above max_ior" in n for n in p["notes"])
     assert 0.0 <= sp["specularFactor"] <= 1.0
     assert all(0.0 <= c <= 1.0 for c in sp["specularColorFactor"])
-    f0 = _gltf_brdf(p).dielectric_f0_f90()[0]
-    if max(F0) <= 0.25:
-        np.testing.assert_allclose(f0, F0, rtol=1e-9)
-    else:
-        np.testing.assert_allclose(f0, np.multiply(F0, 0.25 / max(F0)), rtol=1e-9)
-        assert any("scaled down" in n for n in p["notes"])
+    np.testing.assert_allclose(_gltf_brdf(p).dielectric_f0_f90()[0], F0, rtol=1e-9)
 
 
 def _albedo_on_grid(brdf, k=16):
