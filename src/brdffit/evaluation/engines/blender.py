@@ -275,7 +275,11 @@ def compare_renders(reference, reference_alpha, test, test_alpha, flip: bool = T
            "coverage": {"fit": float(ra.sum()), "blender": float(ta.sum())},
            "peak_pixel": {"fit": _peak_pixel(rm), "blender": _peak_pixel(tm)}}
     if flip:
-        import flip_evaluator
+        try:
+            import flip_evaluator
+        except ImportError:
+            raise ImportError("HDR-FLIP needs NVIDIA's flip-evaluator: pip install -e "
+                              "'.[engines]' (make install does), or pass flip=False") from None
 
         _, mean_flip, _ = flip_evaluator.evaluate(
             np.ascontiguousarray(np.maximum(rm, 0), np.float32),
