@@ -98,7 +98,7 @@ from ._common import (LUMA, base_for_albedo, check_output_path, closer_to,
 
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material",
            "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0",
-           "METAL_MIN_F90", "IOR_MAX", "MESHES", "uv_sphere"]
+           "METAL_MIN_F90", "IOR_MAX", "MESHES", "ENGINES", "uv_sphere"]
 
 MATERIAL_METAL_F0 = 0.08
 #: the largest glTF ``ior`` exported (F0 = 0.25): common dielectrics lie in 1.3-2.5; a
@@ -567,13 +567,37 @@ def optimize_parameters(model, p: dict, n: int = 8192, seed: int = 0) -> dict:
     return out
 
 
+#: the engines :func:`gltf_equivalent` models: the specification's BRDF (Appendix B and the
+#: extensions), and Blender's Cycles with the importer's multiscatter GGX or with GGX
+ENGINES = ("specification", "blender", "blender-ggx")
+
+
 def gltf_equivalent(model, anisotropy: bool = True, optimize: bool = False,
-                    specular: bool = True, max_ior: float = IOR_MAX) -> GLTFBRDF:
-    """The :class:`GLTFBRDF` a glTF viewer renders for the exported material."""
+                    specular: bool = True, max_ior: float = IOR_MAX,
+                    engine: str = "specification") -> GLTFBRDF:
+    """The BRDF an engine renders for the exported material: the specification's
+    :class:`GLTFBRDF` (``engine="specification"``), or Cycles' Principled BSDF as Blender's
+    importer sets it up (:class:`brdffit.export.gltf_cycles.CyclesPrincipledBRDF`;
+    ``"blender"``: its default multiscatter GGX, ``"blender-ggx"``: GGX)."""
+    if engine not in ENGINES:
+        raise ValueError(f"engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
     p = gltf_parameters(model, anisotropy, specular, max_ior)
     if optimize:
         p = optimize_parameters(model, p)
-    return _brdf_of(p, name=f"{getattr(model, 'name', 'model')}-gltf")
+    name = f"{getattr(model, 'name', 'model')}-gltf"
+    if engine == "specification":
+        return _brdf_of(p, name=name)
+    from .gltf_cycles import CyclesPrincipledBRDF
+
+    q = _brdf_of(p)
+    return CyclesPrincipledBRDF(q.base_color, q.metallic, q.roughness, name=f"{name}-{engine}",
+                                anisotropy_strength=q.anisotropy_strength,
+                                anisotropy_rotation=q.anisotropy_rotation,
+                                specular_factor=q.specular_factor,
+                                specular_color=q.specular_color, ior=q.ior,
+                                clearcoat=q.clearcoat,
+                                clearcoat_roughness=q.clearcoat_roughness,
+                                multiscatter=engine == "blender")
 
 
 def gltf_fidelity(model, n_samples: int = 1 << 15,
