@@ -77,6 +77,11 @@ D(0) = 1/(πα²), heavier GGX tails; the loss is measured):
   the fit (cosine-weighted relative error) is written, the choice in the notes;
 * optionally (``optimize=True``, CLI ``--option optimize=true``) baseColor, metallic and
   roughness are refined by least squares in BRDF space (:func:`optimize_parameters`);
+* what Blender's importer and Cycles make of the file (f90 = 1, multiscatter GGX, the
+  diffuse dimmed by one scalar) is modelled by
+  :class:`brdffit.export.gltf_cycles.CyclesPrincipledBRDF`
+  (``gltf_equivalent(..., engine="blender")``), checked against Blender's renders
+  (:mod:`brdffit.evaluation.engines.blender`, ``bench/bench_engines.py``);
 * the loss of fidelity is measured by :func:`gltf_fidelity` (BRDF-space metrics of
   :class:`GLTFBRDF` vs the fit; rendered PSNR in ``bench/bench_export.py``); the exported
   file passes the Khronos glTF-Validator (``tests/export/test_gltf.py``).
