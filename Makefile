@@ -13,27 +13,45 @@ GLTF_VALIDATOR_VERSION := 2.0.0-dev.3.10
 THREE := $(NPM_PREFIX)/node_modules/three/package.json
 THREE_VERSION := 0.187.0
 DEBIAN_PACKAGES := libllvm19 chromium glslang-tools
+# Blender as a Python module (bpy, PyPI) for the engine round trips
+# (brdffit.evaluation.engines.blender): its own venv, because bpy pins numpy < 2 and needs
+# CPython 3.11 exactly; the project runs it in a subprocess. About 375 MB to download,
+# about 1 GB installed.
+BLENDER_VENV := .venv-blender
+BLENDER_STAMP := $(BLENDER_VENV)/.installed-stamp
+BPY_VERSION := 5.0.1
 
-.PHONY: demo test bench sysdeps npmdeps install clean
+.PHONY: demo test bench sysdeps npmdeps blender install clean
 
 demo: $(STAMP)
 	$(VENV)/bin/brdffit demo
 
-test: $(STAMP) npmdeps
+test: $(STAMP) npmdeps blender
 	$(PY) -m pytest -q
 
-bench: $(STAMP)
+bench: $(STAMP) blender
 	$(PY) bench/run_all.py
 
-install: $(STAMP)
+install: $(STAMP) blender
 
 $(STAMP): pyproject.toml
 	@$(MAKE) --no-print-directory sysdeps
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[dev]'
+	$(PY) -m pip install -q -e '.[dev,engines]'
 	@$(MAKE) --no-print-directory npmdeps
 	@touch $(STAMP)
+
+blender: $(BLENDER_STAMP)
+
+# bpy needs CPython 3.11 (its wheels are cp311 only): without one, the Blender round trips
+# are skipped and say so
+$(BLENDER_STAMP):
+	@if $(PYTHON) -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))'; then \
+		$(PYTHON) -m venv $(BLENDER_VENV) && \
+		$(BLENDER_VENV)/bin/python -m pip install -q --upgrade pip && \
+		$(BLENDER_VENV)/bin/python -m pip install -q 'bpy==$(BPY_VERSION)' && touch $(BLENDER_STAMP); \
+	else echo "NOTE: $(PYTHON) is not CPython 3.11, skipping bpy (the Blender round trips will be skipped)"; fi
 
 # libllvm19: Mitsuba 3's LLVM back-end (the machine's default LLVM crashes it).
 # chromium: the report test renders the HTML report headless.
@@ -61,4 +79,4 @@ npmdeps:
 	else echo "NOTE: npm not found, skipping $(NPM_PACKAGES) (the glTF validation and three.js tests will be skipped)"; fi; fi
 
 clean:
-	rm -rf $(VENV) build *.egg-info src/*.egg-info .pytest_cache $(NPM_PREFIX)
+	rm -rf $(VENV) $(BLENDER_VENV) build *.egg-info src/*.egg-info .pytest_cache $(NPM_PREFIX)

@@ -238,17 +238,23 @@ def test_exports_pass_the_khronos_validator(tmp_path):
     }
     seen = set()
     for key, model in models.items():
-        out = tmp_path / f"{key}.gltf"
-        info = export(model, "gltf", out, fidelity=False)
-        seen.update(info["extensions"])
-        report = validate(out)
-        assert report["issues"]["numErrors"] == 0, (key, _errors(report))
-        assert report["issues"]["numWarnings"] == 0, (key, report["issues"]["messages"])
+        for mesh in ("sphere", "none"):
+            out = tmp_path / f"{key}-{mesh}.gltf"
+            info = export(model, "gltf", out, fidelity=False, mesh=mesh)
+            seen.update(info["extensions"])
+            report = validate(out)
+            assert report["issues"]["numErrors"] == 0, (key, mesh, _errors(report))
+            assert report["issues"]["numWarnings"] == 0, (key, mesh,
+                                                          report["issues"]["messages"])
+            info = report["info"]
+            assert info["materialCount"] == 1, (key, mesh, info)
+            # the sphere: a scene with one drawn primitive using the material
+            assert info.get("drawCallCount", 0) == (1 if mesh == "sphere" else 0), (key, info)
     assert seen == {"KHR_materials_anisotropy", "KHR_materials_specular", "KHR_materials_ior",
                     "KHR_materials_clearcoat"}
     # the check can fail: the validator reports an out-of-range factor and an undeclared
     # extension as errors
-    doc = json.loads((tmp_path / "aniso-dielectric.gltf").read_text())
+    doc = json.loads((tmp_path / "aniso-dielectric-sphere.gltf").read_text())
     doc["materials"][0]["pbrMetallicRoughness"]["roughnessFactor"] = 2.0
     doc["extensionsUsed"].remove("KHR_materials_ior")
     (tmp_path / "bad.gltf").write_text(json.dumps(doc))
@@ -258,20 +264,48 @@ def test_exports_pass_the_khronos_validator(tmp_path):
 
 def test_metal_like_fit_with_low_grazing_reflectance_stays_dielectric():
     """F0 looks metallic (0.2) but F90 is 0.3 (ks·Schlick, as ggx-diffuse finds on metallic
-    paints): glTF's metal would force F90 = 1; with the extensions it is a dielectric whose
-    specularFactor carries F90 and whose base keeps ρd (compensated for the layer) — and it
-    is closer to the fit."""
+    paints): glTF's metal would force F90 = 1; with the extensions it is a dielectric that
+    keeps F0 and whose base keeps ρd (compensated for the layer) — and it is closer to the
+    fit. Its flat Fresnel (F0/F90 = 2/3) would need ior 9.9: with the bound ior = 3 the
+    specularFactor (f90) rises to F0 / 0.25 = 0.8 (noted); with max_ior = 10 it is 0.3."""
     fit = MicrofacetBRDF(GGX(0.1), SchlickFresnel(2.0 / 3.0), diffuse=[0.05, 0.04, 0.03],
                          specular=[0.3, 0.3, 0.3])
-    p = gltf_parameters(fit)
-    assert p["metallicFactor"] == 0.0
-    assert p["specular"]["specularFactor"] == pytest.approx(0.3, rel=1e-9)
-    np.testing.assert_allclose(p["baseColorFactor"][:3],
-                               np.array([0.05, 0.04, 0.03]) / _kept_by_schlick(0.2, 0.3), rtol=2e-3)
     core = gltf_parameters(fit, specular=False)            # core glTF only: the metal rule
     assert core["metallicFactor"] == 1.0
-    mine = gltf_fidelity(fit, metrics=("normalized_l2",))["normalized_l2"]
-    assert mine < 0.5 * gltf_fidelity(fit, metrics=("normalized_l2",), specular=False)["normalized_l2"]
+    core_err = gltf_fidelity(fit, metrics=("normalized_l2",), specular=False)["normalized_l2"]
+    for max_ior, f90 in ((3.0, 0.8), (10.0, 0.3)):
+        p = gltf_parameters(fit, max_ior=max_ior)
+        assert p["metallicFactor"] == 0.0
+        assert p["specular"]["ior"] <= max_ior
+        assert p["specular"]["specularFactor"] == pytest.approx(f90, rel=1e-9)
+        np.testing.assert_allclose(_gltf_brdf(p).dielectric_f0_f90()[0], 0.2, rtol=1e-9)
+        assert any("raised from 0.3 to 0.8" in n for n in p["notes"]) == (max_ior == 3.0)
+        np.testing.assert_allclose(p["baseColorFactor"][:3],
+                                   np.array([0.05, 0.04, 0.03]) / _kept_by_schlick(0.2, f90),
+                                   rtol=2e-3)
+        mine = gltf_fidelity(fit, metrics=("normalized_l2",), max_ior=max_ior)["normalized_l2"]
+        assert mine < (0.7 if max_ior == 3.0 else 0.1) * core_err, (max_ior, mine, core_err)
+
+
+@pytest.mark.parametrize("F0, F90", [([0.2, 0.2, 0.2], [0.3, 0.3, 0.3]),
+                                     ([0.5, 0.4, 0.3], [0.55, 0.5, 0.45]),
+                                     ([0.03, 0.04, 0.05], [1.0, 1.0, 1.0]),
+                                     ([0.9, 0.9, 0.9], [0.9, 0.9, 0.9])])
+def test_exported_ior_and_factors_stay_in_range(F0, F90):
+    """ior in [1, 3] when F0 ≤ 0.25 (F0 of ior 3), above only with a note; specular
+    factors in [0, 1]; F0 kept."""
+    fit = MicrofacetBRDF(GGX(0.2), SchlickFresnel(np.divide(F0, F90)), diffuse=[0.3, 0.2, 0.1],
+                         specular=list(F90))
+    p = gltf_parameters(fit)
+    if p["metallicFactor"] == 1.0:
+        return
+    sp = p["specular"]
+    assert 1.0 <= sp["ior"]
+    assert (sp["ior"] <= 3.0) == (max(F0) <= 0.25)
+    assert (sp["ior"] <= 3.0) != any("above max_ior" in n for n in p["notes"])
+    assert 0.0 <= sp["specularFactor"] <= 1.0
+    assert all(0.0 <= c <= 1.0 for c in sp["specularColorFactor"])
+    np.testing.assert_allclose(_gltf_brdf(p).dielectric_f0_f90()[0], F0, rtol=1e-9)
 
 
 def _albedo_on_grid(brdf, k=16):
@@ -365,3 +399,55 @@ def test_coated_fit_exported_as_one_lobe_when_that_is_closer():
 
     assert "coated fit exported as" in p["notes"][-1]
     assert err(p) <= err(coat_only) * 1.05
+
+
+def test_preview_sphere_is_the_scenes_sphere():
+    """Unit radius, normals = positions, u = 0.5 facing +Z (the camera), v = 0 at +Y, every
+    triangle counter-clockwise seen from outside, tangents along ∂p/∂u, and the mesh covers
+    the sphere: the triangles' area approaches 4π."""
+    from brdffit.export.gltf import uv_sphere
+
+    m = uv_sphere(32, 16)
+    p, n, uv, t = m["positions"], m["normals"], m["texcoords"], m["tangents"]
+    np.testing.assert_allclose(np.linalg.norm(p, axis=1), 1.0, atol=1e-6)
+    np.testing.assert_allclose(n, p, atol=0)
+    front = np.argmax(p[:, 2])
+    assert abs(uv[front, 0] - 0.5) < 1e-6 and abs(uv[front, 1] - 0.5) < 1e-6
+    assert np.all(uv[p[:, 1] > 1 - 1e-6, 1] == 0.0)
+    tri = m["indices"].reshape(-1, 3).astype(int)
+    cross = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
+    assert np.all(np.sum(cross * p[tri].mean(1), -1) > 0)
+    area = 0.5 * np.linalg.norm(cross, axis=1).sum()
+    assert 0.97 * 4 * np.pi < area < 4 * np.pi
+    # ∂p/∂u by finite differences along a ring at the equator
+    ring = np.flatnonzero(np.abs(p[:, 1]) < 1e-6)
+    k = ring[np.argsort(uv[ring, 0])]
+    dp = p[k[1:]] - p[k[:-1]]
+    dp /= np.linalg.norm(dp, axis=1, keepdims=True)
+    mid = 0.5 * (t[k[1:], :3] + t[k[:-1], :3])
+    assert np.all(np.sum(dp * mid, -1) > 0.99)
+    # glTF's bitangent w (n × t) points along +v (down the sphere)
+    b = t[:, 3:] * np.cross(n, t[:, :3])
+    assert np.all(b[ring, 1] < -0.99)
+    with pytest.raises(ValueError, match="segments"):
+        uv_sphere(2, 16)
+
+
+def test_mesh_option_is_checked_and_none_leaves_the_material_alone(tmp_path):
+    from brdffit.errors import ExportError
+
+    model = brdffit.synthetic("plastic-beckmann")
+    with pytest.raises(ExportError, match="mesh"):
+        export(model, "gltf", tmp_path / "a.gltf", fidelity=False, mesh="cube")
+    export(model, "gltf", tmp_path / "b.gltf", fidelity=False, mesh="none")
+    doc = json.loads((tmp_path / "b.gltf").read_text())
+    assert "meshes" not in doc and "nodes" not in doc and len(doc["materials"]) == 1
+    # the placeholder image is a PNG that decodes to one white pixel
+    import base64
+    import zlib
+
+    png = base64.b64decode(doc["images"][0]["uri"].split(",", 1)[1])
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    idat = png.index(b"IDAT")
+    size = int.from_bytes(png[idat - 4:idat], "big")
+    assert zlib.decompress(png[idat + 4:idat + 4 + size]) == b"\x00\xff\xff\xff\xff"

@@ -52,8 +52,15 @@ D(0) = 1/(πα²), heavier GGX tails; the loss is measured):
   ``specularFactor = min(1, max(max F90, max F0))`` (f90 of the dielectric: exact when the
   fit's F90 is grey), ``r = F0 / specularFactor``, ``ior = (1 + √max r)/(1 − √max r)``
   (``KHR_materials_ior``; F0 of the ior = the largest channel of r) and
-  ``specularColorFactor = r / max r`` ≤ 1, so ``f0_d = F0`` exactly. A dielectric fit of
-  index η and grey ks gives back ``ior = η`` and ``specularFactor = ks``. The extensions are
+  ``specularColorFactor = r / max r`` ≤ 1, so ``f0_d = F0`` exactly. The index stays
+  within [1, ``IOR_MAX`` = 3] (F0 ≤ 0.25): a flatter Fresnel curve (F0 close to F90, as
+  ggx-diffuse fits of metallic paints find) would need ior 10-40 or more, which only the
+  specification's f90 = specularFactor turns into a flat curve (Blender keeps f90 = 1, see
+  :mod:`brdffit.evaluation.engines.blender`); there ``ior = 3`` and ``specularFactor`` is
+  raised to ``max F0 / 0.25``, F0 kept and f90 raised (noted); a fit with F0 > 0.25 and
+  F90 < 0.8 (measured conductors fitted with a low F90, e.g. metallic paints) keeps the
+  index it needs, noted: as glTF's metal it renders worse (measured). A dielectric fit of index η ≤ 3 and grey ks gives back
+  ``ior = η`` and ``specularFactor = ks``. The extensions are
   written only when they differ from the defaults (ior 1.5, factors 1). With
   ``specular=False`` the core's fixed f0 = 0.04, f90 = 1 are used (lossy, reported);
 * what stays lossy (measured): glTF weights the diffuse term by ``(1 − F_d)`` (the fit adds
@@ -70,6 +77,11 @@ D(0) = 1/(πα²), heavier GGX tails; the loss is measured):
   the fit (cosine-weighted relative error) is written, the choice in the notes;
 * optionally (``optimize=True``, CLI ``--option optimize=true``) baseColor, metallic and
   roughness are refined by least squares in BRDF space (:func:`optimize_parameters`);
+* what Blender's importer and Cycles make of the file (f90 = 1, multiscatter GGX, the
+  diffuse dimmed by one scalar) is modelled by
+  :class:`brdffit.export.gltf_cycles.CyclesPrincipledBRDF`
+  (``gltf_equivalent(..., engine="blender")``), checked against Blender's renders
+  (:mod:`brdffit.evaluation.engines.blender`, ``bench/bench_engines.py``);
 * the loss of fidelity is measured by :func:`gltf_fidelity` (BRDF-space metrics of
   :class:`GLTFBRDF` vs the fit; rendered PSNR in ``bench/bench_export.py``); the exported
   file passes the Khronos glTF-Validator (``tests/export/test_gltf.py``).
@@ -91,9 +103,13 @@ from ._common import (LUMA, base_for_albedo, check_output_path, closer_to,
 
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material",
            "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0",
-           "METAL_MIN_F90"]
+           "METAL_MIN_F90", "IOR_MAX", "MESHES", "ENGINES", "uv_sphere"]
 
 MATERIAL_METAL_F0 = 0.08
+#: the largest glTF ``ior`` exported (F0 = 0.25): common dielectrics lie in 1.3-2.5; a
+#: larger index only imitates a flat Fresnel curve, which engines do not all render (Blender
+#: keeps f90 = 1) and artists do not expect
+IOR_MAX = 3.0
 #: with the KHR extensions (``specular=True``), a fit is exported as a metal only when the
 #: luminance of its F90 is at least this (glTF's metal reaches 1 at grazing)
 METAL_MIN_F90 = 0.8
@@ -280,9 +296,20 @@ def _anisotropy(d):
     return ab, float(np.sqrt((at - ab) / (1.0 - ab))), rot
 
 
-def _specular_extension(F0, F90) -> dict:
+def _specular_extension(F0, F90, max_ior: float = IOR_MAX) -> dict:
     """KHR_materials_specular / KHR_materials_ior parameters whose dielectric ``f0_d`` is
-    ``F0`` exactly and ``f90_d`` the largest channel of F90 (see the module docstring)."""
+    ``F0`` and ``f90_d`` the largest channel of F90, within what engines and artists expect
+    (see the module docstring): ``ior`` in [1, ``max_ior``], factors in [0, 1].
+
+    ``specularFactor`` s = min(1, max(max F90, max F0)) and ``r = F0 / s``; when max r ≤
+    F0(IOR_MAX) = ((IOR_MAX − 1)/(IOR_MAX + 1))², ``ior`` is the index of F0 = max r and
+    ``specularColorFactor = r / max r``: F0 and F90 exact. A flatter Fresnel (max r above
+    F0(max_ior)) would need a larger index; then ``ior = max_ior`` and s is raised to
+    ``max F0 / F0(max_ior)`` (≤ 1), which keeps F0 exactly and raises f90 to s; when even
+    s = 1 is not enough (max F0 > F0(max_ior)), the index the flat curve needs is kept: F0
+    and F90 exact, ior above the bound (as a metal, f90 = 1, it renders further from such
+    fits: gold-metallic-paint 47.7 → 40.3 dB in Blender, 73.5 → 38.4 dB in our glTF
+    equivalent, ``bench/results/engines_blender.json``). The entry ``"note"`` says which."""
     F0 = np.clip(np.asarray(F0, float), 0.0, 1.0)
     F90 = np.clip(np.asarray(F90, float), 0.0, 1.0)
     sf = float(min(1.0, max(float(F90.max()), float(F0.max()))))
@@ -292,12 +319,34 @@ def _specular_extension(F0, F90) -> dict:
     rmax = float(r.max())
     if rmax <= 0.0:
         return {"specularFactor": sf, "specularColorFactor": [0.0, 0.0, 0.0], "ior": 1.5}
+    max_ior = float(max_ior)
+    if not (np.isfinite(max_ior) and max_ior > 1.0):
+        raise ValueError(f"max_ior: expected a finite index > 1, got {max_ior}")
+    f0_max = ((max_ior - 1.0) / (max_ior + 1.0)) ** 2
+    note = None
+    if rmax > f0_max:
+        wanted = (1.0 + np.sqrt(min(rmax, 1.0 - 1e-9))) / (1.0 - np.sqrt(min(rmax, 1.0 - 1e-9)))
+        if F0.max() <= f0_max:
+            raised = float(F0.max() / f0_max)
+            note = (f"ior {max_ior:g} (the largest exported, max_ior) instead of {wanted:.4g}: "
+                    f"specularFactor (glTF's f90) raised from {sf:.4g} to {raised:.4g}")
+            sf = raised
+            r = F0 / sf
+            rmax = float(r.max())
+        else:
+            max_ior = np.inf
+            note = (f"ior {wanted:.4g} above max_ior: F0 {np.round(F0, 4).tolist()} exceeds the "
+                    f"F0 {f0_max:.4g} of any lower index, and glTF's metal (f90 = 1) is further "
+                    "from this fit (bench/bench_engines.py)")
     q = float(np.sqrt(min(rmax, 1.0 - 1e-9)))
-    ior = (1.0 + q) / (1.0 - q)
+    ior = min((1.0 + q) / (1.0 - q), max_ior)
     f0_ior = ((ior - 1.0) / (ior + 1.0)) ** 2
-    color = np.clip(r / f0_ior, 0.0, None)
-    return {"specularFactor": sf, "specularColorFactor": [float(c) for c in color],
-            "ior": float(ior)}
+    color = np.clip(r / f0_ior, 0.0, 1.0)
+    out = {"specularFactor": sf, "specularColorFactor": [float(c) for c in color],
+           "ior": float(ior)}
+    if note:
+        out["note"] = note
+    return out
 
 
 def _is_default_specular(ext) -> bool:
@@ -326,7 +375,8 @@ def reflectances(m) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return F0, F90, rd
 
 
-def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> dict:
+def gltf_parameters(model, anisotropy: bool = True, specular: bool = True,
+                    max_ior: float = IOR_MAX) -> dict:
     """``{"baseColorFactor", "metallicFactor", "roughnessFactor", "alpha", "notes",
     "anisotropy", "specular", ...}`` of a fit by the rules of the module docstring; with
     ``anisotropy`` an anisotropic or correlated GGX uses ``KHR_materials_anisotropy``
@@ -342,9 +392,11 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
     if parts is not None:
         # glTF's clearcoat (Fresnel of N·V, layered) departs from the fit's added coat on
         # rough, heavy coats: export whichever is closer to the fit, the coat or one lobe
-        cands = {"clearcoat": _with_clearcoat(gltf_parameters(parts[0], anisotropy, specular),
+        cands = {"clearcoat": _with_clearcoat(gltf_parameters(parts[0], anisotropy, specular,
+                                                              max_ior),
                                               parts[1]),
-                 "one lobe": gltf_parameters(single_lobe_of(model), anisotropy, specular)}
+                 "one lobe": gltf_parameters(single_lobe_of(model), anisotropy, specular,
+                                             max_ior)}
         label, p, err = closer_to(model, cands, _brdf_of)
         other = next(k for k in err if k != label)
         p = dict(p, notes=p["notes"] + [f"coated fit exported as {label} (cos_rel_error vs the "
@@ -380,7 +432,9 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True) -> di
     else:
         base = np.clip(rd, 0.0, 1.0)
         if specular:
-            spec = _specular_extension(F0, F90)
+            spec = _specular_extension(F0, F90, max_ior)
+            if "note" in spec:
+                notes.append(spec.pop("note"))
             notes.append(f"dielectric: F0 {np.round(F0c, 4).tolist()} via KHR_materials_specular"
                          f" + KHR_materials_ior (ior={spec['ior']:.4g}), F90 = specularFactor "
                          f"{spec['specularFactor']:.4g} (fit: {np.round(F90, 4).tolist()}); "
@@ -518,37 +572,63 @@ def optimize_parameters(model, p: dict, n: int = 8192, seed: int = 0) -> dict:
     return out
 
 
+#: the engines :func:`gltf_equivalent` models: the specification's BRDF (Appendix B and the
+#: extensions), and Blender's Cycles with the importer's multiscatter GGX or with GGX
+ENGINES = ("specification", "blender", "blender-ggx")
+
+
 def gltf_equivalent(model, anisotropy: bool = True, optimize: bool = False,
-                    specular: bool = True) -> GLTFBRDF:
-    """The :class:`GLTFBRDF` a glTF viewer renders for the exported material."""
-    p = gltf_parameters(model, anisotropy, specular)
+                    specular: bool = True, max_ior: float = IOR_MAX,
+                    engine: str = "specification") -> GLTFBRDF:
+    """The BRDF an engine renders for the exported material: the specification's
+    :class:`GLTFBRDF` (``engine="specification"``), or Cycles' Principled BSDF as Blender's
+    importer sets it up (:class:`brdffit.export.gltf_cycles.CyclesPrincipledBRDF`;
+    ``"blender"``: its default multiscatter GGX, ``"blender-ggx"``: GGX)."""
+    if engine not in ENGINES:
+        raise ValueError(f"engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
+    p = gltf_parameters(model, anisotropy, specular, max_ior)
     if optimize:
         p = optimize_parameters(model, p)
-    return _brdf_of(p, name=f"{getattr(model, 'name', 'model')}-gltf")
+    name = f"{getattr(model, 'name', 'model')}-gltf"
+    if engine == "specification":
+        return _brdf_of(p, name=name)
+    from .gltf_cycles import CyclesPrincipledBRDF
+
+    q = _brdf_of(p)
+    return CyclesPrincipledBRDF(q.base_color, q.metallic, q.roughness, name=f"{name}-{engine}",
+                                anisotropy_strength=q.anisotropy_strength,
+                                anisotropy_rotation=q.anisotropy_rotation,
+                                specular_factor=q.specular_factor,
+                                specular_color=q.specular_color, ior=q.ior,
+                                clearcoat=q.clearcoat,
+                                clearcoat_roughness=q.clearcoat_roughness,
+                                multiscatter=engine == "blender")
 
 
 def gltf_fidelity(model, n_samples: int = 1 << 15,
                   metrics=("cos_rel_error", "normalized_l2"), anisotropy: bool = True,
                   optimize: bool = False, specular: bool = True,
-                  parameters: dict | None = None) -> dict:
+                  parameters: dict | None = None, max_ior: float = IOR_MAX) -> dict:
     """BRDF-space loss of fidelity of the glTF material vs the fit
     (:func:`brdffit.evaluation.metrics.brdf_metrics`, the fit as reference); ``parameters``:
     the material's, when already mapped (else they are, with the other options)."""
     from ..evaluation.metrics import brdf_metrics
 
-    exported = (gltf_equivalent(model, anisotropy, optimize, specular) if parameters is None
+    exported = (gltf_equivalent(model, anisotropy, optimize, specular, max_ior)
+                if parameters is None
                 else _brdf_of(parameters))
     r = brdf_metrics(model, exported, n_samples, metrics=metrics)
     return {k: r.get(k) for k in metrics}
 
 
 def gltf_material(model, name: str | None = None, fidelity: bool = True,
-                  anisotropy: bool = True, optimize: bool = False, specular: bool = True) -> dict:
+                  anisotropy: bool = True, optimize: bool = False, specular: bool = True,
+                  max_ior: float = IOR_MAX) -> dict:
     """The glTF 2.0 ``material`` object (``pbrMetallicRoughness`` + ``extras.brdffit`` with
     α, conventions, approximations and the measured BRDF-space fidelity; the
     ``KHR_materials_anisotropy`` extension for anisotropic fits when ``anisotropy``,
     ``KHR_materials_specular`` and ``KHR_materials_ior`` for dielectrics when ``specular``)."""
-    p = gltf_parameters(model, anisotropy, specular)
+    p = gltf_parameters(model, anisotropy, specular, max_ior)
     if optimize:
         p = optimize_parameters(model, p)
     extras = {"alpha": p["alpha"], "F0_fit": p["F0"], "F90_fit": p["F90"],
@@ -578,15 +658,146 @@ def gltf_material(model, name: str | None = None, fidelity: bool = True,
     return mat
 
 
+#: the preview meshes a glTF export can carry (``mesh`` option of :func:`write_gltf`)
+MESHES = ("sphere", "none")
+#: the preview sphere's divisions: around the vertical axis, and from pole to pole
+SPHERE_SEGMENTS, SPHERE_RINGS = 64, 32
+
+
+def uv_sphere(segments: int = SPHERE_SEGMENTS, rings: int = SPHERE_RINGS) -> dict:
+    """The preview mesh: a unit UV sphere laid out like the scenes' sphere
+    (:mod:`brdffit.evaluation.render.scenes`): poles on ±Y (glTF's up), ``u`` around the
+    vertical axis with ``u = 0.5`` facing +Z (the scenes' camera), ``v`` from the top (0) to
+    the bottom (1), the seam at −Z. With ``θ = π v``, ``φ = 2π u``: position = normal =
+    ``(−sin θ sin φ, cos θ, −sin θ cos φ)``; tangent = the unit ``∂p/∂u`` ``(−cos φ, 0, sin φ)``
+    (defined at the poles too) with ``w = −1``, so that glTF's bitangent ``w (n × t)`` points
+    along ``+v``. Triangles counter-clockwise seen from outside, one per quad at the poles
+    (no degenerate triangles). Returns float32 ``positions``, ``normals``, ``tangents``
+    (x, y, z, w), ``texcoords`` and uint16 ``indices``."""
+    segments, rings = int(segments), int(rings)
+    if segments < 3 or rings < 2 or (segments + 1) * (rings + 1) > 65535:
+        raise ValueError(f"uv_sphere: expected segments >= 3, rings >= 2 and at most 65535 "
+                         f"vertices, got {segments} x {rings}")
+    u = np.arange(segments + 1) / segments
+    v = np.arange(rings + 1) / rings
+    V, U = np.meshgrid(v, u, indexing="ij")
+    th, ph = np.pi * V, 2.0 * np.pi * U
+    pos = np.stack([-np.sin(th) * np.sin(ph), np.cos(th), -np.sin(th) * np.cos(ph)], -1)
+    tan = np.stack([-np.cos(ph), np.zeros_like(ph), np.sin(ph), -np.ones_like(ph)], -1)
+    uv = np.stack([U, V], -1)
+    i = np.arange(rings)[:, None]
+    j = np.arange(segments)[None, :]
+    a, b = i * (segments + 1) + j, i * (segments + 1) + j + 1          # upper edge of a quad
+    c, d = a + segments + 1, b + segments + 1                          # lower edge
+    first = np.stack([a, c, d], -1)[:-1]           # (c, d) meet at the bottom pole: none there
+    second = np.stack([a, d, b], -1)[1:]           # (a, b) meet at the top pole: none there
+    tri = np.concatenate([first.reshape(-1, 3), second.reshape(-1, 3)])
+    p = pos.reshape(-1, 3)
+    normal = np.cross(p[tri[:, 1]] - p[tri[:, 0]], p[tri[:, 2]] - p[tri[:, 0]])
+    if np.any(np.sum(normal * p[tri[:, 0]], -1) <= 0):   # an inward or degenerate triangle
+        raise AssertionError("uv_sphere: triangle winding is not counter-clockwise outside")
+    return {"positions": p.astype(np.float32), "normals": p.astype(np.float32),
+            "tangents": tan.reshape(-1, 4).astype(np.float32),
+            "texcoords": uv.reshape(-1, 2).astype(np.float32),
+            "indices": tri.reshape(-1).astype(np.uint16)}
+
+
+def _mesh_document(tangents: bool) -> dict:
+    """The glTF objects of the preview sphere (:func:`uv_sphere`): one buffer (a base64
+    data URI, so that the export stays one file), its views and accessors, one mesh whose
+    primitive uses material 0, one node and one scene. ``tangents``: write the TANGENT
+    attribute (needed by ``KHR_materials_anisotropy``; else viewers derive it)."""
+    import base64
+
+    m = uv_sphere()
+    attrs = [("POSITION", "positions", "VEC3"), ("NORMAL", "normals", "VEC3"),
+             ("TEXCOORD_0", "texcoords", "VEC2")]
+    if tangents:
+        attrs.append(("TANGENT", "tangents", "VEC4"))
+    blob, views, accessors, attributes = bytearray(), [], [], {}
+    for name, key, kind in attrs:
+        data = np.ascontiguousarray(m[key], "<f4")
+        views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": data.nbytes,
+                      "target": 34962})
+        acc = {"bufferView": len(views) - 1, "componentType": 5126, "count": len(data),
+               "type": kind}
+        if name == "POSITION":
+            acc["min"] = [float(x) for x in data.min(0)]
+            acc["max"] = [float(x) for x in data.max(0)]
+        attributes[name] = len(accessors)
+        accessors.append(acc)
+        blob += data.tobytes()
+    idx = np.ascontiguousarray(m["indices"], "<u2")
+    views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": idx.nbytes,
+                  "target": 34963})
+    accessors.append({"bufferView": len(views) - 1, "componentType": 5123,
+                      "count": len(idx), "type": "SCALAR"})
+    blob += idx.tobytes()
+    blob += b"\0" * (-len(blob) % 4)
+    uri = "data:application/octet-stream;base64," + base64.b64encode(bytes(blob)).decode()
+    return {"scene": 0, "scenes": [{"name": "preview", "nodes": [0]}],
+            "nodes": [{"name": "preview sphere", "mesh": 0}],
+            "meshes": [{"name": "preview sphere",
+                        "primitives": [{"attributes": attributes,
+                                        "indices": len(accessors) - 1, "material": 0}]}],
+            "accessors": accessors, "bufferViews": views,
+            "buffers": [{"byteLength": len(blob), "uri": uri}]}
+
+
+def _one_pixel_png() -> bytes:
+    """A 1×1 opaque white RGBA PNG (PNG specification: signature, IHDR, one zlib IDAT, IEND;
+    each chunk's CRC-32 over its type and data)."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+
+    header = struct.pack(">IIBBBBB", 1, 1, 8, 6, 0, 0, 0)   # 1×1, 8 bits, RGBA, no interlace
+    pixels = zlib.compress(b"\x00\xff\xff\xff\xff")       # filter byte 0, then R, G, B, A
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", pixels)
+            + chunk(b"IEND", b""))
+
+
+def _placeholder_image() -> dict:
+    """An ``images`` entry no material uses: Blender's glTF importer (5.0), asked to import
+    unused materials (``import_unused_materials=True``), takes the length of the file's
+    ``images`` array, which must then exist; glTF forbids an empty array, so it holds one
+    1×1 white PNG (a data URI, ~100 bytes). The validator reports it as unused (an
+    information, not an error)."""
+    import base64
+
+    return {"name": "placeholder (unused)",
+            "uri": "data:image/png;base64," + base64.b64encode(_one_pixel_png()).decode()}
+
+
 def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
-               optimize: bool = False, specular: bool = True, **_ignored) -> dict:
-    """Write a minimal valid glTF 2.0 JSON (``asset`` + one ``material``), atomically;
-    ``optimize`` refines the rule-based parameters (:func:`optimize_parameters`),
-    ``specular=False`` leaves the dielectric extensions out (core glTF only)."""
+               optimize: bool = False, specular: bool = True, mesh: str = "sphere",
+               max_ior: float = IOR_MAX, **_ignored) -> dict:
+    """Write a glTF 2.0 JSON file atomically: ``asset``, one ``material`` and, with
+    ``mesh="sphere"`` (default), the preview sphere that uses it (:func:`uv_sphere`, in
+    the file as a data URI), so that a viewer or an importer shows the material; with
+    ``mesh="none"`` the material alone (an importer then creates nothing); an unused
+    placeholder image (:func:`_placeholder_image`) keeps Blender's importer from failing
+    when it imports unused materials. ``optimize``
+    refines the rule-based parameters (:func:`optimize_parameters`), ``specular=False``
+    leaves the dielectric extensions out (core glTF only), ``max_ior`` bounds the exported
+    ``ior`` (:func:`_specular_extension`; a larger bound keeps a flat Fresnel's f90 for
+    engines that follow the specification, at the cost of indices artists do not expect)."""
+    if mesh not in MESHES:
+        from ..errors import ExportError
+
+        raise ExportError(f"glTF mesh: expected one of {', '.join(MESHES)}, found {mesh!r}")
     check_output_path(path)
     mat = gltf_material(model, fidelity=fidelity, anisotropy=anisotropy, optimize=optimize,
-                        specular=specular)
-    doc = {"asset": {"version": "2.0", "generator": "brdffit export"}, "materials": [mat]}
+                        specular=specular, max_ior=max_ior)
+    doc = {"asset": {"version": "2.0", "generator": "brdffit export"}}
+    if mesh == "sphere":
+        doc.update(_mesh_document(tangents="KHR_materials_anisotropy" in mat.get("extensions",
+                                                                                  {})))
+    doc["materials"] = [mat]
+    doc["images"] = [_placeholder_image()]
     if "extensions" in mat:
         doc["extensionsUsed"] = list(mat["extensions"])
     path = check_output_path(path)
@@ -601,6 +812,6 @@ def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
     with writing(path), atomic_write(path, "wb") as fh:
         fh.write(data)
     return {"files": [str(path)], "target": "gltf", "material": mat["pbrMetallicRoughness"],
-            "extensions": sorted(mat.get("extensions", {})),
+            "extensions": sorted(mat.get("extensions", {})), "mesh": mesh,
             "notes": mat["extras"]["brdffit"]["notes"],
             "fidelity": mat["extras"]["brdffit"].get("fidelity")}

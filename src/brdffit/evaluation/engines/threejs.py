@@ -126,7 +126,7 @@ def scene_json(scene: str = "sphere-distant", resolution: int = 128, supersample
                segments: tuple[int, int] = (256, 128), material_index: int = 0) -> dict:
     """The scene description sent to the page (plain data, serialised as JSON): size of the
     render target, camera, light, sphere tessellation and the material index."""
-    from ..render.scenes import CAMERA_DISTANCE, CAMERA_FOV, DISTANT_LIGHT, POINT_LIGHT
+    from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
 
     if scene not in SCENES:
         raise ValueError(f"three.js scene: expected one of {', '.join(SCENES)}, got {scene!r}")
@@ -149,8 +149,10 @@ def scene_json(scene: str = "sphere-distant", resolution: int = 128, supersample
                  "intensity": float(POINT_LIGHT["intensity"])}
     return {"name": scene, "width": n, "height": n, "material_index": int(material_index),
             "sphere_segments": list(seg),
-            "camera": {"origin": [0.0, 0.0, float(CAMERA_DISTANCE)], "target": [0.0, 0.0, 0.0],
-                       "up": [0.0, 1.0, 0.0], "fov": float(CAMERA_FOV)},
+            "camera": {"origin": [float(x) for x in CAMERA["origin"]],
+                       "target": [float(x) for x in CAMERA["target"]],
+                       "up": [float(x) for x in CAMERA["up"]],
+                       "fov": float(CAMERA["fov_degrees"])},
             "light": light}
 
 
@@ -158,10 +160,10 @@ def sphere_geometry_px(resolution: int) -> tuple[float, float, float]:
     """``(cx, cy, R)``: centre (pixel coordinates, pixel centres at i + 0.5) and radius in
     pixels of the unit sphere's silhouette seen by the scenes' camera:
     ``R = (n/2) tan(asin(1/d)) / tan(fov/2)``."""
-    from ..render.scenes import CAMERA_DISTANCE, CAMERA_FOV
+    from ..render.scenes import CAMERA
 
-    half = math.tan(math.radians(CAMERA_FOV) / 2.0)
-    r = (resolution / 2.0) * math.tan(math.asin(1.0 / CAMERA_DISTANCE)) / half
+    half = math.tan(math.radians(CAMERA["fov_degrees"]) / 2.0)
+    r = (resolution / 2.0) * math.tan(math.asin(1.0 / CAMERA["origin"][2])) / half
     return resolution / 2.0, resolution / 2.0, r
 
 

@@ -268,7 +268,7 @@ def shade_sphere(brdf, scene: str = "sphere-distant", resolution: int = 128,
     ``(image (H, W, 3) float64, alpha (H, W))``. ``geometry_roughness`` (default: whether the
     BRDF has ``eval_g``) passes three's per-pixel geometry roughness of the
     ``resolution × supersample`` render target to ``brdf.eval_g``."""
-    from ..render.scenes import CAMERA_DISTANCE, CAMERA_FOV, DISTANT_LIGHT, POINT_LIGHT
+    from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
 
     if scene not in ("sphere-distant", "sphere-point"):
         raise ValueError(f"shade_sphere: expected sphere-distant or sphere-point, got {scene!r}")
@@ -277,11 +277,11 @@ def shade_sphere(brdf, scene: str = "sphere-distant", resolution: int = 128,
     if geometry_roughness is None:
         geometry_roughness = hasattr(brdf, "eval_g")
     n = int(resolution) * int(supersample)
-    t = math.tan(math.radians(CAMERA_FOV) / 2.0)
+    t = math.tan(math.radians(CAMERA["fov_degrees"]) / 2.0)
     c = (np.arange(n) + 0.5) / n * 2.0 - 1.0
     X, Y = np.meshgrid(c * t, -c * t)                          # +x right, +y up, row 0 on top
     d = np.stack([X, Y, -np.ones_like(X)], -1)                 # unnormalised ray directions
-    o = np.array([0.0, 0.0, CAMERA_DISTANCE])
+    o = np.array(CAMERA["origin"], dtype=float)
     # |o + s d|² = 1
     A = np.sum(d * d, -1)
     B = 2.0 * (d @ o)

@@ -78,17 +78,20 @@ from ._mitsuba import load as _load
 
 __all__ = ["SCENES", "scene_dict", "procedural_envmap", "load_envmap", "torus_knot",
            "roughness_texture", "ENVMAP_DIR", "envmap_names", "SUITES", "SceneSpec",
-           "scene_suite", "scene_spec", "scene_exposure", "envmap_stats"]
+           "scene_suite", "scene_spec", "scene_exposure", "envmap_stats", "CAMERA",
+           "DISTANT_LIGHT"]
 
 ENVMAP_DIR = Path(os.environ.get("BRDFFIT_ENVMAP_DIR", "")
                   or Path(__file__).resolve().parents[5] / "shared" / "data" / "envmaps")
 SCENES = ("sphere-env", "sphere-point", "sphere-distant", "knot", "sphere-svrough")
-#: the camera of every scene: at (0, 0, CAMERA_DISTANCE) looking at the origin, +y up, square
-#: film, CAMERA_FOV degrees (Mitsuba's horizontal field of view = the vertical one)
-CAMERA_DISTANCE, CAMERA_FOV = 4.2, 30.0
+#: the camera of every scene: at (0, 0, distance) looking at the origin, +Y up, horizontal
+#: field of view in degrees (square film)
+CAMERA = {"origin": (0.0, 0.0, 4.2), "target": (0.0, 0.0, 0.0), "up": (0.0, 1.0, 0.0),
+          "fov_degrees": 30.0}
 #: ``sphere-point``: position and radiant intensity (W/sr per RGB channel) of the point light
 POINT_LIGHT = {"position": (3.0, 3.5, 4.0), "intensity": 40.0}
-#: ``sphere-distant``: direction of travel of the light and irradiance on a surface facing it
+#: the directional light of ``sphere-distant``: direction of travel and irradiance (W/m²,
+#: on a plane facing it; the same in R, G, B)
 DISTANT_LIGHT = {"direction": (-0.5, -0.6, -0.62), "irradiance": 3.0}
 
 
@@ -210,10 +213,9 @@ def _read_envmap(spec: str) -> np.ndarray:
     return read_exr(path)
 
 
-def _camera(resolution: int, spp: int, distance: float = CAMERA_DISTANCE, fov: float = CAMERA_FOV,
-            crop=None):
-    """The scenes' camera; ``crop=(x0, y0, width, height)`` renders only that window of the
-    same film (same pixels and camera rays)."""
+def _camera(resolution: int, spp: int, crop=None):
+    """The scenes' camera (:data:`CAMERA`); ``crop=(x0, y0, width, height)`` renders only
+    that window of the same film (same pixels and camera rays)."""
     mi, _ = _load()
     film = {"type": "hdrfilm", "width": int(resolution), "height": int(resolution),
             "rfilter": {"type": "box"}, "pixel_format": "rgba", "component_format": "float32"}
@@ -221,9 +223,10 @@ def _camera(resolution: int, spp: int, distance: float = CAMERA_DISTANCE, fov: f
         x0, y0, w, h = (int(v) for v in crop)
         film |= {"crop_offset_x": x0, "crop_offset_y": y0, "crop_width": w, "crop_height": h}
     return {
-        "type": "perspective", "fov": fov,
-        "to_world": mi.ScalarTransform4f().look_at(origin=[0.0, 0.0, distance],
-                                                   target=[0.0, 0.0, 0.0], up=[0.0, 1.0, 0.0]),
+        "type": "perspective", "fov": CAMERA["fov_degrees"], "fov_axis": "x",
+        "to_world": mi.ScalarTransform4f().look_at(origin=list(CAMERA["origin"]),
+                                                   target=list(CAMERA["target"]),
+                                                   up=list(CAMERA["up"])),
         "film": film,
         "sampler": {"type": "independent", "sample_count": int(spp)},
     }
@@ -279,7 +282,8 @@ def scene_dict(bsdf, scene: str = "sphere-env", envmap=None, spp: int = 256,
         d["object"] = _sphere(bsdf)
     elif scene == "sphere-distant":
         d["emitter"] = {"type": "directional", "direction": list(DISTANT_LIGHT["direction"]),
-                        "irradiance": {"type": "rgb", "value": [DISTANT_LIGHT["irradiance"]] * 3}}
+                        "irradiance": {"type": "rgb",
+                                       "value": [DISTANT_LIGHT["irradiance"]] * 3}}
         d["object"] = _sphere(bsdf)
     elif scene == "knot":
         d["emitter"] = _env_emitter(envmap)
@@ -356,7 +360,7 @@ def scene_exposure(base: str, envmap=None) -> float:
     if base == "sphere-point":
         return float(np.pi / (40.0 / 37.25))
     if base == "sphere-distant":
-        return float(np.pi / 3.0)
+        return float(np.pi / DISTANT_LIGHT["irradiance"])
     return float(1.0 / max(_lum_mean(load_envmap(envmap)), 1e-12))
 
 

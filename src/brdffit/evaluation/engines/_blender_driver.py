@@ -1,0 +1,174 @@
+"""Blender side of the Blender round trip: run by the Python interpreter that has ``bpy``
+(``python _blender_driver.py JOB.json``), never imported by brdffit.
+
+The job (JSON, written by :func:`brdffit.evaluation.engines.blender.render_gltf`) names the
+glTF file, the output directory and the scene in *glTF / Mitsuba coordinates* (+Y up):
+camera origin, target, up and horizontal field of view; the directional light's direction of
+travel and irradiance. Blender is +Z up and its glTF importer maps a glTF point (x, y, z) to
+(x, −z, y); the scene is mapped the same way, so the imported mesh and the rebuilt scene
+agree.
+
+What is done, in order: an empty scene (factory settings, no startup file); the file is
+imported with Blender's own glTF importer and **its default options** (the job may ask for
+``import_unused_materials``); with no seeds, the import report is all; else the camera (its
+field of view on the sensor's width), a sun lamp (angle 0: a directional light; strength =
+irradiance in W/m², Cycles' unit) and a black world (strength 0, transparent film: the alpha
+is the coverage) are added; Cycles on the CPU renders one image per seed with a 1-pixel box
+filter, no denoising, no adaptive sampling, no clamping and no light threshold, so the
+estimate is unbiased like Mitsuba's ``direct`` integrator. The Principled BSDF's
+microfacet distribution is left as the importer set it unless the job names one
+(``"GGX"`` or ``"MULTI_GGX"``). Outputs: ``render_<seed>.npy`` (H, W, 4) float32, scene
+linear Rec.709, rows top to bottom, and ``report.json`` (Blender version, the objects and
+materials the import created and the Principled BSDF inputs of each material).
+"""
+
+import json
+import math
+import os
+import sys
+
+import bpy
+import numpy as np
+from mathutils import Matrix, Vector
+
+PRINCIPLED_INPUTS = ("Base Color", "Metallic", "Roughness", "IOR", "Specular IOR Level",
+                     "Specular Tint", "Coat Weight", "Coat Roughness", "Coat IOR",
+                     "Anisotropic", "Anisotropic Rotation")
+
+
+def to_blender(v):
+    """A glTF (+Y up) vector in Blender's frame (+Z up), as the glTF importer maps it."""
+    x, y, z = (float(c) for c in v)
+    return Vector((x, -z, y))
+
+
+def socket_value(sock):
+    v = sock.default_value
+    try:
+        return [float(c) for c in v]
+    except TypeError:
+        return float(v)
+
+
+def principled_nodes(mat):
+    if not mat.use_nodes or mat.node_tree is None:
+        return []
+    return [n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED"]
+
+
+def build_scene(job):
+    scene = bpy.context.scene
+    cam = job["camera"]
+    origin, target, up = (to_blender(cam[k]) for k in ("origin", "target", "up"))
+    forward = (target - origin).normalized()
+    right = forward.cross(up).normalized()
+    true_up = right.cross(forward)
+    # Blender's camera looks along its local −Z with +Y up
+    rot = Matrix((right, true_up, -forward)).transposed()
+    cam_data = bpy.data.cameras.new("camera")
+    cam_data.sensor_fit = "HORIZONTAL"
+    cam_data.angle = math.radians(float(cam["fov_degrees"]))
+    cam_data.clip_start, cam_data.clip_end = 0.01, 1000.0
+    cam_obj = bpy.data.objects.new("camera", cam_data)
+    cam_obj.matrix_world = Matrix.Translation(origin) @ rot.to_4x4()
+    scene.collection.objects.link(cam_obj)
+    scene.camera = cam_obj
+
+    sun = job["sun"]
+    travel = to_blender(sun["direction"]).normalized()
+    sun_data = bpy.data.lights.new("sun", type="SUN")
+    sun_data.energy = float(sun["irradiance"])
+    sun_data.angle = 0.0
+    sun_data.color = (1.0, 1.0, 1.0)
+    sun_obj = bpy.data.objects.new("sun", sun_data)
+    # a sun lamp shines along its local −Z
+    sun_obj.rotation_mode = "QUATERNION"
+    sun_obj.rotation_quaternion = travel.to_track_quat("-Z", "Y")
+    scene.collection.objects.link(sun_obj)
+
+    world = bpy.data.worlds.new("black")
+    world.use_nodes = True
+    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
+    bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+    bg.inputs["Strength"].default_value = 0.0
+    scene.world = world
+
+    res = int(job["resolution"])
+    scene.render.engine = "CYCLES"
+    scene.render.resolution_x = scene.render.resolution_y = res
+    scene.render.resolution_percentage = 100
+    scene.render.film_transparent = True
+    scene.render.threads_mode = "FIXED"
+    scene.render.threads = int(job["threads"])
+    cyc = scene.cycles
+    cyc.device = "CPU"
+    cyc.samples = int(job["spp"])
+    cyc.use_adaptive_sampling = False
+    cyc.use_denoising = False
+    cyc.pixel_filter_type = "BOX"
+    cyc.filter_width = 1.0
+    cyc.sample_clamp_direct = 0.0
+    cyc.sample_clamp_indirect = 0.0
+    cyc.light_sampling_threshold = 0.0
+    cyc.max_bounces = int(job["max_bounces"])
+    scene.view_settings.view_transform = "Standard"
+    settings = scene.render.image_settings
+    settings.file_format = "OPEN_EXR"
+    settings.color_mode = "RGBA"
+    settings.color_depth = "32"
+    settings.exr_codec = "ZIP"
+
+
+def main(job_path):
+    with open(job_path, encoding="utf-8") as fh:
+        job = json.load(fh)
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    before_objects = set(bpy.data.objects)
+    before_materials = set(bpy.data.materials)
+    result = bpy.ops.import_scene.gltf(
+        filepath=job["gltf"], import_unused_materials=bool(job["import_unused_materials"]))
+    objects = [o for o in bpy.data.objects if o not in before_objects]
+    materials = [m for m in bpy.data.materials if m not in before_materials]
+    report = {"blender": bpy.app.version_string, "import_result": sorted(result),
+              "objects": [{"name": o.name, "type": o.type,
+                           "materials": [s.material.name for s in o.material_slots
+                                         if s.material is not None]} for o in objects],
+              "materials": []}
+    for mat in materials:
+        entry = {"name": mat.name, "principled": []}
+        for node in principled_nodes(mat):
+            if job.get("distribution"):
+                node.distribution = job["distribution"]
+            entry["principled"].append(
+                {"distribution": node.distribution,
+                 "inputs": {k: socket_value(node.inputs[k]) for k in PRINCIPLED_INPUTS
+                            if k in node.inputs and not node.inputs[k].is_linked},
+                 "linked": [k for k in PRINCIPLED_INPUTS
+                            if k in node.inputs and node.inputs[k].is_linked]})
+        report["materials"].append(entry)
+    if not job["seeds"]:
+        with open(os.path.join(job["out_dir"], "report.json"), "w", encoding="utf-8") as fh:
+            json.dump(report, fh, indent=1)
+        return 0
+    build_scene(job)
+    scene = bpy.context.scene
+    out_dir = job["out_dir"]
+    for seed in job["seeds"]:
+        scene.cycles.seed = int(seed)
+        exr = os.path.join(out_dir, f"render_{int(seed)}.exr")
+        scene.render.filepath = exr
+        bpy.ops.render.render(write_still=True)
+        img = bpy.data.images.load(exr)
+        px = np.empty(img.size[0] * img.size[1] * 4, np.float32)
+        img.pixels.foreach_get(px)
+        arr = px.reshape(img.size[1], img.size[0], 4)[::-1]   # Blender's rows are bottom-up
+        np.save(os.path.join(out_dir, f"render_{int(seed)}.npy"), np.ascontiguousarray(arr))
+        bpy.data.images.remove(img)
+        os.remove(exr)
+    with open(os.path.join(out_dir, "report.json"), "w", encoding="utf-8") as fh:
+        json.dump(report, fh, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[-1]))
