@@ -42,8 +42,9 @@ D(0) = 1/(πα²), heavier GGX tails; the loss is measured):
   of the fit's F90 is ≥ 0.8 (``METAL_MIN_F90``; measured fits such as the ggx-diffuse ones
   of MERL's metallic paints reach only 0.1-0.5 at grazing, which glTF's metal would raise to
   1: 7.7-29 dB against the fit; as dielectrics with ``specularFactor`` = F90 they keep both
-  reflectances and the diffuse term), or when the fit has no diffuse term at all (tabulated
-  fits: their Fresnel table absorbs the diffuse part; a dielectric would be black);
+  reflectances and the diffuse term), or when the fit has no diffuse term at all (the
+  paper's tabulated lobe alone, ``diffuse=False``: its Fresnel table absorbs the diffuse
+  part; a dielectric would be black);
 * otherwise a **dielectric Lambert + Schlick F0**: ``metallic = 0``, ``baseColorFactor =
   ρd / κ`` (clipped to [0, 1]; κ per channel the cosine-weighted mean over direction pairs
   of the ``1 − F_d`` by which glTF weights the base, so the diffuse albedo is the fit's on
@@ -465,8 +466,8 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True,
         # a fit that separated its diffuse term: glTF's metal is affine in its base colour
         # (Schlick F = c + (1 − c)(1 − V·H)⁵), take the c whose cosine-weighted mean albedo is
         # the fit's, which also counts what glTF cannot carry (a grazing reflectance above
-        # F90 = 1, the dropped diffuse term). Fits without one (tabulated, moment GGX) keep
-        # c = F0: their Fresnel absorbs the diffuse part, and matching the albedo was not
+        # F90 = 1, the dropped diffuse term). Fits without one (a tabulated or moment GGX fit
+        # with ρd = 0) keep c = F0: their Fresnel carries all of it, and matching the albedo was not
         # better there in BRDF space (15 of 30 fits worse), with no render evidence
         target = cosine_weighted_albedo(m)
         base, wanted = base_for_albedo(with_base, target)
