@@ -629,12 +629,13 @@ def _split_diffuse(brdf: BRDF, model, info: dict, refit, merl=None):
 
     On the pairs of :func:`_diffuse_data`, ρd/π per channel is the weighted median of the
     residual ``f − f_lobe``: the constant that minimises the cosine-weighted L1 error, the
-    product's error measure (0 below :data:`DIFFUSE_MIN`). It
-    is then held by the white furnace (:func:`brdffit.furnace.hold_diffuse`). While ρd > 0,
-    the lobe is refitted on ``f − ρ/π`` (``refit(ρ)``, backscatter and Fresnel alike) and ρd
-    taken again, with ``ρ`` the last ρd plus :data:`_STEP_GAIN` times its last change (an
+    product's error measure (0 below :data:`DIFFUSE_MIN`). While ρd > 0, the lobe is
+    refitted on ``f − ρ/π`` (``refit(ρ)``, backscatter and Fresnel alike) and ρd taken
+    again, with ``ρ`` the last ρd plus :data:`_STEP_GAIN` times its last change (an
     extrapolated fixed-point step); a refit is kept while it lowers the error on those pairs
-    by more than :data:`DIFFUSE_MIN_GAIN`, at most :data:`MAX_DIFFUSE_REFITS` times.
+    by more than :data:`DIFFUSE_MIN_GAIN`, at most :data:`MAX_DIFFUSE_REFITS` times. The
+    final ρd is held by the white furnace (:func:`brdffit.furnace.hold_diffuse`; the error
+    after the hold is the last of ``errors`` when it lowered ρd).
 
     Deviation from Dupuy 2015: the paper's model has no diffuse term, its Fresnel residual
     absorbs it (§4.4). With F ≤ 1 that energy would be lost; the term keeps it and the model
@@ -648,24 +649,30 @@ def _split_diffuse(brdf: BRDF, model, info: dict, refit, merl=None):
         residual = f - f_lobe
         rho_d = np.pi * np.array([weighted_median(residual[:, c], w) for c in range(3)])
         rho_d = np.where(rho_d >= DIFFUSE_MIN, rho_d, 0.0)
-        rho_d, lowered = hold_diffuse(rho_d, [lobe]) if rho_d.any() else (rho_d, 0.0 * rho_d)
-        error = float((np.abs(residual - rho_d / np.pi) * w[:, None]).sum() / scale
-                      if scale > 0 else 0.0)
-        return rho_d, lowered, error
+        return rho_d, error_of(residual, rho_d)
 
-    rho_d, lowered, error = with_lambert(model)
+    def error_of(residual, rho_d):
+        return float((np.abs(residual - rho_d / np.pi) * w[:, None]).sum() / scale
+                     if scale > 0 else 0.0)
+
+    rho_d, error = with_lambert(model)
     errors, refits, step = [error], 0, None
     while refits < MAX_DIFFUSE_REFITS and np.any(rho_d > 0):
         target = rho_d if step is None else rho_d + step * _STEP_GAIN
         candidate, candidate_info = refit(np.maximum(target, 0.0))
-        c_rho_d, c_lowered, c_error = with_lambert(candidate)
+        c_rho_d, c_error = with_lambert(candidate)
         errors.append(c_error)
         if c_error >= error * (1.0 - DIFFUSE_MIN_GAIN):
             break
         step = c_rho_d - rho_d
-        model, info, rho_d, lowered, error = (candidate, candidate_info, c_rho_d, c_lowered,
-                                              c_error)
+        model, info, rho_d, error = candidate, candidate_info, c_rho_d, c_error
         refits += 1
+    lowered = np.zeros(3)
+    if rho_d.any():
+        rho_d, lowered = hold_diffuse(rho_d, [model])
+        if lowered.any():
+            f_lobe = np.nan_to_num(np.asarray(model.eval(wi, wo), dtype=np.float64))
+            errors.append(error_of(f - f_lobe, rho_d))
     _set_diffuse(model, rho_d)
     info["diffuse"] = {"rho_d": rho_d.tolist(), "furnace_lowering": lowered.tolist(),
                        "refits": refits, "errors": errors, "pairs": int(len(w))}
