@@ -118,7 +118,7 @@ def test_progress_inside_running_tasks_reaches_caller_and_log(tmp_path, dask_cli
     from brdffit.batch import LOG_NAME, run_batch
 
     tasks = make_tasks([("gold", "synthetic:gold-ggx")], ["npf-g-from-d", "ggx"],
-                       {"npf-g-from-d": {"max_iter": 3}})
+                       {"npf-g-from-d": {"max_iter": 3, "polish": 0}})
     events = []
     res = run_batch(tasks, tmp_path, client=dask_client, metrics=False, progress=False,
                     on_event=events.append)

@@ -183,7 +183,7 @@ def test_mitsuba_xml_of_every_model_loads_in_plain_mitsuba(tmp_path, model):
     from brdffit.fit.registry import fit_model
 
     _mi()
-    options = {"max_iter": 3} if model in ("npf-g-from-d", "npf-naive") else {}
+    options = {"max_iter": 3, "polish": 0} if model in ("npf-g-from-d", "npf-naive") else {}
     fitted, _ = fit_model(model, brdffit.synthetic("gold-ggx"), options)
     info = M.write_mitsuba_xml(fitted, tmp_path / "my scene.xml")
     assert all(os.path.isfile(f) for f in info["files"])

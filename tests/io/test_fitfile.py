@@ -82,9 +82,10 @@ def real_models():
     data = tabulate_merl_grid(s("plastic-beckmann"))
     models["fit-npf-bivariate"] = fit_npf(data=data, variant="bivariate")
     models["fit-npf-naive"] = fit_npf(data=data, variant="naive", max_iter=3)
-    models["fit-npf-g-from-d"] = fit_npf(data=data, variant="g-from-d", max_iter=3)
+    models["fit-npf-g-from-d"] = fit_npf(data=data, variant="g-from-d", max_iter=3, polish=0)
     models["fit-npf-independent-g"] = fit_npf(data=data, variant="independent-g",
-                                              starts=("ones",), max_iter=3, start_max_iter=3)
+                                              starts=("ones",), max_iter=3, start_max_iter=3,
+                                              polish=0)
     return models
 
 
