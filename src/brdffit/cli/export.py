@@ -4,8 +4,8 @@
 (:func:`brdffit.export.load_json`) or ``synthetic:NAME``. Targets (:data:`brdffit.export.TARGETS`):
 ``mitsuba`` (ready-to-render Python scene; built-in plugins or the project's plugin),
 ``mitsuba-xml`` (XML scene for a plain Mitsuba install: built-in plugins, else an RGL tensor
-file for the stock ``measured`` plugin), ``gltf``, ``materialx``, ``glsl``, ``merl``, ``rgl``,
-``json``; plus ``npf-uber`` (several NPF fits packed as the Bagher 2016 uber-texture). The
+file for the stock ``measured`` plugin), ``gltf``, ``materialx``, ``usd`` (UsdPreviewSurface +
+the OpenPBR MaterialX binding), ``glsl``, ``merl``, ``rgl``, ``json``; plus ``npf-uber`` (several NPF fits packed as the Bagher 2016 uber-texture). The
 summary (files, approximations, measured errors) is printed; ``--json`` prints it as JSON.
 A model that cannot go to the target, or an output that cannot be written, exits with status 1
 and one line naming the file (nothing partial is left behind); an unknown target or
@@ -55,18 +55,34 @@ def target_options(to: str) -> dict:
             and p.default is not p.empty}
 
 
+def _choices(to: str) -> dict:
+    """``{option: allowed values}`` of the writer's options annotated ``Literal[...]``."""
+    import typing
+
+    try:
+        hints = typing.get_type_hints(_writer(to))
+    except (NameError, TypeError):          # an annotation that does not resolve: no choices
+        return {}
+    return {k: typing.get_args(h) for k, h in hints.items()
+            if typing.get_origin(h) is typing.Literal}
+
+
 def check_options(to: str, options: dict) -> None:
     """Raise ``ValueError`` (one line) for an option the target does not know or a value of
-    the wrong type (the type of the option's default: boolean, integer, number, string)."""
+    the wrong type (the type of the option's default: boolean, integer, number, string) or,
+    for an option annotated ``Literal[...]``, not one of its values."""
     import math
 
     known = target_options(to)
+    choices = _choices(to)
     for key, val in options.items():
         if key not in known:
             raise ValueError(f"unknown option {key!r} for --to {to}; expected one of "
                              f"{', '.join(known) or '(none)'}")
         d = known[key]
-        if isinstance(d, bool):
+        if key in choices:
+            ok, want = val in choices[key], "one of " + ", ".join(map(repr, choices[key]))
+        elif isinstance(d, bool):
             ok, want = isinstance(val, bool), "true or false"
         elif isinstance(d, int):
             ok, want = isinstance(val, int) and not isinstance(val, bool), "an integer"
@@ -121,7 +137,7 @@ def register(commands) -> None:
 
 def export_cmd(fits: list[str], to: str, out: Path, option: list[str] | None = None,
                as_json: bool = False) -> None:
-    """Export a fit to Mitsuba 3, glTF, MaterialX, GLSL or JSON."""
+    """Export a fit to Mitsuba 3, glTF, MaterialX, USD, GLSL or JSON."""
     from ..export import TARGETS
     from ..export._common import shown
     from . import usage_error

@@ -13,6 +13,8 @@ One module per target (conventions of every target in ``docs/conventions.md``):
   the loss of fidelity);
 * :mod:`.materialx` – MaterialX ``open_pbr_surface`` documents (``.mtlx``, validated by
   MaterialX itself) and :class:`~.materialx.OpenPBRBRDF` to measure their loss;
+* :mod:`.usd` – USD (``.usda``): a ``UsdPreviewSurface`` material with the OpenPBR MaterialX
+  binding on a preview sphere, checked by USD's validators;
 * :mod:`.glsl` – GLSL functions (GGX/Beckmann/SGD with the Eq. 9 G1, tabulated and NPF
   models from textures), the NPF "uber-texture" (Bagher 2016 Fig. 16), and the NumPy
   translation of the same code (:mod:`.glsl_cpu`);
@@ -52,6 +54,7 @@ TARGETS = {
     "mitsuba-xml": (".mitsuba", "write_mitsuba_xml"),
     "gltf": (".gltf", "write_gltf"),
     "materialx": (".materialx", "write_materialx"),
+    "usd": (".usd", "write_usd"),
     "glsl": (".glsl", "write_glsl"),
     "merl": (".merl", "export_merl"),
     "rgl": (".rgl", "export_rgl"),
@@ -61,7 +64,7 @@ TARGETS = {
 
 #: target name -> the file-name endings of its main output (``brdffit export -o``)
 SUFFIXES = {"json": (".json",), "mitsuba": (".py",), "mitsuba-xml": (".xml",),
-            "gltf": (".gltf",), "materialx": (".mtlx",), "glsl": (".glsl",),
+            "gltf": (".gltf",), "materialx": (".mtlx",), "usd": (".usda",), "glsl": (".glsl",),
             "merl": (".binary",), "rgl": (".bsdf",), "npf-uber": (".npy",)}
 
 
