@@ -794,6 +794,10 @@ def _log_params(st: MFState, g_from_d: bool) -> np.ndarray:
                           + [np.ones((3, 1)), st.rho_s[:, None]], axis=1)
 
 
+#: The largest damping of :func:`polish_lm` (a channel that fails there is done).
+LAM_MAX = 1e30
+
+
 def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
               g_from_d=False, bound: float | None = None, newton: bool | None = None,
               bounded: tuple[str, ...] | None = None, callback=None) -> RunResult:
@@ -904,8 +908,11 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
             room_up = np.maximum(start + log_bound - log_p, 0.0)
         room_down[:, -2], room_up[:, -2] = np.maximum(st.rho_d, 0.0), np.inf   # ρd ≥ 0, additive
         free &= ~(((room_down <= 1e-12) & (g > 0)) | ((room_up <= 1e-12) & (g < 0)))
-        todo = np.ones(3, bool)
-        for _attempt in range(8):                 # raise the damping until the step helps
+        # a channel whose step failed at the largest damping is done: its parameters, and so
+        # its next step, can no longer change (channels are independent), and trying it again
+        # would only re-run the passes over the samples for the others
+        todo = lam < LAM_MAX
+        for _attempt in range(8 if todo.any() else 0):  # raise the damping until it helps
             step = np.zeros((3, n))
             for c in np.flatnonzero(todo):
                 damp = np.diag(lam[c] * damping_scale[c] + 1e-300)
@@ -944,7 +951,7 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
             S = tuple(np.where(acc[:, None], x, y) for x, y in zip(Sc, S))
             E = np.where(acc, Ec, E)
             lam = np.where(acc, np.maximum(lam / 10.0, 1e-12),
-                           np.where(todo, np.minimum(lam * 100.0, 1e30), lam))
+                           np.where(todo, np.minimum(lam * 100.0, LAM_MAX), lam))
             todo &= ~acc
             if not np.any(todo):
                 break
