@@ -37,6 +37,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT))  # tests.support: the test kit
 os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
 
 NBRDF = ROOT.parent / "shared" / "data" / "nbrdf" / "merl_nbrdf.zip"
@@ -64,7 +65,8 @@ def _pairs(n=20000, seed=0):
 def bench_material(name, brdf, args) -> dict:
     import brdffit
     from brdffit.evaluation.metrics import brdf_metrics
-    from brdffit.export import glsl, glsl_cpu, gltf, mitsuba, rgl
+    from brdffit.export import glsl, gltf, mitsuba, rgl
+    from tests.support import glsl_cpu
     from brdffit.microfacet.conversions import to_ggx
 
     out: dict = {"material": name, "timings": {}}

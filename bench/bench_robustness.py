@@ -3,10 +3,10 @@
 Three parts, each run for real on this machine (nothing is counted that did not run):
 
 * **bad inputs through the CLI**: every malformed measured file of
-  :mod:`brdffit.testing.malformed_readers` (``brdffit fit SPEC --model ggx -o OUT/x.npz``) and
-  every malformed fit file of :mod:`brdffit.testing.malformed_fits` (``brdffit export FIT
+  :mod:`tests.support.malformed_readers` (``brdffit fit SPEC --model ggx -o OUT/x.npz``) and
+  every malformed fit file of :mod:`tests.support.malformed_fits` (``brdffit export FIT
   --to json -o OUT/x.json``), each in a fresh process under a 1 GiB address-space limit
-  (:func:`brdffit.testing.hostile.run_limited`). Clean = exit 1, one line on stderr naming
+  (:func:`tests.support.hostile.run_limited`). Clean = exit 1, one line on stderr naming
   the file, no traceback, nothing left in OUT, under 5 s and 1 GiB;
 * **hostile names**: exports to every target with output names carrying code/markup payloads;
   clean = the export succeeds, the generated file parses (Python ``compile``, XML, JSON) and
@@ -47,9 +47,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT))  # tests.support: the test kit
 
-from brdffit.testing import malformed_fits, malformed_readers  # noqa: E402
-from brdffit.testing.hostile import MAX_SECONDS, MEMORY_LIMIT, run_limited  # noqa: E402
+from tests.support import malformed_fits, malformed_readers  # noqa: E402
+from tests.support.hostile import MAX_SECONDS, MEMORY_LIMIT, run_limited  # noqa: E402
 
 PAYLOADS = ['x");open("INJECTED","w").write("pwned");("', "a'''b\"\"\"c", "line\nbreak",
             "</script><script>alert(1)</script>", "]]><!--", "*/ #version 100 //", "{{7*7}}",

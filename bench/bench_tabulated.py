@@ -45,6 +45,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
+sys.path.insert(0, str(ROOT))  # tests.support: the test kit
 
 from brdffit._atomic import atomic_write  # noqa: E402
 from brdffit.fit.tabulated import (backscatter, fit_tabulated, luminance,  # noqa: E402
@@ -57,8 +58,8 @@ OUT = ROOT / "bench" / "results" / "tabulated.json"
 
 
 # ------------------------------------------------------------------------------ references
-from brdffit.testing.closed_forms import backscatter_eq12 as eq12  # noqa: E402
-from brdffit.testing.closed_forms import directions as dirs  # noqa: E402
+from tests.support.closed_forms import backscatter_eq12 as eq12  # noqa: E402
+from tests.support.closed_forms import directions as dirs  # noqa: E402
 
 
 # ------------------------------------------------------------------------------ sections

@@ -10,7 +10,7 @@ import pytest
 import brdffit
 from brdffit.errors import ExportError
 from brdffit.export import glsl as GL
-from brdffit.export import glsl_cpu as C
+from tests.support import glsl_cpu as C
 from brdffit.microfacet import GeneralizedSchlickFresnel, MicrofacetBRDF
 from brdffit.microfacet.npf_model import NPFMicrofacetBRDF, smith_g_from_d
 from brdffit.microfacet.sgd import SGD, SGDApproxG1

@@ -15,11 +15,11 @@ from brdffit.fit.tabulated import fit_ggx, fit_tabulated, solve_slope_pdf
 from brdffit.synthetic import synthetic
 from brdffit.microfacet import GGX, Beckmann, MicrofacetBRDF, SchlickFresnel
 from brdffit.microfacet.tabulated import TabulatedSlopeDistribution, radial_rule
-from brdffit.testing.closed_forms import backscatter_eq12, beckmann_lambda, beckmann_P
-from brdffit.testing.closed_forms import directions as dirs
+from tests.support.closed_forms import backscatter_eq12, beckmann_lambda, beckmann_P
+from tests.support.closed_forms import directions as dirs
 
 
-# -- independent closed forms (brdffit.testing.closed_forms) ----------------------------------
+# -- independent closed forms (tests.support.closed_forms) ----------------------------------
 def eq12_backscatter(theta, a):
     """Beckmann backscattering of Dupuy 2015 Eq. 12 with F0 = 1: D G1 / (4 cos²θ)."""
     return backscatter_eq12(theta, a, "beckmann")

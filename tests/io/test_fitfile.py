@@ -15,8 +15,8 @@ import pytest
 import brdffit
 from brdffit.errors import BRDFFormatError
 from brdffit.io.fitfile import load_fit, read_fit_header, save_fit
-from brdffit.testing import malformed_fits as mf
-from brdffit.testing.hostile import run_limited
+from tests.support import malformed_fits as mf
+from tests.support.hostile import run_limited
 
 
 def _raw(path):

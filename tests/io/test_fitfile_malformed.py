@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 
 from brdffit.errors import BRDFFormatError
 from brdffit.io.fitfile import load_fit
-from brdffit.testing import malformed_fits as mf
-from brdffit.testing.hostile import run_limited
+from tests.support import malformed_fits as mf
+from tests.support.hostile import run_limited
 
 CASES = mf.cases()
 

@@ -1,7 +1,7 @@
 """Malformed measured-data files (issue 12): every reader refuses every generated bad input with
 one ``BRDFFormatError`` naming the file, what was expected and what was found.
 
-* every case of :mod:`brdffit.testing.malformed_readers` in process (``brdffit.io.load``), with
+* every case of :mod:`tests.support.malformed_readers` in process (``brdffit.io.load``), with
   a time limit and a limit on what the process allocates (tracemalloc);
 * a representative subset through the CLI (``brdffit info`` and ``brdffit fit --model ggx -o``)
   under a 1 GiB address-space limit: exit 1, one line naming the file, no output left, < 5 s;
@@ -22,8 +22,8 @@ from hypothesis import strategies as st
 
 from brdffit.errors import BRDFFormatError
 from brdffit.io import load
-from brdffit.testing import malformed_readers as mr
-from brdffit.testing.hostile import MAX_SECONDS, run_limited
+from tests.support import malformed_readers as mr
+from tests.support.hostile import MAX_SECONDS, run_limited
 
 CASES = mr.cases()
 CLI_CASES = [c for c in CASES if c.cli]

@@ -228,7 +228,7 @@ def test_filtered_chunked_weights_decode_like_hdf5(tmp_path):
 def test_collection_member_names_windows_separators_and_unsafe_ones(tmp_path):
     """Backslashes separate folders (zips written on Windows); absolute, ``..`` and
     control-character names are never listed nor read."""
-    from brdffit.testing.malformed_readers import network_h5_bytes, write_collection
+    from tests.support.malformed_readers import network_h5_bytes, write_collection
 
     w = _random_weights(5)
     net = network_h5_bytes(w)

@@ -8,7 +8,7 @@ import pytest
 from brdffit.io.fitfile import load_fit, save_fit
 from brdffit.microfacet import GGX, Beckmann, MicrofacetBRDF, SchlickFresnel
 from brdffit.microfacet.per_channel import PerChannelBRDF
-from brdffit.testing.closed_forms import directions
+from tests.support.closed_forms import directions
 
 
 def _models():

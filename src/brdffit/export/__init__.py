@@ -16,8 +16,9 @@ One module per target (conventions of every target in ``docs/conventions.md``):
 * :mod:`.usd` – USD (``.usda``): a ``UsdPreviewSurface`` material with the OpenPBR MaterialX
   binding on a preview sphere, checked by USD's validators;
 * :mod:`.glsl` – GLSL functions (GGX/Beckmann/SGD with the Eq. 9 G1, tabulated and NPF
-  models from textures), the NPF "uber-texture" (Bagher 2016 Fig. 16), and the NumPy
-  translation of the same code (:mod:`.glsl_cpu`);
+  models from textures) and the NPF "uber-texture" (Bagher 2016 Fig. 16); its NumPy
+  translation, which the tests compare it with, is in the test kit
+  (``tests/support/glsl_cpu.py``);
 * :mod:`.merl` / :mod:`.rgl` – resampling to MERL ``.binary`` and RGL-style tensor files
   (``mitsuba-xml`` writes the latter for Mitsuba's ``measured`` plugin when no built-in
   plugin maps the model);

@@ -26,8 +26,8 @@ A :class:`Case` has
 
 Use (tests, ``bench/bench_robustness.py``)::
 
-    from brdffit.testing.hostile import run_limited
-    from brdffit.testing.malformed_readers import cases
+    from tests.support.hostile import run_limited
+    from tests.support.malformed_readers import cases
 
     for case in cases():
         folder = Path(tempfile.mkdtemp())
@@ -109,7 +109,7 @@ def valid_merl_bytes() -> bytes:
     :func:`brdffit.io.write_merl`."""
     import tempfile
 
-    from ..io import write_merl
+    from brdffit.io import write_merl
 
     rng = np.random.default_rng(12)
     values = rng.random((90, 90, 180, 3)) * np.array([0.5, 0.4, 0.3])
@@ -123,7 +123,7 @@ def valid_utia_bytes() -> bytes:
     """A valid UTIA ``.bin`` file (random positive table), written by :func:`brdffit.io.write_utia`."""
     import tempfile
 
-    from ..io import write_utia
+    from brdffit.io import write_utia
 
     rng = np.random.default_rng(13)
     values = rng.random((6, 48, 6, 48, 3))
@@ -134,8 +134,8 @@ def valid_utia_bytes() -> bytes:
 
 @functools.lru_cache(maxsize=1)
 def _rgl_fields() -> dict:
-    from ..export.rgl import rgl_fields
-    from ..synthetic import synthetic
+    from brdffit.export.rgl import rgl_fields
+    from brdffit.synthetic import synthetic
 
     return rgl_fields(synthetic("gold-ggx"), n_theta=4, n_ndf=16, vndf_res=8, rgb_res=8)
 
@@ -143,7 +143,7 @@ def _rgl_fields() -> dict:
 def _tensor_bytes(fields: dict) -> bytes:
     import tempfile
 
-    from ..io.tensorfile import write_tensor_file
+    from brdffit.io.tensorfile import write_tensor_file
 
     with tempfile.TemporaryDirectory() as d:
         return write_tensor_file(Path(d) / "v.bsdf", fields).read_bytes()
