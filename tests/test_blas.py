@@ -35,6 +35,26 @@ def test_registry_fitters_run_with_one_blas_thread(monkeypatch):
     assert seen and seen[0] and all(n == 1 for n in seen[0]), seen   # a BLAS was found
 
 
+@pytest.mark.parametrize("fitter", ["fit_tabulated", "fit_ggx_diffuse", "fit_sgd"])
+def test_public_fitting_functions_run_with_one_blas_thread(fitter, monkeypatch):
+    """Called directly from Python (not through the registry), as the README shows."""
+    import brdffit
+    from brdffit.synthetic import synthetic
+
+    reference = synthetic("gold-ggx")
+    seen = []
+
+    class Spy(type(reference)):
+        def eval(self, wi, wo):
+            seen.append(_blas_threads())
+            return super().eval(wi, wo)
+
+    reference.__class__ = Spy
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "2")          # not the CLI's environment
+    getattr(brdffit, fitter)(reference)
+    assert seen and all(t and all(n == 1 for n in t) for t in seen), seen[:3]
+
+
 def test_cli_environment_is_one_thread_unless_the_user_chose():
     code = ("import os, sys\n"
             "from brdffit._blas import single_thread_env, ENV_VARS\n"

@@ -11,7 +11,11 @@ BLAS.
   ``OPENBLAS_NUM_THREADS`` (and the MKL/BLIS/Accelerate equivalents) to 1 unless the user
   set them; batch workers inherit it.
 * :func:`single_blas_thread` — the library: ``threadpoolctl`` limits BLAS to one thread
-  for the block (every fitter reached through :mod:`brdffit.fit.registry` runs in one).
+  for the block. The public fitting functions (``fit_tabulated``, ``fit_analytic_diffuse``,
+  ``fit_two_slice``, ``fit_cook_torrance``, ``fit_npf`` and the functions built on them),
+  every fitter of :mod:`brdffit.fit.registry` and :func:`brdffit.export.export` run in one
+  (a ggx-diffuse fit of ``synthetic:gold-ggx`` from Python: 2.9 → 0.8 s CPU on the 2-core
+  machine).
 """
 
 from __future__ import annotations

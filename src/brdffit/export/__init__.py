@@ -34,6 +34,7 @@ from __future__ import annotations
 from importlib import import_module
 from pathlib import Path
 
+from .._blas import with_single_blas_thread
 from ..errors import BRDFError, ExportError
 
 __all__ = ["export", "report_exports", "check_model", "TARGETS", "SUFFIXES", "load_json", "ExportError", "load_sgd_table", "load_npf_table",
@@ -69,13 +70,15 @@ SUFFIXES = {"json": (".json",), "mitsuba": (".py",), "mitsuba-xml": (".xml",),
             "merl": (".binary",), "rgl": (".bsdf",), "npf-uber": (".npy",)}
 
 
+@with_single_blas_thread
 def export(model, to: str, path, **options) -> dict:
     """Write ``model`` in the target format ``to`` at ``path``; returns a summary dict
     (files written, approximations made and their measured error where applicable).
 
     Raises :class:`~brdffit.errors.ExportError` when the model cannot go to the target, and
     when an output cannot be written: one line naming the file (what was expected, what was
-    found); a failed export leaves no partial output (see :mod:`._common`).
+    found); a failed export leaves no partial output (see :mod:`._common`). Runs with one BLAS
+    thread (:mod:`brdffit._blas`: the mappings' small least-squares problems).
     """
     from ._common import check_output_path
 

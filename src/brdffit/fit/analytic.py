@@ -126,6 +126,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy import optimize
 
+from .._blas import with_single_blas_thread
 from ..errors import FitError
 from ..furnace import hold_diffuse
 from ..geometry import half_diff_to_io
@@ -1065,6 +1066,7 @@ def _moment_start(brdf, kind: str, anisotropic: bool):
         return None
 
 
+@with_single_blas_thread
 def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool | None = None,
                          fresnel: str = "auto", f90: str = "free", starts: int = 3,
                          moments: bool = True, theta_d_stride: int | None = None,

@@ -116,6 +116,7 @@ import time
 import numpy as np
 from scipy import optimize, special
 
+from .._blas import with_single_blas_thread
 from ..errors import FitError
 from ..geometry import slope_to_normal
 from ..grid import merl_node_values, merl_phi_d, merl_theta_d, merl_theta_h
@@ -881,6 +882,7 @@ def _refine_full(kind: str, data: dict, c: int, cand: dict, max_nfev: int = 40) 
             "source": cand.get("source", "slice") + "+refined", "run": run}
 
 
+@with_single_blas_thread
 def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
                   starts: int = 3, grid: tuple[int, int] = (18, 8), g1_approximation: bool = True,
                   selection: str = "full", linear: str = "full", bounded: bool = True,
@@ -1202,6 +1204,7 @@ def _full_data(brdf, theta_d_stride: int, phi_stride: int):
             "co": wo[..., 2][keep], "w": w[keep], "m": v[keep], "ok": ok[keep]}
 
 
+@with_single_blas_thread
 def fit_cook_torrance(brdf, distribution: str = "beckmann", *, theta_d_stride: int = 4,
                       phi_stride: int = 15, starts: int = 2,
                       name: str | None = None) -> PerChannelMicrofacetBRDF:

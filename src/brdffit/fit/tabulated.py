@@ -50,6 +50,7 @@ import time
 
 import numpy as np
 
+from .._blas import with_single_blas_thread
 from ..brdf import BRDF, IsotropicBRDF, cosine_pairs, measured_mask
 from ..errors import FitError
 from ..furnace import hold_diffuse
@@ -679,6 +680,7 @@ def _split_diffuse(brdf: BRDF, model, info: dict, refit, merl=None):
     return model, info
 
 
+@with_single_blas_thread
 def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
                   tol: float | None = None,
                   anisotropic: bool | None = None, per_channel: bool = False, n_phi: int = 90,

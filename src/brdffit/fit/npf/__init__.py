@@ -71,6 +71,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
+from ..._blas import with_single_blas_thread
 from ...brdf import BRDF
 from ...errors import FitError
 from ...losses.objective import ObjectiveOptions, prepare_objective
@@ -235,6 +236,7 @@ def _n_threads() -> int:
     return len(os.sched_getaffinity(0))
 
 
+@with_single_blas_thread
 def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
             compressive: bool = True, restrict_deg: float | None = None,
             p: float = 1.4, max_theta_io_deg: float = 89.0,
