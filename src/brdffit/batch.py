@@ -401,7 +401,7 @@ def _load_reference(spec: str):
     tasks of one material (its models are submitted one after the other); with its MERL-grid
     tabulation memoised (:func:`brdffit.grid.tabulate_merl_grid`) the fits and metrics of a
     material share both. Two entries: the material of each of two interleaved task streams."""
-    from .io import load
+    from .loading import load
 
     return load(spec)
 
@@ -511,7 +511,7 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
     from .evaluation.metrics import BRDFMetrics
     from .evaluation.report import write_material_page, write_result
     from .export import report_exports
-    from .io import load
+    from .loading import load
 
     out = Path(out_dir)
     record = _base_record(task)

@@ -18,7 +18,7 @@ _OUTPUTS = {".binary": "merl", ".bin": "utia"}
 
 def convert(spec, out) -> dict:
     """Load ``spec`` and write it to ``out`` (format from the extension); return a summary."""
-    from ..io import load
+    from ..loading import load
 
     from .._atomic import WRITE_THROUGH, destination_kind
 

@@ -1,6 +1,6 @@
 """``brdffit fit INPUT[:MATERIAL] --model NAME [-o OUT] [--iterations N] [--json]``.
 
-Loads the input with :func:`brdffit.io.load`, fits it with the model registered under
+Loads the input with :func:`brdffit.load`, fits it with the model registered under
 ``NAME`` in :mod:`brdffit.fit.registry` (``brdffit models`` lists them) and prints a labelled
 summary: the slope scales (αx, αy, ρ) and glTF roughness √α, F0 and the Lambertian albedo ρd
 per channel (:func:`brdffit.fit.registry.figures`), the fit's error against its input
@@ -289,7 +289,7 @@ def run_fit(spec: str, model: str = DEFAULT_MODEL, out: Path | None = None,
     ``error=False``), ``time_s`` (the fit), ``timings_s`` (load, fit, save, error),
     ``output`` (``None`` when not saved), and the model's own summary under ``details``.
     """
-    from ..io import load
+    from ..loading import load
     from ..io._checksum import source_checksum
 
     timings: dict[str, float] = {}

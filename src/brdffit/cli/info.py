@@ -178,7 +178,8 @@ def register(commands) -> None:
 def info_cmd(spec: str, as_json: bool = False, albedo_samples: int = 65536) -> None:
     """Format, sample counts, value range and albedo of a BRDF file."""
     from ..errors import printable
-    from ..io import load, resolve_spec
+    from ..io import resolve_spec
+    from ..loading import load
     from ..io.nbrdf import list_materials
 
     kind, path, member = resolve_spec(spec)

@@ -57,7 +57,7 @@ def measure(rows: list[dict], spec: str, say=lambda msg: None) -> list[dict]:
     from pathlib import Path
 
     from ..fit import registry
-    from ..io import load
+    from ..loading import load
     from ..io.fitfile import save_fit
     from .fit import quick_error
 

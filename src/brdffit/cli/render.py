@@ -1,6 +1,6 @@
 """``brdffit render INPUT_OR_FIT -o image.exr|png``: render one BRDF with Mitsuba 3.
 
-INPUT is anything :func:`brdffit.io.load` reads (MERL, RGL, UTIA, Neural-BRDF
+INPUT is anything :func:`brdffit.load` reads (MERL, RGL, UTIA, Neural-BRDF
 ``collection.zip:material``, ``synthetic:NAME``) or a fit file written by
 :func:`brdffit.io.fitfile.save_fit`. ``.exr`` output is linear RGBA (alpha = coverage);
 ``.png`` is tone-mapped with Bagher 2016 §5 (``--exposure auto`` by default: see
@@ -18,13 +18,13 @@ __all__ = ["register", "render_cmd", "load_brdf"]
 
 def load_brdf(spec: str):
     """A fit file (``.npz`` with a brdffit header) via ``load_fit``, anything else via
-    ``brdffit.io.load``."""
+    ``brdffit.load``."""
     from ..io.fitfile import is_fit_file, load_fit
 
     p = Path(spec)
     if p.suffix.lower() == ".npz" and p.is_file() and is_fit_file(p):
         return load_fit(p)
-    from ..io import load
+    from ..loading import load
 
     return load(spec)
 
@@ -35,7 +35,7 @@ def register(commands) -> None:
 
     cmd = add_command(commands, "render", render_cmd)
     cmd.add_argument("spec", metavar="INPUT_OR_FIT",
-                     help="BRDF file/spec (io.load) or a fit .npz.")
+                     help="BRDF file/spec (brdffit.load) or a fit .npz.")
     cmd.add_argument("-o", "--output", type=path, required=True, metavar="IMAGE",
                      help="Output image (.exr or .png).")
     cmd.add_argument("--scene", default="sphere-env", metavar="SCENE",

@@ -63,7 +63,7 @@ DEFAULT_RESOLUTION = 256
 # inputs
 # ------------------------------------------------------------------------------------------
 def resolve_reference(source, material: str | None = None):
-    """A reference BRDF: a BRDF object as is, else :func:`brdffit.io.load` of the spec (a file,
+    """A reference BRDF: a BRDF object as is, else :func:`brdffit.load` of the spec (a file,
     a fit file, ``archive.zip:member``, ``synthetic:NAME``; ``material`` is appended as
     ``:material``)."""
     if hasattr(source, "eval"):
@@ -71,7 +71,7 @@ def resolve_reference(source, material: str | None = None):
     spec = str(source)
     if material:
         spec = f"{spec}:{material}"
-    from ..io import load
+    from ..loading import load
 
     return load(spec)
 

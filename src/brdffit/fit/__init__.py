@@ -105,7 +105,7 @@ def fit(brdf: BRDF | str, model: str = "ggx-diffuse", **options) -> BRDF:
 
     options = check_options(model, options)
     if isinstance(brdf, str):
-        from ..io import load
+        from ..loading import load
 
         brdf = load(brdf)
     return _fit(model, brdf, options)

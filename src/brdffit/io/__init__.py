@@ -12,7 +12,8 @@ UTIA ``.bin``       :func:`read_utia` / :func:`write_utia`       :class:`~.utia.
 fit files ``.npz``  :func:`save_fit` / :func:`load_fit`          the fitted model
 ==================  ==========================================  ===========================
 
-:func:`load` accepts any of these paths, ``collection.zip:material`` and ``synthetic:NAME``.
+:func:`load` accepts any of these paths and ``collection.zip:material``; ``synthetic:NAME``
+is read by :func:`brdffit.load` (:mod:`brdffit.loading`), above the readers.
 Submodules are imported lazily so that ``import brdffit.io`` stays cheap.
 """
 
@@ -187,28 +188,16 @@ def load(spec: str | os.PathLike, **options) -> BRDF:
       ``.npz`` (brdffit fit file); unknown extensions are recognised by content;
     * ``collection.zip:material`` (Neural-BRDF collection; the zip path may be relative,
       absolute, or a bare file name found on :func:`data_search_path`);
-    * ``synthetic:NAME`` (a built-in material of :func:`brdffit.synthetic.synthetic`).
+    ``synthetic:NAME`` raises :class:`~brdffit.errors.BRDFFormatError` here: the synthetic
+    materials build models, a layer above the readers; :func:`brdffit.load` reads them.
 
     Keyword ``options`` go to the reader (e.g. ``interpolation="nearest"`` for MERL,
     ``precision="float64"`` for Neural-BRDF).
     """
     kind, path, member = resolve_spec(spec)
-    if kind == "synthetic":
-        try:
-            from ..synthetic import synthetic
-        except ModuleNotFoundError as exc:  # pragma: no cover  (module written separately)
-            if exc.name != f"{__package__.rpartition('.')[0]}.synthetic":
-                raise
-            raise BRDFFormatError(spec, "expected a synthetic material, found no "
-                                        "brdffit.synthetic module in this installation") from None
-        from ..synthetic import list_synthetic
-
-        known = list_synthetic()
-        if member not in known:
-            raise BRDFFormatError(os.fspath(spec), f"expected a synthetic material "
-                                                   f"({', '.join(known)}), found none named "
-                                                   f"{member!r}")
-        return synthetic(member, **options)
+    if kind == "synthetic":  # built by brdffit.synthetic, a layer above the readers
+        raise BRDFFormatError(os.fspath(spec), "expected a file spec, found a synthetic "
+                                               "material: brdffit.load reads synthetic:NAME")
     if kind == "merl":
         from .merl import read_merl
 

@@ -122,7 +122,7 @@ def _resolve_input(brdf, data):
         values, valid = data
         return np.asarray(values, dtype=np.float64), valid, None
     if isinstance(brdf, str):
-        from ...io import load
+        from ...loading import load
 
         brdf = load(brdf)
     values, valid = tabulate_merl_grid(brdf)
