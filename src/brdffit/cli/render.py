@@ -11,7 +11,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import check_render_size, output_file, usage_error
+from . import (MAX_RESOLUTION, MAX_SEED, MAX_SPP, add_command, between, check_render_size,
+               output_file, path, positive, positive_or, usage_error)
+from ..errors import BRDFError, printable
 
 __all__ = ["register", "render_cmd", "load_brdf"]
 
@@ -30,9 +32,6 @@ def load_brdf(spec: str):
 
 
 def register(commands) -> None:
-    from . import (MAX_RESOLUTION, MAX_SEED, MAX_SPP, add_command, between, path, positive,
-                   positive_or)
-
     cmd = add_command(commands, "render", render_cmd)
     cmd.add_argument("spec", metavar="INPUT_OR_FIT",
                      help="BRDF file/spec (brdffit.load) or a fit .npz.")
@@ -72,7 +71,6 @@ def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str |
     import numpy as np
 
     from .._atomic import WRITE_THROUGH
-    from ..errors import BRDFError
     from ..evaluation.imageio import write_exr, write_png
     from ..evaluation.render import Renderer
     from ..evaluation.render.scenes import SCENES
@@ -107,8 +105,6 @@ def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str |
     else:
         rgb = tonemap(res.image, expo, gamma, mask=res.mask)
         write_png(output, np.concatenate([rgb, np.clip(res.alpha, 0, 1)[..., None]], -1))
-    from ..errors import printable
-
     print(printable(f"{output}: {scene} {resolution}x{resolution} {spp} spp, evaluator "
                     f"{res.info['evaluator']} ({res.info['path']}), set-up "
                     f"{r.setup_seconds:.2f} s, render {res.seconds:.2f} s"))

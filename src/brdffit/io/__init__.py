@@ -44,14 +44,23 @@ _LAZY = {
     "save_fit": ".fitfile", "load_fit": ".fitfile",
 }
 
+#: Format name → the reader :func:`load` calls (imported on first use, through ``_LAZY``).
+_READERS = {"merl": "read_merl", "nbrdf": "read_nbrdf", "rgl": "read_rgl", "utia": "read_utia",
+            "fit": "load_fit"}
+
 #: Extension → format name understood by :func:`load`.
 SUPPORTED_FORMATS = {".binary": "merl", ".h5": "nbrdf", ".zip": "nbrdf-collection",
                      ".bsdf": "rgl", ".bin": "utia", ".npz": "fit"}
 
 
+def _lazy(name: str):
+    """The public name ``name`` of a reader module, which is imported on first use."""
+    return getattr(import_module(_LAZY[name], __name__), name)
+
+
 def __getattr__(name):
     if name in _LAZY:
-        return getattr(import_module(_LAZY[name], __name__), name)
+        return _lazy(name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -198,33 +207,13 @@ def load(spec: str | os.PathLike, **options) -> BRDF:
     if kind == "synthetic":  # built by brdffit.synthetic, a layer above the readers
         raise BRDFFormatError(os.fspath(spec), "expected a file spec, found a synthetic "
                                                "material: brdffit.load reads synthetic:NAME")
-    if kind == "merl":
-        from .merl import read_merl
-
-        return read_merl(path, **options)
-    if kind == "nbrdf":
-        from .nbrdf import read_nbrdf
-
-        return read_nbrdf(path, **options)
     if kind == "nbrdf-collection":
-        from .nbrdf import list_materials, read_nbrdf_collection
-
         if not member:
-            names = list_materials(path)
+            names = _lazy("list_materials")(path)
             shown = ", ".join(names[:10]) + (", ..." if len(names) > 10 else "")
             raise BRDFFormatError(path, f"expected collection.zip:material, found no material; "
                                         f"{len(names)} materials: {shown}")
-        return read_nbrdf_collection(path, member, **options)
-    if kind == "rgl":
-        from .rgl import read_rgl
-
-        return read_rgl(path, **options)
-    if kind == "utia":
-        from .utia import read_utia
-
-        return read_utia(path, **options)
-    if kind == "fit":
-        from .fitfile import load_fit
-
-        return load_fit(path, **options)
+        return _lazy("read_nbrdf_collection")(path, member, **options)
+    if kind in _READERS:  # the reader's module is imported now, not by `import brdffit.io`
+        return _lazy(_READERS[kind])(path, **options)
     raise BRDFFormatError(path, f"unsupported format {kind!r}")  # pragma: no cover

@@ -46,6 +46,7 @@ __all__ = ["NBRDF", "read_nbrdf", "read_nbrdf_collection", "list_materials"]
 _ACTIVATIONS = ("relu", "linear")
 
 from .._jit import lazy_numba
+from .merl import fast_half_diff
 
 _numba = lazy_numba()  # Numba imported on the first compiled call (brdffit._jit)
 
@@ -188,8 +189,6 @@ class NBRDF(IsotropicBRDF):
 
     def eval(self, wi, wo) -> np.ndarray:
         """f_r(wi, wo) (Rusinkiewicz conversion compiled when numba is available)."""
-        from .merl import fast_half_diff
-
         th, td, pd, above = fast_half_diff(wi, wo)
         return np.where(above[..., None], self.eval_hd(th, td, pd), 0.0)
 
