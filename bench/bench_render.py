@@ -270,7 +270,7 @@ def main(argv=None) -> int:
         materials = [m for m in DEFAULT_MATERIALS if Path(m.split(".zip:")[0] + (".zip" if ".zip:" in m else "")).exists()]
         if args.quick:
             materials = materials[:1]
-    from brdffit.io import load
+    from brdffit import load
 
     results = {"settings": {"scene": args.scene, "envmap": args.envmap, "spp": args.spp,
                             "resolution": args.resolution},

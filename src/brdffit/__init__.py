@@ -30,7 +30,7 @@ def __getattr__(name):  # lazy public API: keeps `import brdffit` fast and cycle
 
     lazy = {
         "BRDF": ".brdf", "IsotropicBRDF": ".brdf",
-        "load": ".io", "resample_to_merl": ".io.merl", "write_merl": ".io.merl",
+        "load": ".loading", "resample_to_merl": ".io.merl", "write_merl": ".io.merl",
         "MicrofacetBRDF": ".microfacet", "Beckmann": ".microfacet", "GGX": ".microfacet",
         "SGD": ".microfacet", "SchlickFresnel": ".microfacet",
         "GeneralizedSchlickFresnel": ".microfacet", "DielectricFresnel": ".microfacet",

@@ -35,6 +35,7 @@ import threading
 import time
 
 from .errors import BRDFError
+from .progress import listening, report
 
 __all__ = ["IsolatedProcess", "ChildCrashed", "NotSendable", "crash_text"]
 
@@ -173,8 +174,6 @@ class IsolatedProcess:
             return self._call(fn, args, kwargs)
 
     def _call(self, fn, args, kwargs):
-        from .progress import report
-
         proc = self._proc
         try:
             data = pickle.dumps(("call", fn, args, kwargs), protocol=pickle.HIGHEST_PROTOCOL)
@@ -212,8 +211,6 @@ class IsolatedProcess:
 
 # -- the child ---------------------------------------------------------------------------------
 def _child_main() -> int:
-    from .progress import listening
-
     out = os.fdopen(os.dup(1), "wb")
     os.dup2(2, 1)  # anything printed goes to stderr, never into the pipe
     sys.stdout = sys.stderr

@@ -74,9 +74,23 @@ from typing import Any, Callable, Iterable, Sequence
 from ._atomic import atomic_write
 from ._json import json_default
 from ._malloc import WORKER_MALLOC_ENV  # the local workers' malloc settings
-from .errors import BRDFError
-from .paths import slug
-from .progress import describe
+from .errors import BRDFError, csv_cell, printable
+from .paths import check_unique, slug
+from .progress import describe, listening
+from .batch_summary import COLUMNS, RECOMMENDATION_RULE, summary_rows
+from .evaluation.compare import compare
+from .evaluation.metrics import BRDFMetrics
+from .evaluation.report import write_index, write_material_page, write_result
+from .export import report_exports
+from .fit.registry import fit_model, is_isotropic_only, model_params
+from .io import find_data_file, resolve_spec
+from .io.fitfile import FORMAT_VERSION, FORMAT_VERSION as fmt, load_fit, save_fit, source_checksum
+from .io.nbrdf import list_materials
+from .loading import load
+from .synthetic import list_synthetic
+from . import __version__
+from .evaluation.validity import check_validity
+import brdffit
 
 __all__ = ["Task", "RenderSettings", "RenderTask", "enumerate_materials", "make_tasks",
            "make_render_tasks", "run_task", "run_render_task", "run_batch", "read_records",
@@ -130,8 +144,6 @@ def _forward_progress(material: str, kind: str):
     except (ImportError, ValueError):
         yield
         return
-    from .progress import listening
-
     def send(event: dict) -> None:
         worker.log_event(PROGRESS_TOPIC, {**{k: v for k, v in event.items()
                                              if isinstance(v, (str, int, float, bool, type(None)))},
@@ -156,8 +168,6 @@ class Task:
         return dict(self.options)
 
     def key(self) -> str:
-        from .io.fitfile import FORMAT_VERSION, source_checksum
-
         payload = {"spec": self.spec, "source_sha256": source_checksum(self.spec),
                    "model": self.model, "options": self.options_dict(),
                    "fit_format": FORMAT_VERSION}
@@ -197,8 +207,6 @@ class RenderTask:
     settings: RenderSettings = RenderSettings()
 
     def key(self) -> str:
-        from .io.fitfile import source_checksum
-
         payload = {"spec": self.spec, "source_sha256": source_checksum(self.spec),
                    "fits": list(self.fits), "render": self.settings.as_dict()}
         return _hash(payload)
@@ -228,8 +236,6 @@ def _absolute_spec(spec: str, base: Path | None = None) -> str:
     it is ``synthetic:`` or names no existing file (the task then fails with that error)."""
     if spec.startswith("synthetic:"):
         return spec
-    from .io import resolve_spec
-
     for candidate in (spec, str(base / spec) if base is not None else None):
         if candidate is None:
             continue
@@ -279,16 +285,12 @@ def _check_materials(pairs: Iterable[tuple[str, str]], where: str = "batch") -> 
             raise BatchError(f"{where}: two materials are named {name!r} "
                              f"({specs[name]} and {spec}); material names must be unique")
     try:
-        from .paths import check_unique
-
         check_unique(specs, "materials")
     except ValueError as exc:
         raise BatchError(f"{where}: {exc}") from None
 
 
 def _synthetic_names(body: str) -> list[str]:
-    from .synthetic import list_synthetic
-
     body = body.strip()
     if body.startswith("[") and body.endswith("]"):  # synthetic:[a,b] as in the help text
         body = body[1:-1]
@@ -317,8 +319,6 @@ def enumerate_materials(source, only: Sequence[str] | None = None,
     if src.startswith("synthetic:"):
         pairs = [(n, f"synthetic:{n}") for n in dict.fromkeys(_synthetic_names(src[10:]))]
     else:
-        from .io import find_data_file  # the same data search path as load()
-
         path = find_data_file(Path(src))
         if path is None:
             raise BatchError(f"{src}: no such file or folder")
@@ -331,8 +331,6 @@ def enumerate_materials(source, only: Sequence[str] | None = None,
                                  f"({', '.join(_MEASURED_SUFFIXES)}), found none")
             pairs = _unique_names([([p.stem, p.name, str(p)], str(p)) for p in files], str(path))
         elif path.suffix == ".zip":
-            from .io.nbrdf import list_materials
-
             pairs = _unique_names([([m], f"{path}:{m}") for m in list_materials(path)], str(path))
         else:
             entries = []
@@ -401,8 +399,6 @@ def _load_reference(spec: str):
     tasks of one material (its models are submitted one after the other); with its MERL-grid
     tabulation memoised (:func:`brdffit.grid.tabulate_merl_grid`) the fits and metrics of a
     material share both. Two entries: the material of each of two interleaved task streams."""
-    from .io import load
-
     return load(spec)
 
 
@@ -412,8 +408,6 @@ def _reference_metrics(spec: str):
     evaluation at the Sobol pairs, the MERL-grid L2 quadrature and the compressive objective's
     samples and weights: ~1 s per model otherwise) and shared by the consecutive tasks of one
     material, like :func:`_load_reference`."""
-    from .evaluation.metrics import BRDFMetrics
-
     return BRDFMetrics(_load_reference(spec))
 
 
@@ -423,9 +417,6 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
     A failure of loading, fitting or measuring is caught and recorded (``status: failed``
     with the error), so one bad material never stops a batch.
     """
-    from .fit.registry import fit_model, is_isotropic_only, model_params
-    from .io.fitfile import save_fit
-
     out = Path(out_dir)
     record = _base_record(task)
     t0 = time.perf_counter()
@@ -442,8 +433,6 @@ def run_task(task: Task, out_dir, metrics: bool = True) -> dict:
         record["fit_file"] = fit_path.relative_to(out).as_posix()
         record["fit_sha256"] = _file_sha256(fit_path)
         record["params"] = model_params(model)
-        from .evaluation.validity import check_validity
-
         record["warnings"] = [v.as_dict() for v in check_validity(model)]
         if metrics:
             t_m = time.perf_counter()
@@ -507,12 +496,6 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
     record is missing, failed or out of date are left out of the page (and listed in the
     record's ``missing_fits``); a failure is recorded, not raised.
     """
-    from .evaluation.compare import compare
-    from .evaluation.metrics import BRDFMetrics
-    from .evaluation.report import write_material_page, write_result
-    from .export import report_exports
-    from .io import load
-
     out = Path(out_dir)
     record = _base_record(task)
     t0 = time.perf_counter()
@@ -578,8 +561,6 @@ def _outputs_problem(task: Task | RenderTask, rec: dict, out: Path) -> str | Non
             if actual != expected:
                 return f"{fit} has SHA-256 {actual[:12]}…, the record says {str(expected)[:12]}…"
         else:  # a record of an older version: the file must at least load
-            from .io.fitfile import load_fit
-
             load_fit(fit)
     except FileNotFoundError:
         return f"{fit} is missing"
@@ -638,8 +619,6 @@ def write_summary(out_dir, records: list[dict] | None = None) -> tuple[Path, Pat
     import csv
     import io
 
-    from .batch_summary import COLUMNS, RECOMMENDATION_RULE, summary_rows
-
     out = Path(out_dir)
     records = read_records(out) if records is None else records
     rows, recommended = summary_rows(records, out)
@@ -648,8 +627,6 @@ def write_summary(out_dir, records: list[dict] | None = None) -> tuple[Path, Pat
     fields = list(COLUMNS)
     for row in rows:
         fields += [k for k in row if k not in fields]
-    from .errors import csv_cell
-
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=fields)
     writer.writeheader()
@@ -752,9 +729,6 @@ def _probe_workers(client, out: Path, tasks: Sequence[Task | RenderTask],
     returns ``{worker address: probe result}`` or raises :class:`BatchError`."""
     import secrets
 
-    from . import __version__
-    from .io.fitfile import FORMAT_VERSION
-
     def probe(out: str, token: str, files: list) -> dict:  # runs on the workers; by value
         import os
         import socket
@@ -762,9 +736,6 @@ def _probe_workers(client, out: Path, tasks: Sequence[Task | RenderTask],
         res = {"where": f"{socket.gethostname()}:{os.getpid()}", "cwd": os.getcwd(),
                "problems": [], "version": None, "fit_format": None}
         try:
-            import brdffit
-            from brdffit.io.fitfile import FORMAT_VERSION as fmt
-
             res["version"], res["fit_format"] = brdffit.__version__, fmt
         except Exception as exc:  # noqa: BLE001
             res["problems"].append(f"cannot import brdffit ({type(exc).__name__}: {exc})")
@@ -901,8 +872,6 @@ def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
         records = read_records(out)
         write_summary(out, records)
         if render_tasks:
-            from .evaluation.report import write_index
-
             write_index(out / "report", title=f"brdffit batch report – {out.name}")
     final = {(r["material"], r["model"]): r for r in [*skipped, *done] if not r.get("lost")}
     return {"ran": len(done), "skipped": len(skipped), "render_tasks": len(render_tasks),
@@ -1018,8 +987,6 @@ class _BatchLog:
     def _write(self, line: str) -> None:
         if self._f is None:
             return
-        from .errors import printable
-
         stamp = time.strftime("%Y-%m-%dT%H:%M:%S")
         with self._lock:
             try:  # names and errors come from files and users: one escaped line each

@@ -40,6 +40,8 @@ import json
 import math
 from pathlib import Path
 from typing import Any
+from .fit.registry import figures
+from .io.fitfile import load_fit
 
 __all__ = ["COLUMNS", "RECOMMENDATION_RULE", "PSNR_TOLERANCE_DB", "ERROR_TOLERANCE_REL",
            "ERROR_TOLERANCE_ABS", "summary_rows", "recommend", "read_render_records"]
@@ -110,9 +112,6 @@ def _figures(rec: dict, out: Path) -> dict:
     if rec.get("status") != "ok" or not isinstance(rec.get("fit_file"), str):
         return {}
     try:
-        from .fit.registry import figures
-        from .io.fitfile import load_fit
-
         return figures(load_fit(out / rec["fit_file"]))
     except Exception:  # noqa: BLE001 - a damaged fit: the row says what the record says
         return {}

@@ -36,6 +36,15 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel, SumBRDF, TabulatedFresnel
+from brdffit.microfacet.fresnel import GeneralizedSchlickFresnel
+from brdffit.microfacet.npf_model import (
+    D_THETA_H, F_THETA_D, G_THETA, NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF,
+)
+from brdffit.microfacet.per_channel import PerChannelBRDF
+from brdffit.microfacet.sgd import SGD
+from brdffit.microfacet.sgd_model import PerChannelMicrofacetBRDF
+from brdffit.microfacet.tabulated import FittedFresnel, TabulatedSlopeDistribution, radial_rule
 
 __all__ = ["Case", "cases", "cli_subset", "write_npz", "write_zip", "valid_fit",
            "BASE_MODELS"]
@@ -56,23 +65,16 @@ class Case:
 # valid base models (built directly, no fitting)
 # ------------------------------------------------------------------------------------------
 def _ggx():
-    from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel
-
     return MicrofacetBRDF(GGX(0.2, 0.3, 0.1), SchlickFresnel(0.04), diffuse=(0.1, 0.2, 0.3))
 
 
 def _tab_fresnel():
-    from brdffit.microfacet import GGX, MicrofacetBRDF, TabulatedFresnel
-
     t = np.linspace(0.0, np.pi / 2, 90)
     v = 0.05 + 0.95 * (1.0 - np.cos(t))[:, None] ** 5 * np.array([1.0, 0.9, 0.8])
     return MicrofacetBRDF(GGX(0.2), TabulatedFresnel(t, v))
 
 
 def _tabulated():
-    from brdffit.microfacet import GGX, MicrofacetBRDF
-    from brdffit.microfacet.tabulated import FittedFresnel, TabulatedSlopeDistribution, radial_rule
-
     _, _, r, _ = radial_rule(32, "merl")
     p = GGX(0.3).pdf(np.stack([r, np.zeros_like(r)], -1))
     t = np.arange(90) * (np.pi / 180)
@@ -82,16 +84,10 @@ def _tabulated():
 
 
 def _sgd():
-    from brdffit.microfacet import MicrofacetBRDF
-    from brdffit.microfacet.fresnel import GeneralizedSchlickFresnel
-    from brdffit.microfacet.sgd import SGD
-
     return MicrofacetBRDF(SGD(0.15, 1.2), GeneralizedSchlickFresnel(0.06, 0.02), diffuse=0.05)
 
 
 def _npf_tables():
-    from brdffit.microfacet.npf_model import D_THETA_H, F_THETA_D, G_THETA
-
     D = np.exp(-(np.tan(D_THETA_H)[:, None] / np.array([0.2, 0.3, 0.4])) ** 2) + 1e-3
     F = 0.4 + 0.6 * (1.0 - np.cos(F_THETA_D))[:, None] ** 5 * np.ones(3)
     G = (1.0 - 0.4 * (G_THETA / G_THETA[-1]) ** 2)[:, None] * np.ones(3)
@@ -99,46 +95,32 @@ def _npf_tables():
 
 
 def _npf():
-    from brdffit.microfacet.npf_model import NPFMicrofacetBRDF
-
     D, F, G = _npf_tables()
     return NPFMicrofacetBRDF(D, F, G, [0.05, 0.08, 0.02], [0.6, 0.4, 0.9])
 
 
 def _npf_naive():
-    from brdffit.microfacet.npf_model import NPFNaiveBRDF
-
     D, F, _ = _npf_tables()
     return NPFNaiveBRDF(D, F, np.ones((180, 3)), [0.05, 0.08, 0.02], [0.6, 0.4, 0.9])
 
 
 def _npf_bivariate():
-    from brdffit.microfacet.npf_model import NPFBivariateBRDF
-
     D, F, _ = _npf_tables()
     return NPFBivariateBRDF(0.5 * D[:, None, :] * F[None, :, :] + 0.03)
 
 
 def _sum():
-    from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel, SumBRDF
-
     return SumBRDF([MicrofacetBRDF(GGX(0.04), SchlickFresnel(0.9), specular=0.35),
                     MicrofacetBRDF(GGX(0.35), SchlickFresnel((0.95, 0.64, 0.54)), specular=0.6)])
 
 
 def _per_channel_sgd():
-    from brdffit.microfacet.sgd_model import PerChannelMicrofacetBRDF
-    from brdffit.microfacet import GGX
-
     chans = [{"distribution": GGX(a), "rho_d": 0.1, "rho_s": 0.3, "F0": 0.9, "F1": -0.5}
              for a in (0.1, 0.2, 0.3)]
     return PerChannelMicrofacetBRDF(chans)
 
 
 def _per_channel_tab():
-    from brdffit.microfacet.per_channel import PerChannelBRDF
-    from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel
-
     return PerChannelBRDF([MicrofacetBRDF(GGX(a), SchlickFresnel(0.5)) for a in (0.1, 0.2, 0.3)])
 
 

@@ -58,6 +58,10 @@ from pathlib import Path
 from typing import Callable
 
 import numpy as np
+from brdffit.export.rgl import rgl_fields
+from brdffit.io import write_merl, write_utia
+from brdffit.io.tensorfile import write_tensor_file
+from brdffit.synthetic import synthetic
 
 __all__ = ["Case", "cases", "CASES", "case_by_name", "valid_merl_bytes", "valid_utia_bytes",
            "valid_rgl_bytes", "write_network_h5", "network_h5_bytes", "keras_json",
@@ -109,8 +113,6 @@ def valid_merl_bytes() -> bytes:
     :func:`brdffit.io.write_merl`."""
     import tempfile
 
-    from brdffit.io import write_merl
-
     rng = np.random.default_rng(12)
     values = rng.random((90, 90, 180, 3)) * np.array([0.5, 0.4, 0.3])
     valid = rng.random((90, 90, 180)) > 0.05
@@ -123,8 +125,6 @@ def valid_utia_bytes() -> bytes:
     """A valid UTIA ``.bin`` file (random positive table), written by :func:`brdffit.io.write_utia`."""
     import tempfile
 
-    from brdffit.io import write_utia
-
     rng = np.random.default_rng(13)
     values = rng.random((6, 48, 6, 48, 3))
     with tempfile.TemporaryDirectory() as d:
@@ -134,16 +134,11 @@ def valid_utia_bytes() -> bytes:
 
 @functools.lru_cache(maxsize=1)
 def _rgl_fields() -> dict:
-    from brdffit.export.rgl import rgl_fields
-    from brdffit.synthetic import synthetic
-
     return rgl_fields(synthetic("gold-ggx"), n_theta=4, n_ndf=16, vndf_res=8, rgb_res=8)
 
 
 def _tensor_bytes(fields: dict) -> bytes:
     import tempfile
-
-    from brdffit.io.tensorfile import write_tensor_file
 
     with tempfile.TemporaryDirectory() as d:
         return write_tensor_file(Path(d) / "v.bsdf", fields).read_bytes()

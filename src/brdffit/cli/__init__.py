@@ -41,6 +41,7 @@ from .. import __version__
 from ..errors import BRDFError, printable
 from .._blas import single_thread_env
 from .._malloc import tune_this_process
+from ..fit import registry
 
 _COMMAND_MODULES = ["info", "convert", "fit", "models", "render", "compare", "batch", "export",
                     "demo"]
@@ -342,8 +343,6 @@ def check_models(names, option: str = "--models") -> list[str]:
 
     Reads the registry's declared names (:func:`brdffit.fit.registry.known_names`) without
     importing any fitting module."""
-    from ..fit import registry
-
     names = list(names)
     unknown = [name for name in names if name not in set(registry.known_names())]
     if unknown:
@@ -358,8 +357,6 @@ def models_help(title: str = "Models") -> str:
     """The model list of ``--help`` texts: one line per declared model with its description
     (kept as written by the help formatter: the block starts with ``\\b``), 80 columns
     wide."""
-    from ..fit import registry
-
     lines = ["\b", f"{title} (iso: isotropic inputs only; `brdffit models` for sizes and "
                     "times):"]
     for name in registry.known_names():

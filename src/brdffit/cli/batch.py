@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import sys
 
-from . import DEFAULT_MODELS, EXIT_ERROR, EXIT_FAILED_TASKS, EXIT_USAGE
+from . import (DEFAULT_MODELS, EXIT_ERROR, EXIT_FAILED_TASKS, EXIT_USAGE, add_command,
+               add_render_options, at_least, between, check_models, check_render_settings,
+               models_help, usage_error)
+from ..errors import printable
 
 
 def register(commands) -> None:
-    from . import add_command, add_render_options, at_least, between, models_help
-
     cmd = add_command(commands, "batch", batch_cmd, epilog=models_help())
     cmd.add_argument("source", metavar="SOURCE",
                      help="Folder of measured files, a Neural-BRDF .zip collection, a list "
@@ -73,8 +74,6 @@ def batch_cmd(source: str, out: str, models: str = DEFAULT_MODELS, only: str = "
             """
     from ..batch import (OutputLocked, RenderSettings, enumerate_materials, make_tasks,
                          run_batch)
-    from . import check_models, usage_error
-
     model_list = check_models([m.strip() for m in models.split(",") if m.strip()])
     if not model_list:
         raise usage_error("--models", f"expected at least one model name, found {models!r}")
@@ -88,8 +87,6 @@ def batch_cmd(source: str, out: str, models: str = DEFAULT_MODELS, only: str = "
                                                 f"{memory_limit!r}") from None
     if render:
         from ..evaluation.render.scenes import scene_suite
-        from . import check_render_settings
-
         check_render_settings(spp, batches, resolution)
         try:
             scene_suite(scenes)
@@ -105,8 +102,6 @@ def batch_cmd(source: str, out: str, models: str = DEFAULT_MODELS, only: str = "
                            if render else None, retry_failed=retry_failed,
                            progress=not quiet, retries=retries, wait_lock=wait_lock)
     except OutputLocked as exc:
-        from ..errors import printable
-
         print(f"brdffit: {printable(str(exc))}", file=sys.stderr)
         return EXIT_USAGE
     n_render = f" + {result['render_tasks']} render" if render else ""

@@ -17,7 +17,11 @@ import json
 import sys
 from pathlib import Path
 
-from . import DEFAULT_MODELS, EXIT_FAILED_TASKS
+from . import (DEFAULT_MODELS, EXIT_FAILED_TASKS, MAX_SEED, add_command, add_render_options,
+               at_least, between, check_models, check_render_settings, models_help, path, positive,
+               positive_or, usage_error)
+from ..errors import printable
+from ..fit.registry import check_options
 
 __all__ = ["register", "compare_cmd"]
 
@@ -38,9 +42,6 @@ def _materials(spec: str, limit: int | None) -> list[str]:
 
 
 def register(commands) -> None:
-    from . import (MAX_SEED, add_command, add_render_options, at_least, between, models_help,
-                   path, positive, positive_or)
-
     cmd = add_command(commands, "compare", compare_cmd, epilog=models_help())
     cmd.add_argument("spec", metavar="INPUT[:MATERIAL]",
                      help="Reference BRDF: a file, collection.zip[:material], synthetic:NAME "
@@ -88,11 +89,7 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
     model_list = [m.strip() for m in models.split(",") if m.strip()]
     if not model_list:
         raise ValueError(f"--models: expected at least one model name, found {models!r}")
-    from . import check_models  # model names (not saved fits) must be known: exit 2
-
     check_models([m for m in model_list if "=" not in m and not m.endswith(".npz")])
-    from . import check_render_settings
-
     batches = check_render_settings(spp, batches, resolution)
     exp = exposure
     try:
@@ -105,9 +102,6 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
                          f"found {fit_options!r}")
     if fopts:
         from ..fit.options import OptionError
-        from ..fit.registry import check_options
-        from . import usage_error
-
         labels = [m.split("=", 1)[0] if "=" in m else Path(m).stem if m.endswith(".npz")
                   else m for m in model_list]
         for label, opts in fopts.items():
@@ -121,8 +115,6 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
             except KeyError:  # a saved fit (label=path.npz) takes no fitting options
                 raise usage_error("--fit-options", f"{label!r} is not a model name") from None
     ropts = {"envmap": envmap} if envmap else {}
-    from ..errors import printable
-
     say = (lambda msg: None) if quiet else (lambda msg: print(printable(msg), file=sys.stderr))
     kw = dict(scenes=scene or scenes, spp=spp, batches=batches, resolution=resolution,
               seed=seed, exposure=exp, gamma=gamma, render_options=ropts, progress=say,

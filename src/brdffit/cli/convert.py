@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..errors import BRDFFormatError
+from ..errors import BRDFFormatError, printable
+from . import add_command, output_file, path
 
 __all__ = ["register", "convert_cmd", "convert"]
 
@@ -18,7 +19,7 @@ _OUTPUTS = {".binary": "merl", ".bin": "utia"}
 
 def convert(spec, out) -> dict:
     """Load ``spec`` and write it to ``out`` (format from the extension); return a summary."""
-    from ..io import load
+    from ..loading import load
 
     from .._atomic import WRITE_THROUGH, destination_kind
 
@@ -44,8 +45,6 @@ def convert(spec, out) -> dict:
 
 
 def register(commands) -> None:
-    from . import add_command, path
-
     cmd = add_command(commands, "convert", convert_cmd)
     cmd.add_argument("src", metavar="IN",
                      help="A BRDF file, collection.zip:material or synthetic:NAME.")
@@ -55,11 +54,7 @@ def register(commands) -> None:
 
 def convert_cmd(src: str, dst: Path) -> None:
     """Resample a BRDF to a MERL (.binary) or UTIA (.bin) file."""
-    from . import output_file
-
     output_file(dst, tuple(_OUTPUTS), option="OUT")
     info = convert(src, dst)
-    from ..errors import printable
-
     print(printable(f"wrote {info['out']} ({info['format']}, {info['n_samples']} samples, "
                     f"{info['n_invalid']} invalid) from {src}"))

@@ -5,7 +5,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from . import EXIT_FAILED_TASKS
+from . import (EXIT_FAILED_TASKS, MAX_RESOLUTION, MAX_SPP, add_command, at_least, between,
+               check_models, check_render_settings, models_help, usage_error)
+from ..errors import printable as safe
 
 # the paper's models and the engine-ready GGX + Lambert (+ coat)
 DEMO_MODELS = "tabulated,ggx,beckmann,ggx-diffuse,sgd,npf-g-from-d,npf"
@@ -18,8 +20,6 @@ NEXT_STEP = ("fit synthetic:plastic-beckmann -m ggx-diffuse -o plastic.npz",
 
 
 def register(commands) -> None:
-    from . import MAX_RESOLUTION, MAX_SPP, add_command, at_least, between, models_help
-
     cmd = add_command(commands, "demo", demo_cmd, epilog=models_help())
     cmd.add_argument("-o", "--out", default="demo-out", metavar="DIR", help="Report folder.")
     cmd.add_argument("--data", default="", metavar="SOURCE",
@@ -96,15 +96,10 @@ def demo_cmd(out: str = "demo-out", data: str = "", limit: int = 0, models: str 
     from .._isolation import ChildCrashed, IsolatedProcess
     from ..batch import enumerate_materials
     from ..evaluation.report import write_index
-    from ..errors import printable as safe
-    from . import check_models, usage_error
-
     model_list = check_models([m.strip() for m in models.split(",") if m.strip()])
     if not model_list:
         raise usage_error("--models", f"expected at least one model name, found {models!r}")
     from ..evaluation.compare import DEFAULT_BATCHES
-    from . import check_render_settings
-
     check_render_settings(spp, DEFAULT_BATCHES, resolution, batches_option=None)
     source = data or "synthetic:"
     materials = enumerate_materials(source, limit=limit or None)

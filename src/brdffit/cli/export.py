@@ -16,6 +16,10 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from ..errors import ExportError, printable
+from ..export import SUFFIXES, TARGETS, check_model, export, load_json
+from ..synthetic import synthetic
+from . import add_command, output_file, path, usage_error
 
 __all__ = ["register", "export_cmd", "load_model", "run_export", "target_options",
            "check_options"]
@@ -24,12 +28,8 @@ __all__ = ["register", "export_cmd", "load_model", "run_export", "target_options
 def load_model(spec: str):
     """A model from a fit file, a parameter JSON or ``synthetic:NAME``."""
     if spec.startswith("synthetic:"):
-        from ..synthetic import synthetic
-
         return synthetic(spec.split(":", 1)[1])
     if Path(spec).suffix.lower() == ".json":
-        from ..export import load_json
-
         return load_json(spec)
     from ..io.fitfile import load_fit
 
@@ -38,8 +38,6 @@ def load_model(spec: str):
 
 def _writer(to: str):
     from importlib import import_module
-
-    from ..export import TARGETS
 
     mod, fn = TARGETS[to]
     return getattr(import_module(mod, "brdffit.export"), fn)
@@ -100,13 +98,11 @@ def check_options(to: str, options: dict) -> None:
 
 def run_export(fits: list[str], to: str, out: Path, options: dict | None = None) -> dict:
     """Load ``fits`` and export them to ``to`` at ``out``; returns the summary."""
-    from ..errors import ExportError
     from ..export._common import check_output_path
 
     out = check_output_path(out)
     models = [load_model(f) for f in fits]
     if to == "npf-uber":
-        from ..export import check_model
         from ..export.glsl import pack_npf_uber_texture
 
         for m in models:
@@ -115,15 +111,10 @@ def run_export(fits: list[str], to: str, out: Path, options: dict | None = None)
     if len(models) != 1:
         raise ExportError(f"--to {to} exports one fit, found {len(models)} (only npf-uber packs "
                           "several)")
-    from ..export import export
-
     return export(models[0], to, out, **(options or {}))
 
 
 def register(commands) -> None:
-    from ..export import TARGETS
-    from . import add_command, path
-
     cmd = add_command(commands, "export", export_cmd)
     cmd.add_argument("fits", nargs="+", metavar="FIT",
                      help="Fit file (.npz), parameter JSON or synthetic:NAME.")
@@ -138,9 +129,7 @@ def register(commands) -> None:
 def export_cmd(fits: list[str], to: str, out: Path, option: list[str] | None = None,
                as_json: bool = False) -> None:
     """Export a fit to Mitsuba 3, glTF, MaterialX, USD, GLSL or JSON."""
-    from ..export import TARGETS
     from ..export._common import shown
-    from . import usage_error
     from .fit import parse_options
 
     targets = list(TARGETS)
@@ -151,9 +140,6 @@ def export_cmd(fits: list[str], to: str, out: Path, option: list[str] | None = N
         check_options(to, options)
     except ValueError as exc:
         raise usage_error("--option", str(exc)) from None
-    from ..export import SUFFIXES
-    from . import output_file
-
     others = [t for t, ends in SUFFIXES.items() if out.suffix.lower() in ends and t != to]
     output_file(out, SUFFIXES[to], hint=f" (the file name of --to {others[0]})" if others
                 else "")
@@ -161,8 +147,6 @@ def export_cmd(fits: list[str], to: str, out: Path, option: list[str] | None = N
     if as_json:
         print(json.dumps(summary, default=str))
         return
-    from ..errors import printable
-
     print(f"wrote {', '.join(shown(f) for f in summary.get('files', [str(out)]))} ({to})")
     for note in summary.get("notes", []):
         print(f"  approximation: {printable(str(note))}")

@@ -1,6 +1,6 @@
 """``brdffit fit INPUT[:MATERIAL] --model NAME [-o OUT] [--iterations N] [--json]``.
 
-Loads the input with :func:`brdffit.io.load`, fits it with the model registered under
+Loads the input with :func:`brdffit.load`, fits it with the model registered under
 ``NAME`` in :mod:`brdffit.fit.registry` (``brdffit models`` lists them) and prints a labelled
 summary: the slope scales (αx, αy, ρ) and glTF roughness √α, F0 and the Lambertian albedo ρd
 per channel (:func:`brdffit.fit.registry.figures`), the fit's error against its input
@@ -22,6 +22,10 @@ import json
 import sys
 import time
 from pathlib import Path
+from ..errors import ExportError, printable
+from ..fit import registry
+from ..fit.registry import check_options as check, figures, options_class
+from . import add_command, at_least, check_models, models_help, output_file, path, usage_error
 
 __all__ = ["register", "fit_cmd", "parse_options", "run_fit", "accepted_options",
            "check_options", "DEFAULT_MODEL"]
@@ -45,8 +49,6 @@ def parse_options(items: list[str] | None) -> dict:
     out: dict = {}
     for item in items or []:
         if "=" not in item:
-            from . import usage_error
-
             raise usage_error("--option", f"expected key=value, found {item!r}")
         key, val = item.split("=", 1)
         try:
@@ -61,8 +63,6 @@ def accepted_options(model: str) -> tuple[set, bool]:
     (its options dataclass, :func:`brdffit.fit.registry.options_class`, without the
     Python-only ones)."""
     from ..fit.options import option_table
-    from ..fit.registry import options_class
-
     cls, open_ended = options_class(model)
     return {n for n, o in option_table(cls).items() if not o.python_only}, open_ended
 
@@ -71,9 +71,6 @@ def check_options(model: str, options: dict) -> dict:
     """The options checked (:func:`brdffit.fit.registry.check_options`): names, types and
     ranges; a bad one is a usage error (exit 2) naming it and what is accepted."""
     from ..fit.options import OptionError
-    from ..fit.registry import check_options as check
-    from . import usage_error
-
     try:
         return check(model, options, command_line=True)
     except OptionError as exc:
@@ -188,8 +185,6 @@ def _figures_summary(fitted) -> dict:
     roughness √α next to α."""
     import math
 
-    from ..fit.registry import figures
-
     fig = figures(fitted)
     out = {"alpha": None, "gltf_roughness": None, "alpha_kind": fig.get("alpha_kind"),
            "alpha_rgb": fig.get("alpha_rgb"), "f0": fig.get("f0"), "rho_d": fig.get("rho_d"),
@@ -205,9 +200,6 @@ def _figures_summary(fitted) -> dict:
 
 def _entry(model: str):
     """The registry entry of ``model``; an unknown name is a usage error."""
-    from ..fit import registry
-    from . import usage_error
-
     try:
         return registry.get(model)
     except KeyError as exc:
@@ -219,8 +211,6 @@ def check_usage(model: str, options: dict) -> None:
     registry's declared names: no fitting module imported) and, only when there are
     options, an option the model's fitter does not take or a value of the wrong type or
     range (imports its module); ``options`` are updated with the checked values."""
-    from . import check_models
-
     check_models([model], "--model")
     if options:
         _entry(model)
@@ -289,7 +279,7 @@ def run_fit(spec: str, model: str = DEFAULT_MODEL, out: Path | None = None,
     ``error=False``), ``time_s`` (the fit), ``timings_s`` (load, fit, save, error),
     ``output`` (``None`` when not saved), and the model's own summary under ``details``.
     """
-    from ..io import load
+    from ..loading import load
     from ..io._checksum import source_checksum
 
     timings: dict[str, float] = {}
@@ -308,8 +298,6 @@ def run_fit(spec: str, model: str = DEFAULT_MODEL, out: Path | None = None,
         bad = _unexpected_option(exc, options or {})
         if bad is None:
             raise
-        from . import usage_error
-
         names, _ = accepted_options(model)
         raise usage_error("--option", f"model {model!r} has no option {bad!r}; accepted: "
                                       f"{', '.join(sorted(names)) or 'none'}") from None
@@ -317,7 +305,6 @@ def run_fit(spec: str, model: str = DEFAULT_MODEL, out: Path | None = None,
     timings["fit"] = elapsed
     summary: dict = {"input": spec, "model": model, "output": None}
     if out is not None:
-        from ..errors import ExportError
         from ..serialization import SerializableModel
         from ..io.fitfile import save_fit
 
@@ -329,8 +316,6 @@ def run_fit(spec: str, model: str = DEFAULT_MODEL, out: Path | None = None,
                  options=dict(getattr(fitted, "fit_options", None) or options or {}, model=model))
         timings["save"] = time.perf_counter() - t0
         summary["output"] = str(out)
-    from ..fit import registry
-
     details = registry.summarize(model, fitted)
     details.pop("model", None)
     details.pop("time_s", None)
@@ -365,8 +350,6 @@ def _large_error_advice(brdf, model: str, error: float, fitted) -> dict:
     :data:`ALTERNATIVES` are fitted (defaults) and measured the same way, and the best one
     is named when it does better by a tenth or more; else what the fit misses is said
     (:func:`brdffit.evaluation.metrics.error_regions`)."""
-    from ..fit import registry
-
     tried = {}
     for name in ALTERNATIVES:
         if name == model or (registry.is_isotropic_only(name)
@@ -483,8 +466,6 @@ def warning_lines(s: dict) -> list[str]:
 
 
 def register(commands) -> None:
-    from . import add_command, at_least, models_help, path
-
     cmd = add_command(commands, "fit", fit_cmd, epilog=models_help())
     cmd.add_argument("spec", metavar="INPUT[:MATERIAL]",
                      help="A BRDF file, collection.zip:material or synthetic:NAME.")
@@ -513,8 +494,6 @@ def fit_cmd(spec: str, model: str = DEFAULT_MODEL, out: Path | None = None,
         opts["iterations"] = iterations
     check_usage(model, opts)
     if out is not None:
-        from . import output_file
-
         output_file(out, (".npz",), hint=" (fit files are .npz; for an engine: brdffit "
                                          "export FIT --to gltf|materialx|mitsuba|glsl|json)")
     with _live_progress(enabled=not as_json and sys.stderr.isatty()):
@@ -524,8 +503,6 @@ def fit_cmd(spec: str, model: str = DEFAULT_MODEL, out: Path | None = None,
 
         print(json.dumps(summary, default=json_default, sort_keys=True))
         return
-    from ..errors import printable
-
     for line in warning_lines(summary):
         print(printable(line), file=sys.stderr)
     for line in format_summary(summary):

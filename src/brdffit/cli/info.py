@@ -12,6 +12,8 @@ from __future__ import annotations
 import builtins
 import json
 import os
+from ..errors import printable
+from . import add_command, between
 
 # NumPy and the readers are imported when the command runs (fast `brdffit --help`).
 
@@ -127,8 +129,6 @@ def _fmt_rgb(v) -> str:
 def _print_summary(s: dict) -> None:
     """The summary, one line per figure; every string from the file or the user escaped
     (:func:`brdffit.errors.printable`)."""
-    from ..errors import printable
-
     def print(line: str) -> None:  # noqa: A001 – every line of this command goes through here
         builtins.print(printable(line))
 
@@ -164,8 +164,6 @@ def _print_summary(s: dict) -> None:
 
 
 def register(commands) -> None:
-    from . import add_command, between
-
     cmd = add_command(commands, "info", info_cmd)
     cmd.add_argument("spec", metavar="FILE[:MATERIAL]",
                      help="A BRDF file, collection.zip:material or synthetic:NAME.")
@@ -177,8 +175,8 @@ def register(commands) -> None:
 
 def info_cmd(spec: str, as_json: bool = False, albedo_samples: int = 65536) -> None:
     """Format, sample counts, value range and albedo of a BRDF file."""
-    from ..errors import printable
-    from ..io import load, resolve_spec
+    from ..io import resolve_spec
+    from ..loading import load
     from ..io.nbrdf import list_materials
 
     kind, path, member = resolve_spec(spec)

@@ -16,14 +16,15 @@ from __future__ import annotations
 
 import json
 import sys
+from ..fit import registry
+from ..fit.registry import options_class
+from . import add_command, check_models
 
 __all__ = ["register", "models_cmd", "model_table", "measure", "model_options"]
 
 
 def model_table() -> list[dict]:
     """One JSON-able row per known model (declared figures; no fitting module imported)."""
-    from ..fit import registry
-
     rows = []
     for name in registry.known_names():
         info = registry.MODELS.get(name) or registry.describe(name)
@@ -41,8 +42,6 @@ def model_options(name: str) -> list[dict]:
     """The options of model ``name`` a command line may give (``-O key=value``), from its
     options dataclass: ``{"name", "type", "default", "none_ok", "text"}`` per option."""
     from ..fit.options import describe_option, option_table
-    from ..fit.registry import options_class
-
     cls, _ = options_class(name)
     return [{"name": o.name, "type": o.kind, "default": o.default, "none_ok": o.none_ok,
              "text": describe_option(o)}
@@ -56,8 +55,7 @@ def measure(rows: list[dict], spec: str, say=lambda msg: None) -> list[dict]:
     import time
     from pathlib import Path
 
-    from ..fit import registry
-    from ..io import load
+    from ..loading import load
     from ..io.fitfile import save_fit
     from .fit import quick_error
 
@@ -117,8 +115,6 @@ def format_table(rows: list[dict]) -> list[str]:
 
 
 def register(commands) -> None:
-    from . import add_command
-
     cmd = add_command(commands, "models", models_cmd)
     cmd.add_argument("--json", dest="as_json", action="store_true",
                      help="Print the rows as JSON.")
@@ -140,9 +136,6 @@ def models_cmd(as_json: bool = False, do_measure: bool = False, on: str = "synth
     The sizes and times are typical figures declared in the registry (measured by
     bench/bench_cli.py --models, see below) unless --measure measures them now.
     """
-    from ..fit import registry
-    from . import check_models
-
     rows = model_table()
     if models:
         keep = check_models([m.strip() for m in models.split(",") if m.strip()])

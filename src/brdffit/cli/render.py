@@ -1,6 +1,6 @@
 """``brdffit render INPUT_OR_FIT -o image.exr|png``: render one BRDF with Mitsuba 3.
 
-INPUT is anything :func:`brdffit.io.load` reads (MERL, RGL, UTIA, Neural-BRDF
+INPUT is anything :func:`brdffit.load` reads (MERL, RGL, UTIA, Neural-BRDF
 ``collection.zip:material``, ``synthetic:NAME``) or a fit file written by
 :func:`brdffit.io.fitfile.save_fit`. ``.exr`` output is linear RGBA (alpha = coverage);
 ``.png`` is tone-mapped with Bagher 2016 §5 (``--exposure auto`` by default: see
@@ -11,31 +11,30 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import check_render_size, output_file, usage_error
+from . import (MAX_RESOLUTION, MAX_SEED, MAX_SPP, add_command, between, check_render_size,
+               output_file, path, positive, positive_or, usage_error)
+from ..errors import BRDFError, printable
 
 __all__ = ["register", "render_cmd", "load_brdf"]
 
 
 def load_brdf(spec: str):
     """A fit file (``.npz`` with a brdffit header) via ``load_fit``, anything else via
-    ``brdffit.io.load``."""
+    ``brdffit.load``."""
     from ..io.fitfile import is_fit_file, load_fit
 
     p = Path(spec)
     if p.suffix.lower() == ".npz" and p.is_file() and is_fit_file(p):
         return load_fit(p)
-    from ..io import load
+    from ..loading import load
 
     return load(spec)
 
 
 def register(commands) -> None:
-    from . import (MAX_RESOLUTION, MAX_SEED, MAX_SPP, add_command, between, path, positive,
-                   positive_or)
-
     cmd = add_command(commands, "render", render_cmd)
     cmd.add_argument("spec", metavar="INPUT_OR_FIT",
-                     help="BRDF file/spec (io.load) or a fit .npz.")
+                     help="BRDF file/spec (brdffit.load) or a fit .npz.")
     cmd.add_argument("-o", "--output", type=path, required=True, metavar="IMAGE",
                      help="Output image (.exr or .png).")
     cmd.add_argument("--scene", default="sphere-env", metavar="SCENE",
@@ -72,7 +71,6 @@ def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str |
     import numpy as np
 
     from .._atomic import WRITE_THROUGH
-    from ..errors import BRDFError
     from ..evaluation.imageio import write_exr, write_png
     from ..evaluation.render import Renderer
     from ..evaluation.render.scenes import SCENES
@@ -107,8 +105,6 @@ def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str |
     else:
         rgb = tonemap(res.image, expo, gamma, mask=res.mask)
         write_png(output, np.concatenate([rgb, np.clip(res.alpha, 0, 1)[..., None]], -1))
-    from ..errors import printable
-
     print(printable(f"{output}: {scene} {resolution}x{resolution} {spp} spp, evaluator "
                     f"{res.info['evaluator']} ({res.info['path']}), set-up "
                     f"{r.setup_seconds:.2f} s, render {res.seconds:.2f} s"))

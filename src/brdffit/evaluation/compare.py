@@ -44,12 +44,21 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from .._isolation import ChildCrashed
+from .._isolation import ChildCrashed, IsolatedProcess, NotSendable
 from ..errors import BRDFError, printable
 from ..fit.registry import fit_model, is_isotropic_only, model_params, small_json
-from . import metrics as M
-from . import plots as P
-from . import report as R
+from . import imageio, metrics as M, plots as P, report as R
+from .imageio import write_png
+from .tonemap import auto_exposure, tonemap
+from ..fit.result import fit_result
+from ..loading import load
+from ..progress import report
+from .render.core import MultiRenderer, describe_evaluator
+from .render.proposal import proposal_for
+from .render.scenes import scene_suite
+from .render.translate import to_evaluator
+from ..io.fitfile import SerializableModel, load_fit, save_fit, table_bytes
+from .validity import check_validity
 
 __all__ = ["compare", "compare_many", "resolve_reference", "DEFAULT_MODELS"]
 
@@ -63,7 +72,7 @@ DEFAULT_RESOLUTION = 256
 # inputs
 # ------------------------------------------------------------------------------------------
 def resolve_reference(source, material: str | None = None):
-    """A reference BRDF: a BRDF object as is, else :func:`brdffit.io.load` of the spec (a file,
+    """A reference BRDF: a BRDF object as is, else :func:`brdffit.load` of the spec (a file,
     a fit file, ``archive.zip:member``, ``synthetic:NAME``; ``material`` is appended as
     ``:material``)."""
     if hasattr(source, "eval"):
@@ -71,8 +80,6 @@ def resolve_reference(source, material: str | None = None):
     spec = str(source)
     if material:
         spec = f"{spec}:{material}"
-    from ..io import load
-
     return load(spec)
 
 
@@ -103,44 +110,15 @@ def _unpack_render(out):
 
 
 def _tonemapper():
-    try:
-        from .tonemap import auto_exposure, tonemap
-    except ImportError:  # pragma: no cover - tonemap.py is part of the package
-        def auto_exposure(img, mask=None, target=1.0):
-            v = np.asarray(img)[..., :3].max(-1)
-            v = v[np.asarray(mask, bool)] if mask is not None else v.ravel()
-            v = v[np.isfinite(v) & (v > 0)]
-            return float(target / np.median(v)) if v.size else 0.02
-
-        def tonemap(img, exposure=0.02, gamma=2.2, mask=None):
-            return M.npf_tonemap(img, exposure, gamma)
     return auto_exposure, tonemap
 
 
 def _write_png(path, img):
-    try:
-        from .imageio import write_png
-    except ImportError:  # pragma: no cover
-        from PIL import Image
-
-        from .._atomic import atomic_path
-
-        def write_png(path, img):
-            a = np.asarray(img)
-            if a.dtype != np.uint8:
-                a = np.round(np.clip(a, 0, 1) * 255).astype(np.uint8)
-            with atomic_path(path, suffix=".png") as tmp:
-                Image.fromarray(a).save(tmp, format="PNG")
-            return Path(path)
     return write_png(path, img)
 
 
 def _write_exr(path, img):
-    try:
-        from .imageio import write_exr
-    except ImportError:  # pragma: no cover
-        return None
-    return write_exr(path, np.asarray(img, np.float32))
+    return imageio.write_exr(path, np.asarray(img, np.float32))  # looked up at call time
 
 
 def _safe_name(name: str) -> str:
@@ -154,8 +132,6 @@ def _convergence(model) -> dict | None:
     """How the fit went (:func:`brdffit.fit.result.fit_result`) and its history, thinned to
     at most 120 points, for the report's convergence plot: the objective per iteration
     (NPF AWLS) or the relative change of the power iteration (tabulated)."""
-    from ..fit.result import fit_result
-
     try:
         res = fit_result(model)
     except ValueError:
@@ -249,8 +225,6 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
     picture and converged peak, render times); ``proposal`` (the sampling mixture fitted to
     the reference) and ``timing``.
     """
-    from .render.scenes import scene_suite
-
     if exports is not None and exports is not False and not callable(exports):
         raise TypeError(f"exports: expected a function such as brdffit.export.report_exports, "
                         f"or None, found {exports!r}")
@@ -294,8 +268,6 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
                 model, rec["fit_time"] = what, None
                 rec["origin"] = "given"
             elif isinstance(what, (str, Path)) and str(what).endswith(".npz"):
-                from ..io.fitfile import load_fit
-
                 model = load_fit(what)
                 rec["origin"] = f"loaded {what}"
                 rec["loaded_from"] = str(what)
@@ -311,8 +283,6 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
             fitted[label] = model
             rec["model_class"] = type(model).__name__
             rec["params"] = model_params(model)
-            from .validity import check_validity
-
             rec["validity"] = [v.as_dict() for v in check_validity(model)]
             info = getattr(model, "fit_info", None)
             if info:
@@ -322,16 +292,12 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
                 # the fit file where it is (e.g. a batch's OUT/fits/), linked relative to the page
                 import os
 
-                from ..io.fitfile import table_bytes
-
                 rel = Path(os.path.relpath(Path(rec["loaded_from"]).resolve(), mdir.resolve()))
                 rec["fit_file"] = rel.as_posix()
                 rec["table_bytes"] = table_bytes(model)
                 rec["exports"] = exports(model, mdir / "exports", _safe_name(label))
             if save_fits and rec["origin"] == "fitted":
                 try:
-                    from ..io.fitfile import SerializableModel, save_fit, table_bytes
-
                     if isinstance(model, SerializableModel) and model.fit_kind:
                         fp = save_fit(model, mdir / "fits" / f"{_safe_name(label)}.npz",
                                       source=getattr(reference, "source", None))
@@ -590,9 +556,6 @@ class _CRNEngine:
     REF = "\0reference"
 
     def __init__(self, reference, models: Mapping, records, say, mat_name):
-        from .render.proposal import proposal_for
-        from .render.translate import to_evaluator
-
         t0 = time.perf_counter()
         say(f"{mat_name}: preparing the renderer (evaluators, proposal)")
         self.evaluators = {self.REF: to_evaluator(reference)}
@@ -636,8 +599,6 @@ class _CRNEngine:
         broad highlight). Reported: ``peak``, ``peak_rel_se`` / ``peak_psnr_se`` (residual
         uncertainty; added to every model's ``psnr_se`` of the scene), ``peak_batches_only``
         (the naive max, for comparison) and the windows."""
-        from .render.core import MultiRenderer
-
         v, _, _ = _peak_candidates(ref_stack, mask)
         H, Wd = v.shape
         W = self.PEAK_WINDOW
@@ -678,9 +639,6 @@ class _CRNEngine:
                 "peak_batches_only": batches_max}
 
     def _render(self, labels, spec, seeds, spp, resolution):
-        from ..progress import report
-        from .render.core import MultiRenderer
-
         keys = [self.REF] + list(labels)
         mr = MultiRenderer({k: self.models[k] for k in keys}, scene=spec.name,
                            envmap=spec.envmap, resolution=resolution, proposal=self.proposal,
@@ -719,8 +677,6 @@ _CHILD_ENGINE: "_CRNEngine | None" = None
 def _child_engine_init(reference, models: Mapping, mat_name: str) -> None:
     """In the renderer's child process: build the :class:`_CRNEngine` that the following
     :func:`_child_engine_call` use."""
-    from ..progress import report
-
     global _CHILD_ENGINE
     records = [{"name": label, "status": "ok"} for label in models]
     _CHILD_ENGINE = _CRNEngine(reference, models, records, lambda msg: report(stage=msg),
@@ -745,8 +701,6 @@ class _IsolatedCRNEngine:
     next scene starts a new child. Same interface as :class:`_CRNEngine`."""
 
     def __init__(self, reference, models: Mapping, records, say, mat_name):
-        from .._isolation import IsolatedProcess
-
         self.mat_name, self.say = mat_name, say
         say(f"{mat_name}: preparing the renderer (evaluators, proposal)")
         self.child = IsolatedProcess("the renderer", track_stages=False,
@@ -761,8 +715,6 @@ class _IsolatedCRNEngine:
         self.setup_seconds = info["setup_seconds"]
 
     def _call(self, stage: str, method: str, *args):
-        from .._isolation import ChildCrashed
-
         self.child.stage = stage
         try:
             return self.child.call(_child_engine_call, method, *args)
@@ -792,8 +744,6 @@ def _make_engine(reference, models: Mapping, records, say, mat_name, isolate: bo
     """The Mitsuba engine, in a child process when ``isolate`` and the BRDFs can be sent
     there (pickled); otherwise in this process, with the reason. Returns ``(engine, note)``."""
     if isolate:
-        from .._isolation import NotSendable
-
         try:
             return _IsolatedCRNEngine(reference, models, records, say, mat_name), None
         except NotSendable as exc:  # e.g. a class defined in __main__
@@ -839,8 +789,6 @@ class _CallbackEngine:
 
 
 def _describe(ev) -> str:
-    from .render.core import describe_evaluator
-
     return describe_evaluator(ev)
 
 

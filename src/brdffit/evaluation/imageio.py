@@ -18,6 +18,7 @@ import numpy as np
 
 from .._atomic import atomic_path
 from ..errors import BRDFFormatError
+from .tonemap import tonemap
 
 __all__ = ["write_exr", "read_exr", "write_png", "read_png", "write_image", "read_image"]
 
@@ -115,8 +116,6 @@ def write_image(path, img, **tonemap_kwargs) -> Path:
     if ext == ".png":
         img = np.asarray(img)
         if img.dtype != np.uint8:
-            from .tonemap import tonemap
-
             rgb = tonemap(img[..., :3], **tonemap_kwargs)
             img = np.concatenate([rgb, np.clip(img[..., 3:4], 0, 1)], -1) if img.shape[-1] == 4 else rgb
         return write_png(path, img)

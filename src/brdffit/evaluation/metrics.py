@@ -43,6 +43,10 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..brdf import measured_mask
+from .tonemap import tonemap
+from ..grid import merl_phi_d, merl_theta_d, merl_theta_h, tabulate_merl_grid
+from ..losses.l2 import L2Reference
+from ..losses.objective import prepare_objective
 
 __all__ = [
     "DELTA_E_VMAX", "DELTA_E_CMAP", "npf_tonemap", "foreground_mask", "rendered_psnr",
@@ -87,8 +91,6 @@ def __getattr__(name):
 def npf_tonemap(img, exposure: float = 0.02, gamma: float = 2.2) -> np.ndarray:
     """Tone mapping of Bagher et al. 2016 §5, ``(1 - 2^(-exposure·x))^(1/gamma)``
     (:func:`brdffit.evaluation.tonemap.tonemap` with a fixed exposure)."""
-    from .tonemap import tonemap
-
     return tonemap(img, exposure, gamma)
 
 
@@ -585,8 +587,6 @@ class BRDFMetrics:
         if "normalized_l2" in self.metrics:
             t0 = time.perf_counter()
             try:
-                from ..losses.l2 import L2Reference
-
                 iso = bool(getattr(reference, "isotropic", False)) and hasattr(reference, "eval_hd")
                 self._l2 = L2Reference(reference, "grid" if iso else "mc", seed=seed)
             except Exception as exc:  # noqa: BLE001 – optional metric
@@ -598,9 +598,6 @@ class BRDFMetrics:
             try:
                 if not getattr(reference, "isotropic", False):
                     raise ValueError("the compressive objective needs an isotropic reference")
-                from ..grid import merl_phi_d, merl_theta_d, merl_theta_h, tabulate_merl_grid
-                from ..losses.objective import prepare_objective
-
                 vals, valid = tabulate_merl_grid(reference)
                 self._obj = prepare_objective(vals, valid, source=getattr(reference, "name", None))
                 th, td, pd = np.meshgrid(merl_theta_h(), merl_theta_d(), merl_phi_d(),

@@ -27,6 +27,8 @@ from typing import Mapping
 import numpy as np
 
 from .._atomic import atomic_path
+from ..geometry import half_diff_to_io
+from .metrics import DELTA_E_CMAP, DELTA_E_VMAX
 
 __all__ = ["plot_lobes", "plot_factors", "plot_slices", "npf_tables", "has_factors",
            "LOBE_INCIDENCES_DEG", "save_figure", "plot_colorbar", "lobe_curve", "npf_sample_angles",
@@ -316,8 +318,6 @@ def _eval_hd(brdf, theta_h, theta_d, phi_d):
             return np.maximum(np.nan_to_num(np.asarray(fn(theta_h, theta_d, phi_d), float)), 0.0)
         except NotImplementedError:
             pass
-    from ..geometry import half_diff_to_io
-
     wi, wo = half_diff_to_io(theta_h, np.zeros_like(theta_h), theta_d, phi_d)
     return _eval(brdf, wi, wo)
 
@@ -363,8 +363,6 @@ def plot_colorbar(path, vmax: float | None = None, cmap: str | None = None,
     from matplotlib import colormaps
     from matplotlib.colors import Normalize
     from matplotlib.cm import ScalarMappable
-
-    from .metrics import DELTA_E_CMAP, DELTA_E_VMAX
 
     plt = _plt()
     vmax = DELTA_E_VMAX if vmax is None else vmax

@@ -33,6 +33,8 @@ import numpy as np
 from .._atomic import atomic_write
 from .._json import json_default
 from ..errors import printable
+from .metrics import count_wins
+from ..paths import slug
 
 __all__ = ["RESULT_NAME", "slugify", "write_result", "read_results", "write_material_page",
            "write_index", "local_links", "missing_links", "summarize"]
@@ -118,8 +120,6 @@ window.addEventListener('load', function () {
 def slugify(name: str) -> str:
     """A file-system and URL safe directory name for a material: :func:`brdffit.paths.slug`
     (the package's one name-to-path function; distinct names never share a folder)."""
-    from ..paths import slug
-
     return slug(name)
 
 
@@ -695,8 +695,6 @@ def _tied_with_best(models: list[dict], tie_db: float = 2.0) -> set:
     """Names of the models whose PSNR is the best or tied with it, by the rule of the wins /
     ties table (:func:`.metrics.count_wins` with ``TIE_Z``: within ``TIE_Z`` combined
     standard errors, ``tie_db`` without them)."""
-    from .metrics import count_wins
-
     scored = {m.get("name"): (_num(m.get("psnr")), _num(m.get("psnr_se"))) for m in models
               if _num(m.get("psnr")) is not None}
     if not scored:
@@ -770,8 +768,6 @@ def summarize(results: Iterable[dict], tie_db: float = 2.0) -> dict:
     Returns ``{"models": [...], "per_model": {name: {...}}, "wins": count_wins(...)}``.
     Materials where a model failed count as missing (NaN) for that model.
     """
-    from .metrics import count_wins
-
     results = list(results)
     names: list[str] = []
     for r in results:

@@ -36,6 +36,9 @@ import dataclasses
 import math
 
 import numpy as np
+from ..brdf import cosine_pairs
+from ..fit.registry import figures
+from ..furnace import sampled_albedo
 
 __all__ = ["Violation", "check_validity", "CHECKS", "ALBEDO_TOLERANCE", "ALBEDO_ANGLES_DEG"]
 
@@ -108,8 +111,6 @@ def _fresnel(model) -> list[Violation]:
             if F[k, c] > worst[0]:
                 worst = (float(F[k, c]), c, math.degrees(math.acos(min(1.0, cos_d[k]))))
     if not found:
-        from ..fit.registry import figures
-
         try:
             f0 = figures(model).get("f0")
         except Exception:  # noqa: BLE001 – a model without figures has nothing to check here
@@ -129,8 +130,6 @@ def _fresnel(model) -> list[Violation]:
 
 
 def _albedo(model) -> list[Violation]:
-    from ..furnace import sampled_albedo
-
     means, ses = sampled_albedo(model, np.radians(ALBEDO_ANGLES_DEG), ALBEDO_SAMPLES)
     worst = None
     for deg, a, se in zip(ALBEDO_ANGLES_DEG, means, ses):
@@ -152,8 +151,6 @@ def _albedo(model) -> list[Violation]:
 
 
 def _values(model) -> list[Violation]:
-    from ..brdf import cosine_pairs
-
     wi, wo = cosine_pairs(PAIRS)
     f = np.asarray(model.eval(wi, wo), dtype=np.float64)
     out = []

@@ -20,7 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ExportError
+from ..errors import BRDFError, ExportError
+from .._atomic import WRITE_THROUGH, destination_kind, place
+from ..brdf import cosine_hemisphere_sample
+from ..evaluation.metrics import brdf_metrics
+from ..fit.analytic import fit_analytic_diffuse
+from ..microfacet.coat import coat_parts
+from ..microfacet.model import MicrofacetBRDF
+from ..microfacet.shadowing import EllipticalSlopeDistribution
 
 __all__ = ["label", "fail", "principal_axes", "microfacet_parts", "is_elliptical", "LUMA",
            "shown", "check_output_path", "write_problem", "writing", "StagedFiles"]
@@ -81,8 +88,6 @@ def write_problem(exc: BaseException) -> str:
 def writing(path, catch: tuple = (OSError,)):
     """Turn an error of type ``catch`` (default ``OSError``) raised while writing ``path``
     into a one-line :class:`ExportError` naming ``path``; brdffit's own errors pass."""
-    from ..errors import BRDFError
-
     try:
         yield
     except BRDFError:
@@ -112,8 +117,6 @@ class StagedFiles:
         self._files: list[tuple[Path, Path]] = []
 
     def __enter__(self) -> "StagedFiles":
-        from .._atomic import WRITE_THROUGH, destination_kind
-
         # a device or FIFO is written through: stage in the temporary folder, not in /dev
         special = destination_kind(self.main) in WRITE_THROUGH
         parent = Path(tempfile.gettempdir()) if special else self.main.parent
@@ -148,8 +151,6 @@ class StagedFiles:
         return False
 
     def _commit(self) -> None:
-        from .._atomic import WRITE_THROUGH, destination_kind, place
-
         order = sorted(self._files, key=lambda ft: ft[0] == self.main)   # main file last
         special = [(f, k) for f, _ in order if (k := destination_kind(f)) in WRITE_THROUGH]
         if special and len(order) > 1:
@@ -191,8 +192,6 @@ def fail(model, target: str, need: str):
 
 def microfacet_parts(model):
     """``(distribution, fresnel, diffuse, specular, correlated)`` of a MicrofacetBRDF, else None."""
-    from ..microfacet.model import MicrofacetBRDF
-
     if not isinstance(model, MicrofacetBRDF):
         return None
     return model.distribution, model.fresnel, model.diffuse, model.specular, model.correlated
@@ -200,8 +199,6 @@ def microfacet_parts(model):
 
 def is_elliptical(dist, kinds=("ggx", "beckmann")) -> bool:
     """True for a GGX/Beckmann :class:`EllipticalSlopeDistribution` (kind in ``kinds``)."""
-    from ..microfacet.shadowing import EllipticalSlopeDistribution
-
     return isinstance(dist, EllipticalSlopeDistribution) and getattr(dist, "kind", "") in kinds
 
 
@@ -210,9 +207,6 @@ def single_lobe_of(coated):
     lobe: the diffuse fit of its family with ``coat="off"`` fitted to it (0.5-0.8 s). A
     target whose coat does not behave like the fit's (glTF's clearcoat has a Fresnel of N·V)
     may carry this closer than the coat (:func:`closer_to`)."""
-    from ..fit.analytic import fit_analytic_diffuse
-    from ..microfacet.coat import coat_parts
-
     base = coat_parts(coated)[0]
     kind = "beckmann" if is_elliptical(base.distribution, ("beckmann",)) else "ggx"
     return fit_analytic_diffuse(coated, kind, coat="off", anisotropic=False,
@@ -223,8 +217,6 @@ def closer_to(model, candidates: dict, make_brdf, n: int = 1 << 14) -> tuple[str
     """``(label, parameters, errors)``: of the exported ``candidates`` (label → parameters),
     the one whose BRDF (``make_brdf(parameters)``) has the lowest cosine-weighted relative
     error against ``model`` (:func:`brdffit.evaluation.metrics.brdf_metrics`, ``n`` pairs)."""
-    from ..evaluation.metrics import brdf_metrics
-
     errors = {k: brdf_metrics(model, make_brdf(p), n, metrics=("cos_rel_error",))
               ["cos_rel_error"] for k, p in candidates.items()}
     best = min(errors, key=errors.get)
@@ -278,8 +270,6 @@ def cosine_weighted_albedo(brdf, n_pairs: int = 1 << 14, seed: int = 0) -> np.nd
     the weight ``cos θi``: ``π`` times the mean of ``f(wi, wo)`` over direction pairs that are
     both cosine-distributed (:func:`brdffit.brdf.cosine_hemisphere_sample`, fixed seed: the
     same pairs for every call with the same ``n_pairs`` and ``seed``)."""
-    from ..brdf import cosine_hemisphere_sample
-
     u = np.random.default_rng(seed).random((2, n_pairs, 2))
     wi, wo = cosine_hemisphere_sample(u[0]), cosine_hemisphere_sample(u[1])
     return np.pi * np.mean(np.asarray(brdf.eval(wi, wo), dtype=np.float64), axis=0)

@@ -55,6 +55,16 @@ import numpy as np
 from ..errors import ExportError
 from ._common import (StagedFiles, check_output_path, fail, is_elliptical, label, shown,
                       writing)
+from ..evaluation import imageio
+from ..microfacet.fresnel import (
+    ConductorFresnel, DielectricFresnel, GeneralizedSchlickFresnel, SchlickFresnel,
+    TabulatedFresnel,
+)
+from ..microfacet.model import MicrofacetBRDF, SumBRDF
+from ..microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF
+from ..microfacet.sgd import SGD, SGDApproxG1
+from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
+from ..microfacet.tabulated import TabulatedSlopeDistribution
 
 __all__ = ["GLSL_LIBRARY", "model_spec", "glsl_source", "write_glsl", "pack_npf_uber_texture",
            "npf_row", "compile_glsl", "glslang_available", "UBER_WIDTH", "TABLE_NODES"]
@@ -308,9 +318,6 @@ def _rgb(x, default: float) -> list[float]:
 
 
 def _dist_spec(dist, textures: dict, notes: list, tag: str) -> dict:
-    from ..microfacet.sgd import SGD, SGDApproxG1
-    from ..microfacet.tabulated import TabulatedSlopeDistribution
-
     if is_elliptical(dist):
         return {"kind": dist.kind, "ell": [dist.alpha_x, dist.alpha_y, dist.rho]}
     if isinstance(dist, SGD):
@@ -360,9 +367,6 @@ def _dist_spec(dist, textures: dict, notes: list, tag: str) -> dict:
 
 
 def _fresnel_spec(f, textures: dict, notes: list, tag: str) -> dict:
-    from ..microfacet.fresnel import (ConductorFresnel, DielectricFresnel,
-                                      GeneralizedSchlickFresnel, SchlickFresnel, TabulatedFresnel)
-
     if f is None:
         return {"kind": "none"}
     if isinstance(f, SchlickFresnel):
@@ -402,10 +406,6 @@ def _lobe_spec(m, textures, notes, prefix: str, channel=None) -> dict:
 def model_spec(model) -> dict:
     """``{"lobes": [...], "textures": {name: float32 (rows, n, 3)}, "notes": [...]}`` of
     ``model`` (see module docstring); :class:`ExportError` for unsupported models."""
-    from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
-    from ..microfacet.model import MicrofacetBRDF, SumBRDF
-    from ..microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF
-
     textures: dict = {}
     notes: list = []
     if isinstance(model, MicrofacetBRDF):
@@ -545,8 +545,6 @@ def glsl_source(spec: dict, version: str | None = "450", main: bool = False) -> 
 # ------------------------------------------------------------------------------------------
 def npf_row(model) -> np.ndarray:
     """One uber-texture row ``(272, 3)`` float32 of an NPFMicrofacetBRDF (layout above)."""
-    from ..microfacet.npf_model import NPFMicrofacetBRDF
-
     if not isinstance(model, NPFMicrofacetBRDF):
         fail(model, "the NPF uber-texture", "an NPFMicrofacetBRDF (Bagher 2016 Eq. 3: D, F, G "
              "tables and rho_d, rho_s); naive/bivariate NPF variants have no D/F/G row")
@@ -583,8 +581,6 @@ def pack_npf_uber_texture(models, path, exr: bool = True) -> dict:
         with staged.open(path) as fh:
             np.save(fh, tex)
         if exr:
-            from ..evaluation import imageio
-
             exr_path = path.with_suffix(".exr")
             tmp = staged.path(exr_path)
             with writing(exr_path, catch=(Exception,)):   # OpenEXR raises plain exceptions
@@ -603,8 +599,6 @@ def _exr_bytes(img, final) -> bytes:
     """The bytes of a float32 OpenEXR image of ``img`` (encoded in a private temporary file,
     since OpenEXR writes only to paths), so that the output itself is written by Python like
     every other file of the export (staged, all-or-nothing, errors naming ``final``)."""
-    from ..evaluation import imageio
-
     with tempfile.TemporaryDirectory(prefix="brdffit-exr-") as d:
         tmp = Path(d) / "texture.exr"
         try:

@@ -39,8 +39,14 @@ from typing import Any
 import numpy as np
 
 from .._atomic import atomic_write
-from ..errors import BRDFFormatError
-from ._common import check_output_path, fail, label, shown, writing
+from ..errors import BRDFFormatError, ExportError
+from ._common import check_output_path, fail, is_elliptical, label, shown, writing
+from ..fit import import_all
+from ..io.fitfile import SerializableModel, model_registry
+from ..microfacet.model import MicrofacetBRDF, SumBRDF, distribution_from_state, fresnel_from_state
+from ..microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF
+from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
+from .. import microfacet as _mf
 
 __all__ = ["to_json_dict", "from_json_dict", "write_json", "load_json", "describe_parameters",
            "CONVENTIONS", "FORMAT"]
@@ -79,8 +85,6 @@ def _rgb(x) -> list[float] | None:
 
 
 def _distribution_parameters(d) -> dict:
-    from ._common import is_elliptical
-
     kind = getattr(d, "kind", type(d).__name__)
     if is_elliptical(d):
         return {"kind": kind, "alpha_x": d.alpha_x, "alpha_y": d.alpha_y, "rho": d.rho,
@@ -116,10 +120,6 @@ def _fresnel_parameters(f) -> dict | None:
 
 def describe_parameters(model) -> dict:
     """The readable ``parameters`` section for ``model`` (see module docstring)."""
-    from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
-    from ..microfacet.model import MicrofacetBRDF, SumBRDF
-    from ..microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF
-
     if isinstance(model, MicrofacetBRDF):
         return {"distribution": _distribution_parameters(model.distribution),
                 "fresnel": _fresnel_parameters(model.fresnel),
@@ -168,8 +168,6 @@ def _decode_array(d, path) -> np.ndarray:
 
 def to_json_dict(model) -> dict[str, Any]:
     """The JSON document of ``model`` (a :class:`~brdffit.io.fitfile.SerializableModel`)."""
-    from ..io.fitfile import SerializableModel
-
     if not isinstance(model, SerializableModel) or not model.fit_kind:
         fail(model, "json", "only serialisable models (SerializableModel with a fit_kind: "
                             "MicrofacetBRDF, SumBRDF, PerChannelMicrofacetBRDF, PerChannelBRDF, "
@@ -185,8 +183,6 @@ def to_json_dict(model) -> dict[str, Any]:
 
 def write_json(model, path, **_ignored) -> dict:
     """Write the parameters of ``model`` as JSON (atomically); returns a summary."""
-    from ..errors import ExportError
-
     path = check_output_path(path)
     doc = to_json_dict(model)
     try:
@@ -209,8 +205,6 @@ def _default(o):
 
 def _from_parameters(p: dict, path):
     """A MicrofacetBRDF from a hand-written ``parameters`` section (analytic parts only)."""
-    from ..microfacet.model import MicrofacetBRDF, distribution_from_state, fresnel_from_state
-
     try:
         dp = {k: v for k, v in p["distribution"].items() if k not in ("kind", "units",
                                                                      "ggx_equivalent")}
@@ -237,11 +231,6 @@ def _from_parameters(p: dict, path):
 
 def from_json_dict(doc: dict, path=None):
     """Rebuild the model described by a document of :func:`to_json_dict`."""
-    from ..io.fitfile import model_registry
-
-    from .. import microfacet as _mf  # noqa: F401  (registers the analytic model kinds)
-    from ..fit import import_all
-
     import_all()                            # registers the fitted model kinds
 
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:

@@ -74,6 +74,11 @@ from ..brdf import IsotropicBRDF, _as_dirs
 from ._common import (LUMA, base_for_albedo, check_output_path, closer_to,
                       cosine_weighted_albedo, diffuse_kept_fraction, principal_axes, shown,
                       single_lobe_of, writing)
+from ..errors import ExportError
+from ..evaluation.metrics import BRDFMetrics, brdf_metrics
+from .gltf import _ggx_model, is_metal, reflectances
+from ..microfacet import DielectricFresnel
+from ..microfacet.coat import coat_alpha_weight, coat_parts
 
 __all__ = ["OpenPBRBRDF", "openpbr_parameters", "openpbr_equivalent", "materialx_fidelity",
            "materialx_document", "write_materialx", "validate_document"]
@@ -253,9 +258,6 @@ def openpbr_parameters(model, metal: bool | None = None) -> dict:
     (:func:`brdffit.microfacet.coat.coat_parts`): the base lobe by these rules, the coat as
     ``coat_weight`` = w, ``coat_roughness`` = √α_coat, ``coat_ior`` = 1.5,
     ``coat_darkening`` = 0."""
-    from ..microfacet.coat import coat_alpha_weight, coat_parts
-    from .gltf import _ggx_model, is_metal, reflectances
-
     parts = coat_parts(model)
     if parts is not None and metal is None:
         # the base lobe of a coated fit can be metal-like with a low grazing reflectance (the
@@ -401,8 +403,6 @@ def _dielectric_choice(model, p, F0, F90, notes, n: int = 1 << 15) -> dict:
     brighter than the fit's, which a darker base partly offsets); on MERL-100 this keeps ρd
     on a few materials, with a small gain on the mean (docs/design/exports.md).
     """
-    from ..evaluation.metrics import BRDFMetrics
-
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(F90 > 0, F0 / np.where(F90 > 0, F90, 1.0), 0.0)
     f_shape, f_f0 = float(np.mean(ratio)), float(F0.max())
@@ -424,8 +424,6 @@ def _dielectric_choice(model, p, F0, F90, notes, n: int = 1 << 15) -> dict:
         eq = _dielectric(p, c)
         e = metric.evaluate(eq).get("cos_rel_error")
         errs[k] = float(e) if e is not None and np.isfinite(e) else np.inf
-    from ..microfacet import DielectricFresnel
-
     if isinstance(getattr(model, "fresnel", None), DielectricFresnel) and np.isfinite(errs["shape"]):
         best = "shape"              # the fit's Fresnel is OpenPBR's: index and tint exact
     else:                           # the F0 end is never used: its grazing peaks ruin renders
@@ -493,8 +491,6 @@ def materialx_fidelity(model, n_samples: int = 1 << 15,
     """BRDF-space loss of the OpenPBR material vs the fit
     (:func:`brdffit.evaluation.metrics.brdf_metrics`, the fit as reference); ``parameters``:
     the material's inputs, when already mapped (:func:`openpbr_parameters`)."""
-    from ..evaluation.metrics import brdf_metrics
-
     exported = openpbr_equivalent(model) if parameters is None else _brdf_of(parameters)
     r = brdf_metrics(model, exported, n_samples, metrics=metrics)
     return {k: r.get(k) for k in metrics}
@@ -510,8 +506,6 @@ def _mx():
     try:
         import MaterialX as mx
     except ImportError as exc:  # pragma: no cover - a declared dependency
-        from ..errors import ExportError
-
         raise ExportError(f"the MaterialX export needs the 'materialx' package ({exc})") from None
     return mx
 
@@ -577,8 +571,6 @@ def _num(v) -> str:
 
 def write_materialx(model, path, fidelity: bool = True, **_ignored) -> dict:
     """Write the ``.mtlx`` document of ``model`` atomically (validated first)."""
-    from ..errors import ExportError
-
     mx = _mx()
     path = check_output_path(path)
     doc, p = materialx_document(model)

@@ -12,14 +12,13 @@ from __future__ import annotations
 import numpy as np
 
 from ._common import check_output_path, fail, writing
+from ..io.merl import resample_to_merl, write_merl
 
 __all__ = ["export_merl"]
 
 
 def export_merl(model, path, **_ignored) -> dict:
     """Write ``model`` as a MERL ``.binary`` file; returns a summary (samples, invalid)."""
-    from ..io.merl import resample_to_merl, write_merl
-
     if not getattr(model, "isotropic", False):
         fail(model, "MERL .binary", "an isotropic BRDF (the MERL grid has no φh axis); "
              "anisotropic fits can go to 'rgl', 'mitsuba-xml', 'json', 'mitsuba' or 'glsl'")

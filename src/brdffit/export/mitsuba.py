@@ -66,6 +66,18 @@ from .._atomic import atomic_write
 from ..errors import ExportError
 from ._common import (StagedFiles, check_output_path, fail, is_elliptical, label,
                       principal_axes, writing)
+from ..evaluation.metrics import brdf_metrics
+from ..evaluation.render import to_evaluator
+from ..evaluation.render._mitsuba import load
+from ..evaluation.render.plugin import PLUGIN_NAME, register_evaluator
+from ..io.fitfile import SerializableModel, save_fit
+from ..io.tensorfile import write_tensor_file
+from ..microfacet import Beckmann, GGX
+from ..microfacet.fresnel import ConductorFresnel, DielectricFresnel
+from ..microfacet.model import MicrofacetBRDF, SumBRDF
+from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
+from ..paths import slug
+from . import rgl as _rgl
 
 __all__ = ["fit_conductor_fresnel", "builtin_terms", "builtin_bsdf", "mitsuba_equivalent",
            "mitsuba_error", "mitsuba_eval", "mitsuba_eval_error", "plastic_bsdf", "to_xml", "scene_xml", "plugin_bsdf", "mitsuba_bsdf",
@@ -89,8 +101,6 @@ def fit_conductor_fresnel(fresnel, n: int = 90, weight_power: float = 4.0) -> di
     "exact": bool}``; exact mappings (conductor, dielectric, ``None``) are not fitted.
     """
     from scipy import optimize
-
-    from ..microfacet.fresnel import ConductorFresnel, DielectricFresnel
 
     if fresnel is None:
         return {"eta": None, "k": None, "scale": [1.0] * 3, "max_abs": 0.0, "rms": 0.0,
@@ -170,9 +180,6 @@ def _lobe_terms(m, mask, notes) -> list[dict]:
 def builtin_terms(model) -> tuple[list[dict], list[str]]:
     """The additive terms (``roughconductor`` lobes and one ``diffuse``) of ``model`` and the
     notes on approximations; :class:`ExportError` when it has no built-in equivalent."""
-    from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
-    from ..microfacet.model import MicrofacetBRDF, SumBRDF
-
     notes: set[str] = set()
     if isinstance(model, MicrofacetBRDF):
         terms = _lobe_terms(model, np.ones(3), notes)
@@ -240,10 +247,6 @@ def mitsuba_equivalent(model, rotate: bool = False):
     """The library BRDF that Mitsuba renders for :func:`builtin_bsdf` (uncorrelated G,
     conductor Fresnel fits, principal roughnesses; with ``rotate`` the tangent frame is
     assumed rotated as reported, i.e. the correlation is kept)."""
-    from ..microfacet import Beckmann, GGX
-    from ..microfacet.fresnel import ConductorFresnel
-    from ..microfacet.model import MicrofacetBRDF, SumBRDF
-
     terms, _ = builtin_terms(model)
     comps = []
     src = _source_dists(model)
@@ -264,9 +267,6 @@ def mitsuba_equivalent(model, rotate: bool = False):
 
 
 def _source_dists(model):
-    from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
-    from ..microfacet.model import SumBRDF
-
     if isinstance(model, SumBRDF):
         return [c.distribution for c in model.components]
     if isinstance(model, PerChannelMicrofacetBRDF):
@@ -278,8 +278,6 @@ def mitsuba_error(model, n_samples: int = 1 << 14) -> dict:
     """BRDF-space error of the built-in mapping: cosine-weighted relative error
     (:func:`brdffit.evaluation.metrics.brdf_metrics`) of :func:`mitsuba_equivalent` vs
     ``model``, without and with the frame rotation."""
-    from ..evaluation.metrics import brdf_metrics
-
     out = {"cos_rel_error": brdf_metrics(model, mitsuba_equivalent(model), n_samples,
                                          metrics=("cos_rel_error",))["cos_rel_error"]}
     if any(abs(r) > 0 for r in builtin_bsdf(model)[1]["frame_rotation_deg"]):
@@ -304,8 +302,6 @@ def _pairs(n: int, seed: int):
 def mitsuba_eval(bsdf: dict, wi, wo) -> np.ndarray:
     """``f_r(wi, wo)`` (library convention: ``wi`` light, ``wo`` viewer, no cosine) of a
     Mitsuba plugin dict, evaluated by Mitsuba itself (``BSDF.eval / cos θ(wi)``)."""
-    from ..evaluation.render._mitsuba import load
-
     mi, dr = load()
     obj = mi.load_dict(bsdf)
     wi = np.asarray(wi, float)
@@ -344,8 +340,6 @@ def plastic_bsdf(model, n: int = 4096) -> tuple[dict, dict]:
 
     The error (evaluated in Mitsuba) is in ``info["error"]``.
     """
-    from ..microfacet.fresnel import DielectricFresnel
-
     m = model
     if not (microfacet_ok := (is_elliptical(getattr(m, "distribution", None))
                               and m.distribution.isotropic)):
@@ -507,9 +501,6 @@ def scene_xml(bsdf: dict, comment: str = "", resolution: int = 256, spp: int = 6
 def plugin_bsdf(model) -> dict:
     """``{"type": "brdffit", "evaluator_id": key}``: the project's plugin with ``model``'s
     Dr.Jit evaluator registered in this process (:mod:`brdffit.evaluation.render.plugin`)."""
-    from ..evaluation.render import to_evaluator
-    from ..evaluation.render.plugin import PLUGIN_NAME, register_evaluator
-
     try:
         ev = to_evaluator(model)
     except Exception as exc:  # noqa: BLE001 - report as an export error
@@ -531,8 +522,6 @@ def mitsuba_bsdf(model, prefer: str = "builtin") -> dict:
 
 def example_scene_dict(bsdf: dict, resolution: int = 64, spp: int = 16) -> dict:
     """The scene of :func:`scene_xml` as a dict for ``mi.load_dict`` (needs Mitsuba)."""
-    from ..evaluation.render._mitsuba import load
-
     mi, _ = load()
     return {"type": "scene",
             "integrator": {"type": "path", "max_depth": 4},
@@ -569,8 +558,6 @@ def write_mitsuba_xml(model, path, resolution: int = 256, spp: int = 64,
 
     The XML and the tensor file are written as a whole (:class:`._common.StagedFiles`).
     """
-    from ..paths import slug
-
     check_output_path(path)
     _count(resolution, "resolution")
     _count(spp, "spp")
@@ -604,11 +591,8 @@ def write_mitsuba_xml(model, path, resolution: int = 256, spp: int = 64,
         with writing(path), atomic_write(path, "wb") as fh:
             fh.write(data)
         return {"files": [str(path)], "target": "mitsuba-xml", **info, "error": err}
-    from .rgl import phi_i_reduction, rgl_error, rgl_fields
-    from ..io.tensorfile import write_tensor_file
-
-    fields = rgl_fields(model)
-    n_phi, red = int(fields["phi_i"].size), phi_i_reduction(fields["phi_i"])
+    fields = _rgl.rgl_fields(model)
+    n_phi, red = int(fields["phi_i"].size), _rgl.phi_i_reduction(fields["phi_i"])
     info.update(phi_i_slices=n_phi, reduction=red)
     if n_phi > 1:
         info["notes"].append(f"anisotropic: {n_phi} phi_i slices over 2pi/{red}")
@@ -616,7 +600,7 @@ def write_mitsuba_xml(model, path, resolution: int = 256, spp: int = 64,
         tmp = staged.path(tensor)
         with writing(tensor):
             write_tensor_file(tmp, fields)
-        err = rgl_error(model, tmp)
+        err = _rgl.rgl_error(model, tmp)  # looked up at call time
         comment = (f"brdffit export of {label(model)} as an RGL tensor file for Mitsuba's "
                    f"measured plugin; cosine-weighted relative error vs the fit: "
                    f"{err['cos_rel_error']:.4g}")
@@ -702,8 +686,6 @@ def write_mitsuba_python(model, path, prefer: str = "builtin", **_ignored) -> di
     uses the project's ``brdffit`` plugin. Both files are written as a whole (nothing is left
     on an error) and names reach the script only as string literals.
     """
-    from ..io.fitfile import SerializableModel, save_fit
-
     path = check_output_path(path)
     stem = path.stem
     summary: dict = {"target": "mitsuba"}

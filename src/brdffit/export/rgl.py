@@ -65,6 +65,13 @@ import numpy as np
 
 from ..io.rgl import phi_i_reduction  # noqa: F401 - re-exported (the reader's rule)
 from ._common import LUMA, StagedFiles, check_output_path, label, writing
+from ..errors import ExportError
+from ..evaluation.metrics import brdf_metrics
+from ..fit.tabulated import fit_tabulated
+from ..io._limits import MAX_TENSOR_FILE_BYTES
+from ..io.rgl import _Marginal2D, phi_to_u, read_rgl, u_to_phi, u_to_theta
+from ..io.tensorfile import write_tensor_file
+from ..microfacet.model import MicrofacetBRDF
 
 __all__ = ["rgl_fields", "export_rgl", "rgl_error", "rgl_reduction", "default_n_phi",
            "phi_i_reduction"]
@@ -103,8 +110,6 @@ def _proxy_warp(model):
     stored values are the model's own ``f_r cos θo`` divided by this D, so the file still
     holds the model (deliberate deviation from the measured files, whose D is the
     material's)."""
-    from ..fit.tabulated import fit_tabulated
-
     return fit_tabulated(model).distribution, 0.25
 
 
@@ -168,9 +173,6 @@ def _phi_grid(reduction: int, n_phi: int) -> np.ndarray:
 def _check_sizes(sizes: dict, n_slices: int) -> None:
     """:class:`ExportError` for a size that is not an integer in [2, 4096], or tables whose
     file would exceed what :func:`brdffit.io.rgl.read_rgl` reads back (the read-back check)."""
-    from ..errors import ExportError
-    from ..io._limits import MAX_TENSOR_FILE_BYTES
-
     for k, v in sizes.items():
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 2 <= v <= 4096:
             raise ExportError(f"expected {k} to be an integer in [2, 4096], found {v!r}")
@@ -194,10 +196,6 @@ def rgl_fields(model, n_theta: int = 32, n_ndf: int = 256, vndf_res: int | None 
     from 0.48 % to 0.50 % and keeps the default files within the 64 MiB the reader accepts).
     ``n_phi`` (anisotropic models only, ≥ 3: two or fewer would make Mitsuba read the file as
     isotropic) defaults to :func:`default_n_phi` of the model's :func:`rgl_reduction`."""
-    from ..errors import ExportError
-    from ..io.rgl import _Marginal2D, phi_to_u, u_to_phi, u_to_theta
-    from ..microfacet.model import MicrofacetBRDF
-
     isotropic = bool(getattr(model, "isotropic", False))
     if vndf_res is None:
         vndf_res = 128 if isotropic else 64
@@ -290,9 +288,6 @@ def rgl_fields(model, n_theta: int = 32, n_ndf: int = 256, vndf_res: int | None 
 def rgl_error(model, path, n: int = 1 << 14, seed: int = 0) -> dict:
     """Read ``path`` back with :func:`brdffit.io.rgl.read_rgl` and compare with ``model``:
     cosine-weighted relative error (:func:`brdffit.evaluation.metrics.brdf_metrics`)."""
-    from ..evaluation.metrics import brdf_metrics
-    from ..io.rgl import read_rgl
-
     back = read_rgl(path)
     return {"cos_rel_error": brdf_metrics(model, back, n, seed,
                                           metrics=("cos_rel_error",))["cos_rel_error"]}
@@ -304,8 +299,6 @@ def export_rgl(model, path, check: bool = True, n_theta: int = 32, n_ndf: int = 
     is moved into place, and nothing is left when that fails); returns a summary with the
     read-back error when ``check``, the ``reduction`` and the file size in bytes. Sizes as in
     :func:`rgl_fields` (``vndf_res``, ``n_phi`` = 0: their defaults for the model)."""
-
-    from ..io.tensorfile import write_tensor_file
 
     def auto(v):
         return None if type(v) is int and v == 0 else v

@@ -35,6 +35,10 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..errors import BRDFFormatError, ExportError
+from ..evaluation.imageio import read_exr
+from ..microfacet.npf_model import NPFMicrofacetBRDF
+from ..microfacet.sgd import SGD
+from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
 
 __all__ = ["load_sgd_table", "write_sgd_table", "load_npf_table", "SGD_COLUMNS"]
 
@@ -45,9 +49,6 @@ _CH = {"r": 0, "g": 1, "b": 2, "0": 0, "1": 1, "2": 2}
 
 def load_sgd_table(path) -> dict:
     """``{material: PerChannelMicrofacetBRDF}`` from an SGD CSV table (layout above)."""
-    from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
-    from ..microfacet.sgd import SGD
-
     path = Path(path)
     text = "\n".join(ln for ln in path.read_text(encoding="utf-8").splitlines()
                      if ln.strip() and not ln.lstrip().startswith("#"))
@@ -95,8 +96,6 @@ def load_sgd_table(path) -> dict:
 
 def write_sgd_table(models, path) -> Path:
     """Write PerChannelMicrofacetBRDF models with SGD channels as an SGD CSV table."""
-    from ..microfacet.sgd import SGD
-
     path = Path(path)
     models = list(models.values()) if isinstance(models, dict) else list(models)
     buf = io.StringIO()
@@ -122,8 +121,6 @@ def write_sgd_table(models, path) -> Path:
 def load_npf_table(path) -> dict:
     """``{material: NPFMicrofacetBRDF}`` from an uber-texture (``.npy``/``.exr``, or its
     ``.json`` index)."""
-    from ..microfacet.npf_model import NPFMicrofacetBRDF
-
     path = Path(path)
     index_path = path if path.suffix == ".json" else path.with_suffix(".json")
     if not index_path.is_file():
@@ -136,8 +133,6 @@ def load_npf_table(path) -> dict:
     if path.suffix == ".json":
         path = index_path.with_name(index.get("npy") or index.get("exr"))
     if path.suffix == ".exr":
-        from ..evaluation.imageio import read_exr
-
         tex = np.asarray(read_exr(path), np.float32)[..., :3]
     else:
         tex = np.load(path)

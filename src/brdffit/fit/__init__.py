@@ -23,6 +23,9 @@ import types
 from importlib import import_module
 from typing import TYPE_CHECKING
 
+from .registry import check_options, known_names
+from .registry import fit as _fit
+
 if TYPE_CHECKING:
     from ..brdf import BRDF
 
@@ -96,16 +99,11 @@ def fit(brdf: BRDF | str, model: str = "ggx-diffuse", **options) -> BRDF:
     >>> round(float(ggx.distribution.alpha_x), 3)
     0.12
     """
-    from .registry import fit as _fit
-    from .registry import known_names
-
     if not isinstance(model, str) or model not in known_names():
         raise ValueError(f"unknown model {model!r}; expected one of {', '.join(known_names())}")
-    from .registry import check_options
-
     options = check_options(model, options)
     if isinstance(brdf, str):
-        from ..io import load
+        from ..loading import load
 
         brdf = load(brdf)
     return _fit(model, brdf, options)

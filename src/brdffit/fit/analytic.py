@@ -121,7 +121,6 @@ from __future__ import annotations
 
 import math
 import time
-from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import optimize
@@ -137,9 +136,14 @@ from ..microfacet.coat import COAT_F0
 from ..microfacet.shadowing import EllipticalSlopeDistribution
 from ..schema import ALBEDO_MAX, INDEX_MAX
 from .result import record
-
-if TYPE_CHECKING:
-    from ..microfacet import MicrofacetBRDF, SumBRDF
+from ..losses.objective import (
+    ObjectiveOptions, compressive_weight, volume_form_weight, weighted_median,
+)
+from ..microfacet import (Beckmann, ConductorFresnel, DielectricFresnel, GGX, MicrofacetBRDF,
+                          SchlickFresnel, SumBRDF)
+from ..microfacet.fresnel import conductor_reflectance, dielectric_reflectance
+from ..microfacet.tabulated import TabulatedSlopeDistribution, radial_rule
+from .tabulated import backscatter, fit_tabulated, luminance, solve_slope_pdf
 
 __all__ = ["fit_analytic_diffuse", "fit_ggx_diffuse", "fit_beckmann_diffuse", "sample_set",
            "ALPHA_MIN", "ALPHA_MAX_FIT", "COAT_MARGIN", "summary"]
@@ -176,8 +180,6 @@ def _merl_rows(stride: int, grazing_stride: int = 1) -> tuple[np.ndarray, np.nda
 
 
 def _isotropic_samples(brdf, theta_d_stride: int, phi_d_stride: int):
-    from ..losses.objective import volume_form_weight
-
     jd, width = _merl_rows(theta_d_stride)
     sp = max(int(phi_d_stride), 1)
     kp = np.arange(0, N_PHI_D, sp)
@@ -225,8 +227,6 @@ def sample_set(brdf, anisotropic: bool, *, theta_d_stride: int | None = None,
     Returns ``wi, wo`` ``(N, 3)``, ``z`` ``(N, 3)`` (measurements clamped at 0), ``w``
     ``(N, 3)`` (``wV wI wC`` per channel, 0 for invalid samples) and ``rho_bar`` ``(3,)``.
     """
-    from ..losses.objective import ObjectiveOptions, compressive_weight, weighted_median
-
     opts = options or ObjectiveOptions()
     if theta_d_stride is None:
         theta_d_stride = 6 if anisotropic else 3
@@ -272,8 +272,6 @@ def sample_set(brdf, anisotropic: bool, *, theta_d_stride: int | None = None,
 # the linear part: exact box-constrained least squares per channel
 # ------------------------------------------------------------------------------------------
 def _distribution(kind: str, ax: float, ay: float | None = None, rho: float = 0.0):
-    from ..microfacet import GGX, Beckmann
-
     cls = GGX if kind == "ggx" else Beckmann
     return cls(ax, ax if ay is None else ay, rho)
 
@@ -403,8 +401,6 @@ def _box_qp_small(H, g, lo, hi):
 def _fresnel_values(fresnel: str, eta, data) -> np.ndarray | None:
     """Dielectric F(θd; η) of one index at the samples
     (:func:`~brdffit.microfacet.fresnel.dielectric_reflectance`; ``None`` for Schlick)."""
-    from ..microfacet.fresnel import dielectric_reflectance
-
     if fresnel != "dielectric":
         return None
     return dielectric_reflectance(data["cos_d"], float(eta))
@@ -613,8 +609,6 @@ def _conductor_channel(nodes, c: int, f90: str, starts):
     """Channel ``c`` of ``ρd/π + ks S F_conductor(θd; η, k)``: ``(E, η, k, ρd, ks)``, the
     best bounded L-BFGS-B descent over (ln η, ln(k + 0.01)) from ``starts``, (ρd, ks)
     solved exactly (box-constrained) for each (η, k) from the node sums."""
-    from ..microfacet.fresnel import conductor_reflectance
-
     cos_nodes, sm = nodes
     z2 = float(sm["Z2"][:, c].sum())
     scale = z2 if z2 > 0 else 1.0          # the objective relative to the all-zero model's
@@ -708,8 +702,6 @@ def _dielectric_at(kind, alpha: float, data, f90: str) -> tuple[float, float | N
     S = _shape_of(kind, (alpha, alpha, 0.0), data)
     if S is None:
         return np.inf, None
-    from ..microfacet.fresnel import dielectric_reflectance
-
     cos_nodes, sm = _node_sums(S, data)
 
     def cost(q):
@@ -1043,9 +1035,6 @@ def _moment_start(brdf, kind: str, anisotropic: bool):
     Isotropic input: only the NDF of :func:`~brdffit.fit.tabulated.fit_tabulated` is needed
     (backscattering at a 90-node Gauss rule, 4 power iterations, Eq. 14-18 / Alg. 3), not its
     Fresnel table; anisotropic input: the full tabulated fit."""
-    from ..microfacet.tabulated import TabulatedSlopeDistribution, radial_rule
-    from .tabulated import backscatter, fit_tabulated, luminance, solve_slope_pdf
-
     def conv(dist):
         return dist.ggx_parameters() if kind == "ggx" else dist.beckmann_parameters()
 
@@ -1164,8 +1153,6 @@ def _one_lobe_model(kind, results, data, anisotropic, label, name, source):
     (``{form: (objective, (αx, αy, ρ, η), linear parameters)}``; the conductor only by a
     margin of :data:`CONDUCTOR_MARGIN`, for its six more parameters), its ρd held under the
     furnace (:func:`brdffit.furnace.hold_diffuse`), with the first part of its ``fit_info``."""
-    from ..microfacet import ConductorFresnel, DielectricFresnel, MicrofacetBRDF, SchlickFresnel
-
     finite = {k: v for k, v in results.items() if v is not None and np.isfinite(v[0])}
     if not finite:
         raise FitError(f"{label}: {kind}-diffuse fit found no finite solution")
@@ -1218,8 +1205,6 @@ def _with_coat(model, E, kind, data, coat, t0):
     ``coat="on"``) and by more than :data:`COAT_MIN_GAIN` of the data's energy, the
     ``SumBRDF`` of the refitted base lobe and the coat lobe; ``fit_info["coat"]`` says what
     was found and whether it was kept."""
-    from ..microfacet import MicrofacetBRDF, SchlickFresnel, SumBRDF
-
     t3 = time.perf_counter()
     found = _search_coat(kind, data)
     if found is None:                     # no finite coated candidate: the search still took time

@@ -118,7 +118,7 @@ from scipy import optimize, special
 
 from .._blas import with_single_blas_thread
 from ..errors import FitError
-from ..geometry import slope_to_normal
+from ..geometry import half_diff_to_io, slope_to_normal
 from ..grid import merl_node_values, merl_phi_d, merl_theta_d, merl_theta_h
 from ..microfacet.beckmann import Beckmann
 from ..microfacet.gamma import upper_gamma
@@ -126,6 +126,8 @@ from ..microfacet.ggx import GGX
 from ..microfacet.sgd import SGD, sgd_log_p22, sgd_mu_lambda
 from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
 from .result import record
+from ..losses.l2 import merl_grid_weights
+from ..losses.objective import compressive_weight, volume_form_weight, weighted_median
 
 __all__ = ["fit_sgd", "fit_beckmann_two_slice", "fit_ggx_two_slice", "fit_cook_torrance",
            "fit_beckmann_ct", "fit_ggx_ct", "fit_two_slice", "summary"]
@@ -657,9 +659,6 @@ def _selection_data(brdf, theta_d_stride: int, phi_stride: int) -> dict:
     subsample, per channel; θi, θo ≤ 89°), every ``theta_d_stride``-th θd and
     ``phi_stride``-th φd node (weights scaled by the strides).
     """
-    from ..losses.objective import compressive_weight, volume_form_weight, weighted_median
-    from ..geometry import half_diff_to_io
-
     sd, sp = int(theta_d_stride), int(phi_stride)
     n_d = len(merl_theta_d())
     # every sd-th θd node below GRAZING_DENSE, every node above (the grazing rows vary fast)
@@ -1186,9 +1185,6 @@ def fit_ggx_two_slice(brdf, *, weighting: str = "cosine", starts: int = 3,
 # full-data weighted least squares Cook-Torrance
 # ------------------------------------------------------------------------------------------
 def _full_data(brdf, theta_d_stride: int, phi_stride: int):
-    from ..losses.l2 import merl_grid_weights
-    from ..geometry import half_diff_to_io
-
     w, _ = merl_grid_weights(phi_stride)
     w = w[:, ::theta_d_stride] * theta_d_stride
     th = merl_theta_h()

@@ -61,9 +61,10 @@ from ..losses.l2 import merl_grid_weights
 from ..losses.objective import weighted_median
 from ..microfacet.conversions import to_beckmann, to_ggx
 from ..microfacet.per_channel import PerChannelBRDF
-from ..microfacet.tabulated import (TabulatedSlopeDistribution,
+from ..microfacet.tabulated import (FittedFresnel, TabulatedSlopeDistribution,
                                     azimuthal_clamped_cosine_integral, radial_rule)
 from .result import record
+from ..microfacet import MicrofacetBRDF
 
 __all__ = ["fit_tabulated", "fit_ggx", "fit_beckmann", "solve_slope_pdf", "iteration_plan",
            "convergence_info", "extract_fresnel", "luminance", "backscatter", "DEFAULT_TOL",
@@ -482,9 +483,6 @@ def extract_fresnel(brdf: BRDF, dist: TabulatedSlopeDistribution, *, merl=None,
 # The fit
 # ------------------------------------------------------------------------------------------
 def _make_model(dist, F, name, source):
-    from ..microfacet import MicrofacetBRDF
-    from ..microfacet.tabulated import FittedFresnel
-
     return MicrofacetBRDF(dist, FittedFresnel(F), name=name, source=source)
 
 

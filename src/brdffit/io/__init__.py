@@ -12,7 +12,8 @@ UTIA ``.bin``       :func:`read_utia` / :func:`write_utia`       :class:`~.utia.
 fit files ``.npz``  :func:`save_fit` / :func:`load_fit`          the fitted model
 ==================  ==========================================  ===========================
 
-:func:`load` accepts any of these paths, ``collection.zip:material`` and ``synthetic:NAME``.
+:func:`load` accepts any of these paths and ``collection.zip:material``; ``synthetic:NAME``
+is read by :func:`brdffit.load` (:mod:`brdffit.loading`), above the readers.
 Submodules are imported lazily so that ``import brdffit.io`` stays cheap.
 """
 
@@ -43,14 +44,23 @@ _LAZY = {
     "save_fit": ".fitfile", "load_fit": ".fitfile",
 }
 
+#: Format name → the reader :func:`load` calls (imported on first use, through ``_LAZY``).
+_READERS = {"merl": "read_merl", "nbrdf": "read_nbrdf", "rgl": "read_rgl", "utia": "read_utia",
+            "fit": "load_fit"}
+
 #: Extension → format name understood by :func:`load`.
 SUPPORTED_FORMATS = {".binary": "merl", ".h5": "nbrdf", ".zip": "nbrdf-collection",
                      ".bsdf": "rgl", ".bin": "utia", ".npz": "fit"}
 
 
+def _lazy(name: str):
+    """The public name ``name`` of a reader module, which is imported on first use."""
+    return getattr(import_module(_LAZY[name], __name__), name)
+
+
 def __getattr__(name):
     if name in _LAZY:
-        return getattr(import_module(_LAZY[name], __name__), name)
+        return _lazy(name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -187,55 +197,23 @@ def load(spec: str | os.PathLike, **options) -> BRDF:
       ``.npz`` (brdffit fit file); unknown extensions are recognised by content;
     * ``collection.zip:material`` (Neural-BRDF collection; the zip path may be relative,
       absolute, or a bare file name found on :func:`data_search_path`);
-    * ``synthetic:NAME`` (a built-in material of :func:`brdffit.synthetic.synthetic`).
+    ``synthetic:NAME`` raises :class:`~brdffit.errors.BRDFFormatError` here: the synthetic
+    materials build models, a layer above the readers; :func:`brdffit.load` reads them.
 
     Keyword ``options`` go to the reader (e.g. ``interpolation="nearest"`` for MERL,
     ``precision="float64"`` for Neural-BRDF).
     """
     kind, path, member = resolve_spec(spec)
-    if kind == "synthetic":
-        try:
-            from ..synthetic import synthetic
-        except ModuleNotFoundError as exc:  # pragma: no cover  (module written separately)
-            if exc.name != f"{__package__.rpartition('.')[0]}.synthetic":
-                raise
-            raise BRDFFormatError(spec, "expected a synthetic material, found no "
-                                        "brdffit.synthetic module in this installation") from None
-        from ..synthetic import list_synthetic
-
-        known = list_synthetic()
-        if member not in known:
-            raise BRDFFormatError(os.fspath(spec), f"expected a synthetic material "
-                                                   f"({', '.join(known)}), found none named "
-                                                   f"{member!r}")
-        return synthetic(member, **options)
-    if kind == "merl":
-        from .merl import read_merl
-
-        return read_merl(path, **options)
-    if kind == "nbrdf":
-        from .nbrdf import read_nbrdf
-
-        return read_nbrdf(path, **options)
+    if kind == "synthetic":  # built by brdffit.synthetic, a layer above the readers
+        raise BRDFFormatError(os.fspath(spec), "expected a file spec, found a synthetic "
+                                               "material: brdffit.load reads synthetic:NAME")
     if kind == "nbrdf-collection":
-        from .nbrdf import list_materials, read_nbrdf_collection
-
         if not member:
-            names = list_materials(path)
+            names = _lazy("list_materials")(path)
             shown = ", ".join(names[:10]) + (", ..." if len(names) > 10 else "")
             raise BRDFFormatError(path, f"expected collection.zip:material, found no material; "
                                         f"{len(names)} materials: {shown}")
-        return read_nbrdf_collection(path, member, **options)
-    if kind == "rgl":
-        from .rgl import read_rgl
-
-        return read_rgl(path, **options)
-    if kind == "utia":
-        from .utia import read_utia
-
-        return read_utia(path, **options)
-    if kind == "fit":
-        from .fitfile import load_fit
-
-        return load_fit(path, **options)
+        return _lazy("read_nbrdf_collection")(path, member, **options)
+    if kind in _READERS:  # the reader's module is imported now, not by `import brdffit.io`
+        return _lazy(_READERS[kind])(path, **options)
     raise BRDFFormatError(path, f"unsupported format {kind!r}")  # pragma: no cover

@@ -57,6 +57,7 @@ from ..errors import BRDFFormatError
 from ._checksum import source_checksum
 from ..schema import ArrayHeader, StateError, show
 from ..serialization import SerializableModel, model_registry, resolve_kind
+from .._version import __version__
 
 __all__ = ["FORMAT_NAME", "FORMAT_VERSION", "SerializableModel", "save_fit", "load_fit",
            "read_fit_header", "is_fit_file", "source_checksum", "model_registry",
@@ -118,8 +119,6 @@ def save_fit(model: BRDF, path: str | os.PathLike, *, source=None, options: dict
     read it): a model that could not be loaded back raises ``BRDFFormatError`` and nothing
     is written.
     """
-    from .._version import __version__
-
     if not isinstance(model, SerializableModel) or not model.fit_kind:
         raise TypeError(f"{type(model).__name__} cannot be saved as a fit file")
     params, arrays = model.to_state()

@@ -25,11 +25,12 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import atomic_write
-from ..brdf import IsotropicBRDF
+from ..brdf import IsotropicBRDF, _as_dirs
 from ..errors import BRDFFormatError
 from ._limits import check_plausible_float64, describe_exception, regular_file_size
 from ..grid import (N_PHI_D, N_THETA_D, N_THETA_H, phi_d_to_index, tabulate_merl_grid,
                     theta_d_to_index, theta_h_to_index)
+from ..geometry import io_to_half_diff
 
 __all__ = ["MERLBRDF", "read_merl", "write_merl", "resample_to_merl", "MERL_SCALE",
            "MERL_SHAPE", "MERL_FILE_SIZE"]
@@ -190,14 +191,10 @@ def fast_half_diff(wi, wo):
     """``(θh, θd, φd, above)`` of direction pairs, as :func:`brdffit.geometry.io_to_half_diff`
     (compiled when numba is available and the work pays for loading it); ``above`` is
     ``wi_z > 0 and wo_z > 0``."""
-    from ..brdf import _as_dirs
-
     wi, wo = _as_dirs(wi, wo)
     shape = wi.shape[:-1]
     above = (wi[..., 2] > 0) & (wo[..., 2] > 0)
     if _numba is None or not _half_diff_kernel.worth_compiling(int(np.prod(shape))):
-        from ..geometry import io_to_half_diff
-
         th, _, td, pd = io_to_half_diff(wi, wo)
         return th, td, pd, above
     a = np.ascontiguousarray(wi).reshape(-1, 3)

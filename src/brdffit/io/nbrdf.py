@@ -46,6 +46,8 @@ __all__ = ["NBRDF", "read_nbrdf", "read_nbrdf_collection", "list_materials"]
 _ACTIVATIONS = ("relu", "linear")
 
 from .._jit import lazy_numba
+from ._h5sandbox import parse_network_h5_isolated
+from .merl import fast_half_diff
 
 _numba = lazy_numba()  # Numba imported on the first compiled call (brdffit._jit)
 
@@ -188,8 +190,6 @@ class NBRDF(IsotropicBRDF):
 
     def eval(self, wi, wo) -> np.ndarray:
         """f_r(wi, wo) (Rusinkiewicz conversion compiled when numba is available)."""
-        from .merl import fast_half_diff
-
         th, td, pd, above = fast_half_diff(wi, wo)
         return np.where(above[..., None], self.eval_hd(th, td, pd), 0.0)
 
@@ -257,8 +257,6 @@ def _layers_from_h5(blob: bytes, where) -> list[tuple[np.ndarray, np.ndarray]]:
     """The ``(kernel, bias)`` pairs of an HDF5 network, parsed in an isolated child process
     (:func:`brdffit.io._h5sandbox.parse_network_h5_isolated`: libhdf5 can crash on a hostile
     file)."""
-    from ._h5sandbox import parse_network_h5_isolated
-
     return parse_network_h5_isolated(blob, where)
 
 

@@ -32,7 +32,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from ..errors import FitError
-from ..grid import N_PHI_D, N_THETA_D, N_THETA_H, merl_phi_d, merl_theta_d, merl_theta_h
+from ..grid import (N_PHI_D, N_THETA_D, N_THETA_H, merl_phi_d, merl_theta_d, merl_theta_h,
+                    tabulate_merl_grid)
 
 __all__ = [
     "ObjectiveOptions", "ObjectiveData", "merl_grid_geometry", "volume_form_weight",
@@ -221,8 +222,6 @@ def compressive_objective(fit, reference, options: ObjectiveOptions | None = Non
     channels), ``per_channel``, ``normalised`` (divided by ``Σ w ρ*²``, i.e. relative to the
     all-zero model) and ``n_samples``.
     """
-    from ..grid import tabulate_merl_grid
-
     ref_values, ref_valid = tabulate_merl_grid(reference)
     fit_values, _ = tabulate_merl_grid(fit)
     return objective_from_values(fit_values, ref_values, ref_valid, options)
@@ -239,8 +238,6 @@ def weighted_mean_relative_error(fit, reference, eps_fraction: float = 0.01,
     measures the relative error over the whole BRDF, which is what rendering under
     broad lighting is sensitive to.
     """
-    from ..grid import tabulate_merl_grid
-
     ref_values, ref_valid = tabulate_merl_grid(reference)
     fit_values, _ = tabulate_merl_grid(fit)
     return relative_error_from_values(fit_values, ref_values, ref_valid, eps_fraction,

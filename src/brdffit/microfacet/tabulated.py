@@ -48,6 +48,7 @@ from ..schema import (ALPHA_MAX, ALPHA_MIN, FRESNEL_MAX, TABLE_MAX, Array, Bool,
                       Integer, Numbers, Schema, StateError)
 from .base import SlopeDistribution
 from .fresnel import TabulatedFresnel
+from .model import register_distribution, register_fresnel
 
 __all__ = ["TabulatedSlopeDistribution", "AnisotropicTabulatedSlopeDistribution",
            "FittedFresnel", "radial_rule", "azimuthal_clamped_cosine_integral"]
@@ -981,8 +982,6 @@ class FittedFresnel(TabulatedFresnel):
 
 
 def _register():
-    from .model import register_distribution, register_fresnel
-
     register_fresnel(FittedFresnel.kind, FittedFresnel)
 
     register_distribution("tabulated", TabulatedSlopeDistribution)

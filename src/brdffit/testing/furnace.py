@@ -8,6 +8,15 @@ from __future__ import annotations
 import functools
 
 import numpy as np
+from ..microfacet import Beckmann, ConductorFresnel, GGX, MicrofacetBRDF, SchlickFresnel, SumBRDF
+from ..microfacet.fresnel import GeneralizedSchlickFresnel
+from ..microfacet.npf_model import (
+    D_THETA_H, F_THETA_D, G_THETA, H_PHI_D, NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF,
+)
+from ..microfacet.per_channel import PerChannelBRDF
+from ..microfacet.sgd import SGD
+from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
+from ..microfacet.tabulated import TabulatedSlopeDistribution, radial_rule
 
 __all__ = ["model_zoo"]
 
@@ -15,16 +24,12 @@ __all__ = ["model_zoo"]
 # -- a zoo of the library's models at a given roughness (tests and bench/bench_furnace.py) ----
 def _ggx_slope_table(n: int = 90) -> np.ndarray:
     """Unit GGX slope pdf ``1/(π(1 + r²)²)`` on the MERL radial nodes (a tabulated fit)."""
-    from ..microfacet.tabulated import radial_rule
-
     r = radial_rule(n, "merl")[2]
     return 1.0 / (np.pi * (1.0 + r * r) ** 2)
 
 
 def _ggx_slope_table_2d(n: int = 40, n_phi: int = 40, ay: float = 0.5) -> np.ndarray:
     """Elliptical GGX slope pdf (αx, αy) = (1, ``ay``) on an anisotropic (θ, φ) table."""
-    from ..microfacet.tabulated import radial_rule
-
     r = radial_rule(n, "merl")[2][:, None]
     phi = 2.0 * np.pi * np.arange(n_phi)[None, :] / n_phi
     q = (r * np.cos(phi)) ** 2 + (r * np.sin(phi) / ay) ** 2
@@ -36,8 +41,6 @@ def _unit_tables():
     """The unit-roughness tabulated distributions of the zoo (shared by every α, so that
     their lazily built sampling tables are built once; the 2D table's visible-normal
     normaliser is built here, before ``with_roughness`` copies share it)."""
-    from ..microfacet.tabulated import TabulatedSlopeDistribution
-
     iso = TabulatedSlopeDistribution(_ggx_slope_table())
     aniso = TabulatedSlopeDistribution(_ggx_slope_table_2d())
     n = np.array([0.0, 0.0, 1.0])
@@ -60,15 +63,6 @@ def model_zoo(alpha: float) -> dict:
     ``per-channel-tabulated`` (tabulated fits R α, G 0.05, B 0.5), ``npf``, ``npf-naive``,
     ``npf-bivariate`` (Bagher 2016 tables of a GGX α lobe).
     """
-    from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
-    from ..microfacet.per_channel import PerChannelBRDF
-    from ..microfacet import (GGX, Beckmann, ConductorFresnel, MicrofacetBRDF, SchlickFresnel,
-                              SumBRDF)
-    from ..microfacet.fresnel import GeneralizedSchlickFresnel
-    from ..microfacet.npf_model import (D_THETA_H, F_THETA_D, G_THETA, NPFBivariateBRDF,
-                                        NPFMicrofacetBRDF, NPFNaiveBRDF, H_PHI_D)
-    from ..microfacet.sgd import SGD
-
     a = float(alpha)
     a2 = min(2.0 * a, 1.0)
     widths = (a, 0.05, 0.5)

@@ -33,6 +33,11 @@ import time
 import numpy as np
 
 from ..metrics import rendered_psnr as psnr  # Bagher 2016 §5 (one implementation)
+from ._mitsuba import load
+from .plugin import make_bsdf
+from .proposal import proposal_for
+from .scenes import SCENES, _camera, roughness_texture, scene_dict, scene_spec
+from .translate import to_evaluator
 
 __all__ = ["RenderResult", "Renderer", "render", "render_ex", "noise_floor", "psnr",
            "foreground_mask", "MultiRenderer", "MultiRenderResult", "render_models",
@@ -80,13 +85,7 @@ class Renderer:
     def __init__(self, brdf=None, scene: str = "sphere-env", envmap=None, spp: int = 256,
                  resolution: int = 256, mode: str = "auto", evaluator=None,
                  alpha_texture=None, proposal=None):
-        from ._mitsuba import load
-
         self.mi, self.dr = load()
-        from .plugin import make_bsdf
-        from .scenes import SCENES, roughness_texture, scene_dict
-        from .translate import to_evaluator
-
         t0 = time.perf_counter()
         if evaluator is None:
             if brdf is None:
@@ -103,16 +102,12 @@ class Renderer:
                           "microfacet models, closed-form or tabulated, support Eq. 9 scaling)",
                           RuntimeWarning, stacklevel=2)
         if proposal is not None and not hasattr(proposal, "sample"):
-            from .proposal import proposal_for
-
             proposal = proposal_for(proposal)
         self.proposal = proposal
         self.bsdf = make_bsdf(evaluator, alpha_texture=alpha_texture, proposal=proposal)
         self.scene_name, self.spp, self.resolution = scene, int(spp), int(resolution)
         self.envmap = envmap
         if envmap is None and scene not in SCENES:  # a suite name carries its map
-            from .scenes import scene_spec
-
             self.envmap = scene_spec(scene).envmap
         self.scene = self.mi.load_dict(scene_dict(self.bsdf, scene, envmap, spp, resolution))
         self.setup_seconds = time.perf_counter() - t0
@@ -183,9 +178,6 @@ def load_scene(scene: str = "sphere-env", envmap=None, resolution: int = 256):
     placeholder diffuse BSDF, cached per (scene, map, resolution) so that every material of a
     comparison reuses it (environment-map sampling tables, the knot mesh and its BVH are built
     once). For :func:`crn_integrator`, which evaluates the models itself."""
-    from ._mitsuba import load
-    from .scenes import scene_dict, scene_spec
-
     mi, _ = load()
     spec = scene_spec(scene, envmap)
     key = (spec.base, spec.envmap if not isinstance(spec.envmap, np.ndarray) else id(spec.envmap),
@@ -220,8 +212,6 @@ def crn_integrator(evaluators, proposal, max_depth: int = 2, alpha_texture=None)
     the spatially varying roughness of ``sphere-svrough`` to the models that support it.
     """
     global _INTEGRATOR_CLS
-    from ._mitsuba import load
-
     mi, dr = load()
     if _INTEGRATOR_CLS is None:
         _INTEGRATOR_CLS = _make_integrator_class(mi, dr)
@@ -344,11 +334,6 @@ class MultiRenderer:
 
     def __init__(self, models, scene: str = "sphere-env", envmap=None, resolution: int = 256,
                  proposal=None, reference=None, mode: str = "auto", evaluators=None):
-        from ._mitsuba import load
-        from .proposal import proposal_for
-        from .scenes import roughness_texture, scene_spec
-        from .translate import to_evaluator
-
         self.mi, self.dr = load()
         t0 = time.perf_counter()
         self.labels = list(models)
@@ -378,8 +363,6 @@ class MultiRenderer:
         t0, c0 = time.perf_counter(), time.process_time()
         kw = {}
         if crop is not None:
-            from .scenes import _camera
-
             crop = tuple(int(v) for v in crop)
             if crop not in self._sensors:
                 self._sensors[crop] = self.mi.load_dict(_camera(self.resolution, 4, crop=crop))

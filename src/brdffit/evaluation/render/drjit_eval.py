@@ -40,6 +40,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._mitsuba import load as _load
+from ...grid import N_THETA_D, N_THETA_H, merl_theta_d, merl_theta_h
 
 mi, dr = _load()
 
@@ -264,8 +265,6 @@ class MERLTableEval(_ProxySampling):
     kind = "merl-table"
 
     def __init__(self, values, valid=None, interp: str = "log"):
-        from ...grid import N_THETA_D, N_THETA_H, merl_theta_h
-
         if interp not in ("log", "linear"):
             raise ValueError(f"interp must be 'log' or 'linear', got {interp!r}")
         v = np.asarray(values, dtype=np.float64)
@@ -339,8 +338,6 @@ def despike(values, factor: float = 100.0):
 def tabulate_full_phi(brdf, chunk: int = 1 << 18) -> np.ndarray:
     """Evaluate an isotropic BRDF on the MERL θh × θd grid with 360 φd samples on [0, 2π)
     (1° steps, no reciprocity folding): ``(90, 90, 360, 3)``."""
-    from ...grid import merl_theta_d, merl_theta_h
-
     pd_axis = np.arange(360) * (np.pi / 180.0)
     th, td, pd = (a.ravel() for a in np.meshgrid(merl_theta_h(), merl_theta_d(), pd_axis,
                                                   indexing="ij"))
@@ -859,8 +856,6 @@ class NPFEval(_ProxySampling):
             else:
                 self.H = f32(tables["H"])
         if proxy_profile is not None:
-            from ...grid import merl_theta_h
-
             self.proxy_alpha, self.proxy_weight = fit_ggx_proxy(merl_theta_h(), proxy_profile)
 
     def eval(self, wi, wo, alpha_scale=1.0, active=True):

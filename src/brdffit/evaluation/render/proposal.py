@@ -39,6 +39,7 @@ Everything unbiased does not depend on the fit: a poor proposal only costs varia
 from __future__ import annotations
 
 import numpy as np
+from . import drjit_eval as dj
 
 __all__ = ["Proposal", "fit_proposal", "proposal_for", "backscatter_profile"]
 
@@ -157,8 +158,6 @@ class Proposal:
 
     # -- Dr.Jit ----------------------------------------------------------------------------
     def pdf(self, wi, wo, alpha_scale=1.0, active=True):
-        from . import drjit_eval as dj
-
         mi, dr = dj.mi, dj.dr
         up = (wi.z > 0) & (wo.z > 0)
         p = self.cosine_weight * dr.maximum(wo.z, 0.0) * (1.0 / np.pi)
@@ -171,8 +170,6 @@ class Proposal:
         return dr.select(active & up, p, mi.Float(0.0))
 
     def sample(self, wi, u1, u2, alpha_scale=1.0, active=True):
-        from . import drjit_eval as dj
-
         mi, dr = dj.mi, dj.dr
         wo = dj.cosine_sample(u2)
         edge = self.cosine_weight

@@ -75,6 +75,7 @@ import numpy as np
 
 from ...errors import BRDFFormatError
 from ._mitsuba import load as _load
+from ..imageio import read_exr
 
 __all__ = ["SCENES", "scene_dict", "procedural_envmap", "load_envmap", "torus_knot",
            "roughness_texture", "ENVMAP_DIR", "envmap_names", "SUITES", "SceneSpec",
@@ -208,8 +209,6 @@ def _read_envmap(spec: str) -> np.ndarray:
         if not path.is_file():
             raise BRDFFormatError(path, f"expected an environment map named {spec!r} in "
                                         f"{ENVMAP_DIR}, found {envmap_names() or 'none'}")
-    from ..imageio import read_exr
-
     return read_exr(path)
 
 

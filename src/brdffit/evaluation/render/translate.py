@@ -42,6 +42,11 @@ from typing import Callable
 import numpy as np
 
 from ...errors import BRDFError
+from ...brdf import cosine_hemisphere_sample
+from ...furnace import FurnaceResult, albedo_quadrature, estimator_values, sample_mean
+from ...geometry import half_diff_to_io
+from ...grid import merl_theta_h, tabulate_merl_grid
+from . import drjit_eval
 
 __all__ = ["to_evaluator", "is_reciprocal", "register_translator", "resampling_error", "tabulate_4d",
            "evaluate_drjit", "albedo_drjit", "furnace_drjit", "TABLE4D_SHAPE"]
@@ -57,8 +62,6 @@ def register_translator(class_name: str, fn: Callable) -> None:
 
 
 def _dj():
-    from . import drjit_eval
-
     return drjit_eval
 
 
@@ -152,8 +155,6 @@ register_translator("PerChannelMicrofacetBRDF", _per_channel_translator)
 def _npf_translator(brdf):
     """NPF models (``brdffit.microfacet.npf_model``): their own tables in Dr.Jit (no
     resampling); the proxy lobe for sampling is fitted to the model's θd = 0 slice."""
-    from ...grid import merl_theta_h
-
     name = type(brdf).__name__
     th = merl_theta_h()
     prof = brdf.eval_hd(th, np.zeros_like(th), np.zeros_like(th)) @ np.array([0.2126, 0.7152, 0.0722])
@@ -174,8 +175,6 @@ for _n in ("NPFMicrofacetBRDF", "NPFNaiveBRDF", "NPFBivariateBRDF"):
 # -- generic tables -------------------------------------------------------------------------
 def tabulate_4d(brdf, shape=TABLE4D_SHAPE, chunk: int = 1 << 18) -> np.ndarray:
     """Evaluate any BRDF on the (θh, φh, θd, φd) grid of :class:`.drjit_eval.Table4DEval`."""
-    from ...geometry import half_diff_to_io
-
     dj = _dj()
     axes = dj.Table4DEval.grid(shape)
     th, ph, td, pd = (a.ravel() for a in np.meshgrid(*axes, indexing="ij"))
@@ -193,8 +192,6 @@ def _table_evaluator(brdf, table4d_shape=TABLE4D_SHAPE, reciprocal=None, despike
         if reciprocal is None:
             reciprocal = is_reciprocal(brdf)
         if getattr(brdf, "merl_table", None) is not None or reciprocal:
-            from ...grid import tabulate_merl_grid
-
             values, valid = tabulate_merl_grid(brdf)   # MERL's own grid, φd ∈ [0, π)
         else:
             values, valid = dj.tabulate_full_phi(brdf), None
@@ -330,8 +327,6 @@ def albedo_drjit(evaluator, theta_i: float, n: int = 1 << 20, seed: int = 0,
     0. Returns ``(mean, standard error)``, RGB (:mod:`brdffit.furnace`).
     ``stratified``: ``batches`` independent batches of jittered-grid uniforms in
     ``[0, 1)³`` (lobe choice ``u1`` and direction ``u2``), standard error of the batch means."""
-    from ...furnace import estimator_values, sample_mean
-
     dj = _dj()
     mi = dj.mi
     rng = np.random.default_rng(seed)
@@ -354,8 +349,6 @@ def furnace_drjit(evaluator, thetas_deg=(0.0, 40.0, 80.0), n: int = 1 << 20, see
     """Furnace test of a Dr.Jit evaluator: :func:`albedo_drjit` against the quadrature of
     the evaluator's own ``eval`` (:func:`brdffit.furnace.albedo_quadrature`), one
     :class:`~brdffit.furnace.FurnaceResult` per incidence."""
-    from ...furnace import FurnaceResult, albedo_quadrature
-
     out = []
     for j, t in enumerate(np.radians(np.atleast_1d(thetas_deg))):
         est, se = albedo_drjit(evaluator, float(t), n=n, seed=seed + j, alpha_scale=alpha_scale,
@@ -367,8 +360,6 @@ def furnace_drjit(evaluator, thetas_deg=(0.0, 40.0, 80.0), n: int = 1 << 20, see
 
 
 def _random_pairs(n, seed):
-    from ...brdf import cosine_hemisphere_sample
-
     rng = np.random.default_rng(seed)
     wi = cosine_hemisphere_sample(rng.random((n, 2)))
     wo = cosine_hemisphere_sample(rng.random((n, 2)))
@@ -380,8 +371,6 @@ def _importance_pairs(brdf, n, seed):
     ``½ cosine + ½ brdf.sample`` and ``weight = cos θo / pdf_mix`` (so that weighted sums are
     cosine-weighted integrals, as the plain averages over :func:`_random_pairs` are). Falls
     back to cosine pairs (weight π) when the BRDF's sampler fails."""
-    from ...brdf import cosine_hemisphere_sample
-
     wi, wc = _random_pairs(n, seed)
     rng = np.random.default_rng(seed + 7919)
     try:

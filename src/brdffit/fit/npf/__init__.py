@@ -72,15 +72,17 @@ from typing import Any, Iterable
 import numpy as np
 
 from ..._blas import with_single_blas_thread
-from ...brdf import BRDF
+from ...brdf import BRDF, IsotropicBRDF
 from ...errors import FitError
 from ...losses.objective import ObjectiveOptions, prepare_objective
-from ...grid import tabulate_merl_grid
+from ...grid import phi_d_to_index, tabulate_merl_grid, theta_d_to_index, theta_h_to_index
 from ...progress import step_callback
-from ...microfacet.npf_model import NPFBivariateBRDF, NPFMicrofacetBRDF, NPFNaiveBRDF
+from ...microfacet.npf_model import (D_THETA_H, F_THETA_D, G_THETA, NPFBivariateBRDF,
+                                     NPFMicrofacetBRDF, NPFNaiveBRDF)
 from ..result import fit_result, record
 from . import _solver
 from ._solver import MFState, NaiveState, Samples
+from ...loading import load
 
 __all__ = ["fit_npf", "fit_npf_independent_g", "fit_npf_g_from_d", "fit_npf_naive",
            "fit_npf_bivariate", "VARIANTS", "ALL_STARTS", "summary"]
@@ -123,8 +125,6 @@ def _resolve_input(brdf, data):
         values, valid = data
         return np.asarray(values, dtype=np.float64), valid, None
     if isinstance(brdf, str):
-        from ...io import load
-
         brdf = load(brdf)
     values, valid = tabulate_merl_grid(brdf)
     return values, valid, brdf
@@ -167,8 +167,6 @@ def _sgd_start(brdf, values, valid):
     except ImportError as exc:
         return None, f"skipped: brdffit.fit.sgd not available ({exc})"
     if brdf is None:
-        from ...brdf import IsotropicBRDF
-
         class _Table(IsotropicBRDF):
             name = "table"
 
@@ -176,7 +174,6 @@ def _sgd_start(brdf, values, valid):
                 return values, valid
 
             def eval_hd(self, th, td, pd):  # pragma: no cover - fit_sgd should use the table
-                from ...grid import phi_d_to_index, theta_d_to_index, theta_h_to_index
                 i = np.minimum(theta_h_to_index(th).astype(int), 89)
                 j = np.minimum(theta_d_to_index(td).astype(int), 89)
                 k = np.minimum(phi_d_to_index(pd).astype(int), 179)
@@ -187,8 +184,6 @@ def _sgd_start(brdf, values, valid):
         model = fit_sgd(brdf)
     except Exception as exc:  # noqa: BLE001 - a failing optional start must not kill the fit
         return None, f"skipped: fit_sgd failed ({type(exc).__name__}: {exc})"
-    from ...microfacet.npf_model import D_THETA_H, F_THETA_D, G_THETA
-
     dist = getattr(model, "distribution", None)
     fres = getattr(model, "fresnel", None)
     try:
