@@ -145,6 +145,8 @@ def main(argv=None) -> int:
     ap.add_argument("--label", default="current", help="key of this run in the JSON")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "engines_blender.json")
     args = ap.parse_args(argv)
+    if str(args.optimize).lower() in ("false", "none", "0", ""):
+        args.optimize = False
 
     from brdffit._atomic import atomic_write
     from brdffit.evaluation.engines import blender
@@ -170,7 +172,8 @@ def main(argv=None) -> int:
               f"{' '.join(f'{x:.3f}' for x in b['mean_ratio']):>20s} "
               f"{' '.join(f'{x:.3f}' for x in b['rim_ratio']):>20s} {b['flip']:6.4f}",
               flush=True)
-    run = {"commit": commit, "model": args.model, "scene": "sphere-distant",
+    run = {"commit": commit, "model": args.model, "optimize": args.optimize,
+           "scene": "sphere-distant",
            "resolution": args.res, "spp_per_batch": args.spp, "batches": args.batches,
            "cpus": os.cpu_count(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
            "command": "bench/bench_engines.py " + " ".join(argv if argv is not None
