@@ -76,8 +76,13 @@ D(0) = 1/(πα²), heavier GGX tails; the loss is measured):
   on rough, heavy coats; so one lobe fitted to the coated fit
   (:func:`~brdffit.export._common.single_lobe_of`) is mapped too, and whichever is closer to
   the fit (cosine-weighted relative error) is written, the choice in the notes;
-* optionally (``optimize=True``, CLI ``--option optimize=true``) baseColor, metallic and
-  roughness are refined by least squares in BRDF space (:func:`optimize_parameters`);
+* optionally (``optimize=True`` or ``"brdf"``, CLI ``--option optimize=true``) baseColor,
+  metallic and roughness are refined by least squares in BRDF space
+  (:func:`optimize_parameters`); with ``optimize="engines"`` (CLI ``--option
+  optimize=engines``; ``"blender"`` / ``"threejs"`` for one engine) the specular reflectance
+  (``specularFactor``, or a metal's base colour) is lowered so that the multiple-scattering
+  energy Blender and three.js add to rough lobes is taken back (:func:`optimize_for_engines`;
+  not the default: the specification's BRDF, which adds none, then renders darker);
 * what Blender's importer and Cycles make of the file (f90 = 1, multiscatter GGX, the
   diffuse dimmed by one scalar) is modelled by
   :class:`brdffit.export.gltf_cycles.CyclesPrincipledBRDF`
