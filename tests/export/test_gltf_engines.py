@@ -53,7 +53,7 @@ def test_engine_aware_parameters_lower_the_modelled_engine_error_on_a_rough_lobe
     assert np.all(spec_ratio < 0.995), spec_ratio
 
 
-def test_engine_aware_parameters_keep_sharp_lobes_and_are_checked():
+def test_engine_aware_parameters_keep_sharp_lobes_and_are_checked(tmp_path):
     sharp = MicrofacetBRDF(GGX(0.01), SchlickFresnel(0.04), diffuse=[0.4, 0.1, 0.1],
                            specular=[0.6, 0.6, 0.6])
     rule = gltf_parameters(sharp)
@@ -66,6 +66,15 @@ def test_engine_aware_parameters_keep_sharp_lobes_and_are_checked():
         gltf_equivalent(sharp, optimize="nope")
     with pytest.raises(ValueError, match="engine"):
         optimize_for_engines(sharp, rule, engines=("unreal",))
+    # the command line's option: a boolean or a name (its type comes from write_gltf's default)
+    from brdffit.cli.export import check_options
+    from brdffit.errors import ExportError
+    from brdffit.export.gltf import write_gltf
+
+    for value in (True, False, "engines", "blender"):
+        check_options("gltf", {"optimize": value})
+    with pytest.raises(ExportError, match="optimize"):
+        write_gltf(sharp, tmp_path / "m.gltf", fidelity=False, optimize="nope")
 
 
 def test_quadrature_dfg_table_is_threes():

@@ -966,15 +966,18 @@ def _placeholder_image() -> dict:
 
 
 def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
-               optimize: bool = False, specular: bool = True, mesh: str = "sphere",
-               max_ior: float = IOR_MAX, **_ignored) -> dict:
+               optimize: bool | str | None = None, specular: bool = True,
+               mesh: str = "sphere", max_ior: float = IOR_MAX, **_ignored) -> dict:
     """Write a glTF 2.0 JSON file atomically: ``asset``, one ``material`` and, with
     ``mesh="sphere"`` (default), the preview sphere that uses it (:func:`uv_sphere`, in
     the file as a data URI), so that a viewer or an importer shows the material; with
     ``mesh="none"`` the material alone (an importer then creates nothing); an unused
     placeholder image (:func:`_placeholder_image`) keeps Blender's importer from failing
     when it imports unused materials. ``optimize``
-    refines the rule-based parameters (:func:`optimize_parameters`), ``specular=False``
+    refines the rule-based parameters (``True`` or ``"brdf"``: :func:`optimize_parameters`;
+    ``"engines"``, ``"blender"``, ``"threejs"``: :func:`optimize_for_engines`; ``None`` or
+    ``False``: the rules alone; its default is ``None`` so that the command line accepts both
+    a boolean and a name), ``specular=False``
     leaves the dielectric extensions out (core glTF only), ``max_ior`` bounds the exported
     ``ior`` (:func:`_specular_extension`; a larger bound keeps a flat Fresnel's f90 for
     engines that follow the specification, at the cost of indices artists do not expect)."""
@@ -982,6 +985,11 @@ def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
         from ..errors import ExportError
 
         raise ExportError(f"glTF mesh: expected one of {', '.join(MESHES)}, found {mesh!r}")
+    if not (optimize is None or isinstance(optimize, bool) or optimize in OPTIMIZE):
+        from ..errors import ExportError
+
+        raise ExportError(f"glTF optimize: expected true, false or one of "
+                          f"{', '.join(OPTIMIZE)}, found {optimize!r}")
     check_output_path(path)
     mat = gltf_material(model, fidelity=fidelity, anisotropy=anisotropy, optimize=optimize,
                         specular=specular, max_ior=max_ior)
