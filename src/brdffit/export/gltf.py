@@ -710,11 +710,12 @@ def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS, n: int = 512,
     rough lobes (Blender's multiscatter GGX, Kulla & Conty 2017: ``1 + F_ms (1 − E)/E``;
     three.js, Turquin 2019 Eq. 16: ``1 + f0 (1/E_ss − 1)``, ``E`` the lobe's single-scattering
     albedo), and Cycles dims the diffuse below by that larger specular albedo; a lower specular
-    reflectance (and a retuned base colour) offsets it. Fitted by least squares: the base colour
-    (3 factors in [0, 1]) and, for a dielectric carrying ``KHR_materials_specular``,
-    ``specularFactor`` (in [0, 1]; the index and ``specularColorFactor`` kept, so that the
-    ior rule of :func:`_specular_extension` holds; a metal's reflectance is its base colour), on
-    the residuals ``√μ (ρ_e(q; μ) − ρ_e,ss(p; μ))`` of every engine ``e`` at the view cosines
+    reflectance offsets it. Fitted by least squares: one factor ``k`` in [0.5, 1] on
+    ``specularFactor`` of a dielectric carrying ``KHR_materials_specular`` (the index and
+    ``specularColorFactor`` kept, so that the ior rule of :func:`_specular_extension` holds;
+    a dielectric without the extension is returned unchanged) or on a metal's base colour (its
+    reflectance); the diffuse base colour is kept (freed, it traded the specular away on rough
+    diffuse fits: docs/design/engines.md), on the residuals ``μ^1.5 (ρ_e(q; μ) − ρ_e,ss(p; μ))`` of every engine ``e`` at the view cosines
     :data:`ALBEDO_MU`: ``ρ_e`` the directional albedo (RGB) of the engine's BRDF for the
     parameters ``q``, ``ρ_e,ss`` that of the rule's material with the engine's multiple
     scattering off (:func:`_albedo_samples`, ``n`` directions per μ, the same for every
