@@ -80,7 +80,7 @@ def bench_material(name: str, spec: str, args) -> dict:
     out["fit_seconds"] = time.perf_counter() - t
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / f"{name}.gltf"
-        info = export(fit, "gltf", path, fidelity=False)
+        info = export(fit, "gltf", path, fidelity=False, optimize=args.optimize)
         doc = json.loads(path.read_text())
         mat = doc["materials"][0]
         out["gltf"] = {"pbrMetallicRoughness": mat["pbrMetallicRoughness"],
@@ -92,7 +92,7 @@ def bench_material(name: str, spec: str, args) -> dict:
                             ("equivalent_blender", "blender"),
                             ("equivalent_blender_ggx", "blender-ggx")):
             try:
-                model = gltf_equivalent(fit, engine=engine)
+                model = gltf_equivalent(fit, engine=engine, optimize=args.optimize)
             except ValueError as exc:                # e.g. anisotropy, not modelled
                 out[key] = {"error": str(exc)}
                 continue
@@ -138,11 +138,15 @@ def main(argv=None) -> int:
     ap.add_argument("--materials", help="comma-separated subset of the material names")
     ap.add_argument("--model", default="ggx-diffuse")
     ap.add_argument("--res", type=int, default=128)
+    ap.add_argument("--optimize", default=False,
+                    help="the exporter's refinement (brdffit.export.gltf.OPTIMIZE), e.g. engines")
     ap.add_argument("--spp", type=int, default=64, help="per batch")
     ap.add_argument("--batches", type=int, default=4)
     ap.add_argument("--label", default="current", help="key of this run in the JSON")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "engines_blender.json")
     args = ap.parse_args(argv)
+    if str(args.optimize).lower() in ("false", "none", "0", ""):
+        args.optimize = False
 
     from brdffit._atomic import atomic_write
     from brdffit.evaluation.engines import blender
@@ -168,7 +172,8 @@ def main(argv=None) -> int:
               f"{' '.join(f'{x:.3f}' for x in b['mean_ratio']):>20s} "
               f"{' '.join(f'{x:.3f}' for x in b['rim_ratio']):>20s} {b['flip']:6.4f}",
               flush=True)
-    run = {"commit": commit, "model": args.model, "scene": "sphere-distant",
+    run = {"commit": commit, "model": args.model, "optimize": args.optimize,
+           "scene": "sphere-distant",
            "resolution": args.res, "spp_per_batch": args.spp, "batches": args.batches,
            "cpus": os.cpu_count(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
            "command": "bench/bench_engines.py " + " ".join(argv if argv is not None

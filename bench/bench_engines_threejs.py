@@ -86,7 +86,7 @@ def bench_material(name, spec, args) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "m.gltf"
         t = time.perf_counter()
-        write_gltf(fit, path, fidelity=False)
+        write_gltf(fit, path, fidelity=False, optimize=args.optimize)
         out["timings"]["export_s"] = time.perf_counter() - t
         doc = json.loads(path.read_text())
         out["gltf_material"] = {k: v for k, v in doc["materials"][0].items() if k != "extras"}
@@ -117,7 +117,8 @@ def bench_material(name, spec, args) -> dict:
     out["three_grid_vs_converged"] = rendered_psnr(fine, est, mask)
     e = rendered_psnr(fit_img, est, mask)
     out["estimate"] = {"psnr": e, "error_db": e - c["psnr"]}
-    spec_img, _ = TB.shade_sphere(gltf_equivalent(fit), geometry_roughness=False, **kw)
+    spec_img, _ = TB.shade_sphere(gltf_equivalent(fit, optimize=args.optimize),
+                                  geometry_roughness=False, **kw)
     out["gltf_spec_vs_fit"] = rendered_psnr(fit_img, spec_img, mask)
     abl = {}
     for key, opts, g in (("no_multiscatter", {"multiscatter": False}, True),
@@ -248,6 +249,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-materialx", dest="materialx", action="store_false",
                     help="skip the MaterialX round trip")
     ap.add_argument("--res", type=int, default=128)
+    ap.add_argument("--optimize", default=False,
+                    help="the exporter's refinement (brdffit.export.gltf.OPTIMIZE), e.g. engines")
     ap.add_argument("--ss", type=int, default=8, help="three.js samples per pixel side")
     ap.add_argument("--spp", type=int, default=256, help="Mitsuba samples per pixel per batch")
     ap.add_argument("--batches", type=int, default=8, help="Mitsuba batches (independent seeds)")
@@ -316,6 +319,7 @@ def main(argv=None) -> int:
                "settings": {"scene": "sphere-distant", "resolution": args.res,
                             "three_supersample": args.ss, "mitsuba_spp": args.spp,
                             "mitsuba_batches": args.batches, "model": "ggx-diffuse",
+                            "optimize": args.optimize,
                             "three": T.three_version()},
                "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
                            "load_average_start": load0, "load_average_end": list(os.getloadavg())},

@@ -235,12 +235,16 @@ def test_exports_pass_the_khronos_validator(tmp_path):
                                            name='evil "name" </script>\u0000 \U0001F600'),
         "black": MicrofacetBRDF(GGX(0.3), SchlickFresnel(0.0), diffuse=0.0),
         "coated": _coated(),
+        # a rough flat-Fresnel dielectric, its specularFactor lowered for the engines below
+        "rough-paint-engines": MicrofacetBRDF(GGX(0.27), SchlickFresnel(0.8), diffuse=0.0,
+                                              specular=[0.33, 0.23, 0.08]),
     }
     seen = set()
     for key, model in models.items():
         for mesh in ("sphere", "none"):
             out = tmp_path / f"{key}-{mesh}.gltf"
-            info = export(model, "gltf", out, fidelity=False, mesh=mesh)
+            info = export(model, "gltf", out, fidelity=False, mesh=mesh,
+                          optimize="engines" if key.endswith("-engines") else False)
             seen.update(info["extensions"])
             report = validate(out)
             assert report["issues"]["numErrors"] == 0, (key, mesh, _errors(report))
@@ -252,6 +256,8 @@ def test_exports_pass_the_khronos_validator(tmp_path):
             assert info.get("drawCallCount", 0) == (1 if mesh == "sphere" else 0), (key, info)
     assert seen == {"KHR_materials_anisotropy", "KHR_materials_specular", "KHR_materials_ior",
                     "KHR_materials_clearcoat"}
+    engines = json.loads((tmp_path / "rough-paint-engines-none.gltf").read_text())
+    assert "multiple scattering" in engines["materials"][0]["extras"]["brdffit"]["notes"][-1]
     # the check can fail: the validator reports an out-of-range factor and an undeclared
     # extension as errors
     doc = json.loads((tmp_path / "aniso-dielectric-sphere.gltf").read_text())

@@ -76,8 +76,13 @@ D(0) = 1/(πα²), heavier GGX tails; the loss is measured):
   on rough, heavy coats; so one lobe fitted to the coated fit
   (:func:`~brdffit.export._common.single_lobe_of`) is mapped too, and whichever is closer to
   the fit (cosine-weighted relative error) is written, the choice in the notes;
-* optionally (``optimize=True``, CLI ``--option optimize=true``) baseColor, metallic and
-  roughness are refined by least squares in BRDF space (:func:`optimize_parameters`);
+* optionally (``optimize=True`` or ``"brdf"``, CLI ``--option optimize=true``) baseColor,
+  metallic and roughness are refined by least squares in BRDF space
+  (:func:`optimize_parameters`); with ``optimize="engines"`` (CLI ``--option
+  optimize=engines``; ``"blender"`` / ``"threejs"`` for one engine) the specular reflectance
+  (``specularFactor``, or a metal's base colour) is lowered so that the multiple-scattering
+  energy Blender and three.js add to rough lobes is taken back (:func:`optimize_for_engines`;
+  not the default: the specification's BRDF, which adds none, then renders darker);
 * what Blender's importer and Cycles make of the file (f90 = 1, multiscatter GGX, the
   diffuse dimmed by one scalar) is modelled by
   :class:`brdffit.export.gltf_cycles.CyclesPrincipledBRDF`
@@ -93,6 +98,7 @@ Colours are the fit's linear RGB, written unchanged (glTF factors are linear).
 from __future__ import annotations
 
 import json
+from functools import lru_cache
 
 import numpy as np
 
@@ -104,7 +110,8 @@ from ._common import (LUMA, base_for_albedo, check_output_path, closer_to,
 
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material",
            "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0",
-           "METAL_MIN_F90", "IOR_MAX", "MESHES", "ENGINES", "uv_sphere"]
+           "METAL_MIN_F90", "IOR_MAX", "MESHES", "ENGINES", "ENGINE_TARGETS", "OPTIMIZE",
+           "engine_brdf", "optimize_for_engines", "threejs_dfg_table", "uv_sphere"]
 
 MATERIAL_METAL_F0 = 0.08
 #: the largest glTF ``ior`` exported (F0 = 0.25): common dielectrics lie in 1.3-2.5; a
@@ -507,6 +514,22 @@ def _with_clearcoat(p: dict, coat) -> dict:
                                                                                           1.0)))})
 
 
+def _extensions(p: dict) -> dict:
+    """The ``KHR_materials_*`` extensions of the material of parameters ``p``."""
+    ext = {}
+    if p["anisotropy"]:
+        ext["KHR_materials_anisotropy"] = p["anisotropy"]
+    sp = p.get("specular")
+    if sp:
+        ext["KHR_materials_specular"] = {"specularFactor": sp["specularFactor"],
+                                         "specularColorFactor": sp["specularColorFactor"]}
+        if abs(sp["ior"] - 1.5) > 1e-9:
+            ext["KHR_materials_ior"] = {"ior": sp["ior"]}
+    if p.get("clearcoat"):
+        ext["KHR_materials_clearcoat"] = p["clearcoat"]
+    return ext
+
+
 def _brdf_of(p: dict, name: str = "gltf") -> "GLTFBRDF":
     a = p.get("anisotropy") or {"anisotropyStrength": 0.0, "anisotropyRotation": 0.0}
     sp = p.get("specular") or {"specularFactor": 1.0, "specularColorFactor": [1.0] * 3,
@@ -574,36 +597,218 @@ def optimize_parameters(model, p: dict, n: int = 8192, seed: int = 0) -> dict:
 
 
 #: the engines :func:`gltf_equivalent` models: the specification's BRDF (Appendix B and the
-#: extensions), and Blender's Cycles with the importer's multiscatter GGX or with GGX
-ENGINES = ("specification", "blender", "blender-ggx")
+#: extensions), Blender's Cycles with the importer's multiscatter GGX or with GGX, and
+#: three.js r187 (``MeshPhysicalMaterial`` under direct light)
+ENGINES = ("specification", "blender", "blender-ggx", "threejs")
+#: the engines whose multiple scattering :func:`optimize_for_engines` compensates by default:
+#: the two measured ones
+ENGINE_TARGETS = ("blender", "threejs")
+#: the refinements of the rule-based parameters (``optimize`` of :func:`write_gltf`):
+#: ``"brdf"`` (= ``True``, :func:`optimize_parameters`), ``"engines"``
+#: (:func:`optimize_for_engines` for :data:`ENGINE_TARGETS`), ``"blender"`` / ``"threejs"``
+#: (the same for one engine)
+OPTIMIZE = ("brdf", "engines", "blender", "threejs")
 
 
-def gltf_equivalent(model, anisotropy: bool = True, optimize: bool = False,
-                    specular: bool = True, max_ior: float = IOR_MAX,
-                    engine: str = "specification") -> GLTFBRDF:
-    """The BRDF an engine renders for the exported material: the specification's
-    :class:`GLTFBRDF` (``engine="specification"``), or Cycles' Principled BSDF as Blender's
-    importer sets it up (:class:`brdffit.export.gltf_cycles.CyclesPrincipledBRDF`;
-    ``"blender"``: its default multiscatter GGX, ``"blender-ggx"``: GGX)."""
+@lru_cache(maxsize=1)
+def threejs_dfg_table() -> np.ndarray:
+    """three.js r187's DFG table as :class:`~brdffit.evaluation.engines.threejs_brdf.ThreeJSBRDF`
+    reads it, ``(16, 16, 2)`` (rows N·V, columns perceptual roughness, texel centres at
+    ``(i + 0.5)/16``), computed here: channel 0 the directional albedo ``E_ss(r, μ)`` of the
+    height-correlated GGX lobe of α = max(r, 0.045)² for F = 1 (quadrature over its visible
+    normals, :class:`brdffit.export.gltf_cycles._Lobe`), channel 1 zero; three's
+    multiple-scattering term reads only ``dfg.x + dfg.y`` = ``E_ss``. Deviation: three ships a
+    half-float table (``DFGLUTData.js``); this one lies within 0.011 of it (0.025 in the row
+    of grazing N·V, μ = 1/32), so that exports do not depend on the npm package."""
+    from .gltf_cycles import _Lobe
+
+    u = (np.arange(16) + 0.5) / 16
+    table = np.zeros((16, 16, 2))
+    for j, r in enumerate(u):
+        lobe = _Lobe(max(r, 0.045) ** 2, None, n=32)
+        table[:, j, 0] = lobe.table(lobe.E, u)
+    return table
+
+
+def engine_brdf(p: dict, engine: str = "specification", name: str = "gltf",
+                multiscatter: bool = True):
+    """The BRDF ``engine`` (one of :data:`ENGINES`) renders for the material of parameters
+    ``p`` (:func:`gltf_parameters`): :class:`GLTFBRDF`; Cycles' Principled BSDF as Blender's
+    importer sets it up (:class:`brdffit.export.gltf_cycles.CyclesPrincipledBRDF`,
+    multiscatter GGX or GGX); three.js's direct-light shading of the material as its
+    ``GLTFLoader`` reads it (:func:`brdffit.evaluation.engines.threejs_brdf.from_gltf`,
+    geometry roughness 0, the DFG table of :func:`threejs_dfg_table`). ``multiscatter=False``
+    switches the engines' multiple-scattering energy off (Blender's GGX, three's ``M = 1``).
+    The engine models raise :class:`ValueError` on ``KHR_materials_anisotropy``."""
     if engine not in ENGINES:
         raise ValueError(f"engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
-    p = gltf_parameters(model, anisotropy, specular, max_ior)
-    if optimize:
-        p = optimize_parameters(model, p)
-    name = f"{getattr(model, 'name', 'model')}-gltf"
+    q = _brdf_of(p, name=name)
     if engine == "specification":
-        return _brdf_of(p, name=name)
+        return q
+    if engine == "threejs":
+        from ..evaluation.engines.threejs_brdf import from_gltf
+
+        mat = {"name": name,
+               "pbrMetallicRoughness": {"baseColorFactor": list(p["baseColorFactor"]),
+                                        "metallicFactor": p["metallicFactor"],
+                                        "roughnessFactor": p["roughnessFactor"]},
+               "extensions": _extensions(p)}
+        return from_gltf({"materials": [mat]}, lut=threejs_dfg_table(),
+                         multiscatter=multiscatter)
     from .gltf_cycles import CyclesPrincipledBRDF
 
-    q = _brdf_of(p)
-    return CyclesPrincipledBRDF(q.base_color, q.metallic, q.roughness, name=f"{name}-{engine}",
+    return CyclesPrincipledBRDF(q.base_color, q.metallic, q.roughness, name=name,
                                 anisotropy_strength=q.anisotropy_strength,
                                 anisotropy_rotation=q.anisotropy_rotation,
                                 specular_factor=q.specular_factor,
                                 specular_color=q.specular_color, ior=q.ior,
                                 clearcoat=q.clearcoat,
                                 clearcoat_roughness=q.clearcoat_roughness,
-                                multiscatter=engine == "blender")
+                                multiscatter=multiscatter and engine == "blender")
+
+
+#: the view cosines μ at which :func:`optimize_for_engines` matches directional albedos
+ALBEDO_MU = (np.arange(16) + 0.5) / 16
+
+
+def _albedo_samples(alpha: float, n: int, seed: int = 0):
+    """Directions to estimate directional albedos ``ρ(μ) = ∫ f(wi, wo) cos θi dwi`` at the view
+    cosines :data:`ALBEDO_MU`: per μ, ``n`` incident directions drawn half uniformly over the
+    hemisphere, half as the mirror of ``wo`` about a half vector drawn from GGX ``D(h) (N·H)``
+    of ``alpha`` (so that a sharp peak is sampled), and the weights ``cos θi / pdf`` of the
+    mixture (``pdf = ½/(2π) + ½ D(h) (N·H)/(4 |wo·H|)``; directions below the horizon weigh 0).
+    Returns ``(wi, wo, weight)`` of shapes ``(m n, 3)``, ``(m n, 3)``, ``(m, n)``."""
+    rng = np.random.default_rng(seed)
+    m = len(ALBEDO_MU)
+    mu = np.repeat(ALBEDO_MU, n)
+    wo = np.stack([np.sqrt(1 - mu * mu), np.zeros_like(mu), mu], -1)
+    u = rng.random((m * n, 2))
+    z, ph = u[:, 0], 2 * np.pi * u[:, 1]
+    s = np.sqrt(np.maximum(0, 1 - z * z))
+    uni = np.stack([s * np.cos(ph), s * np.sin(ph), z], -1)
+    a2 = max(alpha, 1e-3) ** 2
+    ct = np.sqrt((1 - u[:, 0]) / (1 + (a2 - 1) * u[:, 0]))
+    st = np.sqrt(np.maximum(0, 1 - ct * ct))
+    h = np.stack([st * np.cos(ph), st * np.sin(ph), ct], -1)
+    mirror = 2 * np.sum(wo * h, -1, keepdims=True) * h - wo
+    wi = np.where((np.arange(m * n) % 2 == 0)[:, None], uni, mirror)
+    hh = wi + wo
+    hh /= np.maximum(np.linalg.norm(hh, axis=-1, keepdims=True), 1e-300)
+    nh = hh[:, 2]
+    D = a2 / (np.pi * (nh * nh * (a2 - 1) + 1) ** 2)
+    pdf = 0.5 / (2 * np.pi) + 0.5 * D * nh / (4 * np.maximum(np.sum(wo * hh, -1), 1e-9))
+    w = np.where(wi[:, 2] > 0, np.maximum(wi[:, 2], 0) / pdf, 0.0)
+    return wi, wo, w.reshape(m, n)
+
+
+def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS, n: int = 512,
+                         seed: int = 0) -> dict:
+    """Parameters that hold across engines: the glTF material whose renderings in the
+    ``engines`` (:func:`engine_brdf`), *with* the multiple-scattering energy they add, carry the
+    energy the rule-based material ``p`` has in them without it — the energy glTF's
+    single-scattering BRDF specifies. Both engines multiply the specular lobe by a factor > 1 on
+    rough lobes (Blender's multiscatter GGX, Kulla & Conty 2017: ``1 + F_ms (1 − E)/E``;
+    three.js, Turquin 2019 Eq. 16: ``1 + f0 (1/E_ss − 1)``, ``E`` the lobe's single-scattering
+    albedo), and Cycles dims the diffuse below by that larger specular albedo; a lower specular
+    reflectance offsets it. Fitted by least squares: one factor ``k`` in [0.5, 1] on
+    ``specularFactor`` of a dielectric carrying ``KHR_materials_specular`` (the index and
+    ``specularColorFactor`` kept, so that the ior rule of :func:`_specular_extension` holds;
+    a dielectric without the extension is returned unchanged) or on a metal's base colour (its
+    reflectance); the diffuse base colour is kept (freed, it traded the specular away on rough
+    diffuse fits: docs/design/engines.md), on the residuals ``μ^1.5 (ρ_e(q; μ) − ρ_e,ss(p; μ))`` of every engine ``e`` at the view cosines
+    :data:`ALBEDO_MU`: ``ρ_e`` the directional albedo (RGB) of the engine's BRDF for the
+    parameters ``q``, ``ρ_e,ss`` that of the rule's material with the engine's multiple
+    scattering off (:func:`_albedo_samples`, ``n`` directions per μ, the same for every
+    evaluation). An engine without multiple scattering (``"specification"``) in ``engines``
+    pulls towards ``p`` unchanged; the default :data:`ENGINE_TARGETS` are the two measured
+    engines. Roughness, metallic and the coat are kept (the compensation is of energy, not of
+    the lobe's shape); anisotropic materials are returned unchanged (the engine models do not
+    cover ``KHR_materials_anisotropy``). The result replaces ``p`` only when it lowers the mean
+    over ``engines`` of the cosine-weighted relative error against ``model``
+    (:func:`brdffit.evaluation.metrics.brdf_metrics`, 2¹⁴ samples); the per-engine errors
+    before and after are in the notes. What it does not correct: Blender's f90 = 1 and its
+    scalar diffuse dimming beyond the multiple-scattering part, three's geometry roughness
+    (a property of the render, not of the material)."""
+    from scipy import optimize
+
+    from ..evaluation.metrics import brdf_metrics
+
+    engines = tuple(engines)
+    for e in engines:
+        if e not in ENGINES:
+            raise ValueError(f"engine: expected one of {', '.join(ENGINES)}, got {e!r}")
+    if p.get("anisotropy"):
+        return dict(p, notes=p["notes"] + ["engine-aware optimisation skipped: "
+                                           "KHR_materials_anisotropy is not modelled"])
+    wi, wo, weight = _albedo_samples(p["roughnessFactor"] ** 2, n, seed)
+    mu_w = ALBEDO_MU[:, None] ** 1.5
+
+    def albedo(brdf):
+        f = np.asarray(brdf.eval(wi, wo), float).reshape(*weight.shape, 3)
+        return np.mean(f * weight[..., None], axis=1)          # (μ, RGB)
+
+    targets = [albedo(engine_brdf(p, e, multiscatter=False)) for e in engines]
+    sp = p.get("specular")
+    metal = p["metallicFactor"] >= 1.0
+    if not metal and not sp:
+        return dict(p, notes=p["notes"] + ["engine-aware optimisation skipped: the dielectric "
+                                           "has no specularFactor to lower"])
+    base0 = np.asarray(p["baseColorFactor"][:3], float)
+
+    def params(k):
+        k = float(np.clip(np.ravel(k)[0], 0.0, 1.0))
+        if metal:
+            return dict(p, baseColorFactor=[float(x) for x in base0 * k] + [1.0])
+        return dict(p, specular=dict(sp, specularFactor=float(sp["specularFactor"] * k)))
+
+    def resid(k):
+        r = [(albedo(engine_brdf(params(k), e)) - t) * mu_w for e, t in zip(engines, targets)]
+        return np.concatenate(r).ravel() / np.sqrt(len(engines))
+
+    def errors(pp):
+        return [brdf_metrics(model, engine_brdf(pp, e), 1 << 14,
+                             metrics=("cos_rel_error",))["cos_rel_error"] for e in engines]
+
+    q = optimize.least_squares(resid, [0.95], bounds=([0.5], [1.0]), max_nfev=20).x
+    before, after = errors(p), errors(params(q))
+    if not np.mean(after) < np.mean(before):
+        return dict(p, notes=p["notes"] + ["engine-aware optimisation did not lower the "
+                                           "engines' mean error: rule kept"])
+    out = params(q)
+    what = "metal baseColor" if metal else "specularFactor"
+    out["notes"] = p["notes"] + [
+        f"{what} x {float(q[0]):.4g} for the multiple scattering of {', '.join(engines)}: "
+        "cos_rel_error "
+        + ", ".join(f"{e} {b:.4g} -> {a:.4g}" for e, b, a in zip(engines, before, after))]
+    return out
+
+
+def _refine(model, p: dict, optimize) -> dict:
+    """``p`` refined as ``optimize`` asks (:data:`OPTIMIZE`; ``True`` is ``"brdf"``, a false
+    value none)."""
+    if optimize is None or optimize is False:
+        return p
+    kind = "brdf" if optimize is True else optimize
+    if kind not in OPTIMIZE:
+        raise ValueError(f"glTF optimize: expected true, false or one of {', '.join(OPTIMIZE)}, "
+                         f"got {optimize!r}")
+    if kind == "brdf":
+        return optimize_parameters(model, p)
+    return optimize_for_engines(model, p, ENGINE_TARGETS if kind == "engines" else (kind,))
+
+
+def gltf_equivalent(model, anisotropy: bool = True, optimize: bool | str = False,
+                    specular: bool = True, max_ior: float = IOR_MAX,
+                    engine: str = "specification") -> GLTFBRDF:
+    """The BRDF an engine renders for the exported material (:func:`engine_brdf`): the
+    specification's :class:`GLTFBRDF` (``engine="specification"``), Cycles' Principled BSDF
+    as Blender's importer sets it up (``"blender"``: its default multiscatter GGX,
+    ``"blender-ggx"``: GGX), or three.js's (``"threejs"``)."""
+    if engine not in ENGINES:
+        raise ValueError(f"engine: expected one of {', '.join(ENGINES)}, got {engine!r}")
+    p = _refine(model, gltf_parameters(model, anisotropy, specular, max_ior), optimize)
+    name = f"{getattr(model, 'name', 'model')}-gltf"
+    return engine_brdf(p, engine, name if engine == "specification" else f"{name}-{engine}")
 
 
 def gltf_fidelity(model, n_samples: int = 1 << 15,
@@ -629,9 +834,7 @@ def gltf_material(model, name: str | None = None, fidelity: bool = True,
     α, conventions, approximations and the measured BRDF-space fidelity; the
     ``KHR_materials_anisotropy`` extension for anisotropic fits when ``anisotropy``,
     ``KHR_materials_specular`` and ``KHR_materials_ior`` for dielectrics when ``specular``)."""
-    p = gltf_parameters(model, anisotropy, specular, max_ior)
-    if optimize:
-        p = optimize_parameters(model, p)
+    p = _refine(model, gltf_parameters(model, anisotropy, specular, max_ior), optimize)
     extras = {"alpha": p["alpha"], "F0_fit": p["F0"], "F90_fit": p["F90"],
               "rho_d_fit": p["rho_d"], "notes": p["notes"],
               "conventions": "roughnessFactor = sqrt(alpha), alpha = GGX slope scale; "
@@ -643,17 +846,7 @@ def gltf_material(model, name: str | None = None, fidelity: bool = True,
                                     "metallicFactor": p["metallicFactor"],
                                     "roughnessFactor": p["roughnessFactor"]},
            "extras": {"brdffit": extras}}
-    ext = {}
-    if p["anisotropy"]:
-        ext["KHR_materials_anisotropy"] = p["anisotropy"]
-    sp = p.get("specular")
-    if sp:
-        ext["KHR_materials_specular"] = {"specularFactor": sp["specularFactor"],
-                                         "specularColorFactor": sp["specularColorFactor"]}
-        if abs(sp["ior"] - 1.5) > 1e-9:
-            ext["KHR_materials_ior"] = {"ior": sp["ior"]}
-    if p.get("clearcoat"):
-        ext["KHR_materials_clearcoat"] = p["clearcoat"]
+    ext = _extensions(p)
     if ext:
         mat["extensions"] = ext
     return mat
@@ -774,15 +967,18 @@ def _placeholder_image() -> dict:
 
 
 def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
-               optimize: bool = False, specular: bool = True, mesh: str = "sphere",
-               max_ior: float = IOR_MAX, **_ignored) -> dict:
+               optimize: bool | str | None = None, specular: bool = True,
+               mesh: str = "sphere", max_ior: float = IOR_MAX, **_ignored) -> dict:
     """Write a glTF 2.0 JSON file atomically: ``asset``, one ``material`` and, with
     ``mesh="sphere"`` (default), the preview sphere that uses it (:func:`uv_sphere`, in
     the file as a data URI), so that a viewer or an importer shows the material; with
     ``mesh="none"`` the material alone (an importer then creates nothing); an unused
     placeholder image (:func:`_placeholder_image`) keeps Blender's importer from failing
     when it imports unused materials. ``optimize``
-    refines the rule-based parameters (:func:`optimize_parameters`), ``specular=False``
+    refines the rule-based parameters (``True`` or ``"brdf"``: :func:`optimize_parameters`;
+    ``"engines"``, ``"blender"``, ``"threejs"``: :func:`optimize_for_engines`; ``None`` or
+    ``False``: the rules alone; its default is ``None`` so that the command line accepts both
+    a boolean and a name), ``specular=False``
     leaves the dielectric extensions out (core glTF only), ``max_ior`` bounds the exported
     ``ior`` (:func:`_specular_extension`; a larger bound keeps a flat Fresnel's f90 for
     engines that follow the specification, at the cost of indices artists do not expect)."""
@@ -790,6 +986,11 @@ def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
         from ..errors import ExportError
 
         raise ExportError(f"glTF mesh: expected one of {', '.join(MESHES)}, found {mesh!r}")
+    if not (optimize is None or isinstance(optimize, bool) or optimize in OPTIMIZE):
+        from ..errors import ExportError
+
+        raise ExportError(f"glTF optimize: expected true, false or one of "
+                          f"{', '.join(OPTIMIZE)}, found {optimize!r}")
     check_output_path(path)
     mat = gltf_material(model, fidelity=fidelity, anisotropy=anisotropy, optimize=optimize,
                         specular=specular, max_ior=max_ior)

@@ -42,6 +42,8 @@ values of μ, linear interpolation in μ) where Cycles reads precomputed 16³ / 
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from ..brdf import _as_dirs
@@ -152,6 +154,12 @@ class _Lobe:
         return scale, scale * E
 
 
+@lru_cache(maxsize=64)
+def _lobe(alpha: float, eta: float | None) -> _Lobe:
+    """The lobe of ``(alpha, eta)``, shared (its tables are read-only once computed)."""
+    return _Lobe(alpha, eta)
+
+
 class CyclesPrincipledBRDF(GLTFBRDF):
     """Cycles' Principled BSDF for a glTF material imported by Blender (module docstring);
     the parameters of :class:`GLTFBRDF` and ``multiscatter`` (the importer's default
@@ -168,8 +176,8 @@ class CyclesPrincipledBRDF(GLTFBRDF):
         self.eta = self.ior if level == 0.5 else _ior_from_f0(f0)
         self.f0_tinted = np.clip(f0 * self.specular_color, 0.0, 1.0)
         alpha = self.roughness**2
-        self.lobe = _Lobe(alpha, self.eta if self.eta > 1.0 else None)
-        self.coat = (_Lobe(self.clearcoat_roughness**2, 1.5) if self.clearcoat > 0 else None)
+        self.lobe = _lobe(alpha, self.eta if self.eta > 1.0 else None)
+        self.coat = (_lobe(self.clearcoat_roughness**2, 1.5) if self.clearcoat > 0 else None)
 
     def eval(self, wi, wo) -> np.ndarray:
         wi, wo = _as_dirs(wi, wo)

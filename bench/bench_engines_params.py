@@ -1,0 +1,112 @@
+"""Engine-aware glTF parameters, measured on the engine models (no engine, no Monte Carlo).
+
+Per material (MERL Neural-BRDF stand-ins and the RGL files, ``ggx-diffuse`` fits): the glTF
+parameters of the rules (``optimize=False``) and of :func:`brdffit.export.gltf.optimize_for_engines`
+(``optimize="engines"``), each rendered in ``sphere-distant`` (128², noise-free,
+:func:`brdffit.evaluation.engines.threejs_brdf.shade_sphere`) through the specification's BRDF,
+the model of Blender (:class:`brdffit.export.gltf_cycles.CyclesPrincipledBRDF`, multiscatter GGX)
+and the model of three.js (:class:`brdffit.evaluation.engines.threejs_brdf.ThreeJSBRDF` with
+three's own DFG table and per-pixel geometry roughness, 8 × 8 samples per pixel), against the fit
+converged (16 × 16): PSNR, per-channel mean ratio and rim ratio (r > 0.85 R). The real engines
+are measured by ``bench_engines.py`` / ``bench_engines_threejs.py`` (``--optimize engines``).
+
+Run: ``.venv/bin/python bench/bench_engines_params.py [--materials a,b]``; writes
+``bench/results/engines_params.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
+
+DATA = ROOT.parent / "shared" / "data"
+NBRDF = DATA / "nbrdf" / "merl_nbrdf.zip"
+RGL_DIR = DATA / "rgl"
+DEFAULT = ("gold-metallic-paint,white-paint,maroon-plastic,ss440,paper_white,ilm_l3_37_matte,"
+           "chm_mint")
+
+
+def _spec(name: str) -> str:
+    rgl = RGL_DIR / f"{name}_rgb.bsdf"
+    return str(rgl) if rgl.is_file() else f"{NBRDF}:{name}"
+
+
+def bench_material(name: str, res: int) -> dict:
+    import brdffit
+    from brdffit.evaluation.engines import threejs_brdf as TB
+    from brdffit.evaluation.engines.threejs import sphere_geometry_px
+    from brdffit.evaluation.metrics import rendered_psnr
+    from brdffit.export.gltf import _refine, engine_brdf, gltf_parameters
+
+    fit = brdffit.fit(brdffit.load(_spec(name)), model="ggx-diffuse")
+    ref, ra = TB.shade_sphere(fit, resolution=res, supersample=16, geometry_roughness=False)
+    cx, cy, R = sphere_geometry_px(res)
+    yy, xx = np.mgrid[0:res, 0:res] + 0.5
+    out = {"material": name}
+    for label, opt in (("rule", False), ("engines", "engines")):
+        t = time.perf_counter()
+        p = _refine(fit, gltf_parameters(fit), opt)
+        row = {"seconds": time.perf_counter() - t, "baseColorFactor": p["baseColorFactor"][:3],
+               "specular": p.get("specular"), "metallic": p["metallicFactor"],
+               "roughness": p["roughnessFactor"], "notes": p["notes"][-1:]}
+        for engine in ("specification", "blender", "threejs"):
+            model = engine_brdf(p, engine)
+            if engine == "threejs":
+                model.lut = TB.dfg_lut()                    # three's own table
+                img, a = TB.shade_sphere(model, resolution=res, supersample=8)
+            else:
+                img, a = TB.shade_sphere(model, resolution=res, supersample=8,
+                                         geometry_roughness=False)
+            m = (a >= 0.999) & (ra >= 0.999)
+            rim = m & (np.hypot(xx - cx, yy - cy) > 0.85 * R)
+            row[engine] = {"psnr": rendered_psnr(ref, img, m),
+                           "mean_ratio": (img[m].sum(0) / ref[m].sum(0)).tolist(),
+                           "rim_ratio": (img[rim].sum(0) / ref[rim].sum(0)).tolist()}
+        out[label] = row
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--materials", default=DEFAULT)
+    ap.add_argument("--res", type=int, default=128)
+    ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "engines_params.json")
+    args = ap.parse_args(argv)
+    from brdffit._atomic import atomic_write
+
+    rows = []
+    for name in args.materials.split(","):
+        r = bench_material(name, args.res)
+        rows.append(r)
+        cells = []
+        for label in ("rule", "engines"):
+            cells.append(" ".join(f"{r[label][e]['psnr']:6.2f}"
+                                  for e in ("specification", "blender", "threejs")))
+        print(f"{name:22s} spec/blender/three dB: rule {cells[0]} | engines {cells[1]} "
+              f"| {r['engines']['seconds']:.1f} s", flush=True)
+    summary = {}
+    for label in ("rule", "engines"):
+        summary[label] = {e: {"psnr_mean": float(np.mean([r[label][e]["psnr"] for r in rows])),
+                              "psnr_min": float(np.min([r[label][e]["psnr"] for r in rows]))}
+                          for e in ("specification", "blender", "threejs")}
+    doc = {"command": "bench/bench_engines_params.py " + " ".join(argv or sys.argv[1:]),
+           "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "resolution": args.res,
+           "summary": summary, "materials": rows}
+    with atomic_write(args.out, "w") as fh:
+        fh.write(json.dumps(doc, indent=1, default=float) + "\n")
+    print(json.dumps(summary, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,89 @@
+"""Engine-aware glTF parameters (brdffit.export.gltf.optimize_for_engines, ``optimize="engines"``):
+on a rough lobe the parameters chosen for the engines lower the error of the engines' models
+(Blender's Cycles, three.js) against the fit; the option is checked; three's DFG table computed
+by quadrature is three's own. The real engines are measured in bench/bench_engines*.py."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from brdffit.evaluation.engines import threejs_brdf as TB
+from brdffit.evaluation.metrics import rendered_psnr
+from brdffit.export.gltf import (engine_brdf, gltf_equivalent, gltf_parameters,
+                                 optimize_for_engines, threejs_dfg_table)
+from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel
+
+
+def _rough_paint():
+    """A ggx-diffuse fit like MERL gold-metallic-paint's: rough (α 0.27), a flat coloured
+    Fresnel (F0 0.26/0.18/0.06, F90 0.33/0.23/0.08), no diffuse: a dielectric of high index."""
+    return MicrofacetBRDF(GGX(0.27), SchlickFresnel(0.8), diffuse=0.0,
+                          specular=[0.33, 0.23, 0.08], name="rough-paint")
+
+
+def _sphere(brdf, ref, ref_alpha, geometry_roughness=False):
+    img, alpha = TB.shade_sphere(brdf, resolution=32, supersample=2,
+                                 geometry_roughness=geometry_roughness)
+    m = (alpha >= 0.999) & (ref_alpha >= 0.999)
+    return rendered_psnr(ref, img, m), img[m].sum(0) / ref[m].sum(0)
+
+
+def test_engine_aware_parameters_lower_the_modelled_engine_error_on_a_rough_lobe():
+    fit = _rough_paint()
+    rule = gltf_parameters(fit)
+    eng = optimize_for_engines(fit, rule, n=256)
+    assert rule["metallicFactor"] == eng["metallicFactor"] == 0.0
+    k = eng["specular"]["specularFactor"] / rule["specular"]["specularFactor"]
+    assert 0.9 < k < 0.99, eng["notes"][-1]                       # lowered, by a few %
+    assert eng["specular"]["ior"] == rule["specular"]["ior"]
+    assert eng["baseColorFactor"] == rule["baseColorFactor"]
+    assert "multiple scattering of blender, threejs" in eng["notes"][-1]
+    ref, ra = TB.shade_sphere(fit, resolution=32, supersample=4, geometry_roughness=False)
+    for engine, gain in (("blender", 8.0), ("threejs", None)):
+        before_db, before_ratio = _sphere(engine_brdf(rule, engine), ref, ra)
+        after_db, after_ratio = _sphere(engine_brdf(eng, engine), ref, ra)
+        # the engine's mean brightness is closer to the fit's
+        assert np.max(np.abs(after_ratio - 1)) < np.max(np.abs(before_ratio - 1)) - 0.01, (
+            engine, before_ratio, after_ratio)
+        if gain:
+            assert after_db > before_db + gain, (engine, before_db, after_db)
+    # the specification's BRDF, which adds no energy, is darker than the fit now
+    _, spec_ratio = _sphere(engine_brdf(eng, "specification"), ref, ra)
+    assert np.all(spec_ratio < 0.995), spec_ratio
+
+
+def test_engine_aware_parameters_keep_sharp_lobes_and_are_checked(tmp_path):
+    sharp = MicrofacetBRDF(GGX(0.01), SchlickFresnel(0.04), diffuse=[0.4, 0.1, 0.1],
+                           specular=[0.6, 0.6, 0.6])
+    rule = gltf_parameters(sharp)
+    eng = optimize_for_engines(sharp, rule)
+    # no multiple-scattering energy to take back on a sharp lobe
+    sf0 = (rule.get("specular") or {}).get("specularFactor", 1.0)
+    sf1 = (eng.get("specular") or {}).get("specularFactor", 1.0)
+    assert sf1 == pytest.approx(sf0, rel=0.01)
+    with pytest.raises(ValueError, match="optimize"):
+        gltf_equivalent(sharp, optimize="nope")
+    with pytest.raises(ValueError, match="engine"):
+        optimize_for_engines(sharp, rule, engines=("unreal",))
+    # the command line's option: a boolean or a name (its type comes from write_gltf's default)
+    from brdffit.cli.export import check_options
+    from brdffit.errors import ExportError
+    from brdffit.export.gltf import write_gltf
+
+    for value in (True, False, "engines", "blender"):
+        check_options("gltf", {"optimize": value})
+    with pytest.raises(ExportError, match="optimize"):
+        write_gltf(sharp, tmp_path / "m.gltf", fidelity=False, optimize="nope")
+
+
+def test_quadrature_dfg_table_is_threes():
+    from brdffit.evaluation.engines.threejs import three_dir
+
+    if three_dir() is None:
+        pytest.skip("three.js not installed (make npmdeps)")
+    three = TB.dfg_lut()
+    mine = threejs_dfg_table()
+    e3, em = three[..., 0] + three[..., 1], mine[..., 0] + mine[..., 1]
+    assert np.max(np.abs(e3 - em)[1:]) < 0.012                   # N·V ≥ 3/32
+    assert np.max(np.abs(e3 - em)) < 0.03                        # the grazing row
