@@ -103,10 +103,19 @@ from functools import lru_cache
 import numpy as np
 
 from .._atomic import atomic_write
-from ..brdf import IsotropicBRDF, _as_dirs
+from ..errors import ExportError
+from ..evaluation.engines.threejs_brdf import from_gltf
+from ..evaluation.metrics import brdf_metrics
+from ..microfacet import GGX
+from ..microfacet.coat import coat_alpha_weight, coat_parts
+from ..microfacet.conversions import to_ggx
+from ..microfacet.model import MicrofacetBRDF
+from ..microfacet.tabulated import TabulatedSlopeDistribution
 from ._common import (LUMA, base_for_albedo, check_output_path, closer_to,
                       cosine_weighted_albedo, diffuse_kept_fraction, fail, is_elliptical, shown,
-                      single_lobe_of, writing)
+                      principal_axes, single_lobe_of, writing)
+from .gltf_brdf import GLTFBRDF
+from .gltf_cycles import CyclesPrincipledBRDF, _Lobe
 
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material",
            "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0",
@@ -123,156 +132,14 @@ IOR_MAX = 3.0
 METAL_MIN_F90 = 0.8
 
 
-class GLTFBRDF(IsotropicBRDF):
-    """The glTF 2.0 metallic-roughness BRDF (specification Appendix B, see module doc).
-
-    Parameters: ``base_color`` (linear RGB), ``metallic`` and ``roughness`` (perceptual,
-    α = roughness²) in [0, 1]; ``specular_factor`` (in [0, 1]), ``specular_color`` (RGB ≥ 0)
-    of ``KHR_materials_specular`` and ``ior`` (≥ 1) of ``KHR_materials_ior`` (defaults: the
-    core spec's 1, white, 1.5); optional ``anisotropy_strength`` s and
-    ``anisotropy_rotation`` φ (radians, counter-clockwise from the tangent) of the
-    ``KHR_materials_anisotropy`` extension: ``αt = mix(α, 1, s²)`` along ``t = (cos φ,
-    sin φ, 0)``, ``αb = α`` along ``b = n × t``, the extension's anisotropic GGX D and its
-    (non-normative, height-correlated) ``V = 0.5 / (N·L |(αt T·V, αb B·V, N·V)| + N·V |(αt T·L,
-    αb B·L, N·L)|)`` (without the sample code's clamp of V to [0, 1], which cuts grazing
-    values). With s = 0 the core Appendix B (separable V) is used.
-    """
-
-    def __init__(self, base_color, metallic: float, roughness: float, name: str = "gltf",
-                 anisotropy_strength: float = 0.0, anisotropy_rotation: float = 0.0,
-                 specular_factor: float = 1.0, specular_color=(1.0, 1.0, 1.0),
-                 ior: float = 1.5, clearcoat: float = 0.0, clearcoat_roughness: float = 0.0):
-        self.clearcoat = float(clearcoat)
-        self.clearcoat_roughness = float(clearcoat_roughness)
-        for nm, v in (("clearcoat", self.clearcoat),
-                      ("clearcoat_roughness", self.clearcoat_roughness)):
-            if not 0.0 <= v <= 1.0:
-                raise ValueError(f"GLTFBRDF: {nm} must be in [0, 1], got {v}")
-        self.base_color = np.broadcast_to(np.asarray(base_color, float), (3,)).copy()
-        self.specular_factor = float(specular_factor)
-        self.specular_color = np.broadcast_to(np.asarray(specular_color, float), (3,)).copy()
-        self.ior = float(ior)
-        if not 0.0 <= self.specular_factor <= 1.0:
-            raise ValueError(f"GLTFBRDF: specular_factor must be in [0, 1], got {specular_factor}")
-        if not (np.all(np.isfinite(self.specular_color)) and np.all(self.specular_color >= 0)):
-            raise ValueError(f"GLTFBRDF: specular_color must be finite and >= 0, got "
-                             f"{self.specular_color.tolist()}")
-        if not (np.isfinite(self.ior) and self.ior >= 1.0):
-            raise ValueError(f"GLTFBRDF: ior must be >= 1, got {ior}")
-        self.metallic = float(metallic)
-        self.roughness = float(roughness)
-        self.anisotropy_strength = float(anisotropy_strength)
-        self.anisotropy_rotation = float(anisotropy_rotation)
-        for nm, v in (("metallic", self.metallic), ("roughness", self.roughness),
-                      ("anisotropy_strength", self.anisotropy_strength)):
-            if not 0.0 <= v <= 1.0:
-                raise ValueError(f"GLTFBRDF: {nm} must be in [0, 1], got {v}")
-        self.isotropic = self.anisotropy_strength == 0.0
-        self.name = name
-        self.source = None
-
-    @staticmethod
-    def _core_dv(a, wi, wo, h):
-        """``D · V`` of the core spec's isotropic GGX of α = ``a`` (separable Smith V)."""
-        nl, nv, nh = wi[..., 2], wo[..., 2], h[..., 2]
-        a2 = a * a
-        with np.errstate(divide="ignore", invalid="ignore"):
-            D = a2 * (nh > 0) / (np.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
-            V = ((np.sum(wi * h, -1) > 0) * (np.sum(wo * h, -1) > 0)
-                 / ((np.abs(nl) + np.sqrt(a2 + (1.0 - a2) * nl * nl))
-                    * (np.abs(nv) + np.sqrt(a2 + (1.0 - a2) * nv * nv))))
-            return np.nan_to_num(D * V)
-
-    def _specular_dv(self, wi, wo, h):
-        """``D · V`` of the core spec (isotropic) or of KHR_materials_anisotropy."""
-        nl, nv, nh = wi[..., 2], wo[..., 2], h[..., 2]
-        a = self.roughness**2
-        if self.anisotropy_strength == 0.0:
-            return self._core_dv(a, wi, wo, h)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s2 = self.anisotropy_strength**2
-            at, ab = a * (1.0 - s2) + s2, a
-            c, s = np.cos(self.anisotropy_rotation), np.sin(self.anisotropy_rotation)
-
-            def tb(w):
-                return c * w[..., 0] + s * w[..., 1], -s * w[..., 0] + c * w[..., 1]
-
-            th, bh = tb(h)
-            tv, bv = tb(wo)
-            tl, bl = tb(wi)
-            a2 = at * ab
-            f2 = (ab * th) ** 2 + (at * bh) ** 2 + (a2 * nh) ** 2
-            w2 = a2 / f2
-            D = a2 * w2 * w2 / np.pi
-            ggxv = nl * np.sqrt((at * tv) ** 2 + (ab * bv) ** 2 + nv * nv)
-            ggxl = nv * np.sqrt((at * tl) ** 2 + (ab * bl) ** 2 + nl * nl)
-            V = 0.5 / (ggxv + ggxl)          # (the sample code's clamp to [0, 1] omitted)
-            return np.nan_to_num(D * V)
-
-    def dielectric_f0_f90(self) -> tuple[np.ndarray, float]:
-        """``(f0_d, f90_d)`` of the dielectric part (KHR_materials_ior/specular)."""
-        f0_ior = ((self.ior - 1.0) / (self.ior + 1.0)) ** 2
-        f0 = np.minimum(f0_ior * self.specular_color, 1.0) * self.specular_factor
-        return f0, self.specular_factor
-
-    def eval(self, wi, wo) -> np.ndarray:
-        """``f_r`` of Appendix B with the extensions: ``(1 − m)((1 − F_d) c/π + F_d D V)
-        + m F_m D V`` (L = wi, V = wo; see the module docstring)."""
-        wi, wo = _as_dirs(wi, wo)
-        ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
-        h = wi + wo
-        h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
-        vh = np.abs(np.sum(wo * h, -1))
-        dv = self._specular_dv(wi, wo, h)[..., None]
-        x5 = ((1.0 - vh) ** 5)[..., None]
-        f0_d, f90_d = self.dielectric_f0_f90()
-        F_d = f0_d + (f90_d - f0_d) * x5
-        F_m = self.base_color + (1.0 - self.base_color) * x5
-        m = self.metallic
-        f = (1.0 - m) * ((1.0 - F_d) * self.base_color / np.pi + F_d * dv) + m * F_m * dv
-        if self.clearcoat > 0.0:      # KHR_materials_clearcoat: Fresnel of N·V, index 1.5
-            fc = (0.04 + 0.96 * (1.0 - np.abs(wo[..., 2])) ** 5)[..., None]
-            dvc = self._core_dv(self.clearcoat_roughness**2, wi, wo, h)[..., None]
-            f = f * (1.0 - self.clearcoat * fc) + self.clearcoat * fc * dvc
-        return np.where(ok[..., None], f, 0.0)
-
-    def as_microfacet(self):
-        """For a pure metal (metallic = 1): the identical ``MicrofacetBRDF`` (GGX α = r²,
-        Schlick F0 = baseColor, uncorrelated Smith G), usable by the closed-form renderers."""
-        from ..microfacet import GGX, MicrofacetBRDF, SchlickFresnel
-
-        if self.metallic != 1.0 or self.anisotropy_strength != 0.0 or self.clearcoat > 0.0:
-            return None
-        return MicrofacetBRDF(GGX(max(self.roughness**2, 1e-6)),
-                              SchlickFresnel(np.clip(self.base_color, 0, 1)), correlated=False,
-                              name=self.name)
-
-    def describe(self) -> dict:
-        d = super().describe()
-        d.update(base_color=self.base_color.tolist(), metallic=self.metallic,
-                 roughness=self.roughness, anisotropy_strength=self.anisotropy_strength,
-                 anisotropy_rotation=self.anisotropy_rotation,
-                 specular_factor=self.specular_factor,
-                 specular_color=self.specular_color.tolist(), ior=self.ior,
-                 clearcoat=self.clearcoat, clearcoat_roughness=self.clearcoat_roughness)
-        return d
-
-
 def _ggx_model(model, target: str = "glTF 2.0"):
     """``(model as single GGX lobe, notes)`` or ExportError (naming ``target``)."""
-    from ..microfacet.model import MicrofacetBRDF
-    from ..microfacet.tabulated import TabulatedSlopeDistribution
-
     notes = []
     if isinstance(model, MicrofacetBRDF) and isinstance(model.distribution,
                                                        TabulatedSlopeDistribution):
-        from ..microfacet.conversions import to_ggx
-
         model = to_ggx(model)
         notes.append("tabulated NDF converted to GGX by Dupuy 2015 App. C (first moments)")
     if isinstance(model, MicrofacetBRDF) and is_elliptical(model.distribution, ("beckmann",)):
-        from ..microfacet import GGX
-
         d = model.distribution
         name, source = model.name, model.source
         model = MicrofacetBRDF(GGX(d.alpha_x, d.alpha_y, d.rho), model.fresnel, model.diffuse,
@@ -291,8 +158,6 @@ def _anisotropy(d):
     """``(αb, strength, rotation)`` of KHR_materials_anisotropy for GGX(αx, αy, ρ): principal
     axes (Dupuy 2015 App. C), the rougher one is the extension's direction t with
     ``αt = mix(αb, 1, s²)``; ``None`` when αt > 1 (not representable)."""
-    from ._common import principal_axes
-
     au, av, phi = principal_axes(d.alpha_x, d.alpha_y, d.rho)
     if au >= av:
         at, ab, rot = au, av, phi
@@ -394,8 +259,6 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True,
     the core's defaults are exact or for a metal). A coated diffuse fit
     (:func:`brdffit.microfacet.coat.coat_parts`) maps its base lobe by these rules and its coat
     to ``KHR_materials_clearcoat`` (``"clearcoat"`` entry)."""
-    from ..microfacet.coat import coat_parts
-
     parts = coat_parts(model)
     if parts is not None:
         # glTF's clearcoat (Fresnel of N·V, layered) departs from the fit's added coat on
@@ -498,8 +361,6 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True,
 def _with_clearcoat(p: dict, coat) -> dict:
     """``p`` (the base lobe's parameters) with the coat lobe as ``KHR_materials_clearcoat``:
     ``clearcoatFactor`` = the coat's weight w, ``clearcoatRoughnessFactor`` = √α_coat."""
-    from ..microfacet.coat import coat_alpha_weight
-
     alpha, w = coat_alpha_weight(coat)
     notes = list(p["notes"])
     if not is_elliptical(coat.distribution, ("ggx",)):
@@ -553,8 +414,6 @@ def optimize_parameters(model, p: dict, n: int = 8192, seed: int = 0) -> dict:
     the cosine-weighted relative error of :func:`brdffit.evaluation.metrics.brdf_metrics`."""
     from scipy import optimize
 
-    from ..evaluation.metrics import brdf_metrics
-
     rng = np.random.default_rng(seed)
     v = rng.normal(size=(2 * n, 3))
     v /= np.linalg.norm(v, axis=-1, keepdims=True)
@@ -562,7 +421,6 @@ def optimize_parameters(model, p: dict, n: int = 8192, seed: int = 0) -> dict:
     wi, wo = v[:n], v[n:]
     ref = np.asarray(model.eval(wi, wo), float) * wo[:, 2:3]
     scale = np.abs(ref) + np.mean(np.abs(ref))
-    a = p["anisotropy"] or {"anisotropyStrength": 0.0, "anisotropyRotation": 0.0}
 
     def make(q):
         return _brdf_of(dict(p, baseColorFactor=list(np.clip(q[:3], 0, 1)),
@@ -620,8 +478,6 @@ def threejs_dfg_table() -> np.ndarray:
     multiple-scattering term reads only ``dfg.x + dfg.y`` = ``E_ss``. Deviation: three ships a
     half-float table (``DFGLUTData.js``); this one lies within 0.011 of it (0.025 in the row
     of grazing N·V, μ = 1/32), so that exports do not depend on the npm package."""
-    from .gltf_cycles import _Lobe
-
     u = (np.arange(16) + 0.5) / 16
     table = np.zeros((16, 16, 2))
     for j, r in enumerate(u):
@@ -646,8 +502,6 @@ def engine_brdf(p: dict, engine: str = "specification", name: str = "gltf",
     if engine == "specification":
         return q
     if engine == "threejs":
-        from ..evaluation.engines.threejs_brdf import from_gltf
-
         mat = {"name": name,
                "pbrMetallicRoughness": {"baseColorFactor": list(p["baseColorFactor"]),
                                         "metallicFactor": p["metallicFactor"],
@@ -655,8 +509,6 @@ def engine_brdf(p: dict, engine: str = "specification", name: str = "gltf",
                "extensions": _extensions(p)}
         return from_gltf({"materials": [mat]}, lut=threejs_dfg_table(),
                          multiscatter=multiscatter)
-    from .gltf_cycles import CyclesPrincipledBRDF
-
     return CyclesPrincipledBRDF(q.base_color, q.metallic, q.roughness, name=name,
                                 anisotropy_strength=q.anisotropy_strength,
                                 anisotropy_rotation=q.anisotropy_rotation,
@@ -730,8 +582,6 @@ def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS, n: int = 512,
     scalar diffuse dimming beyond the multiple-scattering part, three's geometry roughness
     (a property of the render, not of the material)."""
     from scipy import optimize
-
-    from ..evaluation.metrics import brdf_metrics
 
     engines = tuple(engines)
     for e in engines:
@@ -818,8 +668,6 @@ def gltf_fidelity(model, n_samples: int = 1 << 15,
     """BRDF-space loss of fidelity of the glTF material vs the fit
     (:func:`brdffit.evaluation.metrics.brdf_metrics`, the fit as reference); ``parameters``:
     the material's, when already mapped (else they are, with the other options)."""
-    from ..evaluation.metrics import brdf_metrics
-
     exported = (gltf_equivalent(model, anisotropy, optimize, specular, max_ior)
                 if parameters is None
                 else _brdf_of(parameters))
@@ -983,12 +831,8 @@ def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
     ``ior`` (:func:`_specular_extension`; a larger bound keeps a flat Fresnel's f90 for
     engines that follow the specification, at the cost of indices artists do not expect)."""
     if mesh not in MESHES:
-        from ..errors import ExportError
-
         raise ExportError(f"glTF mesh: expected one of {', '.join(MESHES)}, found {mesh!r}")
     if not (optimize is None or isinstance(optimize, bool) or optimize in OPTIMIZE):
-        from ..errors import ExportError
-
         raise ExportError(f"glTF optimize: expected true, false or one of "
                           f"{', '.join(OPTIMIZE)}, found {optimize!r}")
     check_output_path(path)
@@ -1006,8 +850,6 @@ def write_gltf(model, path, fidelity: bool = True, anisotropy: bool = True,
     try:
         data = json.dumps(doc, indent=1, allow_nan=False).encode("ascii")   # names \u-escaped
     except ValueError as exc:
-        from ..errors import ExportError
-
         raise ExportError(f"cannot export {model.__class__.__name__} {getattr(model, 'name', '')!r}"
                           f" to {shown(path)}: expected finite parameters, found NaN or infinity "
                           f"({exc})") from None

@@ -47,7 +47,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..brdf import _as_dirs
-from .gltf import GLTFBRDF
+from .gltf_brdf import GLTFBRDF
 
 __all__ = ["CyclesPrincipledBRDF"]
 
