@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..brdf import IsotropicBRDF, _as_dirs
+from ..microfacet import GGX, MicrofacetBRDF, SchlickFresnel
 
 __all__ = ["GLTFBRDF"]
 
@@ -129,8 +130,6 @@ class GLTFBRDF(IsotropicBRDF):
     def as_microfacet(self):
         """For a pure metal (metallic = 1): the identical ``MicrofacetBRDF`` (GGX α = r²,
         Schlick F0 = baseColor, uncorrelated Smith G), usable by the closed-form renderers."""
-        from ..microfacet import GGX, MicrofacetBRDF, SchlickFresnel
-
         if self.metallic != 1.0 or self.anisotropy_strength != 0.0 or self.clearcoat > 0.0:
             return None
         return MicrofacetBRDF(GGX(max(self.roughness**2, 1e-6)),

@@ -40,6 +40,8 @@ import numpy as np
 from .._atomic import atomic_write
 from ..errors import ExportError
 from ._common import check_output_path, label, shown, writing
+from .gltf import gltf_parameters
+from .materialx import _library, openpbr_parameters
 
 __all__ = ["usd_layer", "write_usd", "check_usd", "PREVIEW_INPUTS", "MTLX_SHADER_ID"]
 
@@ -89,9 +91,6 @@ def preview_surface_inputs(p: dict) -> tuple[dict, list[str]]:
 
 def usd_layer(model, name: str | None = None, mesh: str = "sphere") -> tuple[str, dict]:
     """``(usda_text, summary)``: the layer of :func:`write_usd` as text."""
-    from .gltf import gltf_parameters
-    from .materialx import openpbr_parameters
-
     if mesh not in ("sphere", "none"):
         raise ExportError(f"mesh: expected 'sphere' or 'none', found {mesh!r}")
     Gf, Sdf, Tf, Usd, UsdGeom, UsdShade, _ = _pxr()
@@ -158,8 +157,6 @@ def _mtlx_problems(stage) -> list[str]:
     the node definition of their ``info:id`` exists and every input is one of its inputs,
     of its type."""
     from pxr import UsdShade
-
-    from .materialx import _library
 
     types = {"float": "float", "color3f": "color3"}
     problems = []

@@ -46,6 +46,9 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import BRDFError
+from ..metrics import crn_psnr
+from ..render.core import Renderer
+from ..render.scenes import CAMERA, DISTANT_LIGHT
 
 __all__ = ["BlenderUnavailable", "BlenderFailed", "BlenderRender", "blender_python",
            "available", "import_report", "render_gltf", "render_fit", "compare_renders",
@@ -123,8 +126,6 @@ class BlenderRender:
 
 
 def _scene_job(scene: str) -> dict:
-    from ..render.scenes import CAMERA, DISTANT_LIGHT
-
     if scene not in SCENES:
         raise ValueError(f"scene {scene!r} is not rebuilt in Blender; expected one of "
                          f"{', '.join(SCENES)}")
@@ -249,8 +250,6 @@ def _peak_pixel(img) -> list[int]:
 def compare_renders(reference, reference_alpha, test, test_alpha, flip: bool = True) -> dict:
     """Blender (``test``, (K, H, W, 3)) against our render of the fit (``reference``, same
     shape), the coverage of each ((H, W) alpha); the figures of the module docstring."""
-    from ..metrics import crn_psnr
-
     ref = np.asarray(reference, np.float64)
     tst = np.asarray(test, np.float64)
     if ref.ndim != 4 or ref.shape != tst.shape or ref.shape[-1] != 3:
@@ -292,8 +291,6 @@ def render_fit(model, scene: str = "sphere-distant", resolution: int = 64, spp: 
                seeds=(0, 1, 2, 3)):
     """Our Mitsuba render of ``model`` in ``scene``, one image per seed: ``(images (K, H, W,
     3), alpha (H, W))``."""
-    from ..render.core import Renderer
-
     r = Renderer(model, scene, None, spp, resolution)
     res = [r.render(seed=int(s)) for s in seeds]
     return np.stack([x.image for x in res]), res[0].alpha

@@ -45,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from .threejs import ThreeRender, run_page, scene_json
+from ..render.scenes import DISTANT_LIGHT
 
 __all__ = ["generate_essl", "render_mtlx"]
 
@@ -133,8 +134,6 @@ def render_mtlx(mtlx, scene: str = "sphere-distant", resolution: int = 128,
     """Render the MaterialX document ``mtlx`` on the unit sphere of ``scene``
     (``sphere-distant``) with MaterialX's ESSL shaders in headless Chromium (module
     docstring); linear float pixels."""
-    from ..render.scenes import DISTANT_LIGHT
-
     sh = generate_essl(mtlx, scene)            # validates scene (sphere-distant) and the file
     sc = scene_json(scene, resolution, supersample, segments)
     d = np.asarray(DISTANT_LIGHT["direction"], float)

@@ -68,6 +68,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..metrics import crn_psnr
+from ..render import Renderer
+from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
+
 __all__ = ["SCENES", "ThreeRender", "EngineUnavailable", "three_dir", "three_version",
            "chromium_path", "available", "scene_json", "render_gltf", "run_page", "sphere_geometry_px",
            "compare_render", "reference_renders"]
@@ -126,8 +130,6 @@ def scene_json(scene: str = "sphere-distant", resolution: int = 128, supersample
                segments: tuple[int, int] = (256, 128), material_index: int = 0) -> dict:
     """The scene description sent to the page (plain data, serialised as JSON): size of the
     render target, camera, light, sphere tessellation and the material index."""
-    from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
-
     if scene not in SCENES:
         raise ValueError(f"three.js scene: expected one of {', '.join(SCENES)}, got {scene!r}")
     for nm, v, lo, hi in (("resolution", resolution, 8, 2048), ("supersample", supersample, 1, 8),
@@ -160,8 +162,6 @@ def sphere_geometry_px(resolution: int) -> tuple[float, float, float]:
     """``(cx, cy, R)``: centre (pixel coordinates, pixel centres at i + 0.5) and radius in
     pixels of the unit sphere's silhouette seen by the scenes' camera:
     ``R = (n/2) tan(asin(1/d)) / tan(fov/2)``."""
-    from ..render.scenes import CAMERA
-
     half = math.tan(math.radians(CAMERA["fov_degrees"]) / 2.0)
     r = (resolution / 2.0) * math.tan(math.asin(1.0 / CAMERA["origin"][2])) / half
     return resolution / 2.0, resolution / 2.0, r
@@ -347,8 +347,6 @@ def reference_renders(brdf, scene: str = "sphere-distant", resolution: int = 128
                       spp: int = 64, batches: int = 4):
     """Our Mitsuba render of ``brdf`` in ``scene``: ``(stack (K, H, W, 3), alpha (H, W))``
     of ``batches`` independent seeds (K ≥ 2 for the standard error of :func:`compare_render`)."""
-    from ..render import Renderer
-
     if scene not in SCENES:
         raise ValueError(f"expected one of {', '.join(SCENES)}, got {scene!r}")
     if batches < 2:
@@ -387,8 +385,6 @@ def compare_render(test_image, test_alpha, ref_stack, ref_alpha, rim: float = 0.
     and the analytic πR² of :func:`sphere_geometry_px`), ``coverage_px`` (pixels with
     alpha > 0.5), ``peak_pixel`` ((row, col) of the brightest luminance, engine and fit).
     """
-    from ..metrics import crn_psnr
-
     t = np.asarray(test_image, np.float64)
     refs = np.asarray(ref_stack, np.float64)
     if refs.ndim != 4 or refs.shape[1:] != t.shape or t.shape[-1] != 3:

@@ -53,6 +53,9 @@ from pathlib import Path
 import numpy as np
 
 from ...brdf import IsotropicBRDF, _as_dirs
+from ..metrics import rendered_psnr
+from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
+from .threejs import EngineUnavailable, sphere_geometry_px, three_dir
 
 __all__ = ["ThreeJSBRDF", "from_gltf", "dfg_lut", "shade_sphere", "estimate"]
 
@@ -73,8 +76,6 @@ def dfg_lut(three: str | None = None) -> np.ndarray:
     """three's DFG table ``(16, 16, 2)`` (rows N·V, columns roughness; scale, bias), read from
     ``src/renderers/shaders/DFGLUTData.js`` of the installed ``three`` package."""
     if three is None:
-        from .threejs import EngineUnavailable, three_dir
-
         d = three_dir()
         if d is None:
             raise EngineUnavailable("needs the npm package three (`make npmdeps`) for its DFG table")
@@ -268,8 +269,6 @@ def shade_sphere(brdf, scene: str = "sphere-distant", resolution: int = 128,
     ``(image (H, W, 3) float64, alpha (H, W))``. ``geometry_roughness`` (default: whether the
     BRDF has ``eval_g``) passes three's per-pixel geometry roughness of the
     ``resolution × supersample`` render target to ``brdf.eval_g``."""
-    from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
-
     if scene not in ("sphere-distant", "sphere-point"):
         raise ValueError(f"shade_sphere: expected sphere-distant or sphere-point, got {scene!r}")
     if int(resolution) < 1 or int(supersample) < 1:
@@ -336,9 +335,6 @@ def estimate(fit, gltf, scene: str = "sphere-distant", resolution: int = 128,
     the fully covered pixels and those beyond ``rim`` R). Measured against the engine
     (``bench/bench_engines_threejs.py``): within 0.23 dB of three's PSNR against the
     converged fit on 11 materials."""
-    from ..metrics import rendered_psnr
-    from .threejs import sphere_geometry_px
-
     model = from_gltf(gltf, index)
     img, alpha = shade_sphere(model, scene, resolution, supersample)
     ref, ref_alpha = shade_sphere(fit, scene, resolution, max(16, int(supersample)),
