@@ -204,3 +204,14 @@ def test_lazy_numba_compiles_once_the_work_pays_for_it():
         "code = int(small) + 2 * int(half)")
     assert code == 0  # neither a 1-pair call nor half the threshold imported numba
     assert "numba" in mods  # ... the call past the threshold did
+
+
+def test_end_to_end_tests_run_in_the_mode_users_run():
+    """tests/conftest.py: Dr.Jit's debug mode is for the render layer's tests only."""
+    import os
+
+    from tests.conftest import _DEBUG_FROM_ENV
+
+    if _DEBUG_FROM_ENV is not None:
+        pytest.skip("BRDFFIT_DRJIT_DEBUG is set in the environment: it applies to every test")
+    assert os.environ["BRDFFIT_DRJIT_DEBUG"] == "0"

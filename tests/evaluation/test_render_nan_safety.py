@@ -106,3 +106,20 @@ def test_hostile_directions_read_no_table_out_of_bounds(name, debug_mode, capfd)
             assert p[k] == 0, (k, p[k])
     assert np.isfinite(f[-2:]).all() and np.isfinite(p[-2:]).all()
     assert np.isfinite(sampled[0][-2:]).all()
+
+
+def test_the_render_layer_tests_run_in_drjit_debug_mode():
+    """tests/conftest.py: this file is one of DEBUG_TESTS (unless the environment chose)."""
+    import os
+
+    from tests.conftest import _DEBUG_FROM_ENV
+
+    if _DEBUG_FROM_ENV is not None:
+        pytest.skip("BRDFFIT_DRJIT_DEBUG is set in the environment: it applies to every test")
+    from brdffit.evaluation.render import _mitsuba
+
+    _mitsuba.load()
+    import drjit as dr
+
+    assert os.environ["BRDFFIT_DRJIT_DEBUG"] == "1"
+    assert dr.flag(dr.JitFlag.Debug) and not dr.flag(dr.JitFlag.PacketOps)
