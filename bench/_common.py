@@ -2,7 +2,23 @@
 
 from __future__ import annotations
 
+import os
+import sys
+from pathlib import Path
+
 import numpy as np
+
+#: the project's root, the shared data beside it, and its Neural-BRDF MERL and RGL folders
+ROOT = Path(__file__).resolve().parents[1]
+DATA = ROOT.parent / "shared" / "data"
+NBRDF = DATA / "nbrdf" / "merl_nbrdf.zip"
+RGL_DIR = DATA / "rgl"
+
+
+def use_project_sources() -> None:
+    """Import brdffit from ``src/`` and load Mitsuba with Debian's LLVM 19 (the README)."""
+    sys.path.insert(0, str(ROOT / "src"))
+    os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
 
 
 def random_direction_pairs(n: int, seed: int = 0) -> list[np.ndarray]:

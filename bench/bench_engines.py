@@ -39,13 +39,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "src"))
-os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
+from _common import DATA, NBRDF, RGL_DIR, ROOT, use_project_sources  # bench/ is on sys.path
 
-DATA = ROOT.parent / "shared" / "data"
-NBRDF = DATA / "nbrdf" / "merl_nbrdf.zip"
-RGL_DIR = DATA / "rgl"
+use_project_sources()
 MERL = ["ss440", "gold-metallic-paint", "maroon-plastic", "white-paint", "chrome-steel",
         "blue-metallic-paint", "red-plastic", "alum-bronze"]
 

@@ -18,20 +18,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "src"))
-os.environ.setdefault("DRJIT_LIBLLVM_PATH", "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1")
+from _common import NBRDF, RGL_DIR, ROOT, use_project_sources  # bench/ is on sys.path
 
-DATA = ROOT.parent / "shared" / "data"
-NBRDF = DATA / "nbrdf" / "merl_nbrdf.zip"
-RGL_DIR = DATA / "rgl"
+use_project_sources()
 DEFAULT = ("gold-metallic-paint,white-paint,maroon-plastic,ss440,paper_white,ilm_l3_37_matte,"
            "chm_mint")
 
