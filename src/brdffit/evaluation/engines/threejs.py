@@ -212,8 +212,10 @@ class _Handler(BaseHTTPRequestHandler):
         s = self.server
         if path in ("/", "/index.html"):
             return self._file(_PAGE, "index.html")
-        if path == "/page/render.js":
+        if path == "/page/render.js":          # the entry point: the page's own script
             return self._file(_PAGE, s.script)
+        if path.startswith("/page/"):            # the modules it imports (common.js)
+            return self._file(_PAGE, path[len("/page/"):])
         if path == "/scene.json":
             return self._send(json.dumps(s.scene).encode(), "application/json")
         if path in s.data:

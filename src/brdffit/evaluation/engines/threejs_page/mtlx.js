@@ -4,10 +4,7 @@
 // to /result. three.js only supplies the sphere, the camera matrices and the render target:
 // the shaders are compiled as they are (RawShaderMaterial, GLSL ES 3.00). Errors go to /error.
 import * as THREE from 'three';
-
-async function post(path, body, type) {
-  await fetch(path, { method: 'POST', headers: { 'Content-Type': type }, body });
-}
+import { floatRenderer, glInfo, post, renderFloat, sceneCamera } from './common.js';
 
 function uniformValue(u) {
   const v = u.value;
@@ -25,26 +22,10 @@ async function main() {
   const scene = await (await fetch('/scene.json')).json();
   const sh = await (await fetch('/shader.json')).json();
   const W = scene.width, H = scene.height;
-  const canvas = document.createElement('canvas');
-  canvas.width = W; canvas.height = H;
-  document.body.appendChild(canvas);
-  const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, alpha: true });
-  renderer.setPixelRatio(1);
-  renderer.setSize(W, H, false);
-  renderer.toneMapping = THREE.NoToneMapping;
-  renderer.setClearColor(0x000000, 0.0);
+  const renderer = floatRenderer(W, H);
   renderer.debug.checkShaderErrors = true;
-  const gl = renderer.getContext();
-  if (!renderer.extensions.has('EXT_color_buffer_float')) {
-    throw new Error('WebGL 2 without EXT_color_buffer_float: no float render target');
-  }
 
-  const cam = new THREE.PerspectiveCamera(scene.camera.fov, W / H, 0.1, 100.0);
-  cam.position.fromArray(scene.camera.origin);
-  cam.up.fromArray(scene.camera.up);
-  cam.lookAt(new THREE.Vector3().fromArray(scene.camera.target));
-  cam.updateMatrixWorld(true);
-  cam.updateProjectionMatrix();
+  const cam = sceneCamera(scene, W, H);
 
   const uniforms = {};
   for (const [name, u] of Object.entries(sh.uniforms)) {
@@ -78,27 +59,17 @@ async function main() {
   const world = new THREE.Scene();
   world.add(new THREE.Mesh(geo, material));
 
-  const target = new THREE.WebGLRenderTarget(W, H, {
-    type: THREE.FloatType, format: THREE.RGBAFormat, depthBuffer: true,
-    minFilter: THREE.NearestFilter, magFilter: THREE.NearestFilter, samples: 0 });
-  renderer.setRenderTarget(target);
-  renderer.clear();
-  renderer.render(world, cam);
-  const props = renderer.properties.get(material);
-  const prog = props.currentProgram;
-  if (!prog || prog.diagnostics && !prog.diagnostics.runnable) {
-    const d = prog && prog.diagnostics;
-    throw new Error('MaterialX shaders did not compile: ' +
-                    (d ? (d.vertexShader.log + ' ' + d.fragmentShader.log + ' ' + d.programLog) : 'no program'));
-  }
-  const pixels = new Float32Array(W * H * 4);
-  renderer.readRenderTargetPixels(target, 0, 0, W, H, pixels);
-  renderer.setRenderTarget(null);
-  const dbg = gl.getExtension('WEBGL_debug_renderer_info');
+  const pixels = renderFloat(renderer, world, cam, W, H, () => {
+    const prog = renderer.properties.get(material).currentProgram;
+    if (!prog || prog.diagnostics && !prog.diagnostics.runnable) {
+      const d = prog && prog.diagnostics;
+      throw new Error('MaterialX shaders did not compile: ' +
+                      (d ? (d.vertexShader.log + ' ' + d.fragmentShader.log + ' ' + d.programLog) : 'no program'));
+    }
+  });
   await post('/info', JSON.stringify({
     three: THREE.REVISION, material_type: 'RawShaderMaterial (MaterialX ESSL)',
-    gl_renderer: dbg ? gl.getParameter(dbg.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER),
-    gl_version: gl.getParameter(gl.VERSION) }), 'application/json');
+    ...glInfo(renderer) }), 'application/json');
   await post('/result', pixels.buffer, 'application/octet-stream');
 }
 

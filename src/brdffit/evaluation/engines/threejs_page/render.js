@@ -4,27 +4,12 @@
 // The scene description is data (JSON), never code: see brdffit.evaluation.engines.threejs.
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
-
-async function post(path, body, type) {
-  await fetch(path, { method: 'POST', headers: { 'Content-Type': type }, body });
-}
+import { floatRenderer, glInfo, post, renderFloat, sceneCamera } from './common.js';
 
 async function main() {
   const scene = await (await fetch('/scene.json')).json();
   const W = scene.width, H = scene.height;
-  const canvas = document.createElement('canvas');
-  canvas.width = W; canvas.height = H;
-  document.body.appendChild(canvas);
-  const renderer = new THREE.WebGLRenderer({ canvas, antialias: false, alpha: true,
-                                             preserveDrawingBuffer: true });
-  renderer.setPixelRatio(1);
-  renderer.setSize(W, H, false);
-  renderer.toneMapping = THREE.NoToneMapping;
-  renderer.setClearColor(0x000000, 0.0);
-  const gl = renderer.getContext();
-  if (!renderer.extensions.has('EXT_color_buffer_float')) {
-    throw new Error('WebGL 2 without EXT_color_buffer_float: no float render target');
-  }
+  const renderer = floatRenderer(W, H, { preserveDrawingBuffer: true });
 
   const loader = new GLTFLoader();
   const gltf = await loader.loadAsync('/material.gltf');
@@ -40,10 +25,7 @@ async function main() {
     new THREE.SphereGeometry(1.0, scene.sphere_segments[0], scene.sphere_segments[1]), material);
   world.add(sphere);
 
-  const cam = new THREE.PerspectiveCamera(scene.camera.fov, W / H, 0.1, 100.0);
-  cam.position.fromArray(scene.camera.origin);
-  cam.up.fromArray(scene.camera.up);
-  cam.lookAt(new THREE.Vector3().fromArray(scene.camera.target));
+  const cam = sceneCamera(scene, W, H);
 
   const L = scene.light;
   if (L.type === 'directional') {
@@ -62,21 +44,10 @@ async function main() {
     throw new Error('unknown light type ' + L.type);
   }
 
-  const target = new THREE.WebGLRenderTarget(W, H, {
-    type: THREE.FloatType, format: THREE.RGBAFormat, depthBuffer: true,
-    minFilter: THREE.NearestFilter, magFilter: THREE.NearestFilter, samples: 0 });
-  renderer.setRenderTarget(target);
-  renderer.clear();
-  renderer.render(world, cam);
-  const pixels = new Float32Array(W * H * 4);
-  renderer.readRenderTargetPixels(target, 0, 0, W, H, pixels);
-  renderer.setRenderTarget(null);
+  const pixels = renderFloat(renderer, world, cam, W, H);
 
-  const dbg = gl.getExtension('WEBGL_debug_renderer_info');
   const info = {
-    three: THREE.REVISION, material_type: material.type,
-    gl_renderer: dbg ? gl.getParameter(dbg.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER),
-    gl_version: gl.getParameter(gl.VERSION),
+    three: THREE.REVISION, material_type: material.type, ...glInfo(renderer),
     material: { color: material.color.toArray(), metalness: material.metalness,
                 roughness: material.roughness, ior: material.ior,
                 specularIntensity: material.specularIntensity,
