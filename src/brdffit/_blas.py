@@ -23,6 +23,7 @@ from __future__ import annotations
 import functools
 import os
 import sys
+import threading
 from contextlib import contextmanager
 from typing import Callable, Iterator
 
@@ -46,11 +47,17 @@ def _env_says_one() -> bool:
     return os.environ.get("OPENBLAS_NUM_THREADS") == "1" and "numpy" in sys.modules
 
 
+#: how deep this thread is in :func:`single_blas_thread` blocks (a registry fitter wraps a
+#: public fitting function that wraps its own: only the outermost sets the limit)
+_nesting = threading.local()
+
+
 @contextmanager
 def single_blas_thread() -> Iterator[None]:
-    """Limit BLAS to one thread inside the block (no-op without ``threadpoolctl``, or when
-    the environment already did it)."""
-    if _env_says_one():
+    """Limit BLAS to one thread inside the block (no-op without ``threadpoolctl``, when the
+    environment already did it, or inside another such block of this thread)."""
+    depth = getattr(_nesting, "depth", 0)
+    if depth or _env_says_one():
         yield
         return
     try:
@@ -58,8 +65,12 @@ def single_blas_thread() -> Iterator[None]:
     except ImportError:  # pragma: no cover - a declared dependency
         yield
         return
-    with threadpool_limits(limits=1, user_api="blas"):
-        yield
+    _nesting.depth = 1
+    try:
+        with threadpool_limits(limits=1, user_api="blas"):
+            yield
+    finally:
+        _nesting.depth = 0
 
 
 def with_single_blas_thread(fn: Callable) -> Callable:
