@@ -31,6 +31,7 @@ test: $(STAMP) npmdeps blender
 
 bench: $(STAMP) blender
 	$(PY) bench/run_all.py
+	$(PY) bench/readme.py
 
 install: $(STAMP) blender
 
