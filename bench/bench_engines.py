@@ -96,7 +96,7 @@ def bench_material(name: str, spec: str, args) -> dict:
                                               seeds)
             out[key] = _brief(blender.compare_renders(ref, alpha, eq, eq_alpha))
         for key, dist in (("blender", None), ("blender_ggx", "GGX")):
-            b = blender.render_gltf(path, "sphere-distant", args.res, args.spp, seeds, dist)
+            b = blender.render_file(path, "sphere-distant", args.res, args.spp, seeds, dist)
             out[key] = _brief(blender.compare_renders(ref, alpha, b.images, b.alpha))
             out[key]["seconds"] = b.seconds
             out[key]["principled"] = b.report["materials"][0]["principled"]

@@ -14,8 +14,8 @@ binding, on a preview sphere.
     ← a shader whose ``info:id`` is ``ND_open_pbr_surface_surfaceshader`` with the inputs of
     the ``.mtlx`` export (:func:`brdffit.export.materialx.openpbr_parameters`).
 
-* ``/Root/Sphere``, a unit ``UsdGeom.Sphere`` bound to the material (``mesh="none"``: the
-  material alone).
+* ``/Root/Sphere``, the glTF export's unit UV sphere as a ``UsdGeom.Mesh`` bound to the
+  material (``mesh="none"``: the material alone).
 
 What UsdPreviewSurface cannot hold is dropped and said in ``notes``: glTF's
 ``KHR_materials_specular`` (a coloured F0 and F90 below 1: UsdPreviewSurface's dielectric
@@ -40,7 +40,7 @@ import numpy as np
 from .._atomic import atomic_write
 from ..errors import ExportError
 from ._common import check_output_path, label, shown, writing
-from .gltf import gltf_parameters
+from .gltf import gltf_parameters, uv_sphere
 from .materialx import _library, openpbr_parameters
 
 __all__ = ["usd_layer", "write_usd", "check_usd", "PREVIEW_INPUTS", "MTLX_SHADER_ID"]
@@ -138,10 +138,7 @@ def usd_layer(model, name: str | None = None, mesh: str = "sphere") -> tuple[str
                      f"({mtlx['tangent_rotation_deg']:.6g} deg) is not carried")
 
     if mesh == "sphere":
-        sphere = UsdGeom.Sphere.Define(stage, "/Root/Sphere")
-        sphere.CreateRadiusAttr(1.0)
-        sphere.CreateExtentAttr([(-1.0, -1.0, -1.0), (1.0, 1.0, 1.0)])
-        UsdShade.MaterialBindingAPI.Apply(sphere.GetPrim()).Bind(material)
+        _preview_sphere(stage, material)
     text = stage.GetRootLayer().ExportToString()
     summary = {"target": "usd", "material": f"/Root/Looks/{ident}",
                "preview_surface": preview,
@@ -150,6 +147,30 @@ def usd_layer(model, name: str | None = None, mesh: str = "sphere") -> tuple[str
                                                     for n in mtlx["notes"]],
                "mesh": mesh}
     return text, summary
+
+
+def _preview_sphere(stage, material) -> None:
+    """``/Root/Sphere``: the glTF export's preview sphere (:func:`brdffit.export.gltf.uv_sphere`)
+    as a ``UsdGeom.Mesh`` (triangles, vertex normals, ``primvars:st``, no subdivision), bound
+    to ``material``. A mesh, not a ``UsdGeom.Sphere``: Blender's USD importer (5.0) makes a
+    coarse mesh of a sphere shape and does not bind its material."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade, Vt
+
+    s = uv_sphere()
+    sphere = UsdGeom.Mesh.Define(stage, "/Root/Sphere")
+    sphere.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(s["positions"]))
+    sphere.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(s["normals"]))
+    sphere.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    indices = s["indices"].astype(np.int32)
+    sphere.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(indices) // 3, 3,
+                                                                    np.int32)))
+    sphere.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(indices))
+    sphere.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    sphere.CreateExtentAttr([Gf.Vec3f(-1.0, -1.0, -1.0), Gf.Vec3f(1.0, 1.0, 1.0)])
+    st = UsdGeom.PrimvarsAPI(sphere).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                   UsdGeom.Tokens.vertex)
+    st.Set(Vt.Vec2fArray.FromNumpy(s["texcoords"]))
+    UsdShade.MaterialBindingAPI.Apply(sphere.GetPrim()).Bind(material)
 
 
 def _mtlx_problems(stage) -> list[str]:

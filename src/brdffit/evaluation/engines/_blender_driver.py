@@ -1,16 +1,17 @@
 """Blender side of the Blender round trip: run by the Python interpreter that has ``bpy``
 (``python _blender_driver.py JOB.json``), never imported by brdffit.
 
-The job (JSON, written by :func:`brdffit.evaluation.engines.blender.render_gltf`) names the
-glTF file, the output directory and the scene in *glTF / Mitsuba coordinates* (+Y up):
+The job (JSON, written by :func:`brdffit.evaluation.engines.blender.render_file`) names the
+glTF or USD file, the output directory and the scene in *glTF / Mitsuba coordinates* (+Y up):
 camera origin, target, up and horizontal field of view; the directional light's direction of
-travel and irradiance. Blender is +Z up and its glTF importer maps a glTF point (x, y, z) to
-(x, −z, y); the scene is mapped the same way, so the imported mesh and the rebuilt scene
-agree.
+travel and irradiance. Blender is +Z up; its glTF importer maps a glTF point (x, y, z) to
+(x, −z, y), and its USD importer rotates a +Y-up stage by 90° about X, the same map; the
+scene is mapped the same way, so the imported mesh and the rebuilt scene agree.
 
 What is done, in order: an empty scene (factory settings, no startup file); the file is
-imported with Blender's own glTF importer and **its default options** (the job may ask for
-``import_unused_materials``); with no seeds, the import report is all; else the camera (its
+imported with Blender's own glTF or USD importer (by its suffix) and **its default options**
+(the job may ask for ``import_unused_materials``, the USD importer's
+``import_all_materials``); with no seeds, the import report is all; else the camera (its
 field of view on the sensor's width), a sun lamp (angle 0: a directional light; strength =
 irradiance in W/m², Cycles' unit) and a black world (strength 0, transparent film: the alpha
 is the coverage) are added; Cycles on the CPU renders one image per seed with a 1-pixel box
@@ -54,6 +55,13 @@ def principled_nodes(mat):
     if not mat.use_nodes or mat.node_tree is None:
         return []
     return [n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED"]
+
+
+def import_file(path, unused_materials):
+    """Import ``path`` with Blender's importer for its suffix, default options."""
+    if path.lower().endswith((".usd", ".usda", ".usdc")):
+        return bpy.ops.wm.usd_import(filepath=path, import_all_materials=unused_materials)
+    return bpy.ops.import_scene.gltf(filepath=path, import_unused_materials=unused_materials)
 
 
 def build_scene(job):
@@ -125,8 +133,7 @@ def main(job_path):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     before_objects = set(bpy.data.objects)
     before_materials = set(bpy.data.materials)
-    result = bpy.ops.import_scene.gltf(
-        filepath=job["gltf"], import_unused_materials=bool(job["import_unused_materials"]))
+    result = import_file(job["file"], bool(job["import_unused_materials"]))
     objects = [o for o in bpy.data.objects if o not in before_objects]
     materials = [m for m in bpy.data.materials if m not in before_materials]
     report = {"blender": bpy.app.version_string, "import_result": sorted(result),
