@@ -8,6 +8,8 @@ exported to glTF (preview sphere, default options) and
   in ``sphere-distant`` rebuilt in Blender (:mod:`brdffit.evaluation.engines.blender`);
 * ``blender_ggx``: the same with the Principled BSDF's distribution set to single-scatter
   GGX after the import (what the importer's multiscatter GGX costs);
+* ``blender_usd``: the fit's USD export (``brdffit export --to usd``: UsdPreviewSurface on the
+  same preview sphere) imported by Blender's USD importer (default options), same render;
 * ``equivalent``: our Mitsuba render of :func:`brdffit.export.gltf.gltf_equivalent` (the
   specification's BRDF); ``equivalent_blender`` / ``equivalent_blender_ggx``: the same with
   ``engine="blender"`` / ``"blender-ggx"`` (Cycles' Principled BSDF as the importer sets it
@@ -95,8 +97,11 @@ def bench_material(name: str, spec: str, args) -> dict:
             eq, eq_alpha = blender.render_fit(model, "sphere-distant", args.res, args.spp,
                                               seeds)
             out[key] = _brief(blender.compare_renders(ref, alpha, eq, eq_alpha))
-        for key, dist in (("blender", None), ("blender_ggx", "GGX")):
-            b = blender.render_file(path, "sphere-distant", args.res, args.spp, seeds, dist)
+        usd = Path(tmp) / f"{name}.usda"
+        out["usd_notes"] = export(fit, "usd", usd)["notes"]
+        for key, dist, file in (("blender", None, path), ("blender_ggx", "GGX", path),
+                                ("blender_usd", None, usd)):
+            b = blender.render_file(file, "sphere-distant", args.res, args.spp, seeds, dist)
             out[key] = _brief(blender.compare_renders(ref, alpha, b.images, b.alpha))
             out[key]["seconds"] = b.seconds
             out[key]["principled"] = b.report["materials"][0]["principled"]
@@ -107,7 +112,7 @@ def bench_material(name: str, spec: str, args) -> dict:
 
 def _summary(rows: list[dict]) -> dict:
     s = {}
-    for key in ("blender", "blender_ggx", "equivalent"):
+    for key in ("blender", "blender_ggx", "blender_usd", "equivalent"):
         ps = np.array([r[key]["psnr"] for r in rows])
         ratios = np.array([r[key]["mean_ratio"] for r in rows])
         rims = np.array([r[key]["rim_ratio"] for r in rows])
@@ -157,14 +162,14 @@ def main(argv=None) -> int:
     commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
                             capture_output=True, text=True).stdout.strip()
     rows = []
-    print(f"{'material':24s} {'Blender dB':>14s} {'GGX forced':>14s} {'spec/Bl. eq.':>13s} "
+    print(f"{'material':24s} {'Blender dB':>14s} {'GGX forced':>14s} {'USD':>6s} {'spec/Bl. eq.':>13s} "
           f"{'mean ratio R,G,B':>20s} {'rim ratio R,G,B':>20s} {'FLIP':>6s}")
     for name, spec in mats:
         r = bench_material(name, spec, args)
         rows.append(r)
         b, g, e = r["blender"], r["blender_ggx"], r["equivalent"]
         print(f"{name:24s} {b['psnr']:7.2f} ± {b['psnr_se']:4.2f} {g['psnr']:7.2f} ± "
-              f"{g['psnr_se']:4.2f} {e['psnr']:6.2f}/{r['equivalent_blender'].get('psnr', np.nan):6.2f} "
+              f"{g['psnr_se']:4.2f} {r['blender_usd']['psnr']:6.2f} {e['psnr']:6.2f}/{r['equivalent_blender'].get('psnr', np.nan):6.2f} "
               f"{' '.join(f'{x:.3f}' for x in b['mean_ratio']):>20s} "
               f"{' '.join(f'{x:.3f}' for x in b['rim_ratio']):>20s} {b['flip']:6.4f}",
               flush=True)
