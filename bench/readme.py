@@ -168,6 +168,18 @@ BENCHMARKS = (
                     f"projected {r['projected_all_materials_wall_h'] * 60:.0f} min"),
 )
 
+def _best_known(r: dict) -> str:
+    return "; ".join(f"{m} default within 1 % of the best on {v['default_within_1pc']} / "
+                     f"{v['materials']}" for m, v in r["per_model"].items())
+
+
+BENCHMARKS += (
+    Entry("best_known", "per MERL material, NPF variants and SGD: the defaults' objective "
+          "against the best over many starts and longer runs; their CPU time",
+          "nice bench/bench_best_known.py [--materials all]",
+          ("best_known.json", "best_known.csv"), _best_known),
+)
+
 STUDIES = (
     Entry("npf_defaults", "NPF with the product's defaults over MERL: convergence, time, "
           "objective vs the AWLS point and a reference run",
