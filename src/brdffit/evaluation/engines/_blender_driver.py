@@ -12,9 +12,11 @@ What is done, in order: an empty scene (factory settings, no startup file); the 
 imported with Blender's own glTF or USD importer (by its suffix) and **its default options**
 (the job may ask for ``import_unused_materials``, the USD importer's
 ``import_all_materials``); with no seeds, the import report is all; else the camera (its
-field of view on the sensor's width), a sun lamp (angle 0: a directional light; strength =
-irradiance in W/m², Cycles' unit) and a black world (strength 0, transparent film: the alpha
-is the coverage) are added; Cycles on the CPU renders one image per seed with a 1-pixel box
+field of view on the sensor's width) and either a sun lamp (angle 0: a directional light;
+strength = irradiance in W/m², Cycles' unit) with a black world, or a world of the job's
+environment map (an equirectangular texture, linear, strength 1, looked up along the
+direction turned about +Z to Mitsuba's lat-long convention) are added (transparent film: the
+alpha is the coverage); Cycles on the CPU renders one image per seed with a 1-pixel box
 filter, no denoising, no adaptive sampling, no clamping and no light threshold, so the
 estimate is unbiased like Mitsuba's ``direct`` integrator. The Principled BSDF's
 microfacet distribution is left as the importer set it unless the job names one
@@ -64,6 +66,47 @@ def import_file(path, unused_materials):
     return bpy.ops.import_scene.gltf(filepath=path, import_unused_materials=unused_materials)
 
 
+def add_sun(scene, sun):
+    """A sun lamp of angle 0 (a directional light) travelling along ``sun["direction"]``,
+    strength = the irradiance."""
+    travel = to_blender(sun["direction"]).normalized()
+    sun_data = bpy.data.lights.new("sun", type="SUN")
+    sun_data.energy = float(sun["irradiance"])
+    sun_data.angle = 0.0
+    sun_data.color = (1.0, 1.0, 1.0)
+    sun_obj = bpy.data.objects.new("sun", sun_data)
+    # a sun lamp shines along its local −Z
+    sun_obj.rotation_mode = "QUATERNION"
+    sun_obj.rotation_quaternion = travel.to_track_quat("-Z", "Y")
+    scene.collection.objects.link(sun_obj)
+
+
+def make_world(env):
+    """The world: black (strength 0), or the environment map ``env["exr"]`` (linear,
+    strength 1) looked up along the direction turned by ``env["rotation_z_deg"]`` about +Z."""
+    world = bpy.data.worlds.new("world")
+    world.use_nodes = True
+    nodes, links = world.node_tree.nodes, world.node_tree.links
+    bg = next(n for n in nodes if n.type == "BACKGROUND")
+    if env is None:
+        bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+        bg.inputs["Strength"].default_value = 0.0
+        return world
+    tex = nodes.new("ShaderNodeTexEnvironment")
+    tex.image = bpy.data.images.load(env["exr"])
+    tex.image.colorspace_settings.name = "Linear Rec.709"
+    tex.interpolation = "Linear"
+    coord = nodes.new("ShaderNodeTexCoord")
+    mapping = nodes.new("ShaderNodeMapping")
+    mapping.vector_type = "VECTOR"
+    mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(env["rotation_z_deg"]))
+    links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+    links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    links.new(tex.outputs["Color"], bg.inputs["Color"])
+    bg.inputs["Strength"].default_value = 1.0
+    return world
+
+
 def build_scene(job):
     scene = bpy.context.scene
     cam = job["camera"]
@@ -82,24 +125,9 @@ def build_scene(job):
     scene.collection.objects.link(cam_obj)
     scene.camera = cam_obj
 
-    sun = job["sun"]
-    travel = to_blender(sun["direction"]).normalized()
-    sun_data = bpy.data.lights.new("sun", type="SUN")
-    sun_data.energy = float(sun["irradiance"])
-    sun_data.angle = 0.0
-    sun_data.color = (1.0, 1.0, 1.0)
-    sun_obj = bpy.data.objects.new("sun", sun_data)
-    # a sun lamp shines along its local −Z
-    sun_obj.rotation_mode = "QUATERNION"
-    sun_obj.rotation_quaternion = travel.to_track_quat("-Z", "Y")
-    scene.collection.objects.link(sun_obj)
-
-    world = bpy.data.worlds.new("black")
-    world.use_nodes = True
-    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
-    bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-    bg.inputs["Strength"].default_value = 0.0
-    scene.world = world
+    if "sun" in job:
+        add_sun(scene, job["sun"])
+    scene.world = make_world(job.get("world"))
 
     res = int(job["resolution"])
     scene.render.engine = "CYCLES"

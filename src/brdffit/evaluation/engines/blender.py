@@ -50,14 +50,21 @@ import numpy as np
 from ...errors import BRDFError
 from ..metrics import crn_psnr
 from ..render.core import Renderer
-from ..render.scenes import CAMERA, DISTANT_LIGHT
+from ..imageio import write_exr
+from ..render.scenes import CAMERA, DISTANT_LIGHT, load_envmap, scene_spec
 
 __all__ = ["BlenderUnavailable", "BlenderFailed", "BlenderRender", "blender_python",
            "available", "import_report", "render_file", "render_fit", "compare_renders",
            "rim_mask", "round_trip", "RIM_FRACTION", "SCENES"]
 
-#: the scenes rebuilt in Blender
-SCENES = ("sphere-distant",)
+#: the scenes rebuilt in Blender: the directional light, and the sphere under an environment
+#: map (``sphere-env``: the procedural map; ``sphere-<map>``: a map of the shared set, as the
+#: paper suite's ``sphere-courtyard``, ``sphere-studio``, ``sphere-sunrise``)
+SCENES = ("sphere-distant", "sphere-env", "sphere-<map>")
+#: rotation about Blender's +Z of the direction looked up in the environment texture: Mitsuba's
+#: lat-long ``u = atan2(x, −z)/2π`` in its +Y-up frame is Blender's equirectangular ``u``
+#: turned by a quarter turn in Blender's +Z-up frame (the importer's (x, y, z) → (x, −z, y))
+ENVMAP_ROTATION_DEG = 90.0
 #: the rim: pixels farther than this fraction of the sphere's projected radius from its centre
 RIM_FRACTION = 0.85
 _DRIVER = Path(__file__).with_name("_blender_driver.py")
@@ -127,13 +134,25 @@ class BlenderRender:
     seconds: float
 
 
-def _scene_job(scene: str) -> dict:
-    if scene not in SCENES:
-        raise ValueError(f"scene {scene!r} is not rebuilt in Blender; expected one of "
-                         f"{', '.join(SCENES)}")
-    return {"camera": {k: (list(v) if isinstance(v, tuple) else v) for k, v in CAMERA.items()},
-            "sun": {"direction": list(DISTANT_LIGHT["direction"]),
-                    "irradiance": float(DISTANT_LIGHT["irradiance"])}}
+def _scene_job(scene: str, out_dir: Path) -> dict:
+    """The job's scene: the camera, and the sun of ``sphere-distant`` or the environment map
+    of a ``sphere-env`` scene (written to ``out_dir`` as an EXR, clamped at 0 as our renderer
+    loads it)."""
+    job = {"camera": {k: (list(v) if isinstance(v, tuple) else v) for k, v in CAMERA.items()}}
+    if scene == "sphere-distant":
+        job["sun"] = {"direction": list(DISTANT_LIGHT["direction"]),
+                      "irradiance": float(DISTANT_LIGHT["irradiance"])}
+        return job
+    try:
+        spec = scene_spec(scene)
+    except ValueError:
+        spec = None
+    if spec is None or spec.base != "sphere-env":
+        raise ValueError(f"scene {scene!r} is not rebuilt in Blender; expected "
+                         f"sphere-distant, sphere-env or sphere-<map>")
+    path = write_exr(out_dir / "envmap.exr", load_envmap(spec.envmap))
+    job["world"] = {"exr": str(path), "rotation_z_deg": ENVMAP_ROTATION_DEG}
+    return job
 
 
 def _run_driver(path: Path, job: dict, timeout: float) -> tuple[dict, Path, float]:
@@ -223,7 +242,7 @@ def render_file(path, scene: str = "sphere-distant", resolution: int = 64,
         job = {"file": str(path.resolve()), "out_dir": tmp, "resolution": resolution,
                "spp": spp, "seeds": list(seeds), "distribution": distribution,
                "threads": threads, "max_bounces": max_bounces,
-               "import_unused_materials": False, **_scene_job(scene)}
+               "import_unused_materials": False, **_scene_job(scene, Path(tmp))}
         report, out_dir, seconds = _run_driver(path, job, timeout)
         frames = [np.load(out_dir / f"render_{s}.npy") for s in seeds]
     if not any(o["type"] == "MESH" for o in report["objects"]):
