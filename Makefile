@@ -13,7 +13,7 @@ GLTF_VALIDATOR_VERSION := 2.0.0-dev.3.10
 THREE := $(NPM_PREFIX)/node_modules/three/package.json
 THREE_VERSION := 0.187.0
 # esbuild (npm): bundles three + OrbitControls + GLTFLoader + the report's viewer into one
-# classic script (threejs_page/viewer.bundle.js, committed; tools/build_viewer_bundle.py)
+# classic script (threejs_page/vendor/viewer.bundle.js, committed; tools/build_viewer_bundle.py)
 ESBUILD := $(NPM_PREFIX)/node_modules/esbuild/package.json
 ESBUILD_VERSION := 0.28.2
 DEBIAN_PACKAGES := libllvm19 chromium glslang-tools

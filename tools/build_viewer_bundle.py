@@ -7,7 +7,7 @@ esbuild (``make npmdeps``: ``ESBUILD_VERSION`` of the Makefile) bundles
 its ``OrbitControls`` and ``GLTFLoader`` into one minified classic script (an IIFE, no
 ``import``: Chromium runs it from ``file://``), three's MIT licence comment kept at the end
 (``--legal-comments=eof``). The default output is the committed
-``threejs_page/viewer.bundle.js``; the same versions give the same bytes, which
+``threejs_page/vendor/viewer.bundle.js``; the same versions give the same bytes, which
 tests/evaluation/test_report_viewer.py checks when ``.npm`` holds them.
 """
 
@@ -23,7 +23,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 PAGE = ROOT / "src" / "brdffit" / "evaluation" / "engines" / "threejs_page"
 ENTRY = PAGE / "viewer.js"
-BUNDLE = PAGE / "viewer.bundle.js"
+BUNDLE = PAGE / "vendor" / "viewer.bundle.js"
 #: the bundle's header: what it holds, at which versions (checked against .npm)
 HEADER = ("/* brdffit report viewer: viewer.js + three {three} (MIT, three.js authors) "
           "OrbitControls, GLTFLoader; bundled by esbuild {esbuild} "

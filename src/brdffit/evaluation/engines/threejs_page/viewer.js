@@ -1,10 +1,11 @@
 // The report's live viewer: each element with a data-brdffit-viewer attribute (the id of a
 // <script type="application/json"> holding the viewer's data, written by
-// brdffit.evaluation.report_viewer) gets a canvas where the glTF material of a fit, on a unit
+// brdffit.evaluation.report_viewer) fills its canvas where the glTF material of a fit, on a unit
 // sphere, is lit by the page's environment map (image-based lighting of three.js: the map
 // prefiltered by PMREMGenerator), seen by the scenes' camera and tone-mapped as the page's
 // images, (1 - 2^(-exposure x))^(1/gamma), with orbit controls. Bundled into a classic script
-// (viewer.bundle.js) so that it runs from file:// where module scripts and fetch are blocked.
+// (vendor/viewer.bundle.js) so that it runs from file://, where module scripts and fetch are
+// blocked.
 // All data arrive as JSON and reach the page as text (textContent), never as code or markup.
 import * as THREE from 'three';
 import { OrbitControls } from 'three/addons/controls/OrbitControls.js';
@@ -24,13 +25,16 @@ function base64Bytes(s) {
 function environmentTexture(env) {
   const rgb = new Uint16Array(base64Bytes(env.rgb_f16).buffer);
   const n = env.width * env.height;
-  if (rgb.length !== 3 * n) throw new Error('environment map: expected ' + 3 * n + ' values, got ' + rgb.length);
+  if (rgb.length !== 3 * n) {
+    throw new Error('environment map: expected ' + 3 * n + ' values, got ' + rgb.length);
+  }
   const rgba = new Uint16Array(4 * n);
   for (let i = 0; i < n; i++) {
     rgba[4 * i] = rgb[3 * i]; rgba[4 * i + 1] = rgb[3 * i + 1]; rgba[4 * i + 2] = rgb[3 * i + 2];
     rgba[4 * i + 3] = HALF_ONE;
   }
-  const tex = new THREE.DataTexture(rgba, env.width, env.height, THREE.RGBAFormat, THREE.HalfFloatType);
+  const tex = new THREE.DataTexture(rgba, env.width, env.height, THREE.RGBAFormat,
+                                    THREE.HalfFloatType);
   tex.mapping = THREE.EquirectangularReflectionMapping;
   tex.colorSpace = THREE.LinearSRGBColorSpace;
   tex.magFilter = THREE.LinearFilter;
@@ -44,10 +48,12 @@ function environmentTexture(env) {
 function useReportToneMap(gamma) {
   const g = Number(gamma);
   if (!(g > 0 && isFinite(g))) throw new Error('tone map: gamma must be a positive number');
-  THREE.ShaderChunk.tonemapping_pars_fragment = THREE.ShaderChunk.tonemapping_pars_fragment.replace(
+  const chunks = THREE.ShaderChunk;
+  chunks.tonemapping_pars_fragment = chunks.tonemapping_pars_fragment.replace(
     /vec3 CustomToneMapping\( vec3 color \) \{[^}]*\}/,
-    'vec3 CustomToneMapping( vec3 color ) { return pow( max( vec3( 1.0 ) - exp2( - toneMappingExposure * '
-    + 'max( color, vec3( 0.0 ) ) ), vec3( 0.0 ) ), vec3( ' + (1.0 / g).toFixed(8) + ' ) ); }');
+    'vec3 CustomToneMapping( vec3 color ) { return pow( max( vec3( 1.0 ) - exp2( '
+    + '- toneMappingExposure * max( color, vec3( 0.0 ) ) ), vec3( 0.0 ) ), vec3( '
+    + (1.0 / g).toFixed(8) + ' ) ); }');
 }
 
 async function loadMaterial(doc) {
@@ -58,7 +64,8 @@ async function loadMaterial(doc) {
 }
 
 function makeRenderer(canvas, data) {
-  const renderer = new THREE.WebGLRenderer({ canvas, antialias: true, preserveDrawingBuffer: true });
+  const renderer = new THREE.WebGLRenderer({ canvas, antialias: true,
+                                             preserveDrawingBuffer: true });
   renderer.setPixelRatio(window.devicePixelRatio || 1);
   renderer.setSize(data.size, data.size, false);
   renderer.toneMapping = THREE.CustomToneMapping;
@@ -110,7 +117,10 @@ async function start(root) {
     sphere.material = await loadMaterial(data.models[i].gltf);
     render();
     root.dataset.viewerModel = data.models[i].name;
-    if (location.hash === '#brdffit-viewer-image') root.dataset.viewerImage = canvas.toDataURL('image/png');
+    // asked for in the address (the browser test): the canvas as a PNG on the element
+    if (location.hash === '#brdffit-viewer-image') {
+      root.dataset.viewerImage = canvas.toDataURL('image/png');
+    }
   };
   modelSelect(root, data.models, (i) => show(i).catch((e) => fail(root, status, e)));
   await show(0);
