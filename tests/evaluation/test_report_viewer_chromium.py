@@ -104,6 +104,8 @@ def test_viewer_shows_the_export_as_our_render(page, tmp_path):
     assert status and status.group(1) == "ok", re.findall(r'viewer-status">([^<]*)', dom)
     shown = re.search(r'data-viewer-model="([^"]*)"', dom)
     assert shown and html.unescape(shown.group(1)) == HOSTILE
+    label = re.search(r'class="viewer-model">([^<]*)<', dom)
+    assert label and html.unescape(label.group(1)) == "glTF of " + HOSTILE
     m = re.search(r'data-viewer-image="data:image/png;base64,([^"]*)"', dom)
     assert m, "the viewer left no image"
     canvas_png = tmp_path / "canvas.png"

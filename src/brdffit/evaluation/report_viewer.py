@@ -211,7 +211,7 @@ def viewer_sections(out_dir, mdir: Path, result: dict, disp: int,
     canvas = (f'<div class="cell"><canvas width="{int(disp)}" height="{int(disp)}" '
               f'style="width:{int(disp)}px;height:{int(disp)}px;background:#000;'
               'border:1px solid #999;display:block"></canvas>'
-              '<select aria-label="model" hidden></select><br>'
+              '<b class="viewer-model"></b><select aria-label="model" hidden></select><br>'
               '<span class="viewer-status">Live viewer: needs JavaScript and WebGL.</span></div>')
     ref_cell = cell(ref["png"], f"reference rendering, {name}", disp,
                     "<b>Reference</b><br>&nbsp;")

@@ -117,6 +117,7 @@ async function start(root) {
     sphere.material = await loadMaterial(data.models[i].gltf);
     render();
     root.dataset.viewerModel = data.models[i].name;
+    root.querySelector('.viewer-model').textContent = 'glTF of ' + data.models[i].name;
     // asked for in the address (the browser test): the canvas as a PNG on the element
     if (location.hash === '#brdffit-viewer-image') {
       root.dataset.viewerImage = canvas.toDataURL('image/png');
