@@ -33,13 +33,13 @@ import base64
 import html
 import json
 import math
-import shutil
 from functools import lru_cache
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
+from .._atomic import atomic_write
 from ..errors import printable
 from .render.scenes import CAMERA, envmap_names, load_envmap
 
@@ -179,9 +179,8 @@ def copy_bundle(out_dir) -> bool:
     dest = Path(out_dir) / ASSET
     if not (dest.is_file() and dest.stat().st_size == len(data) and dest.read_bytes() == data):
         dest.parent.mkdir(parents=True, exist_ok=True)
-        tmp = dest.with_name(dest.name + ".tmp")
-        shutil.copyfile(BUNDLE, tmp)
-        tmp.replace(dest)
+        with atomic_write(dest, "wb") as fh:       # pages of a batch may be written at once
+            fh.write(data)
     return True
 
 
