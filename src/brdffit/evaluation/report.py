@@ -35,6 +35,7 @@ from .._json import json_default
 from ..errors import printable
 from .metrics import count_wins
 from ..paths import slug
+from .report_viewer import viewer_sections
 
 __all__ = ["RESULT_NAME", "slugify", "write_result", "read_results", "write_material_page",
            "write_index", "local_links", "missing_links", "summarize"]
@@ -358,6 +359,7 @@ def write_material_page(out_dir, result: dict, colorbar: str | None = "../assets
     # renderings and dE maps, metrics
     if scenes:
         parts += _scene_sections(scenes, models, disp, colorbar)
+        parts += viewer_sections(out_dir, mdir, result, disp, _cell)
     else:
         parts += _single_scene_sections(ref, models, disp, colorbar)
     parts.append(_metrics_table(models, scenes, best))
