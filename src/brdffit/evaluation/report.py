@@ -31,7 +31,7 @@ from typing import Iterable
 import numpy as np
 
 from .._atomic import atomic_write
-from .._json import json_default
+from .._json import float_or_none as _num, json_default, standard_json
 from ..errors import printable
 from .metrics import count_wins
 from ..paths import slug
@@ -123,24 +123,11 @@ def slugify(name: str) -> str:
     return slug(name)
 
 
-def _clean(obj):
-    """Replace non-finite floats by strings so the JSON stays standard ("inf", "nan")."""
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, (float, np.floating)) and not math.isfinite(float(obj)):
-        return str(float(obj))
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
-
-
 def write_result(material_dir, result: dict) -> Path:
     """Write ``result.json`` of one material atomically."""
     path = Path(material_dir) / RESULT_NAME
     with atomic_write(path, "w") as fh:
-        json.dump(_clean(result), fh, indent=1, default=json_default, allow_nan=False)
+        json.dump(standard_json(result), fh, indent=1, default=json_default, allow_nan=False)
     return path
 
 
@@ -160,16 +147,6 @@ def read_results(out_dir) -> list[dict]:
 # ------------------------------------------------------------------------------------------
 # formatting helpers
 # ------------------------------------------------------------------------------------------
-def _num(x) -> float | None:
-    if x is None:
-        return None
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        return None
-    return v
-
-
 def _fmt(x, digits: int = 2, unit: str = "") -> str:
     v = _num(x)
     if v is None:
@@ -909,7 +886,7 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
         fh.write(_page(title, "\n".join(parts)))
     summ_path = out_dir / "summary.json"
     with atomic_write(summ_path, "w") as fh:
-        json.dump(_clean(summ), fh, indent=1, default=json_default, allow_nan=False)
+        json.dump(standard_json(summ), fh, indent=1, default=json_default, allow_nan=False)
     return path
 
 
