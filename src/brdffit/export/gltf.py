@@ -113,7 +113,7 @@ from ..microfacet.model import MicrofacetBRDF
 from ..microfacet.tabulated import TabulatedSlopeDistribution
 from ._common import (LUMA, base_for_albedo, check_output_path, closer_to,
                       cosine_weighted_albedo, diffuse_kept_fraction, fail, is_elliptical, shown,
-                      principal_axes, single_lobe_of, writing)
+                      single_lobe_of, tangent_axes, writing)
 from .gltf_brdf import GLTFBRDF
 from .gltf_cycles import CyclesPrincipledBRDF, _Lobe
 
@@ -158,12 +158,7 @@ def _anisotropy(d):
     """``(αb, strength, rotation)`` of KHR_materials_anisotropy for GGX(αx, αy, ρ): principal
     axes (Dupuy 2015 App. C), the rougher one is the extension's direction t with
     ``αt = mix(αb, 1, s²)``; ``None`` when αt > 1 (not representable)."""
-    au, av, phi = principal_axes(d.alpha_x, d.alpha_y, d.rho)
-    if au >= av:
-        at, ab, rot = au, av, phi
-    else:
-        at, ab, rot = av, au, phi + 0.5 * np.pi
-    rot = float(np.angle(np.exp(1j * rot)))
+    at, ab, rot = tangent_axes(d)
     if at > 1.0 or ab >= 1.0:
         return None
     return ab, float(np.sqrt((at - ab) / (1.0 - ab))), rot

@@ -72,7 +72,7 @@ import numpy as np
 from .._atomic import atomic_write
 from ..brdf import IsotropicBRDF, _as_dirs
 from ._common import (LUMA, base_for_albedo, check_output_path, closer_to,
-                      cosine_weighted_albedo, diffuse_kept_fraction, principal_axes, shown,
+                      cosine_weighted_albedo, diffuse_kept_fraction, shown, tangent_axes,
                       single_lobe_of, writing)
 from ..errors import ExportError
 from ..evaluation.metrics import BRDFMetrics, brdf_metrics
@@ -296,12 +296,7 @@ def openpbr_parameters(model, metal: bool | None = None) -> dict:
         return p
     m, notes = _ggx_model(model, "MaterialX")
     d = m.distribution
-    au, av, phi = principal_axes(d.alpha_x, d.alpha_y, d.rho)
-    if au >= av:
-        at, ab, rot = au, av, phi
-    else:
-        at, ab, rot = av, au, phi + 0.5 * np.pi
-    rot = float(np.angle(np.exp(1j * rot)))
+    at, ab, rot = tangent_axes(d)
     if at > 1.0:
         notes.append(f"alpha {at:.4g} > 1 clipped to OpenPBR's largest roughness")
         at, ab = 1.0, min(ab, 1.0)
