@@ -141,7 +141,8 @@ def show(value, limit: int = 60) -> str:
     return f"a {type(value).__name__}"
 
 
-def _num(x: float) -> str:
+def _bound_text(x: float) -> str:
+    """A bound of a :class:`Number` as the error messages show it (``%g``)."""
     return f"{x:g}"
 
 
@@ -207,13 +208,13 @@ class Number(Validator):
     def _range(self) -> str:
         parts = []
         if self.gt is not None:
-            parts.append(f"> {_num(self.gt)}")
+            parts.append(f"> {_bound_text(self.gt)}")
         if self.ge is not None:
-            parts.append(f">= {_num(self.ge)}")
+            parts.append(f">= {_bound_text(self.ge)}")
         if self.lt is not None:
-            parts.append(f"< {_num(self.lt)}")
+            parts.append(f"< {_bound_text(self.lt)}")
         if self.le is not None:
-            parts.append(f"<= {_num(self.le)}")
+            parts.append(f"<= {_bound_text(self.le)}")
         return " and ".join(parts)
 
     def describe(self) -> str:

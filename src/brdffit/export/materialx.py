@@ -560,12 +560,12 @@ def materialx_document(model, name: str | None = None):
                          "surfaceshader")
     for key in ("base_weight", "base_metalness", "base_diffuse_roughness", "specular_weight",
                 "specular_roughness", "specular_roughness_anisotropy", "specular_ior"):
-        shader.addInput(key, "float").setValueString(_num(p[key]))
+        shader.addInput(key, "float").setValueString(_value_string(p[key]))
     for key in ("base_color", "specular_color"):
-        shader.addInput(key, "color3").setValueString(", ".join(_num(v) for v in p[key]))
+        shader.addInput(key, "color3").setValueString(", ".join(_value_string(v) for v in p[key]))
     if p.get("coat_weight", 0.0) > 0.0:
         for key in ("coat_weight", "coat_roughness", "coat_ior", "coat_darkening"):
-            shader.addInput(key, "float").setValueString(_num(p[key]))
+            shader.addInput(key, "float").setValueString(_value_string(p[key]))
     if p["tangent_rotation_deg"] != 0.0:
         # MaterialX's rotate3d turns v into v cos + (v × axis) sin + ...: clockwise about the
         # axis for a positive amount, hence the minus sign
@@ -576,14 +576,15 @@ def materialx_document(model, name: str | None = None):
         rot = doc.addNode("rotate3d", doc.createValidChildName(f"{mat_name}_rotated_tangent"),
                           "vector3")
         rot.addInput("in", "vector3").setConnectedNode(tangent)
-        rot.addInput("amount", "float").setValueString(_num(-p["tangent_rotation_deg"]))
+        rot.addInput("amount", "float").setValueString(_value_string(-p["tangent_rotation_deg"]))
         rot.addInput("axis", "vector3").setConnectedNode(normal)
         shader.addInput("geometry_tangent", "vector3").setConnectedNode(rot)
     doc.addMaterialNode(mat_name, shader)
     return doc, p
 
 
-def _num(v) -> str:
+def _value_string(v) -> str:
+    """A float input's MaterialX value string (9 significant digits: float32 round trip)."""
     return f"{float(v):.9g}"
 
 
