@@ -29,8 +29,8 @@ from ..microfacet.coat import coat_parts
 from ..microfacet.model import MicrofacetBRDF
 from ..microfacet.shadowing import EllipticalSlopeDistribution
 
-__all__ = ["label", "fail", "principal_axes", "tangent_axes", "microfacet_parts", "is_elliptical",
-           "LUMA", "shown", "check_output_path", "write_problem", "writing", "StagedFiles"]
+__all__ = ["label", "fail", "finite_float", "principal_axes", "tangent_axes", "microfacet_parts",
+           "is_elliptical", "LUMA", "shown", "check_output_path", "write_problem", "writing", "StagedFiles"]
 
 #: Rec. 709 / linear-sRGB luminance weights (used for RGL ``luminance`` and reports)
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -183,6 +183,16 @@ class StagedFiles:
                     elif not existed:
                         os.unlink(final)
             raise
+
+
+def finite_float(x, where: str) -> float:
+    """``float(x)``; :class:`ExportError` "cannot write the non-finite value ... {where}"
+    when it is NaN or infinite (a scene or shader literal has no such value)."""
+    x = float(x)
+    if not np.isfinite(x):
+        raise ExportError(f"cannot write the non-finite value {x!r} {where}; expected finite "
+                          "parameters")
+    return x
 
 
 def fail(model, target: str, need: str):

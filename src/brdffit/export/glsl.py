@@ -53,8 +53,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ExportError
-from ._common import (StagedFiles, check_output_path, fail, is_elliptical, label, shown,
-                      writing)
+from ._common import (StagedFiles, check_output_path, fail, finite_float, is_elliptical, label,
+                      shown, writing)
 from ..evaluation import imageio
 from ..microfacet.fresnel import (
     ConductorFresnel, DielectricFresnel, GeneralizedSchlickFresnel, SchlickFresnel,
@@ -450,11 +450,7 @@ def model_spec(model) -> dict:
 # spec -> GLSL text
 # ------------------------------------------------------------------------------------------
 def _f(x) -> str:
-    x = float(x)
-    if not np.isfinite(x):
-        raise ExportError(f"cannot write the non-finite value {x!r} as a GLSL literal; expected "
-                          "finite parameters")
-    s = repr(x)
+    s = repr(finite_float(x, "as a GLSL literal"))
     return s if ("." in s or "e" in s) else s + ".0"
 
 
