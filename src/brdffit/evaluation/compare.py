@@ -314,6 +314,10 @@ class Comparison:
         """The record of the model ``label``."""
         return next(r for r in self.records if r["name"] == label)
 
+    def stem(self, label: str) -> str:
+        """The file-name stem of model ``label``'s fit file and engine files."""
+        return _safe_name(label)
+
     def fit_files(self) -> dict[str, Any]:
         """Label → BRDF of each model that has a fit file: saved by :func:`fit_models`
         (``fit_file``) or loaded from one (``loaded_from``), in the order of the models;
@@ -822,17 +826,7 @@ def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report
     No engine files are written: :func:`brdffit.batch.compare_with_exports` writes them
     between :func:`prepare` and :func:`finish`.
     """
-    exports = options.pop("exports", None)
-    if exports is not None and exports is not False and not callable(exports):
-        raise TypeError(f"exports: expected a function such as brdffit.export.report_exports, "
-                        f"or None, found {exports!r}")
-    c = prepare(source, models, out_dir, **options)
-    for label, model in (c.fit_files() if exports else {}).items():
-        try:
-            c.add_exports(label, exports(model, c.folder / "exports", _safe_name(label)))
-        except Exception as exc:  # noqa: BLE001 – recorded on the model
-            c.exports_failed(label, exc)
-    return finish(c)
+    return finish(prepare(source, models, out_dir, **options))
 
 
 def _peak_candidates(ref_stack, mask):
@@ -1112,16 +1106,20 @@ def _describe(ev) -> str:
     return describe_evaluator(ev)
 
 
-def compare_many(sources: Iterable, models=DEFAULT_MODELS, out_dir="report", **kw) -> list[dict]:
+def compare_many(sources: Iterable, models=DEFAULT_MODELS, out_dir="report", *,
+                 run: Callable[..., dict] | None = None, **kw) -> list[dict]:
     """:func:`compare` for several inputs (each a BRDF or spec), then one index rebuild.
 
-    A material that fails entirely (cannot be loaded or the reference cannot be rendered) is
+    ``run`` compares one material, with :func:`compare`'s arguments (default
+    :func:`compare`; :func:`brdffit.batch.compare_with_exports` adds the engine files). A
+    material that fails entirely (cannot be loaded or the reference cannot be rendered) is
     reported in the returned list as ``{"material": ..., "error": ...}`` and skipped.
     """
+    run = run or compare
     results = []
     for src in sources:
         try:
-            results.append(compare(src, models, out_dir, update_index=False, **kw))
+            results.append(run(src, models, out_dir, update_index=False, **kw))
         except (BRDFError, OSError, ValueError, RuntimeError, KeyError) as exc:
             results.append({"material": str(getattr(src, "name", src)),
                             "error": f"{type(exc).__name__}: {exc}"})
