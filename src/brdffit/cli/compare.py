@@ -82,9 +82,9 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
                 envmap: str | None = None, limit: int | None = None,
                 fit_options: str | None = None, quiet: bool = False) -> int | None:
     """Fit, render and measure models against a reference (HTML report)."""
-    from ..evaluation.compare import compare, compare_many
+    from ..batch import compare_with_exports
+    from ..evaluation.compare import compare_many
     from ..evaluation.report import write_index
-    from ..export import report_exports
 
     model_list = [m.strip() for m in models.split(",") if m.strip()]
     if not model_list:
@@ -118,13 +118,13 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
     say = (lambda msg: None) if quiet else (lambda msg: print(printable(msg), file=sys.stderr))
     kw = dict(scenes=scene or scenes, spp=spp, batches=batches, resolution=resolution,
               seed=seed, exposure=exp, gamma=gamma, render_options=ropts, progress=say,
-              fit_options=fopts, exports=report_exports)
+              fit_options=fopts)
     specs = _materials(spec, limit)
     if len(specs) == 1:
-        res = compare(specs[0], model_list, out, **kw)
+        res = compare_with_exports(specs[0], model_list, out, **kw)
         results = [res]
     else:
-        results = compare_many(specs, model_list, out, **kw)
+        results = compare_many(specs, model_list, out, run=compare_with_exports, **kw)
     write_index(out)
     for r in results:
         if "error" in r and "models" not in r:

@@ -43,15 +43,14 @@ def _one_material(name: str, spec: str, model_list: list[str], out: str, spp: in
     """Fit, render and compare one material (in a worker process): ``(seconds, per-model
     and per-scene texts, failures)``; what it is doing goes out as progress stages (a crash
     message names the last one)."""
-    from ..evaluation.compare import compare
-    from ..export import report_exports
+    from ..batch import compare_with_exports
     from ..progress import report
 
     t = time.perf_counter()
-    result = compare(spec, model_list, out, name=name, spp=spp, resolution=resolution,
-                     fit_options=DEMO_FIT_OPTIONS, update_index=False, exports=report_exports,
-                     progress=lambda msg: report(stage=msg.removeprefix(f"{name}: "),
-                                                 final=True))
+    result = compare_with_exports(
+        spec, model_list, out, name=name, spp=spp, resolution=resolution,
+        fit_options=DEMO_FIT_OPTIONS, update_index=False,
+        progress=lambda msg: report(stage=msg.removeprefix(f"{name}: "), final=True))
     rows, failures = [], 0
     for m in result.get("models", []):
         psnr = m.get("psnr")
