@@ -12,7 +12,9 @@ MERL file through :mod:`brdffit.io.merl` without ever calling its kernels. A mod
 
 and ``_numba.njit(...)(fn)`` returns a :class:`LazyDispatcher` that imports Numba and compiles
 ``fn`` (from the on-disk cache with ``cache=True``) the first time it is called; every other
-attribute of ``_numba`` is the real module's (imported then).
+attribute of ``_numba`` is the real module's (imported then). A kernel may call another
+``LazyDispatcher`` (a helper shared by kernels): Numba types it as the dispatcher it stands
+for.
 
 A kernel with a NumPy fall-back asks :meth:`LazyDispatcher.worth_compiling` first: small
 jobs (a few evaluations of a MERL table, ``brdffit info``'s albedos) run in NumPy until
@@ -53,6 +55,7 @@ class LazyDispatcher:
                 if self._dispatcher is None:
                     import numba
 
+                    _type_lazy_dispatchers()
                     self._dispatcher = numba.njit(**self._options)(self.py_func)
         return self._dispatcher
 
@@ -73,6 +76,22 @@ class LazyDispatcher:
         if name.startswith("_"):
             raise AttributeError(name)
         return getattr(self.compiled(), name)
+
+
+_TYPED = False
+
+
+def _type_lazy_dispatchers() -> None:
+    """Let compiled code call a :class:`LazyDispatcher` (a kernel's helper): Numba types it as
+    the dispatcher it stands for (registered once, when Numba is imported)."""
+    global _TYPED
+    if _TYPED:
+        return
+    from numba import typeof
+    from numba.extending import typeof_impl
+
+    typeof_impl.register(LazyDispatcher)(lambda val, c: typeof(val.compiled()))
+    _TYPED = True
 
 
 class LazyNumba:

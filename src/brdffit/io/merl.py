@@ -92,6 +92,30 @@ def _merl_trilinear_numpy(table, u, v, w):
     return _gather_interp(table, idx, wts)
 
 
+def _add_row(table, r, wt, a0, a1, a2, a3):  # pragma: no cover  (compiled by numba)
+    """The running sums of an interpolation plus ``wt`` times row ``r`` of a table whose
+    columns are R, G, B and the weight of valid samples."""
+    return (a0 + wt * table[r, 0], a1 + wt * table[r, 1], a2 + wt * table[r, 2],
+            a3 + wt * table[r, 3])
+
+
+def _store_normalised(out, s, a0, a1, a2, a3):  # pragma: no cover  (compiled by numba)
+    """``out[s]`` = the interpolated RGB over the valid samples' weight (0 where none)."""
+    if a3 > 1e-12:
+        out[s, 0] = a0 / a3
+        out[s, 1] = a1 / a3
+        out[s, 2] = a2 / a3
+    else:
+        out[s, 0] = 0.0
+        out[s, 1] = 0.0
+        out[s, 2] = 0.0
+
+
+if _numba is not None:
+    _add_row = _numba.njit(cache=True, nogil=True, inline="always")(_add_row)
+    _store_normalised = _numba.njit(cache=True, nogil=True, inline="always")(_store_normalised)
+
+
 def _merl_trilinear_kernel(table, u, v, w, out):  # pragma: no cover  (compiled by numba)
     nh, nd, npd = 90, 90, 180
     for s in range(u.shape[0]):
@@ -105,10 +129,7 @@ def _merl_trilinear_kernel(table, u, v, w, out):  # pragma: no cover  (compiled 
         fw = w[s] - kf
         k0 = int(kf) % npd
         k1 = (k0 + 1) % npd
-        a0 = 0.0
-        a1 = 0.0
-        a2 = 0.0
-        a3 = 0.0
+        a0 = a1 = a2 = a3 = 0.0
         for di in range(2):
             wi_ = fu if di == 1 else 1.0 - fu
             for dj in range(2):
@@ -116,20 +137,9 @@ def _merl_trilinear_kernel(table, u, v, w, out):  # pragma: no cover  (compiled 
                 base = npd * ((j0 + dj) + nd * (i0 + di))
                 for dk in range(2):
                     wk = fw if dk == 1 else 1.0 - fw
-                    wt = wi_ * wj * wk
                     r = base + (k1 if dk == 1 else k0)
-                    a0 += wt * table[r, 0]
-                    a1 += wt * table[r, 1]
-                    a2 += wt * table[r, 2]
-                    a3 += wt * table[r, 3]
-        if a3 > 1e-12:
-            out[s, 0] = a0 / a3
-            out[s, 1] = a1 / a3
-            out[s, 2] = a2 / a3
-        else:
-            out[s, 0] = 0.0
-            out[s, 1] = 0.0
-            out[s, 2] = 0.0
+                    a0, a1, a2, a3 = _add_row(table, r, wi_ * wj * wk, a0, a1, a2, a3)
+        _store_normalised(out, s, a0, a1, a2, a3)
 
 
 if _numba is not None:

@@ -24,7 +24,7 @@ from ..brdf import BRDF, _as_dirs
 from ..errors import BRDFFormatError
 from ._limits import check_plausible_float64, describe_exception, regular_file_size
 from ..geometry import cartesian_to_spherical, spherical_to_cartesian
-from .merl import _gather_interp, _numba, _pack
+from .merl import _add_row, _gather_interp, _numba, _pack, _store_normalised
 
 __all__ = ["UTIABRDF", "read_utia", "write_utia", "utia_theta", "utia_phi", "UTIA_SHAPE",
            "UTIA_FILE_SIZE"]
@@ -64,10 +64,7 @@ def _utia_kernel(table, ti, pi, tv, pv, out):  # pragma: no cover  (compiled by 
         fd = d - df
         b0 = int(bf) % nph
         d0 = int(df) % nph
-        acc0 = 0.0
-        acc1 = 0.0
-        acc2 = 0.0
-        acc3 = 0.0
+        acc0 = acc1 = acc2 = acc3 = 0.0
         for ka in range(2):
             wa = fa if ka == 1 else 1.0 - fa
             for kb in range(2):
@@ -79,19 +76,9 @@ def _utia_kernel(table, ti, pi, tv, pv, out):  # pragma: no cover  (compiled by 
                         wd = fd if kd == 1 else 1.0 - fd
                         idd = (d0 + kd) % nph
                         r = ((((a0 + ka) * nph + ib) * nt + (c0 + kc)) * nph) + idd
-                        w = wa * wb * wc * wd
-                        acc0 += w * table[r, 0]
-                        acc1 += w * table[r, 1]
-                        acc2 += w * table[r, 2]
-                        acc3 += w * table[r, 3]
-        if acc3 > 1e-12:
-            out[s, 0] = acc0 / acc3
-            out[s, 1] = acc1 / acc3
-            out[s, 2] = acc2 / acc3
-        else:
-            out[s, 0] = 0.0
-            out[s, 1] = 0.0
-            out[s, 2] = 0.0
+                        acc0, acc1, acc2, acc3 = _add_row(table, r, wa * wb * wc * wd,
+                                                          acc0, acc1, acc2, acc3)
+        _store_normalised(out, s, acc0, acc1, acc2, acc3)
 
 
 if _numba is not None:
