@@ -66,7 +66,7 @@ def _random(init_key: str, n: int, **extra) -> list[tuple[str, dict]]:
 CONFIGS = {
     "sgd": [("default", {}), ("starts-20", {"starts": 20}), ("starts-100", {"starts": 100}),
             ("grid-36x16", {"starts": 20, "grid": (36, 16)}),
-            ("refine-8", {"starts": 20, "refine": 8})],
+            ("refine-1", {"refine": 1}), ("refine-8", {"starts": 20, "refine": 8})],
     "npf-g-from-d": [("default", {}), ("ones", {"init": "ones"}),
                      *_random("init", N_RANDOM_SEEDS),
                      ("long", {"max_iter": 1200, "polish": 240})],
