@@ -31,7 +31,6 @@ from ..errors import ExportError, printable
 from ..fit import registry
 from ..fit.registry import check_options as check, figures, options_class
 from ..loading import load
-from ..progress import describe, listening
 from ._checks import check_models, output_file, parse_options
 from ._commands import DEFAULT_MODEL
 from ._parsing import usage_error
@@ -209,6 +208,7 @@ def _live_progress(enabled: bool):
     if not enabled:
         yield
         return
+    from ..progress import describe, listening  # a status line on a terminal only
 
     live: dict = {}
 
