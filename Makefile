@@ -12,6 +12,10 @@ GLTF_VALIDATOR_VERSION := 2.0.0-dev.3.10
 # bench/bench_engines_threejs.py): served from .npm/ to headless Chromium, offline
 THREE := $(NPM_PREFIX)/node_modules/three/package.json
 THREE_VERSION := 0.187.0
+# esbuild (npm): bundles three + OrbitControls + GLTFLoader + the report's viewer into one
+# classic script (threejs_page/vendor/viewer.bundle.js, committed; tools/build_viewer_bundle.py)
+ESBUILD := $(NPM_PREFIX)/node_modules/esbuild/package.json
+ESBUILD_VERSION := 0.28.2
 DEBIAN_PACKAGES := libllvm19 chromium glslang-tools
 # Blender as a Python module (bpy, PyPI) for the engine round trips
 # (brdffit.evaluation.engines.blender): its own venv, because bpy pins numpy < 2 and needs
@@ -31,6 +35,7 @@ test: $(STAMP) npmdeps blender
 
 bench: $(STAMP) blender
 	$(PY) bench/run_all.py
+	$(PY) bench/readme.py
 
 install: $(STAMP) blender
 
@@ -63,20 +68,21 @@ sysdeps:
 		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing >/dev/null; \
 	else echo "NOTE: not root, skipping Debian packages:$$missing (rendering and report tests will be skipped)"; fi
 
-# gltf-validator and three into .npm/ (need node and npm: present in the machine image; when npm
-# is missing and we are root, Debian's nodejs + npm are installed first). Both are installed
-# (again) when gltf-validator is absent or three is not at THREE_VERSION.
-NPM_PACKAGES := gltf-validator@$(GLTF_VALIDATOR_VERSION) three@$(THREE_VERSION)
+# gltf-validator, three and esbuild into .npm/ (need node and npm: present in the machine
+# image; when npm is missing and we are root, Debian's nodejs + npm are installed first). All
+# are installed (again) when gltf-validator is absent or three or esbuild is not at its version.
+NPM_PACKAGES := gltf-validator@$(GLTF_VALIDATOR_VERSION) three@$(THREE_VERSION) esbuild@$(ESBUILD_VERSION)
 npmdeps:
-	@if [ -f $(GLTF_VALIDATOR) ] && grep -q '"version": "$(THREE_VERSION)"' $(THREE) 2>/dev/null; then \
-		echo "gltf-validator and three@$(THREE_VERSION) present in $(NPM_PREFIX)/"; \
+	@if [ -f $(GLTF_VALIDATOR) ] && grep -q '"version": "$(THREE_VERSION)"' $(THREE) 2>/dev/null \
+		&& grep -q '"version": "$(ESBUILD_VERSION)"' $(ESBUILD) 2>/dev/null; then \
+		echo "gltf-validator, three@$(THREE_VERSION) and esbuild@$(ESBUILD_VERSION) present in $(NPM_PREFIX)/"; \
 	else if ! command -v npm >/dev/null 2>&1 && [ "$$(id -u)" = 0 ]; then \
 		echo "Installing Debian packages: nodejs npm"; apt-get update -qq && \
 		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq nodejs npm >/dev/null; fi; \
 	if command -v npm >/dev/null 2>&1; then echo "Installing $(NPM_PACKAGES) into $(NPM_PREFIX)/"; \
 		npm install --prefix $(NPM_PREFIX) --no-audit --no-fund --no-save --silent \
-			$(NPM_PACKAGES) || echo "NOTE: npm install failed (the glTF validation and three.js tests will be skipped)"; \
-	else echo "NOTE: npm not found, skipping $(NPM_PACKAGES) (the glTF validation and three.js tests will be skipped)"; fi; fi
+			$(NPM_PACKAGES) || echo "NOTE: npm install failed (the glTF validation, three.js and viewer bundle tests will be skipped)"; \
+	else echo "NOTE: npm not found, skipping $(NPM_PACKAGES) (the glTF validation, three.js and viewer bundle tests will be skipped)"; fi; fi
 
 clean:
 	rm -rf $(VENV) $(BLENDER_VENV) build *.egg-info src/*.egg-info .pytest_cache $(NPM_PREFIX)

@@ -5,11 +5,16 @@ RGL file of ``../shared/data/rgl``): the fit of ``--model`` (default ``ggx-diffu
 exported to glTF (preview sphere, default options) and
 
 * ``blender``: Blender's own importer (default options) and Cycles on the CPU render the file
-  in ``sphere-distant`` rebuilt in Blender (:mod:`brdffit.evaluation.engines.blender`);
-* ``blender_ggx``: the same with the Principled BSDF's distribution set to single-scatter
+  in each scene rebuilt in Blender (:mod:`brdffit.evaluation.engines.blender`):
+  ``sphere-distant`` and the paper suite's spheres (``sphere-courtyard``, ``sphere-studio``,
+  ``sphere-sunrise``: the map as Blender's world; ``--scenes``);
+* in ``sphere-distant`` only: ``blender_ggx``: the same with the Principled BSDF's distribution set to single-scatter
   GGX after the import (what the importer's multiscatter GGX costs);
+* ``blender_usd``: the fit's USD export (``brdffit export --to usd``: UsdPreviewSurface on the
+  same preview sphere) imported by Blender's USD importer (default options), same render;
 * ``equivalent``: our Mitsuba render of :func:`brdffit.export.gltf.gltf_equivalent` (the
-  specification's BRDF); ``equivalent_blender`` / ``equivalent_blender_ggx``: the same with
+  specification's BRDF); ``equivalent_blender`` / ``equivalent_blender_ggx`` (the latter in
+  ``sphere-distant`` only): the same with
   ``engine="blender"`` / ``"blender-ggx"`` (Cycles' Principled BSDF as the importer sets it
   up, :mod:`brdffit.export.gltf_cycles`): the predictions of ``blender`` / ``blender_ggx``
   (``*_prediction_gap_db`` in the summary: predicted − measured PSNR);
@@ -18,7 +23,8 @@ each compared with our Mitsuba render of the fit, K batches (seeds) on both side
 its standard error (:func:`brdffit.evaluation.metrics.crn_psnr`; the batches of the two
 renderers are independent), per-channel mean ratio, rim ratio (r > 0.85 R), HDR-FLIP and the
 alignment (coverage, peak pixel). The glTF parameters written (ior, specular factors,
-metallic) and what Blender's importer made of them are kept.
+metallic) and what Blender's importer made of them are kept. The summary has each scene and,
+over the paper suite's spheres, the per-material mean PSNR's mean and minimum.
 
 Run: ``.venv/bin/python bench/bench_engines.py`` (``--materials a,b`` to restrict,
 ``--label after`` to store the run under that label next to others in the same JSON).
@@ -42,6 +48,8 @@ import numpy as np
 from _common import DATA, NBRDF, RGL_DIR, ROOT, use_project_sources  # bench/ is on sys.path
 
 use_project_sources()
+#: the scenes rebuilt in Blender: the directional light and the paper suite's spheres
+SCENES = ("sphere-distant", "sphere-courtyard", "sphere-studio", "sphere-sunrise")
 MERL = ["ss440", "gold-metallic-paint", "maroon-plastic", "white-paint", "chrome-steel",
         "blue-metallic-paint", "red-plastic", "alum-bronze"]
 
@@ -62,71 +70,106 @@ def _brief(r: dict) -> dict:
     return {k: r[k] for k in keys if k in r}
 
 
-def bench_material(name: str, spec: str, args) -> dict:
-    import brdffit
+def _render_variants(fit, scene: str, files: dict, args) -> dict:
+    """One scene of one material: our render of the fit, of its glTF equivalents and
+    Blender's renders of the exported files, each compared with the fit's."""
     from brdffit.evaluation.engines import blender
-    from brdffit.export import export
     from brdffit.export.gltf import gltf_equivalent
-    from brdffit.io import load
 
     seeds = tuple(range(args.batches))
+    full = scene == "sphere-distant"          # every variant there; the main ones elsewhere
+    out: dict = {}
+    t = time.perf_counter()
+    ref, alpha = blender.render_fit(fit, scene, args.res, args.spp, seeds)
+    out["fit_render_seconds"] = time.perf_counter() - t
+    equivalents = (("equivalent", "specification"), ("equivalent_blender", "blender"))
+    if full:
+        equivalents += (("equivalent_blender_ggx", "blender-ggx"),)
+    for key, engine in equivalents:
+        try:
+            model = gltf_equivalent(fit, engine=engine, optimize=args.optimize)
+        except ValueError as exc:                # e.g. anisotropy, not modelled
+            out[key] = {"error": str(exc)}
+            continue
+        eq, eq_alpha = blender.render_fit(model, scene, args.res, args.spp, seeds)
+        out[key] = _brief(blender.compare_renders(ref, alpha, eq, eq_alpha))
+    variants = [("blender", None, files["gltf"])]
+    if full:
+        variants += [("blender_ggx", "GGX", files["gltf"]), ("blender_usd", None, files["usd"])]
+    for key, dist, file in variants:
+        b = blender.render_file(file, scene, args.res, args.spp, seeds, dist)
+        out[key] = _brief(blender.compare_renders(ref, alpha, b.images, b.alpha))
+        out[key]["seconds"] = b.seconds
+        out[key]["principled"] = b.report["materials"][0]["principled"]
+        out["blender_version"] = b.report["blender"]
+    return out
+
+
+def bench_material(name: str, spec: str, args) -> dict:
+    import brdffit
+    from brdffit.export import export
+    from brdffit.io import load
+
     out: dict = {"material": name, "source": spec, "load_average_before": os.getloadavg()}
     t = time.perf_counter()
     fit = brdffit.fit(load(spec), args.model)
     out["fit_seconds"] = time.perf_counter() - t
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / f"{name}.gltf"
-        info = export(fit, "gltf", path, fidelity=False, optimize=args.optimize)
-        doc = json.loads(path.read_text())
-        mat = doc["materials"][0]
+        files = {"gltf": Path(tmp) / f"{name}.gltf", "usd": Path(tmp) / f"{name}.usda"}
+        info = export(fit, "gltf", files["gltf"], fidelity=False, optimize=args.optimize)
+        out["usd_notes"] = export(fit, "usd", files["usd"])["notes"]
+        mat = json.loads(files["gltf"].read_text())["materials"][0]
         out["gltf"] = {"pbrMetallicRoughness": mat["pbrMetallicRoughness"],
                        "extensions": mat.get("extensions", {}), "notes": info["notes"]}
-        t = time.perf_counter()
-        ref, alpha = blender.render_fit(fit, "sphere-distant", args.res, args.spp, seeds)
-        out["fit_render_seconds"] = time.perf_counter() - t
-        for key, engine in (("equivalent", "specification"),
-                            ("equivalent_blender", "blender"),
-                            ("equivalent_blender_ggx", "blender-ggx")):
-            try:
-                model = gltf_equivalent(fit, engine=engine, optimize=args.optimize)
-            except ValueError as exc:                # e.g. anisotropy, not modelled
-                out[key] = {"error": str(exc)}
-                continue
-            eq, eq_alpha = blender.render_fit(model, "sphere-distant", args.res, args.spp,
-                                              seeds)
-            out[key] = _brief(blender.compare_renders(ref, alpha, eq, eq_alpha))
-        for key, dist in (("blender", None), ("blender_ggx", "GGX")):
-            b = blender.render_gltf(path, "sphere-distant", args.res, args.spp, seeds, dist)
-            out[key] = _brief(blender.compare_renders(ref, alpha, b.images, b.alpha))
-            out[key]["seconds"] = b.seconds
-            out[key]["principled"] = b.report["materials"][0]["principled"]
-            out["blender_version"] = b.report["blender"]
+        out["scenes"] = {scene: _render_variants(fit, scene, files, args)
+                         for scene in args.scenes}
     out["load_average_after"] = os.getloadavg()
     return out
 
 
-def _summary(rows: list[dict]) -> dict:
+def _scene_summary(rows: list[dict], scene: str) -> dict:
     s = {}
-    for key in ("blender", "blender_ggx", "equivalent"):
-        ps = np.array([r[key]["psnr"] for r in rows])
-        ratios = np.array([r[key]["mean_ratio"] for r in rows])
-        rims = np.array([r[key]["rim_ratio"] for r in rows])
+    for key in ("blender", "blender_ggx", "blender_usd", "equivalent"):
+        got = [r for r in rows if "psnr" in r["scenes"][scene].get(key, {})]
+        if not got:
+            continue
+        ps = np.array([r["scenes"][scene][key]["psnr"] for r in got])
+        ratios = np.array([r["scenes"][scene][key]["mean_ratio"] for r in got])
+        rims = np.array([r["scenes"][scene][key]["rim_ratio"] for r in got])
         s[key] = {"psnr_mean": float(ps.mean()), "psnr_min": float(ps.min()),
-                  "worst": rows[int(ps.argmin())]["material"],
+                  "worst": got[int(ps.argmin())]["material"],
                   "max_mean_ratio_deviation": float(np.max(np.abs(ratios - 1))),
                   "max_rim_ratio_deviation": float(np.max(np.abs(rims - 1)))}
     for name, eq, measured in (("prediction_gap_db", "equivalent", "blender"),
                                ("blender_prediction_gap_db", "equivalent_blender", "blender"),
                                ("blender_ggx_prediction_gap_db", "equivalent_blender_ggx",
                                 "blender_ggx")):
-        pairs = [(r[eq]["psnr"], r[measured]["psnr"], r[measured]["resolved"]) for r in rows
-                 if "psnr" in r.get(eq, {})]
+        pairs = [(r["scenes"][scene][eq]["psnr"], r["scenes"][scene][measured]["psnr"],
+                  r["scenes"][scene][measured]["resolved"]) for r in rows
+                 if "psnr" in r["scenes"][scene].get(eq, {})
+                 and measured in r["scenes"][scene]]
+        if not pairs:
+            continue
         gap = np.array([p - m for p, m, _ in pairs])
         resolved = np.array([p - m for p, m, ok in pairs if ok])
         s[name] = {"mean": float(gap.mean()), "max_abs": float(np.abs(gap).max()),
                    "max_abs_resolved": float(np.abs(resolved).max()) if resolved.size else None,
                    "within_2db": int(np.sum(np.abs(gap) <= 2.0)), "materials": len(pairs)}
     return s
+
+
+def _summary(rows: list[dict], scenes) -> dict:
+    """Per scene, and over the paper suite's spheres (per material the mean PSNR of those
+    scenes, as the paper averages its scenes)."""
+    out = {scene: _scene_summary(rows, scene) for scene in scenes}
+    suite = [sc for sc in scenes if sc != "sphere-distant"]
+    if suite:
+        per = np.array([np.mean([r["scenes"][sc]["blender"]["psnr"] for sc in suite])
+                        for r in rows])
+        out["paper_suite_spheres"] = {"scenes": suite, "blender_psnr_mean": float(per.mean()),
+                                      "blender_psnr_min": float(per.min()),
+                                      "worst": rows[int(per.argmin())]["material"]}
+    return out
 
 
 def main(argv=None) -> int:
@@ -138,11 +181,14 @@ def main(argv=None) -> int:
                     help="the exporter's refinement (brdffit.export.gltf.OPTIMIZE), e.g. engines")
     ap.add_argument("--spp", type=int, default=64, help="per batch")
     ap.add_argument("--batches", type=int, default=4)
+    ap.add_argument("--scenes", default=",".join(SCENES),
+                    help="comma-separated: sphere-distant and sphere-<map> scenes")
     ap.add_argument("--label", default="current", help="key of this run in the JSON")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "engines_blender.json")
     args = ap.parse_args(argv)
     if str(args.optimize).lower() in ("false", "none", "0", ""):
         args.optimize = False
+    args.scenes = [x for x in args.scenes.split(",") if x]
 
     from brdffit._atomic import atomic_write
     from brdffit.evaluation.engines import blender
@@ -157,24 +203,26 @@ def main(argv=None) -> int:
     commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
                             capture_output=True, text=True).stdout.strip()
     rows = []
-    print(f"{'material':24s} {'Blender dB':>14s} {'GGX forced':>14s} {'spec/Bl. eq.':>13s} "
-          f"{'mean ratio R,G,B':>20s} {'rim ratio R,G,B':>20s} {'FLIP':>6s}")
     for name, spec in mats:
         r = bench_material(name, spec, args)
         rows.append(r)
-        b, g, e = r["blender"], r["blender_ggx"], r["equivalent"]
-        print(f"{name:24s} {b['psnr']:7.2f} ± {b['psnr_se']:4.2f} {g['psnr']:7.2f} ± "
-              f"{g['psnr_se']:4.2f} {e['psnr']:6.2f}/{r['equivalent_blender'].get('psnr', np.nan):6.2f} "
-              f"{' '.join(f'{x:.3f}' for x in b['mean_ratio']):>20s} "
-              f"{' '.join(f'{x:.3f}' for x in b['rim_ratio']):>20s} {b['flip']:6.4f}",
-              flush=True)
+        for scene, v in r["scenes"].items():
+            b, e = v["blender"], v["equivalent"]
+            extra = "".join(f" {k.removeprefix('blender_')} {v[k]['psnr']:6.2f}"
+                            for k in ("blender_ggx", "blender_usd") if k in v)
+            print(f"{name:22s} {scene:17s} Blender {b['psnr']:6.2f} ± {b['psnr_se']:4.2f}"
+                  f"{extra} spec eq. {e.get('psnr', np.nan):6.2f} Blender eq. "
+                  f"{v['equivalent_blender'].get('psnr', np.nan):6.2f} ratio "
+                  f"{' '.join(f'{x:.3f}' for x in b['mean_ratio'])} rim "
+                  f"{' '.join(f'{x:.3f}' for x in b['rim_ratio'])} FLIP {b['flip']:.4f}",
+                  flush=True)
     run = {"commit": commit, "model": args.model, "optimize": args.optimize,
-           "scene": "sphere-distant",
+           "scenes": args.scenes,
            "resolution": args.res, "spp_per_batch": args.spp, "batches": args.batches,
            "cpus": os.cpu_count(), "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
            "command": "bench/bench_engines.py " + " ".join(argv if argv is not None
                                                             else sys.argv[1:]),
-           "summary": _summary(rows), "materials": rows}
+           "summary": _summary(rows, args.scenes), "materials": rows}
     old = json.loads(args.out.read_text()) if args.out.is_file() else {}
     old[args.label] = run
     with atomic_write(args.out, "w") as fh:

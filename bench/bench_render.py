@@ -246,10 +246,10 @@ def main(argv=None) -> int:
     if args.crn:
         results = _crn_figures(args)
         from brdffit._atomic import atomic_write
-        from brdffit.evaluation.report import _clean
+        from brdffit._json import standard_json
 
         with atomic_write(args.out, "w") as fh:
-            json.dump(_clean(results), fh, indent=1, default=float)
+            json.dump(standard_json(results), fh, indent=1, default=float)
         print(f"wrote {args.out}")
         return 0
     if args.envmap not in envmap_names() and not Path(args.envmap).is_file():

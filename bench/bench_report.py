@@ -99,10 +99,10 @@ def machine() -> dict:
 
 def write_json(path: Path, obj) -> None:
     from brdffit._atomic import atomic_write
-    from brdffit.evaluation.report import _clean
+    from brdffit._json import standard_json
 
     with atomic_write(path, "w") as fh:
-        json.dump(_clean(obj), fh, indent=1, default=str, allow_nan=False)
+        json.dump(standard_json(obj), fh, indent=1, default=str, allow_nan=False)
 
 
 def bench_single(args) -> dict:

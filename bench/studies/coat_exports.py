@@ -72,7 +72,7 @@ def main(argv=None) -> int:
                   "materialx-on": openpbr_equivalent(on)}
         with tempfile.TemporaryDirectory() as tmp:
             res = compare(ref, models, tmp, name=name, save_fits=False, update_index=False,
-                          brdf_metrics=(), exports=False, write_exr=False)
+                          brdf_metrics=(), write_exr=False)
         by = {m["name"]: m for m in res["models"]}
         row = {"material": name}
         for c in COLUMNS:

@@ -79,8 +79,7 @@ def main(argv=None) -> int:
             continue
         with tempfile.TemporaryDirectory() as tmp:
             res = compare(ref, {"off": fits["off"], "on": fits["on"]}, tmp, name=name,
-                          save_fits=False, update_index=False, brdf_metrics=(), exports=False,
-                          write_exr=False)
+                          save_fits=False, update_index=False, brdf_metrics=(), write_exr=False)
         by = {m["name"]: m for m in res["models"]}
         rows.append({"material": name,
                      "objective_ratio": coat["objective"] / coat["objective_without"],

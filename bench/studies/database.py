@@ -95,7 +95,7 @@ def render(args) -> None:
         t0, c0 = time.perf_counter(), time.process_time()
         try:
             compare(spec, models, report, name=name, save_fits=False, update_index=False,
-                    brdf_metrics=(), exports=False)
+                    brdf_metrics=())
             status = "ok"
         except Exception as exc:  # noqa: BLE001 - recorded, the run goes on
             status = f"failed: {type(exc).__name__}: {exc}"

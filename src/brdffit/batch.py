@@ -14,9 +14,9 @@ means the task's outputs are complete. Output layout (``<material>`` and ``<mode
 
 **Rendering (optional).** With :class:`RenderSettings`, each material also gets one render
 task, submitted once its fits are done, that renders the reference and every fitted model
-with Mitsuba 3 (:func:`brdffit.evaluation.compare.compare` on the saved fit files, no
-refitting) and writes its report page; the run ends by rebuilding the report index over the
-whole database::
+with Mitsuba 3 (:func:`compare_with_exports` on the saved fit files, no refitting) and
+writes its report page with the fits' engine files; the run ends by rebuilding the report
+index over the whole database::
 
     OUT/report/<material>/index.html      renderings, dE2000 maps, plots, metrics
     OUT/report/index.html, summary.json   every material; per-model PSNR/dE2000, wins/ties
@@ -78,7 +78,7 @@ from .errors import BRDFError, csv_cell, printable
 from .paths import check_unique, slug
 from .progress import describe, listening
 from .batch_summary import COLUMNS, RECOMMENDATION_RULE, summary_rows
-from .evaluation.compare import compare
+from .evaluation.compare import Comparison, finish, prepare
 from .evaluation.metrics import BRDFMetrics
 from .evaluation.report import write_index, write_material_page, write_result
 from .export import report_exports
@@ -489,6 +489,31 @@ def _read_record(path: Path, quiet_missing: bool = True) -> tuple[dict | None, s
     return rec, None
 
 
+def export_fits(comparison: Comparison) -> None:
+    """Write the engine files (:func:`brdffit.export.report_exports`: JSON, glTF, MaterialX)
+    of every model of ``comparison`` that has a fit file, under ``<slug>/exports/``, and
+    record them for its page (:meth:`~brdffit.evaluation.compare.Comparison.add_exports`;
+    one that raises is recorded by
+    :meth:`~brdffit.evaluation.compare.Comparison.exports_failed`)."""
+    for label, model in comparison.fit_files().items():
+        try:
+            paths = report_exports(model, comparison.folder / "exports", comparison.stem(label))
+        except Exception as exc:  # noqa: BLE001 – recorded on the model, the others go on
+            comparison.exports_failed(label, exc)
+        else:
+            comparison.add_exports(label, paths)
+
+
+def compare_with_exports(source, models, out_dir, **options) -> dict:
+    """:func:`brdffit.evaluation.compare.compare` with the engine files of the fits
+    (:func:`export_fits`, between :func:`~brdffit.evaluation.compare.prepare` and
+    :func:`~brdffit.evaluation.compare.finish`) linked from the material page and listed in
+    each model's ``exports`` of ``result.json``."""
+    comparison = prepare(source, models, out_dir, **options)
+    export_fits(comparison)
+    return finish(comparison)
+
+
 def run_render_task(task: RenderTask, out_dir, *after) -> dict:
     """Render one material's reference and saved fits and write its report page.
 
@@ -513,12 +538,11 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
         record["missing_fits"] = missing
         st = task.settings
         with _forward_progress(task.material, "render"):
-            result = compare(load(task.spec), models, out / "report", name=task.material,
-                             scenes=st.scenes, spp=st.spp, batches=st.batches,
-                             resolution=st.resolution, seed=st.seed, save_fits=False,
-                             update_index=False, exports=report_exports,
-                             brdf_metrics=(() if len(fit_metrics) == len(models)
-                                           else BRDFMetrics.ALL))
+            result = compare_with_exports(
+                load(task.spec), models, out / "report", name=task.material,
+                scenes=st.scenes, spp=st.spp, batches=st.batches, resolution=st.resolution,
+                seed=st.seed, save_fits=False, update_index=False,
+                brdf_metrics=(() if len(fit_metrics) == len(models) else BRDFMetrics.ALL))
         if len(fit_metrics) == len(models):  # the fit tasks measured them already: reuse
             for m in result["models"]:
                 m["brdf"] = fit_metrics.get(m["name"], m.get("brdf"))

@@ -141,7 +141,8 @@ def show(value, limit: int = 60) -> str:
     return f"a {type(value).__name__}"
 
 
-def _num(x: float) -> str:
+def _bound_text(x: float) -> str:
+    """A bound of a :class:`Number` as the error messages show it (``%g``)."""
     return f"{x:g}"
 
 
@@ -207,13 +208,13 @@ class Number(Validator):
     def _range(self) -> str:
         parts = []
         if self.gt is not None:
-            parts.append(f"> {_num(self.gt)}")
+            parts.append(f"> {_bound_text(self.gt)}")
         if self.ge is not None:
-            parts.append(f">= {_num(self.ge)}")
+            parts.append(f">= {_bound_text(self.ge)}")
         if self.lt is not None:
-            parts.append(f"< {_num(self.lt)}")
+            parts.append(f"< {_bound_text(self.lt)}")
         if self.le is not None:
-            parts.append(f"<= {_num(self.le)}")
+            parts.append(f"<= {_bound_text(self.le)}")
         return " and ".join(parts)
 
     def describe(self) -> str:
@@ -245,40 +246,54 @@ class Integer(Number):
             raise StateError(path, f"expected {self.describe()}, found {show(value)}")
 
 
-class RGB(Validator):
-    """A number or a list of 3 numbers, each checked by ``Number(**bounds)``."""
+class _NumberOrList(Validator):
+    """A number checked by ``Number(**bounds)`` or a list of such numbers: the list's form
+    is the subclass's (:meth:`list_text`, :meth:`check_list`)."""
 
     def __init__(self, **bounds):
         self.item = Number(**bounds)
 
+    def list_text(self) -> str:
+        raise NotImplementedError
+
+    def check_list(self, value, path, scope):
+        raise NotImplementedError
+
     def describe(self) -> str:
-        return f"{self.item.describe()} or a list of 3 of them"
+        return f"{self.item.describe()} or {self.list_text()}"
 
     def check(self, value, path, scope):
         if _is_number(value):
             self.item.check(value, path, scope)
             return
+        self.check_list(value, path, scope)
+
+
+class RGB(_NumberOrList):
+    """A number or a list of 3 numbers, each checked by ``Number(**bounds)``."""
+
+    def list_text(self) -> str:
+        return "a list of 3 of them"
+
+    def check_list(self, value, path, scope):
         if not isinstance(value, (list, tuple)) or len(value) != 3:
             raise StateError(path, f"expected {self.describe()}, found {show(value)}")
         for i, v in enumerate(value):
             self.item.check(v, f"{path}[{i}]", scope)
 
 
-class Numbers(Validator):
+class Numbers(_NumberOrList):
     """A number, or a (nested) list of at most ``max_size`` numbers, each checked by
     ``Number(**bounds)`` (e.g. per-texel roughness)."""
 
     def __init__(self, max_size: int = 4096, max_depth: int = 4, **bounds):
-        self.item = Number(**bounds)
+        super().__init__(**bounds)
         self.max_size, self.max_depth = max_size, max_depth
 
-    def describe(self) -> str:
-        return f"{self.item.describe()} or a list of at most {self.max_size} of them"
+    def list_text(self) -> str:
+        return f"a list of at most {self.max_size} of them"
 
-    def check(self, value, path, scope):
-        if _is_number(value):
-            self.item.check(value, path, scope)
-            return
+    def check_list(self, value, path, scope):
         if not isinstance(value, list):
             raise StateError(path, f"expected {self.describe()}, found {show(value)}")
         stack, count = [(value, path, 1)], 0

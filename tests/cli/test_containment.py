@@ -103,6 +103,6 @@ def test_brdfs_the_renderer_child_cannot_load_render_in_this_process(tmp_path, m
     monkeypatch.setattr(sys.modules["__main__"], "Local", local, raising=False)
     ref.__class__ = local
     r = compare(ref, ["ggx"], tmp_path, spp=2, resolution=16, scenes="sphere-studio",
-                exports=False, brdf_metrics=(), write_exr=False)
+                brdf_metrics=(), write_exr=False)
     assert r["timing"]["renders_isolated"] is False and r["models"][0]["status"] == "ok"
     assert any("not isolated: the child process cannot load the call" in n for n in r["notes"])

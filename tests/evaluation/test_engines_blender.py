@@ -55,7 +55,7 @@ def test_blender_round_trip_is_aligned_and_sees_a_changed_colour(tmp_path):
     # a file whose red base colour is 30 % lower: the comparison sees it
     darker = _plastic((0.42, 0.3, 0.1))
     export(darker, "gltf", tmp_path / "darker.gltf", fidelity=False)
-    b = blender.render_gltf(tmp_path / "darker.gltf", resolution=48, spp=32, seeds=(0, 1, 2))
+    b = blender.render_file(tmp_path / "darker.gltf", resolution=48, spp=32, seeds=(0, 1, 2))
     ref, alpha = blender.render_fit(fit, resolution=48, spp=32, seeds=(0, 1, 2))
     worse = blender.compare_renders(ref, alpha, b.images, b.alpha)
     assert worse["psnr"] < res["psnr"] - 6.0, (worse["psnr"], res["psnr"])
@@ -71,7 +71,7 @@ def test_a_file_without_mesh_imports_nothing_and_unused_materials_import(tmp_pat
     rep = blender.import_report(tmp_path / "bare.gltf", import_unused_materials=True)
     assert [m["name"] for m in rep["materials"]] == ["plastic"], rep
     with pytest.raises(blender.BlenderFailed, match="no mesh"):
-        blender.render_gltf(tmp_path / "bare.gltf", resolution=16, spp=1, seeds=(0,))
+        blender.render_file(tmp_path / "bare.gltf", resolution=16, spp=1, seeds=(0,))
 
 
 def test_rim_mask_is_the_outer_ring_of_the_disc():
@@ -120,7 +120,7 @@ def test_cycles_equivalent_predicts_blender_where_the_specification_does_not(tmp
                          specular=0.5, name="tinted")
     export(fit, "gltf", tmp_path / "tinted.gltf", fidelity=False)
     seeds = (0, 1, 2)
-    b = blender.render_gltf(tmp_path / "tinted.gltf", resolution=48, spp=32, seeds=seeds)
+    b = blender.render_file(tmp_path / "tinted.gltf", resolution=48, spp=32, seeds=seeds)
     res = {}
     for engine in ("specification", "blender"):
         img, alpha = blender.render_fit(gltf_equivalent(fit, engine=engine), resolution=48,
@@ -130,3 +130,58 @@ def test_cycles_equivalent_predicts_blender_where_the_specification_does_not(tmp
     assert np.all(np.abs(np.subtract(res["blender"]["mean_ratio"], 1.0)) < 0.01), res["blender"]
     # the specification's BRDF misses Blender's dimmer red diffuse by several percent
     assert res["specification"]["mean_ratio"][0] < 0.97, res["specification"]
+
+
+@needs_blender
+@needs_mitsuba
+def test_usd_export_imports_with_its_material_and_renders_like_the_gltf(tmp_path):
+    """Blender's USD importer (default options) reads the USD export's preview mesh with the
+    material bound, as UsdPreviewSurface's values, and Cycles renders it like the glTF of the
+    same fit (a fit both formats hold exactly: F0 0.04 is ior 1.5)."""
+    fit = _plastic()
+    export(fit, "usd", tmp_path / "fit.usda")
+    export(fit, "gltf", tmp_path / "fit.gltf", fidelity=False)
+    seeds = (0, 1, 2)
+    u = blender.render_file(tmp_path / "fit.usda", resolution=48, spp=32, seeds=seeds)
+    meshes = [o for o in u.report["objects"] if o["type"] == "MESH"]
+    assert len(meshes) == 1 and meshes[0]["materials"] == ["plastic"], u.report["objects"]
+    inputs = u.report["materials"][0]["principled"][0]["inputs"]
+    p = gltf_parameters(fit)
+    np.testing.assert_allclose(inputs["Base Color"][:3], p["baseColorFactor"][:3], rtol=1e-6)
+    assert inputs["Roughness"] == pytest.approx(p["roughnessFactor"], rel=1e-6)
+    assert inputs["IOR"] == pytest.approx(1.5, rel=1e-6)
+    g = blender.render_file(tmp_path / "fit.gltf", resolution=48, spp=32, seeds=seeds)
+    same = blender.compare_renders(g.images, g.alpha, u.images, u.alpha, flip=False)
+    assert same["peak_pixel"]["fit"] == same["peak_pixel"]["blender"], same["peak_pixel"]
+    assert 0.999 < same["coverage"]["blender"] / same["coverage"]["fit"] < 1.001
+    assert np.all(np.abs(np.subtract(same["mean_ratio"], 1.0)) < 0.01), same["mean_ratio"]
+    assert same["psnr"] > 50.0, same
+
+
+@needs_blender
+@needs_mitsuba
+def test_environment_map_scene_is_rebuilt_with_mitsubas_orientation(tmp_path):
+    """sphere-env in Blender (the procedural map as the world, turned to Mitsuba's lat-long
+    convention) against our render of what Cycles shades (the Blender model of the export):
+    the same light, where the map turned half a turn is far off."""
+    from brdffit.evaluation.render.core import Renderer
+    from brdffit.evaluation.render.scenes import procedural_envmap
+    from brdffit.export.gltf import gltf_equivalent
+
+    fit = MicrofacetBRDF(GGX(0.1), SchlickFresnel(0.04), diffuse=[0.6, 0.3, 0.1], name="p")
+    export(fit, "gltf", tmp_path / "p.gltf", fidelity=False)
+    seeds = (0, 1, 2)
+    b = blender.render_file(tmp_path / "p.gltf", "sphere-env", resolution=32, spp=64,
+                            seeds=seeds)
+    model = gltf_equivalent(fit, engine="blender")
+    ref, alpha = blender.render_fit(model, "sphere-env", resolution=32, spp=64, seeds=seeds)
+    same = blender.compare_renders(ref, alpha, b.images, b.alpha, flip=False)
+    assert np.all(np.abs(np.subtract(same["mean_ratio"], 1.0)) < 0.02), same["mean_ratio"]
+    turned = np.roll(procedural_envmap(), procedural_envmap().shape[1] // 2, axis=1)
+    r = Renderer(model, "sphere-env", turned, 64, 32)
+    other = np.stack([r.render(seed=s).image for s in seeds])
+    wrong = blender.compare_renders(other, alpha, b.images, b.alpha, flip=False)
+    assert np.max(np.abs(np.subtract(wrong["mean_ratio"], 1.0))) > 0.1, wrong["mean_ratio"]
+    assert wrong["psnr"] < same["psnr"] - 10.0, (wrong["psnr"], same["psnr"])
+    with pytest.raises(ValueError, match="not rebuilt"):
+        blender.render_file(tmp_path / "p.gltf", "knot", resolution=16, spp=1, seeds=(0,))

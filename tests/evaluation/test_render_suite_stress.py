@@ -33,7 +33,7 @@ reference = resolve_reference("synthetic:gold-ggx")
 models = {m: fit_model(m, reference)[0] for m in ("tabulated", "ggx")}
 for k in range(repeats):
     r = compare(reference, models, out, resolution=resolution, isolate_renders=False,
-                exports=False, save_fits=False, update_index=False, brdf_metrics=())
+                save_fits=False, update_index=False, brdf_metrics=())
     assert r["scene"]["spp"] == DEFAULT_SPP and r["scene"]["batches"] == DEFAULT_BATCHES
     assert [s["name"] for s in r["scenes"]] == [s.name for s in scene_suite("paper")[0]]
     errors = [s.get("error") for s in r["scenes"] if s.get("error")]

@@ -9,9 +9,8 @@ import math
 import pytest
 
 import brdffit
-from brdffit.evaluation import compare as C
 from brdffit.evaluation import report as R
-from brdffit.export import report_exports
+from brdffit.batch import compare_with_exports
 
 from .test_report import standin_render
 
@@ -20,9 +19,10 @@ from .test_report import standin_render
 def fitted_report(tmp_path_factory):
     root = tmp_path_factory.mktemp("batch")
     out = root / "report"
-    res = C.compare(brdffit.synthetic("gold-ggx"), ["tabulated", "ggx", "npf-g-from-d"], out,
-                    renderer=standin_render, spp=8, resolution=16, brdf_metric_samples=1 << 9,
-                    fit_options={"npf-g-from-d": {"max_iter": 5, "polish": 0}}, exports=report_exports)
+    res = compare_with_exports(brdffit.synthetic("gold-ggx"), ["tabulated", "ggx", "npf-g-from-d"],
+                               out, renderer=standin_render, spp=8, resolution=16,
+                               brdf_metric_samples=1 << 9,
+                               fit_options={"npf-g-from-d": {"max_iter": 5, "polish": 0}})
     return root, out, res
 
 
@@ -74,8 +74,9 @@ def test_loaded_fit_files_are_linked_where_they_are(tmp_path):
 
     ref = brdffit.synthetic("gold-ggx")
     fp = save_fit(fit_model("ggx", ref)[0], tmp_path / "fits" / "gold" / "ggx.npz")
-    res = C.compare(ref, {"ggx": str(fp)}, tmp_path / "report", renderer=standin_render,
-                    spp=4, resolution=16, brdf_metric_samples=1 << 9, exports=report_exports)
+    res = compare_with_exports(ref, {"ggx": str(fp)}, tmp_path / "report",
+                               renderer=standin_render, spp=4, resolution=16,
+                               brdf_metric_samples=1 << 9)
     page = tmp_path / "report" / res["slug"] / "index.html"
     links = R.local_links(page)
     assert "../../fits/gold/ggx.npz" in links and "exports/ggx.gltf" in links

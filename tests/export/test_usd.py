@@ -50,8 +50,9 @@ def test_preview_surface_and_openpbr_carry_the_export_mappings(model, tmp_path):
     got = _inputs(mtlx)
     np.testing.assert_allclose(list(got["base_color"]), o["base_color"], rtol=1e-6)
     assert got["specular_roughness"] == pytest.approx(o["specular_roughness"], rel=1e-6)
-    sphere = UsdGeom.Sphere(stage.GetPrimAtPath("/Root/Sphere"))
-    bound = UsdShade.MaterialBindingAPI(sphere.GetPrim()).ComputeBoundMaterial()[0]
+    sphere = stage.GetPrimAtPath("/Root/Sphere")
+    assert sphere.IsA(UsdGeom.Mesh) and len(UsdGeom.Mesh(sphere).GetPointsAttr().Get()) > 1000
+    bound = UsdShade.MaterialBindingAPI(sphere).ComputeBoundMaterial()[0]
     assert bound.GetPath() == material.GetPath() and info["mesh"] == "sphere"
 
 
@@ -64,7 +65,7 @@ def test_a_hostile_name_is_stored_as_data_and_the_layer_still_validates(tmp_path
     stage = Usd.Stage.Open(str(path))
     material = _material(stage)
     assert material.GetPrim().GetDisplayName() == name
-    assert [p.GetName() for p in stage.Traverse() if p.IsA(UsdGeom.Sphere)] == []
+    assert [p.GetName() for p in stage.Traverse() if p.IsA(UsdGeom.Gprim)] == []
 
 
 def test_the_check_rejects_a_shader_input_openpbr_does_not_have(tmp_path):
@@ -92,3 +93,19 @@ def test_cli_exports_usd_and_refuses_an_unknown_mesh_before_any_work(tmp_path, c
     assert "expected mesh to be one of 'sphere', 'none', found 'cube'" in capsys.readouterr().err
     with pytest.raises(ExportError):
         export(MicrofacetBRDF(GGX(0.2)), "usd", tmp_path / "y.usda", mesh="cube")
+
+
+def test_a_dielectric_with_a_low_flat_fresnel_keeps_its_f0_in_the_ior(tmp_path):
+    """glTF holds F0 0.05 with F90 0.06 as ior 3 + specularFactor; UsdPreviewSurface has no
+    such factor, so its ior is the one of F0 0.05 (≈ 1.58), not 3 (F0 0.25, five times too
+    bright at normal incidence)."""
+    model = MicrofacetBRDF(GGX(0.1), SchlickFresnel([0.05 / 0.06] * 3), specular=[0.06] * 3,
+                           diffuse=[0.01] * 3, name="steel-like")
+    path = tmp_path / "s.usda"
+    info = export(model, "usd", path)
+    stage = Usd.Stage.Open(str(path))
+    got = _inputs(_material(stage).ComputeSurfaceSource()[0])
+    assert gltf_parameters(model)["specular"]["ior"] == pytest.approx(3.0)
+    f0 = ((got["ior"] - 1) / (got["ior"] + 1)) ** 2
+    assert f0 == pytest.approx(0.05, rel=1e-3), got["ior"]
+    assert any("KHR_materials_specular dropped" in n for n in info["notes"])

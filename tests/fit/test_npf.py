@@ -384,6 +384,18 @@ def _samples_and_ones(data):
                                 rho_d=np.zeros(3), rho_s=np.ones(3))
 
 
+def test_start_basins_count_objectives_more_than_the_tolerance_apart():
+    from brdffit.fit.npf import start_basins
+
+    runs = [{"status": "ok", "objective_per_channel": e} for e in
+            ([1.0, 2.0, 5.0], [1.005, 2.5, 5.0], [1.2, 2.51, 5.0])]
+    runs.append({"status": "non-finite", "objective_per_channel": [0.0, 0.0, 0.0]})
+    got = start_basins(runs)
+    assert got["starts"] == 3 and got["distinct"] == [2, 2, 1]
+    np.testing.assert_allclose(got["spread"], [1.2, 1.255, 1.0])
+    assert start_basins([{"status": "unavailable"}])["starts"] == 0
+
+
 def _copy_state(st):
     return _solver.MFState(*(np.array(a) for a in _solver._state_arrays(st)))
 
@@ -402,6 +414,12 @@ def test_options_and_determinism(indep_truth):
     assert labels == ["random-0", "random-1", "ones"]
     best = min(s["objective"] for s in a.fit_info["starts"])
     assert a.fit_info["objective"] <= best * (1 + 1e-9)
+    # how far apart the starts ended, per channel
+    basins = a.fit_info["start_basins"]
+    per_start = np.array([s["objective_per_channel"] for s in a.fit_info["starts"]])
+    assert basins["starts"] == 3
+    np.testing.assert_allclose(basins["spread"], per_start.max(0) / per_start.min(0))
+    assert all(1 <= d <= 3 for d in basins["distinct"])
     # objective options are recorded and change the sample set / weights
     r = fit_npf(data=data, variant="naive", max_iter=3, restrict_deg=80.0, compressive=False)
     assert r.fit_options["objective"]["restrict_deg"] == 80.0

@@ -18,9 +18,9 @@ from pathlib import Path
 
 from . import EXIT_FAILED_TASKS
 from ..errors import printable
-from ..evaluation.compare import compare, compare_many
+from ..batch import compare_with_exports
+from ..evaluation.compare import compare_many
 from ..evaluation.report import write_index
-from ..export import report_exports
 from ..fit.options import OptionError
 from ..fit.registry import check_options
 from ..io import resolve_spec
@@ -80,13 +80,13 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
     say = (lambda msg: None) if quiet else (lambda msg: print(printable(msg), file=sys.stderr))
     kw = dict(scenes=scene or scenes, spp=spp, batches=batches, resolution=resolution,
               seed=seed, exposure=exp, gamma=gamma, render_options=ropts, progress=say,
-              fit_options=fopts, exports=report_exports)
+              fit_options=fopts)
     specs = _materials(spec, limit)
     if len(specs) == 1:
-        res = compare(specs[0], model_list, out, **kw)
+        res = compare_with_exports(specs[0], model_list, out, **kw)
         results = [res]
     else:
-        results = compare_many(specs, model_list, out, **kw)
+        results = compare_many(specs, model_list, out, run=compare_with_exports, **kw)
     write_index(out)
     for r in results:
         if "error" in r and "models" not in r:

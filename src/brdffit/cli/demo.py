@@ -10,12 +10,11 @@ from pathlib import Path
 
 from . import EXIT_FAILED_TASKS
 from .._isolation import ChildCrashed, IsolatedProcess
-from ..batch import enumerate_materials
+from ..batch import compare_with_exports, enumerate_materials
 from ..errors import printable as safe
 from ..evaluation import report as R
-from ..evaluation.compare import DEFAULT_BATCHES, compare
+from ..evaluation.compare import DEFAULT_BATCHES
 from ..evaluation.report import write_index
-from ..export import report_exports
 from ..progress import report
 from ._checks import check_models, check_render_settings
 from ._commands import DEMO_MODELS
@@ -35,10 +34,10 @@ def _one_material(name: str, spec: str, model_list: list[str], out: str, spp: in
     and per-scene texts, failures)``; what it is doing goes out as progress stages (a crash
     message names the last one)."""
     t = time.perf_counter()
-    result = compare(spec, model_list, out, name=name, spp=spp, resolution=resolution,
-                     fit_options=DEMO_FIT_OPTIONS, update_index=False, exports=report_exports,
-                     progress=lambda msg: report(stage=msg.removeprefix(f"{name}: "),
-                                                 final=True))
+    result = compare_with_exports(
+        spec, model_list, out, name=name, spp=spp, resolution=resolution,
+        fit_options=DEMO_FIT_OPTIONS, update_index=False,
+        progress=lambda msg: report(stage=msg.removeprefix(f"{name}: "), final=True))
     rows, failures = [], 0
     for m in result.get("models", []):
         psnr = m.get("psnr")

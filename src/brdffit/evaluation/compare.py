@@ -2,7 +2,22 @@
 common random numbers on a suite of scenes, measure, plot, and write the HTML report.
 
 :func:`compare` handles one material and updates the report index; :func:`compare_many`
-loops over several. The measurement protocol:
+loops over several. A comparison is a :class:`Comparison` passed through five stages:
+
+1. :func:`resolve_comparison`: the reference, the material's name and folder, the scenes and
+   the options;
+2. :func:`fit_models`: fit, load or take each model and describe it (``result.json``'s
+   ``models``), saving the fits;
+3. :func:`render_scenes`: render every scene and measure each model in it;
+4. :func:`measure_models`: each model's summary over the scenes and its BRDF-space metrics;
+5. :func:`write_report`: plots, ``result.json``, the material page and the index.
+
+:func:`prepare` runs the first two and :func:`finish` the last three: between them a caller
+can write engine files of the fitted models (:meth:`Comparison.fit_files`,
+:meth:`Comparison.add_exports`; :func:`brdffit.batch.compare_with_exports`), which the page
+links.
+
+The measurement protocol:
 
 * **scenes**: by default the paper's suite (Bagher et al. 2016 §5; :data:`SUITES` ``paper``
   in :mod:`.render.scenes`): a sphere under three environment maps of different dynamic range
@@ -27,9 +42,10 @@ loops over several. The measurement protocol:
   reference instead, a number fixes it), dE2000 on the tone-mapped mean images (:mod:`.metrics`);
 * BRDF-space metrics (:func:`.metrics.brdf_metrics`) independent of rendering.
 
-A custom ``renderer`` (``renderer(brdf, scene=..., spp=..., resolution=..., seed=...)``,
-e.g. a NumPy stand-in in tests) is called once per model, scene and batch with the batch's
-seed; it must itself make equal seeds mean common random numbers.
+The scenes are rendered by an engine of :mod:`.scene_engines`. A custom ``renderer``
+(``renderer(brdf, scene=..., spp=..., resolution=..., seed=...)``, e.g. a NumPy stand-in in
+tests) is called once per model, scene and batch with the batch's seed; it must itself make
+equal seeds mean common random numbers.
 
 A model that fails to fit, load or render is recorded with its error message; the others
 still make it into the report.
@@ -37,6 +53,8 @@ still make it into the report.
 
 from __future__ import annotations
 
+import dataclasses
+import os
 import time
 import traceback
 from pathlib import Path
@@ -44,7 +62,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from .._isolation import ChildCrashed, IsolatedProcess, NotSendable
+from .._isolation import ChildCrashed
 from ..errors import BRDFError, printable
 from ..fit.registry import fit_model, is_isotropic_only, model_params, small_json
 from . import imageio, metrics as M, plots as P, report as R
@@ -52,15 +70,15 @@ from .imageio import write_png
 from .tonemap import auto_exposure, tonemap
 from ..fit.result import fit_result
 from ..loading import load
-from ..progress import report
-from .render.core import MultiRenderer, describe_evaluator
-from .render.proposal import proposal_for
-from .render.scenes import scene_suite
-from .render.translate import to_evaluator
+from .render.scenes import SceneSpec, scene_suite
+from .scene_engines import (CallbackEngine, IsolatedCRNEngine, cpu_seconds, make_engine,
+                            peak_from_batches)
 from ..io.fitfile import SerializableModel, load_fit, save_fit, table_bytes
 from .validity import check_validity
 
-__all__ = ["compare", "compare_many", "resolve_reference", "DEFAULT_MODELS"]
+__all__ = ["compare", "compare_many", "resolve_reference", "DEFAULT_MODELS", "Comparison",
+           "CompareOptions", "resolve_comparison", "fit_models", "render_scenes",
+           "measure_models", "write_report", "prepare", "finish"]
 
 DEFAULT_MODELS = ("tabulated", "ggx", "beckmann", "sgd", "npf")
 #: Samples per pixel per scene (all batches), batches, image size of :func:`compare`.
@@ -90,25 +108,6 @@ def _default_renderer():
     return None
 
 
-def _unpack_render(out):
-    """Renderer output → (image (H, W, 3) float64, mask (H, W) bool)."""
-    img = mask = None
-    if isinstance(out, tuple):
-        img, mask = out[0], (out[1] if len(out) > 1 else None)
-    elif isinstance(out, Mapping):
-        img, mask = out.get("image"), out.get("mask")
-    else:
-        img, mask = getattr(out, "image", out), getattr(out, "mask", None)
-    img = np.asarray(img, dtype=np.float64)
-    if img.ndim == 3 and img.shape[-1] == 4:
-        if mask is None:
-            mask = img[..., 3] > 0.5
-        img = img[..., :3]
-    if mask is None:
-        mask = np.ones(img.shape[:2], bool)
-    return img, np.asarray(mask).astype(bool).reshape(img.shape[:2])
-
-
 def _tonemapper():
     return auto_exposure, tonemap
 
@@ -125,9 +124,274 @@ def _safe_name(name: str) -> str:
     return R.slugify(name)
 
 
+def _model_entries(models: Sequence | Mapping) -> list[tuple[str, Any]]:
+    """``(label, what)`` of each model: a mapping's items; in a sequence ``"label=what"``,
+    ``"path.npz"`` (labelled by its stem) or a model name (labelled by itself)."""
+    if isinstance(models, Mapping):
+        return list(models.items())
+    entries: list[tuple[str, Any]] = []
+    for m in models:
+        if isinstance(m, str) and "=" in m:
+            label, what = m.split("=", 1)
+            entries.append((label, what))
+        elif isinstance(m, str) and m.endswith(".npz"):
+            entries.append((Path(m).stem, m))
+        else:
+            entries.append((str(m), m))
+    return entries
+
+
 # ------------------------------------------------------------------------------------------
-# the comparison
+# the comparison and its options
 # ------------------------------------------------------------------------------------------
+@dataclasses.dataclass
+class CompareOptions:
+    """How a comparison renders and measures: the keyword arguments of :func:`compare`.
+
+    Attributes
+    ----------
+    scenes : str or sequence of str
+        ``"paper"`` (the four scenes of Bagher 2016 §5, see :mod:`.render.scenes`), one scene
+        name or several (list or comma-separated: ``sphere-studio``, ``knot-courtyard``,
+        ``sphere-env`` with ``render_options={"envmap": ...}``, ...).
+    scene : str, optional
+        One scene name; wins over ``scenes`` when given.
+    spp, batches, resolution, seed : int
+        ``spp`` samples per pixel per scene in total, rendered as ``batches`` independent
+        batches of ``ceil(spp / batches)`` (``batches ≥ 3`` gives standard errors); scene
+        ``i``'s batch ``k`` uses seed ``seed + i·batches + k`` for the reference and every
+        model.
+    exposure : {"scene", "auto"} or float
+        Tone mapping of the PNGs and of the dE2000 conversion (Bagher et al. 2016 §5):
+        ``"scene"`` each scene's fixed exposure (:func:`.render.scenes.scene_exposure`),
+        ``"auto"`` one exposure per scene from its reference, a number the same everywhere.
+    gamma : float, optional
+        The tone map's γ; ``None`` is the scene's (2.2).
+    noise_floor : bool, optional
+        Ignored: the standard error replaces the noise floor.
+    brdf_metric_samples : int
+        Sample pairs of the cosine-weighted relative error.
+    brdf_metrics : sequence of str
+        Which BRDF-space metrics to compute (:class:`.metrics.BRDFMetrics`; the reference is
+        prepared once).
+    fit_options : mapping, optional
+        Per-model keyword arguments of the fitters.
+    save_fits : bool
+        Save each fitted model to ``<slug>/fits/<label>.npz``, linked from the page.
+    write_exr : bool or "reference"
+        Linear EXRs of the mean images: ``"reference"`` the references only, ``True`` every
+        model too, ``False`` none.
+    renderer : callable, optional
+        Replaces the Mitsuba CRN renderer (see the module docstring).
+    render_options : mapping, optional
+        Go to the scenes (e.g. ``{"envmap": "studio"}`` for ``sphere-env``/``knot``) or to a
+        custom ``renderer``.
+    update_index : bool
+        Rebuild ``out_dir/index.html`` from every material present.
+    progress : callable, optional
+        Receives one line per step (``"<material>: fitting ggx"``).
+    isolate_renders : bool
+        Render in a child process: a renderer that dies from a signal fails the scene it was
+        rendering (``scenes[i]["error"]``, one line through ``progress``) and the other scenes
+        go on in a new child. BRDFs that cannot be pickled are rendered in this process, with
+        a note.
+    """
+
+    scenes: str | Sequence[str] = "paper"
+    scene: str | None = None
+    spp: int = DEFAULT_SPP
+    batches: int = DEFAULT_BATCHES
+    resolution: int = DEFAULT_RESOLUTION
+    seed: int = 0
+    exposure: str | float = "scene"
+    gamma: float | None = None
+    noise_floor: bool | None = None
+    brdf_metric_samples: int = 1 << 16
+    brdf_metrics: Sequence[str] = M.BRDFMetrics.ALL
+    fit_options: Mapping[str, Mapping] | None = None
+    save_fits: bool = True
+    write_exr: bool | str = "reference"
+    renderer: Callable | None = None
+    render_options: Mapping | None = None
+    update_index: bool = True
+    progress: Callable[[str], None] | None = None
+    isolate_renders: bool = True
+
+    @property
+    def batch_count(self) -> int:
+        """Batches rendered per scene: ``batches`` clipped to ``[1, spp]``."""
+        return max(1, min(int(self.batches), int(self.spp)))
+
+    @property
+    def spp_batch(self) -> int:
+        """Samples per pixel of one batch: ``ceil(spp / batch_count)``."""
+        return max(1, -(-int(self.spp) // self.batch_count))
+
+
+@dataclasses.dataclass
+class Comparison:
+    """One material compared with its models: what the stages of :func:`compare` read and
+    fill.
+
+    Attributes
+    ----------
+    source : object
+        The reference as given (a BRDF or a load spec).
+    reference : BRDF
+        The reference BRDF.
+    material : str
+        Its name in the report; :attr:`slug` names its folder.
+    out_dir : Path
+        The report directory; the material's files go to :attr:`folder`.
+    models : list of (str, object)
+        ``(label, what)`` per model: a BRDF, a fit-file path or a model name.
+    scenes : list of SceneSpec
+        The scenes rendered.
+    options : CompareOptions
+        The settings.
+    notes : list of str
+        Notes on the settings (scene substitutions, rounded sample counts).
+    records : list of dict
+        Per model, what ``result.json`` says of it (``result["models"]``).
+    fitted : dict
+        Label → BRDF of each model fitted, loaded or given.
+    scene_entries : dict
+        Label → the model's per-scene measures (``records[i]["scenes"]``) of each model
+        rendered.
+    result : dict
+        ``result.json``.
+    """
+
+    source: Any
+    reference: Any
+    material: str
+    out_dir: Path
+    models: list[tuple[str, Any]]
+    scenes: list[SceneSpec]
+    options: CompareOptions
+    notes: list[str] = dataclasses.field(default_factory=list)
+    records: list[dict] = dataclasses.field(default_factory=list)
+    fitted: dict[str, Any] = dataclasses.field(default_factory=dict)
+    scene_entries: dict[str, list[dict]] = dataclasses.field(default_factory=dict)
+    result: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    @property
+    def slug(self) -> str:
+        """The material's folder name under :attr:`out_dir`."""
+        return _safe_name(self.material)
+
+    @property
+    def folder(self) -> Path:
+        """``out_dir/<slug>``: the material's page, pictures, fits and exports."""
+        return self.out_dir / self.slug
+
+    def say(self, message: str) -> None:
+        """One line of progress (``options.progress``)."""
+        if self.options.progress:
+            self.options.progress(message)
+
+    def record(self, label: str) -> dict:
+        """The record of the model ``label``."""
+        return next(r for r in self.records if r["name"] == label)
+
+    def stem(self, label: str) -> str:
+        """The file-name stem of model ``label``'s fit file and engine files."""
+        return _safe_name(label)
+
+    def fit_files(self) -> dict[str, Any]:
+        """Label → BRDF of each model that has a fit file: saved by :func:`fit_models`
+        (``fit_file``) or loaded from one (``loaded_from``), in the order of the models;
+        the models whose engine files the page can link (:meth:`add_exports`)."""
+        return {r["name"]: self.fitted[r["name"]] for r in self.records
+                if r["status"] == "ok" and (r.get("loaded_from") or r.get("fit_file"))}
+
+    def add_exports(self, label: str, paths: Sequence[str]) -> None:
+        """Record the engine files written for model ``label`` under ``folder/exports``
+        (paths relative to :attr:`folder`; ``result.json``'s ``exports``). A loaded fit is
+        linked where it is, relative to the page (``fit_file``, ``table_bytes``)."""
+        self._link_loaded_fit(label)["exports"] = list(paths)
+
+    def exports_failed(self, label: str, exc: BaseException) -> None:
+        """Writing the engine files of model ``label`` raised ``exc`` (call it while handling
+        ``exc``): a model fitted here keeps its fit file, with a warning; a loaded fit fails
+        like a fit file that cannot be read."""
+        rec = self._link_loaded_fit(label)
+        if rec.get("loaded_from"):
+            rec.update(status="failed", error=f"fit/load failed: {type(exc).__name__}: {exc}")
+            rec["traceback"] = traceback.format_exc(limit=4)
+        else:
+            rec.setdefault("warnings", []).append(f"could not save fit: {exc}")
+
+    def _link_loaded_fit(self, label: str) -> dict:
+        """The record of ``label``, with a loaded fit's file linked relative to the page."""
+        rec = self.record(label)
+        if rec.get("loaded_from"):
+            rel = Path(os.path.relpath(Path(rec["loaded_from"]).resolve(), self.folder.resolve()))
+            rec["fit_file"] = rel.as_posix()
+            rec["table_bytes"] = table_bytes(self.fitted[label])
+        return rec
+
+
+@dataclasses.dataclass
+class _Scene:
+    """One rendered scene while its models are measured: its record in ``result["scenes"]``,
+    the reference's batches, their mean, the foreground and the scene's tone map."""
+
+    spec: SceneSpec
+    record: dict
+    ref_stack: np.ndarray
+    ref_mean: np.ndarray
+    mask: np.ndarray
+    exposure: float
+    gamma: float
+
+    def tonemap(self, img):
+        """The scene's tone map of a linear image."""
+        return _tonemapper()[1](img, exposure=self.exposure, gamma=self.gamma)
+
+
+# ------------------------------------------------------------------------------------------
+# the stages
+# ------------------------------------------------------------------------------------------
+def resolve_comparison(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report",
+                       *, material: str | None = None, name: str | None = None,
+                       **options) -> Comparison:
+    """The comparison of one reference with ``models``, nothing fitted yet.
+
+    Parameters
+    ----------
+    source : BRDF or str
+        The reference: a BRDF object, a fit file, ``synthetic:NAME`` or a load spec
+        (``INPUT`` with ``material`` → ``INPUT:MATERIAL``, :func:`resolve_reference`).
+    models : sequence or mapping
+        Model names to fit (``"tabulated"``, ``"ggx"``, … resolved by
+        :func:`brdffit.fit.registry.get`), paths to saved fit files (``.npz``),
+        ``"label=path.npz"``, or a mapping label → (BRDF object | fit-file path | model name).
+    out_dir : path
+        Report directory; the material goes to ``out_dir/<slug>/`` (created here).
+    material, name : str, optional
+        The member of ``source`` and the material's name in the report (default: the
+        reference's ``name``, else ``material``, else ``source``).
+    **options
+        :class:`CompareOptions`.
+    """
+    opts = CompareOptions(**options)
+    reference = resolve_reference(source, material)
+    mat_name = name or getattr(reference, "name", None) or (material or str(source))
+    opts.render_options = dict(opts.render_options or {})
+    opts.fit_options = dict(opts.fit_options or {})
+    specs, notes = scene_suite(opts.scene if opts.scene is not None else opts.scenes,
+                               opts.render_options.get("envmap"))
+    rendered = opts.spp_batch * opts.batch_count
+    if rendered != int(opts.spp):
+        notes = [*notes, f"{int(opts.spp)} samples per pixel asked, {rendered} rendered: "
+                         f"{opts.batch_count} batches of {opts.spp_batch}"]
+    c = Comparison(source, reference, mat_name, Path(out_dir), _model_entries(models),
+                   list(specs), opts, list(notes))
+    c.folder.mkdir(parents=True, exist_ok=True)
+    return c
+
+
 def _convergence(model) -> dict | None:
     """How the fit went (:func:`brdffit.fit.result.fit_result`) and its history, thinned to
     at most 120 points, for the report's convergence plot: the objective per iteration
@@ -153,655 +417,412 @@ def _convergence(model) -> dict | None:
     return out
 
 
-def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report", *,
-            material: str | None = None, name: str | None = None, scenes="paper",
-            scene: str | None = None, spp: int = DEFAULT_SPP, batches: int = DEFAULT_BATCHES,
-            resolution: int = DEFAULT_RESOLUTION, seed: int = 0, exposure="scene",
-            gamma: float | None = None, noise_floor: bool | None = None,
-            brdf_metric_samples: int = 1 << 16,
-            brdf_metrics: Sequence[str] = M.BRDFMetrics.ALL,
-            fit_options: Mapping[str, Mapping] | None = None, save_fits: bool = True,
-            exports: Callable[[Any, Path, str], list[str]] | None = None,
-            write_exr: bool | str = "reference", renderer: Callable | None = None,
-            render_options: Mapping | None = None, update_index: bool = True,
-            progress: Callable[[str], None] | None = None, isolate_renders: bool = True) -> dict:
+def _obtain_model(c: Comparison, label: str, what, rec: dict):
+    """The BRDF of one model entry: ``what`` itself (a BRDF), loaded (a fit file) or fitted
+    to the reference (a model name); ``None`` when the model is skipped (an isotropic-only
+    model of an anisotropic reference). Fills ``rec``'s ``origin`` and ``fit_time``."""
+    if hasattr(what, "eval"):
+        rec["fit_time"], rec["origin"] = None, "given"
+        return what
+    if isinstance(what, (str, Path)) and str(what).endswith(".npz"):
+        model = load_fit(what)
+        rec["origin"] = f"loaded {what}"
+        rec["loaded_from"] = str(what)
+        info = getattr(model, "fit_info", None) or {}
+        rec["fit_time"] = _num(info.get("time", info.get("time_s")))  # NPF: time_s
+        return model
+    if is_isotropic_only(str(what)) and not getattr(c.reference, "isotropic", False):
+        rec.update(status="skipped", error=f"{what} fits isotropic BRDFs only")
+        return None
+    c.say(f"{c.material}: fitting {label}")
+    model, rec["fit_time"] = fit_model(str(what), c.reference, c.options.fit_options.get(label))
+    rec["origin"] = "fitted"
+    return model
+
+
+def _describe_model(rec: dict, model) -> None:
+    """The model's class, parameters, validity checks and, for a fit, how it went."""
+    rec["model_class"] = type(model).__name__
+    rec["params"] = model_params(model)
+    rec["validity"] = [v.as_dict() for v in check_validity(model)]
+    info = getattr(model, "fit_info", None)
+    if info:
+        rec["fit_info"] = small_json(dict(info))
+        rec["convergence"] = _convergence(model)
+
+
+def _save_model(c: Comparison, label: str, model, rec: dict) -> None:
+    """Save a fitted model to ``fits/<label>.npz`` (fit files only; a failure is a warning)."""
+    try:
+        if isinstance(model, SerializableModel) and model.fit_kind:
+            fp = save_fit(model, c.folder / "fits" / f"{_safe_name(label)}.npz",
+                          source=getattr(c.reference, "source", None))
+            rec["fit_file"] = f"fits/{fp.name}"
+            rec["table_bytes"] = table_bytes(model)
+    except Exception as exc:  # noqa: BLE001 – saving is a convenience
+        rec.setdefault("warnings", []).append(f"could not save fit: {exc}")
+
+
+def fit_models(c: Comparison) -> Comparison:
+    """Fit, load or take each model of ``c`` (:attr:`Comparison.fitted`) and describe it
+    (:attr:`Comparison.records`: origin, fit time, parameters, validity, convergence, fit
+    file); fits are saved unless ``options.save_fits`` is false. A model that fails is
+    recorded with its error and traceback (``status="failed"``); one that does not apply to
+    the reference is ``"skipped"``."""
+    for label, what in c.models:
+        rec: dict[str, Any] = {"name": label, "status": "ok"}
+        c.records.append(rec)
+        try:
+            model = _obtain_model(c, label, what, rec)
+            if model is None:
+                continue
+            c.fitted[label] = model
+            _describe_model(rec, model)
+            if c.options.save_fits and rec["origin"] == "fitted":
+                _save_model(c, label, model, rec)
+        except Exception as exc:  # noqa: BLE001 – one failing model must not sink the report
+            rec.update(status="failed", error=f"fit/load failed: {type(exc).__name__}: {exc}")
+            rec["traceback"] = traceback.format_exc(limit=4)
+    return c
+
+
+def _start_result(c: Comparison) -> None:
+    """``result.json``'s head: the material, its source, the render settings, the models'
+    records and the notes."""
+    o = c.options
+    settings = {"scenes": [sp.name for sp in c.scenes], "spp": int(o.spp_batch * o.batch_count),
+                "batches": int(o.batch_count), "spp_per_batch": int(o.spp_batch),
+                "resolution": int(o.resolution), "seed": int(o.seed),
+                **{k: (v if isinstance(v, (int, float, str, bool)) else str(v))
+                   for k, v in o.render_options.items()}}
+    c.result = {"material": c.material, "slug": c.slug,
+                "source": getattr(c.reference, "source", None) or (
+                    str(c.source) if not hasattr(c.source, "eval") else None),
+                "scene": settings, "models": c.records,
+                "measured_domain": getattr(c.reference, "measured_domain", None),
+                "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+    if c.notes:
+        c.result["notes"] = list(c.notes)
+
+
+def _make_scene_engine(c: Comparison):
+    """The engine that renders the scenes (Mitsuba CRN, or ``options.renderer`` per model);
+    ``None`` when the renderer died while being prepared: every scene and model then fails
+    with that error."""
+    ok = {r["name"]: c.fitted[r["name"]] for r in c.records if r["status"] == "ok"}
+    renderer = c.options.renderer or _default_renderer()
+    try:
+        if renderer is None:
+            engine, note = make_engine(c.reference, ok, c.records, c.say, c.material,
+                                        c.options.isolate_renders)
+            if note:
+                c.result.setdefault("notes", []).append(note)
+            c.result["proposal"] = engine.proposal_dict
+            return engine
+        return CallbackEngine(renderer, c.reference, ok, c.options.render_options)
+    except ChildCrashed as exc:  # the renderer died while being prepared: nothing renders
+        c.result["render_error"] = str(exc)
+        c.say(f"{c.material}: {exc}")
+        for spec in c.scenes:
+            c.result["scenes"].append(spec.as_dict() | {"error": str(exc)})
+        for rec in c.records:
+            if rec["status"] == "ok":
+                rec.update(status="failed", error=f"render failed: {exc}")
+        return None
+
+
+def _scene_failed(c: Comparison, srec: dict, error: str) -> None:
+    """Scene ``srec`` could not be measured: its ``error``, and every model's entry says so."""
+    srec["error"] = error
+    for entries in c.scene_entries.values():
+        entries.append({"scene": srec["name"], "error": error})
+
+
+def _tone(c: Comparison, spec: SceneSpec, ref_mean, mask) -> tuple[float, float]:
+    """The scene's exposure and γ (``options.exposure``, ``options.gamma``)."""
+    exposure, gamma = c.options.exposure, c.options.gamma
+    if exposure == "scene":
+        exp_s = float(spec.exposure)
+    elif exposure == "auto":
+        exp_s = float(_tonemapper()[0](ref_mean, mask))
+    else:
+        exp_s = float(exposure)
+    return exp_s, float(spec.gamma if gamma is None else gamma)
+
+
+def _render_scene(c: Comparison, engine, i: int, spec: SceneSpec):
+    """Render scene ``i`` (``batches`` seeds, the reference and every model): a
+    :class:`_Scene` and the models' stacks and render failures, or ``None`` when the scene
+    failed (its record and the models' entries say why)."""
+    o = c.options
+    seeds = [int(o.seed) + i * o.batch_count + k for k in range(o.batch_count)]
+    c.say(f"{c.material}: rendering {spec.name} ({o.batch_count} × {o.spp_batch} spp, "
+          f"{len(engine.labels)} models)")
+    srec: dict[str, Any] = spec.as_dict() | {"seeds": seeds}
+    c.result["scenes"].append(srec)
+    t0, c0 = time.perf_counter(), cpu_seconds(engine)
+    try:
+        stacks, alpha, failures = engine.render_scene(spec, seeds, o.spp_batch, o.resolution)
+    except Exception as exc:  # noqa: BLE001 – the reference of this scene cannot be rendered
+        _scene_failed(c, srec, str(exc) if isinstance(exc, ChildCrashed)
+                      else f"{type(exc).__name__}: {exc}")
+        return None
+    srec["render_seconds"] = time.perf_counter() - t0
+    srec["render_cpu_seconds"] = cpu_seconds(engine) - c0
+    ref_stack = stacks.pop(None)
+    mask = alpha >= 0.999
+    ref_mean = ref_stack.mean(0)
+    if not mask.any():
+        _scene_failed(c, srec, "the reference has no foreground pixel in this scene")
+        return None
+    exp_s, gam = _tone(c, spec, ref_mean, mask)
+    srec["exposure"], srec["gamma"] = exp_s, gam
+    return _Scene(spec, srec, ref_stack, ref_mean, mask, exp_s, gam), stacks, failures
+
+
+def _measure_reference(c: Comparison, engine, i: int, sc: _Scene) -> None:
+    """The scene's reference picture (PNG, EXR) and converged peak (the PSNR numerator,
+    ``engine.peak``; the batches' own maximum, with a warning, when that fails)."""
+    srec, o = sc.record, c.options
+    ref_png = f"{_safe_name(sc.spec.name)}-reference.png"
+    _write_png(c.folder / ref_png, sc.tonemap(sc.ref_mean))
+    srec["reference"] = {"png": ref_png, "foreground_pixels": int(sc.mask.sum())}
+    t1, c1 = time.perf_counter(), cpu_seconds(engine)
+    try:
+        srec["reference"] |= engine.peak(sc.spec, sc.ref_stack, sc.mask, o.resolution,
+                                         seed=int(o.seed) + 100000 + 16 * i)
+    except Exception as exc:  # noqa: BLE001 – the batches' own peak is the fallback
+        srec["reference"] |= peak_from_batches(sc.ref_stack, sc.mask)
+        srec.setdefault("warnings", []).append(
+            f"the peak was not converged ({type(exc).__name__}: {exc}); the batches' "
+            "maximum is used")
+    srec["peak_seconds"] = time.perf_counter() - t1
+    srec["peak_cpu_seconds"] = cpu_seconds(engine) - c1
+    exr = ref_png.replace(".png", ".exr")
+    if o.write_exr in (True, "reference") and _write_exr(c.folder / exr, sc.ref_mean) is not None:
+        srec["reference"]["exr"] = exr
+
+
+def _measure_model(c: Comparison, sc: _Scene, de_ref, label: str, stack, entry: dict) -> None:
+    """One model in one scene: PSNR with standard errors (:func:`.metrics.crn_psnr`; the
+    total ``psnr_se`` adds the peak's residual uncertainty, ``psnr_se_mse`` is the part that
+    separates two models of the comparison), mean dE2000, and its pictures."""
+    peak_se = float(sc.record["reference"].get("peak_psnr_se", 0.0))
+    est = M.crn_psnr(sc.ref_stack, stack, sc.mask, peak=sc.record["reference"]["peak"])
+    entry.update({k: est[k] for k in ("psnr", "mse", "mse_se", "noise_mse",
+                                      "resolved", "bound", "psnr_plain")})
+    entry["psnr_se_mse"] = est["psnr_se"]
+    entry["psnr_se"] = float(np.hypot(est["psnr_se"], peak_se)) if np.isfinite(
+        est["psnr"]) else est["psnr_se"]
+    img = stack.mean(0)
+    de = de_ref.image(img)
+    entry["mean_de2000"] = float(np.nanmean(de))
+    fn = f"{_safe_name(sc.spec.name)}-{_safe_name(label)}"
+    _write_png(c.folder / f"{fn}.png", sc.tonemap(img))
+    _write_png(c.folder / f"{fn}_de2000.png", M.colorize_delta_e(de))
+    entry["png"], entry["de_png"] = f"{fn}.png", f"{fn}_de2000.png"
+    if c.options.write_exr is True and _write_exr(c.folder / f"{fn}.exr", img) is not None:
+        entry["exr"] = f"{fn}.exr"
+
+
+def _measure_scene(c: Comparison, sc: _Scene, stacks, failures: Mapping[str, str]) -> None:
+    """Every model's entry of one rendered scene (:func:`_measure_model`; a model that failed
+    to render or to be measured gets an ``error``)."""
+    de_ref = M.DeltaE2000(sc.ref_mean, sc.mask, tonemap=sc.tonemap)
+    for label, entries in c.scene_entries.items():
+        entry: dict[str, Any] = {"scene": sc.spec.name}
+        entries.append(entry)
+        if label in failures:
+            entry["error"] = failures[label]
+            continue
+        try:
+            _measure_model(c, sc, de_ref, label, stacks[label], entry)
+        except Exception as exc:  # noqa: BLE001
+            entry["error"] = f"{type(exc).__name__}: {exc}"
+
+
+_ESTIMATOR = ("crn-u-statistic-jackknife: per scene, MSE of (model − reference) "
+              "from batches rendered with common random numbers, unbiased "
+              "U-statistic over pairs of batches, jackknife standard error, delta "
+              "method to dB, plus the converged reference peak's residual "
+              "uncertainty (psnr_se_mse: without it, the part that separates two "
+              "models of this comparison); psnr = mean over scenes, "
+              "psnr_se = sqrt(Σ se²)/S")
+
+
+def _render_summary(c: Comparison, engine, seconds: float, cpu: float) -> None:
+    """``result.json``'s timing, reference picture, tone map and estimator."""
+    c.result["timing"] = {"render_seconds": seconds, "render_cpu_seconds": cpu,
+                          "setup_seconds": getattr(engine, "setup_seconds", None),
+                          "renders_isolated": isinstance(engine, IsolatedCRNEngine)}
+    first = next((s for s in c.result["scenes"] if "reference" in s), None)
+    c.result["reference"] = {
+        "png": first["reference"]["png"] if first else None, "render_time": seconds,
+        "foreground_pixels": first["reference"]["foreground_pixels"] if first else 0}
+    if first:
+        c.result["exposure"], c.result["gamma"] = first["exposure"], first["gamma"]
+    c.result["estimator"] = _ESTIMATOR
+
+
+def render_scenes(c: Comparison) -> Comparison:
+    """Render every scene of ``c`` with the reference and every model that is ``ok``, and
+    measure them per scene (``result["scenes"]``, :attr:`Comparison.scene_entries`): the
+    batches of a scene are measured as soon as they are rendered and then dropped. Starts
+    ``result.json`` (:attr:`Comparison.result`)."""
+    _start_result(c)
+    c.result["scenes"] = []
+    t_all, c_all = time.perf_counter(), time.process_time()  # the child's CPU starts at 0
+    engine = _make_scene_engine(c)
+    c.scene_entries = {k: [] for k in (engine.labels if engine is not None else ())}
+    for i, spec in enumerate(c.scenes if engine is not None else ()):
+        rendered = _render_scene(c, engine, i, spec)
+        if rendered is None:
+            continue
+        sc, stacks, failures = rendered
+        _measure_reference(c, engine, i, sc)
+        _measure_scene(c, sc, stacks, failures)
+    t_render, c_render = time.perf_counter() - t_all, cpu_seconds(engine) - c_all
+    if engine is not None and hasattr(engine, "close"):
+        engine.close()
+    _render_summary(c, engine, t_render, c_render)
+    return c
+
+
+def _summarize_model(rec: dict, entries: list[dict]) -> bool:
+    """A rendered model's summary over its scenes (``psnr`` ± ``psnr_se``, mean dE2000, the
+    first scene's pictures); ``False`` (and the record failed) when no scene measured it."""
+    rec["scenes"] = entries
+    rec["render_time"] = None  # all models are rendered in the same passes
+    good = [e for e in entries if "error" not in e]
+    bad = [e for e in entries if "error" in e]
+    if not good:
+        rec.update(status="failed", error="render failed: " + "; ".join(
+            f"{e['scene']}: {e['error']}" for e in bad))
+        return False
+    comb = M.combine_psnr(good)
+    rec["psnr"], rec["psnr_se"] = comb["psnr"], comb["psnr_se"]
+    rec["psnr_se_mse"] = M.combine_psnr(
+        [e | {"psnr_se": e["psnr_se_mse"]} for e in good])["psnr_se"]
+    if comb["bound"]:
+        rec["psnr_bound"] = comb["bound"]
+    rec["mean_de2000"] = float(np.mean([e["mean_de2000"] for e in good]))
+    rec["png"], rec["de_png"] = good[0]["png"], good[0]["de_png"]
+    if bad:
+        rec.setdefault("warnings", []).append(
+            "not rendered in " + ", ".join(f"{e['scene']} ({e['error']})" for e in bad)
+            + "; psnr is the mean over the other scenes")
+    return True
+
+
+def measure_models(c: Comparison) -> Comparison:
+    """Each rendered model's summary over the scenes (:func:`_summarize_model`) and its
+    BRDF-space metrics (:class:`.metrics.BRDFMetrics`, the reference prepared once; an error
+    is recorded in ``brdf["errors"]``)."""
+    bm = None
+    for rec in c.records:
+        if rec["status"] != "ok" or not _summarize_model(rec, c.scene_entries[rec["name"]]):
+            continue
+        try:
+            if bm is None:
+                c.say(f"{c.material}: preparing BRDF-space metrics")
+                bm = M.BRDFMetrics(c.reference, c.options.brdf_metric_samples, c.options.seed,
+                                   c.options.brdf_metrics)
+                c.result["brdf_metrics_setup"] = bm.timings
+            rec["brdf"] = bm.evaluate(c.fitted[rec["name"]])
+        except Exception as exc:  # noqa: BLE001
+            rec["brdf"] = {"errors": {"all": f"{type(exc).__name__}: {exc}"}}
+    return c
+
+
+def _write_plots(c: Comparison) -> dict[str, str]:
+    """The lobes, factors and slices plots of the models that are ``ok`` (name → file); a
+    plot that fails is a note."""
+    ok = {r["name"]: c.fitted[r["name"]] for r in c.records if r["status"] == "ok"}
+    plots: dict[str, str] = {}
+    title = printable(c.material)
+    for key, fn in (("lobes", lambda p: P.plot_lobes(c.reference, ok, p, title=title)),
+                    ("factors", lambda p: P.plot_factors(ok, p, title=title)),
+                    ("slices", lambda p: P.plot_slices(c.reference, ok, p, title=title))):
+        if not ok:
+            break
+        try:
+            if fn(c.folder / f"{key}.png") is not None:
+                plots[key] = f"{key}.png"
+        except Exception as exc:  # noqa: BLE001
+            c.result.setdefault("notes", []).append(
+                f"{key} plot failed: {type(exc).__name__}: {exc}")
+    return plots
+
+
+def write_report(c: Comparison) -> dict:
+    """Write the plots, ``<slug>/result.json``, the material page and (``update_index``) the
+    report index; returns the result."""
+    c.result["plots"] = _write_plots(c)
+    R.write_result(c.folder, c.result)
+    P.plot_colorbar(c.out_dir / "assets" / "de_colorbar.png")
+    R.write_material_page(c.out_dir, c.result)
+    if c.options.update_index:
+        R.write_index(c.out_dir)
+    return c.result
+
+
+def prepare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report",
+            **options) -> Comparison:
+    """:func:`resolve_comparison` then :func:`fit_models`: the comparison with its models
+    fitted, loaded or taken, ready for exports (:meth:`Comparison.fit_files`) and
+    :func:`finish`."""
+    return fit_models(resolve_comparison(source, models, out_dir, **options))
+
+
+def finish(c: Comparison) -> dict:
+    """:func:`render_scenes`, :func:`measure_models` and :func:`write_report`: the result."""
+    return write_report(measure_models(render_scenes(c)))
+
+
+def compare(source, models: Sequence | Mapping = DEFAULT_MODELS, out_dir="report",
+            **options) -> dict:
     """Compare models against one reference BRDF and write its report page.
 
     Parameters
     ----------
-    source:
-        The reference: a BRDF object, a fit file, ``synthetic:NAME`` or a load spec
-        (``INPUT`` with ``material`` → ``INPUT:MATERIAL``).
-    models:
-        Model names to fit (``"tabulated"``, ``"ggx"``, … resolved by :func:`brdffit.fit.registry.get`),
-        paths to saved fit files (``.npz``), ``"label=path.npz"``, or a mapping
-        label → (BRDF object | fit-file path | model name).
-    out_dir:
-        Report directory; the material goes to ``out_dir/<slug>/`` and ``out_dir/index.html``
-        is rebuilt from every material present (``update_index``).
-    scenes:
-        ``"paper"`` (default: the four scenes of Bagher 2016 §5, see :mod:`.render.scenes`),
-        one scene name or several (list or comma-separated: ``sphere-studio``,
-        ``knot-courtyard``, ``sphere-env`` with ``render_options={"envmap": ...}``, ...).
-        ``scene`` (one name, kept for callers of the single-scene form) wins when given.
-    spp, batches, resolution, seed:
-        ``spp`` samples per pixel per scene in total, rendered as ``batches`` independent
-        batches of ``ceil(spp / batches)`` (``batches ≥ 3`` gives standard errors); scene
-        ``i``'s batch ``k`` uses seed ``seed + i·batches + k`` for the reference and every
-        model. ``render_options`` (e.g. ``{"envmap": "studio"}`` for ``sphere-env``/``knot``)
-        go to the scenes or to a custom ``renderer``, which replaces the Mitsuba CRN renderer
-        (see module docstring).
-    exposure, gamma:
-        Tone mapping of the PNGs and of the dE2000 conversion (Bagher et al. 2016 §5):
-        ``"scene"`` uses each scene's fixed exposure and γ (:func:`.render.scenes.scene_exposure`),
-        ``"auto"`` one exposure per scene from its reference, a number the same everywhere;
-        ``gamma=None`` is the scene's (2.2).
-    noise_floor:
-        Ignored (the standard error replaces the noise floor); kept for old callers.
-    write_exr:
-        Linear EXRs of the mean images: ``"reference"`` (default) the references only,
-        ``True`` every model too, ``False`` none.
-    fit_options:
-        Per-model keyword arguments of the fitters.
-    exports:
-        ``exports(model, folder, stem) -> [paths relative to the material folder]`` writes
-        engine files of every fitted or loaded model under ``<slug>/exports/``
-        (:func:`brdffit.export.report_exports`: JSON, glTF and MaterialX), linked with the fit
-        files from the material page; ``None`` (default) writes none.
-    isolate_renders:
-        Render in a child process (default): a renderer that dies from a signal fails the
-        scene it was rendering (``scenes[i]["error"]``, one line through ``progress``) and
-        the other scenes go on in a new child. BRDFs that cannot be pickled are rendered in
-        this process, with a note.
-    brdf_metric_samples, brdf_metrics:
-        Sample pairs of the cosine-weighted relative error and which BRDF-space metrics to
-        compute (:class:`.metrics.BRDFMetrics`; the reference is prepared once).
+    source, models, out_dir, material, name
+        As :func:`resolve_comparison`.
+    **options
+        :class:`CompareOptions`.
 
-    Returns the result dict that is also written to ``out_dir/<slug>/result.json``: per model
-    ``psnr`` (mean over scenes, dB), ``psnr_se`` (its standard error, dB, including the
-    reference peak's residual uncertainty; ``psnr_se_mse`` without it), ``scenes`` (per
-    scene: ``psnr``, ``psnr_se``, ``mse``, ``mse_se``, … of :func:`.metrics.crn_psnr`, mean
-    dE2000 and the pictures), and a top-level ``scenes`` list (name, map, exposure, reference
-    picture and converged peak, render times); ``proposal`` (the sampling mixture fitted to
-    the reference) and ``timing``.
+    Returns
+    -------
+    dict
+        The result that is also written to ``out_dir/<slug>/result.json``: per model
+        ``psnr`` (mean over scenes, dB), ``psnr_se`` (its standard error, dB, including the
+        reference peak's residual uncertainty; ``psnr_se_mse`` without it), ``scenes`` (per
+        scene: ``psnr``, ``psnr_se``, ``mse``, ``mse_se``, … of :func:`.metrics.crn_psnr`,
+        mean dE2000 and the pictures), and a top-level ``scenes`` list (name, map, exposure,
+        reference picture and converged peak, render times); ``proposal`` (the sampling
+        mixture fitted to the reference) and ``timing``.
+
+    Notes
+    -----
+    No engine files are written: :func:`brdffit.batch.compare_with_exports` writes them
+    between :func:`prepare` and :func:`finish`.
     """
-    if exports is not None and exports is not False and not callable(exports):
-        raise TypeError(f"exports: expected a function such as brdffit.export.report_exports, "
-                        f"or None, found {exports!r}")
-    say = progress or (lambda msg: None)
-    out_dir = Path(out_dir)
-    reference = resolve_reference(source, material)
-    mat_name = name or getattr(reference, "name", None) or (material or str(source))
-    slug = _safe_name(mat_name)
-    mdir = out_dir / slug
-    mdir.mkdir(parents=True, exist_ok=True)
-    ropts = dict(render_options or {})
-    auto_exposure, tonemap = _tonemapper()
-    fit_options = dict(fit_options or {})
-    batches = max(1, min(int(batches), int(spp)))
-    spp_batch = max(1, -(-int(spp) // batches))
-    specs, scene_notes = scene_suite(scene if scene is not None else scenes, ropts.get("envmap"))
-    if spp_batch * batches != int(spp):
-        scene_notes = [*scene_notes, f"{int(spp)} samples per pixel asked, {spp_batch * batches} "
-                       f"rendered: {batches} batches of {spp_batch}"]
-
-    # ---- resolve / fit models --------------------------------------------------------
-    entries: list[tuple[str, Any]] = []
-    if isinstance(models, Mapping):
-        entries = list(models.items())
-    else:
-        for m in models:
-            if isinstance(m, str) and "=" in m:
-                label, what = m.split("=", 1)
-                entries.append((label, what))
-            elif isinstance(m, str) and m.endswith(".npz"):
-                entries.append((Path(m).stem, m))
-            else:
-                entries.append((str(m), m))
-    fitted: dict[str, Any] = {}
-    records: list[dict] = []
-    for label, what in entries:
-        rec: dict[str, Any] = {"name": label, "status": "ok"}
-        records.append(rec)
-        try:
-            if hasattr(what, "eval"):
-                model, rec["fit_time"] = what, None
-                rec["origin"] = "given"
-            elif isinstance(what, (str, Path)) and str(what).endswith(".npz"):
-                model = load_fit(what)
-                rec["origin"] = f"loaded {what}"
-                rec["loaded_from"] = str(what)
-                info = getattr(model, "fit_info", None) or {}
-                rec["fit_time"] = _num(info.get("time", info.get("time_s")))  # NPF: time_s
-            elif is_isotropic_only(str(what)) and not getattr(reference, "isotropic", False):
-                rec.update(status="skipped", error=f"{what} fits isotropic BRDFs only")
-                continue
-            else:
-                say(f"{mat_name}: fitting {label}")
-                model, rec["fit_time"] = fit_model(str(what), reference, fit_options.get(label))
-                rec["origin"] = "fitted"
-            fitted[label] = model
-            rec["model_class"] = type(model).__name__
-            rec["params"] = model_params(model)
-            rec["validity"] = [v.as_dict() for v in check_validity(model)]
-            info = getattr(model, "fit_info", None)
-            if info:
-                rec["fit_info"] = small_json(dict(info))
-                rec["convergence"] = _convergence(model)
-            if exports and rec.get("loaded_from"):
-                # the fit file where it is (e.g. a batch's OUT/fits/), linked relative to the page
-                import os
-
-                rel = Path(os.path.relpath(Path(rec["loaded_from"]).resolve(), mdir.resolve()))
-                rec["fit_file"] = rel.as_posix()
-                rec["table_bytes"] = table_bytes(model)
-                rec["exports"] = exports(model, mdir / "exports", _safe_name(label))
-            if save_fits and rec["origin"] == "fitted":
-                try:
-                    if isinstance(model, SerializableModel) and model.fit_kind:
-                        fp = save_fit(model, mdir / "fits" / f"{_safe_name(label)}.npz",
-                                      source=getattr(reference, "source", None))
-                        rec["fit_file"] = f"fits/{fp.name}"
-                        rec["table_bytes"] = table_bytes(model)
-                        if exports:
-                            rec["exports"] = exports(model, mdir / "exports",
-                                                     _safe_name(label))
-                except Exception as exc:  # noqa: BLE001 – saving is a convenience
-                    rec.setdefault("warnings", []).append(f"could not save fit: {exc}")
-        except Exception as exc:  # noqa: BLE001 – one failing model must not sink the report
-            rec.update(status="failed", error=f"fit/load failed: {type(exc).__name__}: {exc}")
-            rec["traceback"] = traceback.format_exc(limit=4)
-
-    settings = {"scenes": [sp.name for sp in specs], "spp": int(spp_batch * batches),
-                "batches": int(batches), "spp_per_batch": int(spp_batch),
-                "resolution": int(resolution), "seed": int(seed),
-                **{k: (v if isinstance(v, (int, float, str, bool)) else str(v))
-                   for k, v in ropts.items()}}
-    result: dict[str, Any] = {"material": mat_name, "slug": slug,
-                              "source": getattr(reference, "source", None) or (
-                                  str(source) if not hasattr(source, "eval") else None),
-                              "scene": settings, "models": records,
-                              "measured_domain": getattr(reference, "measured_domain", None),
-                              "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
-    if scene_notes:
-        result["notes"] = list(scene_notes)
-
-    # ---- render: every scene, every batch, reference and models with CRN --------------
-    ok_labels = [r["name"] for r in records if r["status"] == "ok"]
-    t_all, c_all = time.perf_counter(), time.process_time()  # the child's CPU starts at 0
-    renderer = renderer or _default_renderer()
-    result["scenes"] = []
-    try:
-        if renderer is None:
-            engine, note = _make_engine(reference, {k: fitted[k] for k in ok_labels}, records,
-                                        say, mat_name, isolate_renders)
-            if note:
-                result.setdefault("notes", []).append(note)
-            result["proposal"] = engine.proposal_dict
-        else:
-            engine = _CallbackEngine(renderer, reference, {k: fitted[k] for k in ok_labels},
-                                     ropts)
-    except ChildCrashed as exc:  # the renderer died while being prepared: nothing renders
-        engine = None
-        result["render_error"] = str(exc)
-        say(f"{mat_name}: {exc}")
-        for spec in specs:
-            result["scenes"].append(spec.as_dict() | {"error": str(exc)})
-        for rec in records:
-            if rec["status"] == "ok":
-                rec.update(status="failed", error=f"render failed: {exc}")
-    ok_labels = list(engine.labels) if engine is not None else []  # translation may fail
-    per_model_scenes: dict[str, list] = {k: [] for k in ok_labels}
-    write_all_exr = write_exr is True
-    write_ref_exr = write_exr in (True, "reference")
-    for i, spec in enumerate(specs if engine is not None else ()):
-        seeds = [int(seed) + i * batches + k for k in range(batches)]
-        say(f"{mat_name}: rendering {spec.name} ({batches} × {spp_batch} spp, "
-            f"{len(engine.labels)} models)")
-        srec: dict[str, Any] = spec.as_dict() | {"seeds": seeds}
-        result["scenes"].append(srec)
-        t0, c0 = time.perf_counter(), _cpu_seconds(engine)
-        try:
-            stacks, alpha, failures = engine.render_scene(spec, seeds, spp_batch, resolution)
-        except Exception as exc:  # noqa: BLE001 – the reference of this scene cannot be rendered
-            srec["error"] = str(exc) if isinstance(exc, ChildCrashed) else \
-                f"{type(exc).__name__}: {exc}"
-            for k in ok_labels:
-                per_model_scenes[k].append({"scene": spec.name, "error": srec["error"]})
-            continue
-        srec["render_seconds"] = time.perf_counter() - t0
-        srec["render_cpu_seconds"] = _cpu_seconds(engine) - c0
-        ref_stack = stacks.pop(None)
-        mask = alpha >= 0.999
-        ref_mean = ref_stack.mean(0)
-        if not mask.any():
-            srec["error"] = "the reference has no foreground pixel in this scene"
-            for k in ok_labels:
-                per_model_scenes[k].append({"scene": spec.name, "error": srec["error"]})
-            continue
-        if exposure == "scene":
-            exp_s = float(spec.exposure)
-        elif exposure == "auto":
-            exp_s = float(auto_exposure(ref_mean, mask))
-        else:
-            exp_s = float(exposure)
-        gam = float(spec.gamma if gamma is None else gamma)
-        srec["exposure"], srec["gamma"] = exp_s, gam
-
-        def tm(img, exp_s=exp_s, gam=gam):
-            return tonemap(img, exposure=exp_s, gamma=gam)
-
-        ref_png = f"{_safe_name(spec.name)}-reference.png"
-        _write_png(mdir / ref_png, tm(ref_mean))
-        srec["reference"] = {"png": ref_png, "foreground_pixels": int(mask.sum())}
-        t1, c1 = time.perf_counter(), _cpu_seconds(engine)
-        try:
-            srec["reference"] |= engine.peak(spec, ref_stack, mask, resolution,
-                                             seed=int(seed) + 100000 + 16 * i)
-        except Exception as exc:  # noqa: BLE001 – the batches' own peak is the fallback
-            srec["reference"] |= _peak_from_batches(ref_stack, mask)
-            srec.setdefault("warnings", []).append(
-                f"the peak was not converged ({type(exc).__name__}: {exc}); the batches' "
-                "maximum is used")
-        srec["peak_seconds"] = time.perf_counter() - t1
-        srec["peak_cpu_seconds"] = _cpu_seconds(engine) - c1
-        if write_ref_exr and _write_exr(mdir / ref_png.replace(".png", ".exr"), ref_mean) is not None:
-            srec["reference"]["exr"] = ref_png.replace(".png", ".exr")
-        peak_se = float(srec["reference"].get("peak_psnr_se", 0.0))
-        de_ref = M.DeltaE2000(ref_mean, mask, tonemap=tm)
-        for label in ok_labels:
-            entry: dict[str, Any] = {"scene": spec.name}
-            per_model_scenes[label].append(entry)
-            if label in failures:
-                entry["error"] = failures[label]
-                continue
-            try:
-                stack = stacks[label]
-                est = M.crn_psnr(ref_stack, stack, mask, peak=srec["reference"]["peak"])
-                entry.update({k: est[k] for k in ("psnr", "mse", "mse_se", "noise_mse",
-                                                  "resolved", "bound", "psnr_plain")})
-                # se of the MSE estimate (what separates two models of this comparison) and
-                # the total with the peak's residual uncertainty (the absolute value's)
-                entry["psnr_se_mse"] = est["psnr_se"]
-                entry["psnr_se"] = float(np.hypot(est["psnr_se"], peak_se)) if np.isfinite(
-                    est["psnr"]) else est["psnr_se"]
-                img = stack.mean(0)
-                de = de_ref.image(img)
-                entry["mean_de2000"] = float(np.nanmean(de))
-                fn = f"{_safe_name(spec.name)}-{_safe_name(label)}"
-                _write_png(mdir / f"{fn}.png", tm(img))
-                _write_png(mdir / f"{fn}_de2000.png", M.colorize_delta_e(de))
-                entry["png"], entry["de_png"] = f"{fn}.png", f"{fn}_de2000.png"
-                if write_all_exr and _write_exr(mdir / f"{fn}.exr", img) is not None:
-                    entry["exr"] = f"{fn}.exr"
-            except Exception as exc:  # noqa: BLE001
-                entry["error"] = f"{type(exc).__name__}: {exc}"
-    t_render, c_render = time.perf_counter() - t_all, _cpu_seconds(engine) - c_all
-    if engine is not None and hasattr(engine, "close"):
-        engine.close()
-    result["timing"] = {"render_seconds": t_render, "render_cpu_seconds": c_render,
-                        "setup_seconds": getattr(engine, "setup_seconds", None),
-                        "renders_isolated": isinstance(engine, _IsolatedCRNEngine)}
-    first = next((s for s in result["scenes"] if "reference" in s), None)
-    result["reference"] = {"png": first["reference"]["png"] if first else None,
-                           "render_time": t_render,
-                           "foreground_pixels": first["reference"]["foreground_pixels"] if first else 0}
-    if first:
-        result["exposure"], result["gamma"] = first["exposure"], first["gamma"]
-    result["estimator"] = ("crn-u-statistic-jackknife: per scene, MSE of (model − reference) "
-                           "from batches rendered with common random numbers, unbiased "
-                           "U-statistic over pairs of batches, jackknife standard error, delta "
-                           "method to dB, plus the converged reference peak's residual "
-                           "uncertainty (psnr_se_mse: without it, the part that separates two "
-                           "models of this comparison); psnr = mean over scenes, "
-                           "psnr_se = sqrt(Σ se²)/S")
-
-    # ---- per-model summary over scenes, BRDF-space metrics ---------------------------
-    bm = None
-    for rec in records:
-        if rec["status"] != "ok":
-            continue
-        label = rec["name"]
-        rec["scenes"] = per_model_scenes[label]
-        rec["render_time"] = None  # all models are rendered in the same passes
-        good = [e for e in rec["scenes"] if "error" not in e]
-        bad = [e for e in rec["scenes"] if "error" in e]
-        if not good:
-            rec.update(status="failed", error="render failed: " + "; ".join(
-                f"{e['scene']}: {e['error']}" for e in bad))
-            continue
-        comb = M.combine_psnr(good)
-        rec["psnr"], rec["psnr_se"] = comb["psnr"], comb["psnr_se"]
-        rec["psnr_se_mse"] = M.combine_psnr(
-            [e | {"psnr_se": e["psnr_se_mse"]} for e in good])["psnr_se"]
-        if comb["bound"]:
-            rec["psnr_bound"] = comb["bound"]
-        rec["mean_de2000"] = float(np.mean([e["mean_de2000"] for e in good]))
-        rec["png"], rec["de_png"] = good[0]["png"], good[0]["de_png"]
-        if bad:
-            rec.setdefault("warnings", []).append(
-                "not rendered in " + ", ".join(f"{e['scene']} ({e['error']})" for e in bad)
-                + "; psnr is the mean over the other scenes")
-        try:
-            if bm is None:
-                say(f"{mat_name}: preparing BRDF-space metrics")
-                bm = M.BRDFMetrics(reference, brdf_metric_samples, seed, brdf_metrics)
-                result["brdf_metrics_setup"] = bm.timings
-            rec["brdf"] = bm.evaluate(fitted[label])
-        except Exception as exc:  # noqa: BLE001
-            rec["brdf"] = {"errors": {"all": f"{type(exc).__name__}: {exc}"}}
-
-    # ---- plots -----------------------------------------------------------------------
-    ok = {r["name"]: fitted[r["name"]] for r in records if r["status"] == "ok"}
-    plots: dict[str, str] = {}
-    title = printable(mat_name)
-    for key, fn in (("lobes", lambda p: P.plot_lobes(reference, ok, p, title=title)),
-                    ("factors", lambda p: P.plot_factors(ok, p, title=title)),
-                    ("slices", lambda p: P.plot_slices(reference, ok, p, title=title))):
-        if not ok:
-            break
-        try:
-            if fn(mdir / f"{key}.png") is not None:
-                plots[key] = f"{key}.png"
-        except Exception as exc:  # noqa: BLE001
-            result.setdefault("notes", []).append(f"{key} plot failed: {type(exc).__name__}: {exc}")
-    result["plots"] = plots
-
-    R.write_result(mdir, result)
-    P.plot_colorbar(out_dir / "assets" / "de_colorbar.png")
-    R.write_material_page(out_dir, result)
-    if update_index:
-        R.write_index(out_dir)
-    return result
+    return finish(prepare(source, models, out_dir, **options))
 
 
-def _peak_candidates(ref_stack, mask):
-    """Per-pixel peak statistics of the reference batches: the mean image's max RGB component
-    ``v``, its standard error ``se`` (spread of that channel over the batches) and the
-    candidate pixels that could hold the converged maximum (``v + 2 se ≥ max(v − 2 se)``)."""
-    K = ref_stack.shape[0]
-    mean = ref_stack.mean(0)
-    c = np.argmax(mean, -1)
-    v = np.take_along_axis(mean, c[..., None], -1)[..., 0]
-    if K > 1:
-        ch = np.take_along_axis(ref_stack, np.broadcast_to(c[None, ..., None], ref_stack.shape[:3] + (1,)), -1)[..., 0]
-        se = ch.std(0, ddof=1) / np.sqrt(K)
-    else:
-        se = np.zeros_like(v)
-    vm = np.where(mask, v, -np.inf)
-    lo = np.max(np.where(mask, v - 2 * se, -np.inf))
-    cand = mask & (vm + 2 * se >= lo)
-    return v, se, cand
-
-
-def _peak_from_batches(ref_stack, mask) -> dict:
-    """The PSNR numerator from the batches alone: max RGB of the mean reference foreground,
-    with the standard error of that pixel and the PSNR shift it can cause (``20/ln 10 ·
-    se/peak`` dB, common to every model of the scene)."""
-    v, se, _ = _peak_candidates(ref_stack, mask)
-    j = np.unravel_index(np.argmax(np.where(mask, v, -np.inf)), v.shape)
-    peak = float(v[j])
-    out = {"peak": peak, "peak_source": f"mean of the {ref_stack.shape[0]} batches"}
-    if ref_stack.shape[0] > 1 and peak > 0:
-        out |= {"peak_rel_se": float(se[j] / peak),
-                "peak_psnr_se": float(20.0 / np.log(10.0) * se[j] / peak)}
-    return out
-
-
-class _CRNEngine:
-    """Mitsuba renders with common random numbers: one :class:`.render.core.MultiRenderer`
-    pass per scene and batch renders the reference and every model (evaluators and the
-    proposal built once per comparison)."""
-
-    REF = "\0reference"
-
-    def __init__(self, reference, models: Mapping, records, say, mat_name):
-        t0 = time.perf_counter()
-        say(f"{mat_name}: preparing the renderer (evaluators, proposal)")
-        self.evaluators = {self.REF: to_evaluator(reference)}
-        self.models = {self.REF: reference}
-        by = {r["name"]: r for r in records}
-        for label, model in models.items():
-            try:
-                self.evaluators[label] = to_evaluator(model)
-                self.models[label] = model
-                by[label]["evaluator"] = _describe(self.evaluators[label])
-            except Exception as exc:  # noqa: BLE001
-                by[label].update(status="failed",
-                                 error=f"render failed: {type(exc).__name__}: {exc}")
-                by[label]["traceback"] = traceback.format_exc(limit=4)
-        self.labels = [k for k in self.models if k != self.REF]
-        self.records = [by[k] for k in models]
-        self.proposal = proposal_for(reference)
-        self.proposal_dict = self.proposal.as_dict()
-        self.setup_seconds = time.perf_counter() - t0
-
-    #: Converging the reference's peak: samples, number of windows, window side.
-    PEAK_SAMPLES = 1 << 20
-    PEAK_WINDOWS = 3
-    PEAK_WINDOW = 3
-
-    def peak(self, spec, ref_stack, mask, resolution, seed) -> dict:
-        """Converge the PSNR numerator (Bagher 2016 §5: the max RGB component of the
-        *ground-truth* foreground).
-
-        The max over the noisy mean of the batches is biased upwards: the brightest pixels of
-        a highlight carry the most noise (10-25 % relative at 64 spp on a glossy sphere under
-        the studio lights) and the max picks the luckiest; the peak scales every model's PSNR
-        of the scene alike. So the batches only *select* the pixels: the ``PEAK_WINDOWS``
-        brightest of the mean reference, at least ``PEAK_WINDOW`` pixels apart, and the
-        ``PEAK_WINDOW × PEAK_WINDOW`` windows around them are re-rendered with the reference
-        alone and independent seeds, ``PEAK_SAMPLES`` samples in all (4 batches, so their
-        standard error is known; ~40k spp per pixel). The peak is the max of those converged
-        windows over the foreground: with independent samples the selection's luck does not
-        carry over, the max over a few converged pixels has a negligible bias, and missing
-        the true maximum pixel costs little precisely when many pixels are close to it (a
-        broad highlight). Reported: ``peak``, ``peak_rel_se`` / ``peak_psnr_se`` (residual
-        uncertainty; added to every model's ``psnr_se`` of the scene), ``peak_batches_only``
-        (the naive max, for comparison) and the windows."""
-        v, _, _ = _peak_candidates(ref_stack, mask)
-        H, Wd = v.shape
-        W = self.PEAK_WINDOW
-        vm = np.where(mask, v, -np.inf)
-        batches_max = float(vm.max())
-        windows = []
-        for _ in range(self.PEAK_WINDOWS):
-            if not np.isfinite(vm.max()):
-                break
-            jy, jx = np.unravel_index(np.argmax(vm), vm.shape)
-            y0 = int(np.clip(jy - W // 2, 0, max(H - W, 0)))
-            x0 = int(np.clip(jx - W // 2, 0, max(Wd - W, 0)))
-            windows.append((x0, y0, min(W, Wd), min(W, H)))
-            vm[max(0, y0 - W // 2):y0 + W + W // 2, max(0, x0 - W // 2):x0 + W + W // 2] = -np.inf
-        nb = 4
-        area = sum(w * h for _, _, w, h in windows)
-        spp = int(np.clip(self.PEAK_SAMPLES // (area * nb), 64, 1 << 16))
-        mr = MultiRenderer({self.REF: self.models[self.REF]}, scene=spec.name, envmap=spec.envmap,
-                           resolution=resolution, proposal=self.proposal,
-                           evaluators={self.REF: self.evaluators[self.REF]})
-        best = None
-        for k, (x0, y0, w, h) in enumerate(windows):
-            st = np.stack([mr.render(seed + 4 * k + b, spp, crop=(x0, y0, w, h)).images[self.REF]
-                           for b in range(nb)])
-            wv, wse, _ = _peak_candidates(st, np.ones((h, w), bool))
-            wv = np.where(mask[y0:y0 + h, x0:x0 + w], wv, -np.inf)
-            j = np.unravel_index(np.argmax(wv), wv.shape)
-            if best is None or wv[j] > best[0]:
-                best = (float(wv[j]), float(wse[j]))
-        if best is None or not best[0] > 0:
-            return _peak_from_batches(ref_stack, mask)
-        peak, pse = best
-        return {"peak": peak, "peak_rel_se": pse / peak,
-                "peak_psnr_se": float(20.0 / np.log(10.0) * pse / peak),
-                "peak_source": f"{len(windows)} window(s) of the brightest pixels re-rendered "
-                               f"with {nb * spp} spp",
-                "peak_windows": [list(w) for w in windows], "peak_spp": nb * spp,
-                "peak_batches_only": batches_max}
-
-    def _render(self, labels, spec, seeds, spp, resolution):
-        keys = [self.REF] + list(labels)
-        mr = MultiRenderer({k: self.models[k] for k in keys}, scene=spec.name,
-                           envmap=spec.envmap, resolution=resolution, proposal=self.proposal,
-                           evaluators={k: self.evaluators[k] for k in keys})
-        stacks = {k: [] for k in keys}
-        alpha = []
-        for i, s in enumerate(seeds):
-            report(stage=f"render {spec.name}, {len(keys)} images", iteration=i + 1,
-                   max_iterations=len(seeds))
-            res = mr.render(s, spp)
-            for k in keys:
-                stacks[k].append(res.images[k])
-            alpha.append(res.alpha)
-        return {k: np.stack(v) for k, v in stacks.items()}, np.mean(alpha, 0)
-
-    def render_scene(self, spec, seeds, spp, resolution):
-        failures: dict[str, str] = {}
-        try:
-            stacks, alpha = self._render(self.labels, spec, seeds, spp, resolution)
-        except Exception:  # noqa: BLE001 – isolate the model that breaks the pass
-            stacks, alpha = self._render([], spec, seeds, spp, resolution)
-            for label in self.labels:
-                try:
-                    one, _ = self._render([label], spec, seeds, spp, resolution)
-                    stacks[label] = one[label]
-                except Exception as exc:  # noqa: BLE001
-                    failures[label] = f"render failed: {type(exc).__name__}: {exc}"
-        stacks[None] = stacks.pop(self.REF)
-        return stacks, alpha, failures
-
-
-# -- the renders in a child process ------------------------------------------------------------
-_CHILD_ENGINE: "_CRNEngine | None" = None
-
-
-def _child_engine_init(reference, models: Mapping, mat_name: str) -> None:
-    """In the renderer's child process: build the :class:`_CRNEngine` that the following
-    :func:`_child_engine_call` use."""
-    global _CHILD_ENGINE
-    records = [{"name": label, "status": "ok"} for label in models]
-    _CHILD_ENGINE = _CRNEngine(reference, models, records, lambda msg: report(stage=msg),
-                               mat_name)
-
-
-def _child_engine_info() -> dict:
-    """What the parent's :class:`_IsolatedCRNEngine` mirrors of the child's engine."""
-    e = _CHILD_ENGINE
-    return {"labels": list(e.labels), "records": e.records, "proposal_dict": e.proposal_dict,
-            "setup_seconds": e.setup_seconds}
-
-
-def _child_engine_call(method: str, *args):
-    return getattr(_CHILD_ENGINE, method)(*args)
-
-
-class _IsolatedCRNEngine:
-    """:class:`_CRNEngine` in a child process (:class:`brdffit._isolation.IsolatedProcess`):
-    a renderer that dies from a signal fails the scene it was rendering, with one line
-    (``the renderer crashed (SIGSEGV) while rendering knot-courtyard for gold-ggx``), and the
-    next scene starts a new child. Same interface as :class:`_CRNEngine`."""
-
-    def __init__(self, reference, models: Mapping, records, say, mat_name):
-        self.mat_name, self.say = mat_name, say
-        say(f"{mat_name}: preparing the renderer (evaluators, proposal)")
-        self.child = IsolatedProcess("the renderer", track_stages=False,
-                                     init=[(_child_engine_init, (reference, dict(models),
-                                                                 mat_name), {})])
-        self.child.stage = f"preparing the renderer for {mat_name}"
-        info = self.child.call(_child_engine_info)
-        by = {r["name"]: r for r in records}
-        for rec in info["records"]:
-            by[rec["name"]].update(rec)
-        self.labels, self.proposal_dict = info["labels"], info["proposal_dict"]
-        self.setup_seconds = info["setup_seconds"]
-
-    def _call(self, stage: str, method: str, *args):
-        self.child.stage = stage
-        try:
-            return self.child.call(_child_engine_call, method, *args)
-        except ChildCrashed as exc:
-            self.say(f"{self.mat_name}: {exc}")
-            raise
-
-    def render_scene(self, spec, seeds, spp, resolution):
-        return self._call(f"rendering {spec.name} for {self.mat_name}", "render_scene", spec,
-                          seeds, spp, resolution)
-
-    def peak(self, spec, ref_stack, mask, resolution, seed) -> dict:
-        return self._call(f"converging the peak of {spec.name} for {self.mat_name}", "peak",
-                          spec, ref_stack, mask, resolution, seed)
-
-    def close(self) -> None:
-        self.child.close()
-
-
-def _cpu_seconds(engine) -> float:
-    """CPU time of this process and of the engine's renderer child (if any)."""
-    child = getattr(getattr(engine, "child", None), "cpu_seconds", 0.0)
-    return time.process_time() + child
-
-
-def _make_engine(reference, models: Mapping, records, say, mat_name, isolate: bool):
-    """The Mitsuba engine, in a child process when ``isolate`` and the BRDFs can be sent
-    there (pickled); otherwise in this process, with the reason. Returns ``(engine, note)``."""
-    if isolate:
-        try:
-            return _IsolatedCRNEngine(reference, models, records, say, mat_name), None
-        except NotSendable as exc:  # e.g. a class defined in __main__
-            note = f"renders ran in this process, not isolated: {exc}"
-            say = (lambda msg: None)  # "preparing the renderer" was said already
-    else:
-        note = None
-    return _CRNEngine(reference, models, records, say, mat_name), note
-
-
-class _CallbackEngine:
-    """A user renderer called per model, scene and batch with the batch's seed."""
-
-    def __init__(self, renderer, reference, models: Mapping, ropts):
-        self.renderer, self.reference, self.models, self.ropts = renderer, reference, models, ropts
-        self.labels = list(models)
-        self.setup_seconds = 0.0
-
-    def peak(self, spec, ref_stack, mask, resolution, seed) -> dict:
-        return _peak_from_batches(ref_stack, mask)
-
-    def render_scene(self, spec, seeds, spp, resolution):
-        opts = dict(self.ropts)
-        if spec.envmap is not None and isinstance(spec.envmap, str):
-            opts["envmap"] = spec.envmap
-        failures: dict[str, str] = {}
-        ref, alpha = [], []
-        for s in seeds:
-            img, mask = _unpack_render(self.renderer(self.reference, scene=spec.name, spp=spp,
-                                                     resolution=resolution, seed=s, **opts))
-            ref.append(img)
-            alpha.append(mask.astype(np.float64))
-        stacks = {None: np.stack(ref)}
-        for label, model in self.models.items():
-            try:
-                stacks[label] = np.stack([
-                    _unpack_render(self.renderer(model, scene=spec.name, spp=spp,
-                                                 resolution=resolution, seed=s, **opts))[0]
-                    for s in seeds])
-            except Exception as exc:  # noqa: BLE001
-                failures[label] = f"render failed: {type(exc).__name__}: {exc}"
-        return stacks, np.min(alpha, 0), failures
-
-
-def _describe(ev) -> str:
-    return describe_evaluator(ev)
-
-
-def compare_many(sources: Iterable, models=DEFAULT_MODELS, out_dir="report", **kw) -> list[dict]:
+def compare_many(sources: Iterable, models=DEFAULT_MODELS, out_dir="report", *,
+                 run: Callable[..., dict] | None = None, **kw) -> list[dict]:
     """:func:`compare` for several inputs (each a BRDF or spec), then one index rebuild.
 
-    A material that fails entirely (cannot be loaded or the reference cannot be rendered) is
+    ``run`` compares one material, with :func:`compare`'s arguments (default
+    :func:`compare`; :func:`brdffit.batch.compare_with_exports` adds the engine files). A
+    material that fails entirely (cannot be loaded or the reference cannot be rendered) is
     reported in the returned list as ``{"material": ..., "error": ...}`` and skipped.
     """
+    run = run or compare
     results = []
     for src in sources:
         try:
-            results.append(compare(src, models, out_dir, update_index=False, **kw))
+            results.append(run(src, models, out_dir, update_index=False, **kw))
         except (BRDFError, OSError, ValueError, RuntimeError, KeyError) as exc:
             results.append({"material": str(getattr(src, "name", src)),
                             "error": f"{type(exc).__name__}: {exc}"})

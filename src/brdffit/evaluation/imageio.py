@@ -33,6 +33,18 @@ def _as_image(img, path) -> np.ndarray:
     return img
 
 
+def _read_file(path: Path, a_kind: str, kind: str, read):
+    """``read(path)``, with :class:`BRDFFormatError` naming ``path`` when it is not a file
+    ("expected {a_kind} file") or ``read`` raises ("expected a readable {kind} image"; the
+    image libraries raise plain exceptions on corrupt files)."""
+    if not path.is_file():
+        raise BRDFFormatError(path, f"expected {a_kind} file, found no such file")
+    try:
+        return read(path)
+    except Exception as exc:
+        raise BRDFFormatError(path, f"expected a readable {kind} image, could not read it: {exc}")
+
+
 def write_exr(path, img) -> Path:
     """Write a linear float image ``(H, W[, 1|3|4])`` as a float32 EXR, atomically."""
     import OpenEXR
@@ -55,14 +67,12 @@ def read_exr(path) -> np.ndarray:
     """Read an EXR as float32 ``(H, W, C)`` with C = 3 (RGB), 4 (RGBA) or 1 (Y)."""
     import OpenEXR
 
+    def channels(p: Path) -> dict:
+        with OpenEXR.File(str(p), separate_channels=True) as f:
+            return {k: np.asarray(v.pixels) for k, v in f.channels().items()}
+
     path = Path(path)
-    if not path.is_file():
-        raise BRDFFormatError(path, "expected an EXR file, found no such file")
-    try:
-        with OpenEXR.File(str(path), separate_channels=True) as f:
-            ch = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
-    except Exception as exc:  # OpenEXR raises plain Exceptions on corrupt files
-        raise BRDFFormatError(path, f"expected a readable OpenEXR image, could not read it: {exc}")
+    ch = _read_file(path, "an EXR", "OpenEXR", channels)
     if all(c in ch for c in "RGB"):
         names = ["R", "G", "B"] + (["A"] if "A" in ch else [])
     elif "Y" in ch:
@@ -95,14 +105,12 @@ def read_png(path) -> np.ndarray:
     """Read a PNG as uint8 ``(H, W, C)``."""
     from PIL import Image
 
+    def pixels(p: Path) -> np.ndarray:
+        with Image.open(p) as im:
+            return np.asarray(im)
+
     path = Path(path)
-    if not path.is_file():
-        raise BRDFFormatError(path, "expected a PNG file, found no such file")
-    try:
-        with Image.open(path) as im:
-            arr = np.asarray(im)
-    except Exception as exc:
-        raise BRDFFormatError(path, f"expected a readable PNG image, could not read it: {exc}")
+    arr = _read_file(path, "a PNG", "PNG", pixels)
     return arr if arr.ndim == 3 else arr[..., None]
 
 

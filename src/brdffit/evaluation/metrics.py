@@ -169,6 +169,42 @@ def psnr_from_mse(peak: float, mse: float) -> float:
     return float(10.0 * np.log10(peak * peak / mse))
 
 
+def _foreground_differences(reference, test, mask) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, D)`` of :func:`crn_psnr`, both ``(K, P)`` float64: the reference batches on the
+    foreground ``mask`` (P values: pixels × channels) and the differences test − reference
+    (checked finite); a single ``(H, W, 3)`` image pair is one batch."""
+    ref = np.asarray(reference, dtype=np.float64)
+    tst = np.asarray(test, dtype=np.float64)
+    if ref.ndim == 3:
+        ref, tst = ref[None], tst[None]
+    if ref.ndim != 4 or ref.shape[-1] != 3 or tst.shape != ref.shape:
+        raise ValueError(f"expected two (K, H, W, 3) stacks of the same shape, found {ref.shape} "
+                         f"and {tst.shape}")
+    K = ref.shape[0]
+    if mask is None:
+        m = np.ones(ref.shape[1:3], bool)
+    else:
+        m = np.asarray(mask).astype(bool)
+        if m.shape != ref.shape[1:3]:
+            raise ValueError(f"foreground mask: expected shape {ref.shape[1:3]}, found {m.shape}")
+    if not m.any():
+        raise ValueError("foreground mask: expected at least one foreground pixel, found none")
+    R = ref[:, m, :].reshape(K, -1)
+    D = tst[:, m, :].reshape(K, -1) - R
+    if not np.all(np.isfinite(D)):
+        raise ValueError("test image: expected finite values on the foreground, found NaN/inf")
+    return R, D
+
+
+def _jackknife_se(D: np.ndarray, S: np.ndarray, base: float) -> float:
+    """Delete-one-batch jackknife standard error of :func:`crn_psnr`'s ``MSE_U`` (K ≥ 3
+    batches, rows of ``D``; ``S = Σ_k D_k``, ``base = mean_P (S² − Q)``): U without batch k
+    is ``mean_P[(S − D_k)² − (Q − D_k²)] / ((K−1)(K−2))``."""
+    K = D.shape[0]
+    loo = (base - 2.0 * (D @ S) / D.shape[1] + 2.0 * np.mean(D * D, axis=1)) / ((K - 1) * (K - 2))
+    return float(np.sqrt((K - 1) / K * np.sum(np.square(loo - loo.mean()))))
+
+
 def crn_psnr(reference, test, mask=None, peak: float | None = None) -> dict:
     """Rendered PSNR (Bagher 2016 §5) with its standard error, from K independent batches.
 
@@ -208,26 +244,8 @@ def crn_psnr(reference, test, mask=None, peak: float | None = None) -> dict:
     ``peak``, ``batches``, ``resolved``, ``bound`` (``None`` or ``"lower"``),
     ``psnr_plain`` (PSNR of the mean images, biased low).
     """
-    ref = np.asarray(reference, dtype=np.float64)
-    tst = np.asarray(test, dtype=np.float64)
-    if ref.ndim == 3:
-        ref, tst = ref[None], tst[None]
-    if ref.ndim != 4 or ref.shape[-1] != 3 or tst.shape != ref.shape:
-        raise ValueError(f"expected two (K, H, W, 3) stacks of the same shape, found {ref.shape} "
-                         f"and {tst.shape}")
-    K = ref.shape[0]
-    if mask is None:
-        m = np.ones(ref.shape[1:3], bool)
-    else:
-        m = np.asarray(mask).astype(bool)
-        if m.shape != ref.shape[1:3]:
-            raise ValueError(f"foreground mask: expected shape {ref.shape[1:3]}, found {m.shape}")
-    if not m.any():
-        raise ValueError("foreground mask: expected at least one foreground pixel, found none")
-    R = ref[:, m, :].reshape(K, -1)
-    D = tst[:, m, :].reshape(K, -1) - R
-    if not np.all(np.isfinite(D)):
-        raise ValueError("test image: expected finite values on the foreground, found NaN/inf")
+    R, D = _foreground_differences(reference, test, mask)
+    K = R.shape[0]
     if peak is None:
         peak = float(np.max(R.mean(0)))
     if not np.isfinite(peak) or peak <= 0:
@@ -246,11 +264,7 @@ def crn_psnr(reference, test, mask=None, peak: float | None = None) -> dict:
                       "bound": "lower"}
     base = np.mean(S * S - Q)
     mse = float(base / (K * (K - 1)))
-    se = float("nan")
-    if K >= 3:
-        # U without batch k: mean_P[(S − D_k)² − (Q − D_k²)] / ((K−1)(K−2))
-        loo = (base - 2.0 * (D @ S) / D.shape[1] + 2.0 * np.mean(D * D, axis=1)) / ((K - 1) * (K - 2))
-        se = float(np.sqrt((K - 1) / K * np.sum(np.square(loo - loo.mean()))))
+    se = _jackknife_se(D, S, base) if K >= 3 else float("nan")
     out |= {"mse": mse, "mse_se": se, "noise_mse": mse_plain - mse}
     if mse > 0:
         resolved = bool(np.isfinite(se) and mse > 2.0 * se)

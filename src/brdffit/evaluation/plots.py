@@ -238,67 +238,10 @@ def plot_factors(fits: Mapping[str, object], path, n: int = 200, title: str | No
     th = _angles(n)
     row = 0
     if micro:
-        axF, axD, axG = axes[0]
-        m = np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], -1)
-        styles = ("-", "--", ":", "-.")
-        from matplotlib.lines import Line2D
-
-        fresnel_keys = []   # one legend entry per model: its line style, in black
-        for k, (name, model) in enumerate(micro.items()):
-            col = _MODEL_COLOURS[k % len(_MODEL_COLOURS)]
-            ls = styles[k % len(styles)]
-            lobes = _channel_lobes(model)
-            if lobes:
-                _plot_channel_lobes(axF, axD, axG, name, lobes, th, m, ls)
-                fresnel_keys.append(Line2D([], [], ls=ls, color="k", lw=1,
-                                           label=f"{name} (per channel)"))
-                continue
-            if getattr(model, "fresnel", None) is not None or hasattr(model, "_fresnel"):
-                try:
-                    F = _specular_fresnel(model, np.cos(th))
-                    for c in range(min(3, F.shape[1])):
-                        axF.plot(np.degrees(th), F[:, c], ls, color=_RGB[c], lw=1)
-                    fresnel_keys.append(Line2D([], [], ls=ls, color="k", lw=1, label=name))
-                except Exception:  # noqa: BLE001 – a factor that cannot be evaluated is skipped
-                    pass
-            dist = getattr(model, "distribution", None)
-            if dist is not None:
-                try:
-                    D = np.asarray(dist.D(m), float)
-                    axD.semilogy(np.degrees(th), np.maximum(D, 1e-8), ls, color=col, lw=1, label=name)
-                except Exception:  # noqa: BLE001
-                    pass
-                try:
-                    G = np.asarray(dist.G1(m), float)
-                    axG.plot(np.degrees(th), G, ls, color=col, lw=1, label=name)
-                except Exception:  # noqa: BLE001
-                    pass
-        axF.set(title="Fresnel ks·F (colour: R, G, B)", xlabel="θd (°)")
-        axD.set(title="NDF D", xlabel="θh (°)")
-        axG.set(title="Smith G1", xlabel="θ (°)", ylim=(0, 1.05))
-        if fresnel_keys:
-            axF.legend(handles=fresnel_keys, fontsize=6)
-        for ax in (axD, axG):
-            if ax.get_legend_handles_labels()[0]:
-                ax.legend(fontsize=6)
+        _plot_microfacet_factors(axes[0], micro, th)
         row = 1
     for name, tabs in npf.items():
-        third = ("G", "θ") if "G" in tabs or "H" not in tabs else ("H", "φd")
-        for j, (key, label) in enumerate((("D", "θh"), ("F", "θd"), third)):
-            ax = axes[row][j]
-            tab = tabs.get(key)
-            if tab is None:
-                ax.set_axis_off()
-                continue
-            tab = tab.reshape(tab.shape[0], -1)
-            x = np.asarray(tabs.get(f"theta_{key}", npf_sample_angles(key, tab.shape[0])), float)
-            for c in range(min(3, tab.shape[1])):
-                col = _RGB[c] if tab.shape[1] > 1 else "k"
-                if key == "D":
-                    ax.semilogy(np.degrees(x), np.maximum(tab[:, c], 1e-8), color=col, lw=1)
-                else:
-                    ax.plot(np.degrees(x), tab[:, c], color=col, lw=1)
-            ax.set(title=f"{name}: {key} per channel", xlabel=f"{label} (°)")
+        _plot_npf_tables(axes[row], name, tabs)
         row += 1
     for ax in axes.ravel():
         ax.tick_params(labelsize=7)
@@ -306,6 +249,75 @@ def plot_factors(fits: Mapping[str, object], path, n: int = 200, title: str | No
         fig.suptitle(title, fontsize=9)
     fig.tight_layout()
     return save_figure(fig, path)
+
+
+def _plot_microfacet_factors(axes_row, micro: Mapping[str, object], th: np.ndarray) -> None:
+    """The first row of :func:`plot_factors`: Fresnel, D and G1 of every fit of ``micro``
+    (line style per model, in the model's colour for D and G1) over the angles ``th``."""
+    from matplotlib.lines import Line2D
+
+    axF, axD, axG = axes_row
+    m = np.stack([np.sin(th), np.zeros_like(th), np.cos(th)], -1)
+    styles = ("-", "--", ":", "-.")
+    fresnel_keys = []   # one legend entry per model: its line style, in black
+    for k, (name, model) in enumerate(micro.items()):
+        col = _MODEL_COLOURS[k % len(_MODEL_COLOURS)]
+        ls = styles[k % len(styles)]
+        lobes = _channel_lobes(model)
+        if lobes:
+            _plot_channel_lobes(axF, axD, axG, name, lobes, th, m, ls)
+            fresnel_keys.append(Line2D([], [], ls=ls, color="k", lw=1,
+                                       label=f"{name} (per channel)"))
+            continue
+        if getattr(model, "fresnel", None) is not None or hasattr(model, "_fresnel"):
+            try:
+                F = _specular_fresnel(model, np.cos(th))
+                for c in range(min(3, F.shape[1])):
+                    axF.plot(np.degrees(th), F[:, c], ls, color=_RGB[c], lw=1)
+                fresnel_keys.append(Line2D([], [], ls=ls, color="k", lw=1, label=name))
+            except Exception:  # noqa: BLE001 – a factor that cannot be evaluated is skipped
+                pass
+        dist = getattr(model, "distribution", None)
+        if dist is not None:
+            try:
+                D = np.asarray(dist.D(m), float)
+                axD.semilogy(np.degrees(th), np.maximum(D, 1e-8), ls, color=col, lw=1, label=name)
+            except Exception:  # noqa: BLE001
+                pass
+            try:
+                G = np.asarray(dist.G1(m), float)
+                axG.plot(np.degrees(th), G, ls, color=col, lw=1, label=name)
+            except Exception:  # noqa: BLE001
+                pass
+    axF.set(title="Fresnel ks·F (colour: R, G, B)", xlabel="θd (°)")
+    axD.set(title="NDF D", xlabel="θh (°)")
+    axG.set(title="Smith G1", xlabel="θ (°)", ylim=(0, 1.05))
+    if fresnel_keys:
+        axF.legend(handles=fresnel_keys, fontsize=6)
+    for ax in (axD, axG):
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=6)
+
+
+def _plot_npf_tables(axes_row, name: str, tabs: dict) -> None:
+    """One NPF row of :func:`plot_factors`: the D, F and G (or H) tables of fit ``name``
+    per channel (:func:`npf_tables`); an axis without its table is switched off."""
+    third = ("G", "θ") if "G" in tabs or "H" not in tabs else ("H", "φd")
+    for j, (key, label) in enumerate((("D", "θh"), ("F", "θd"), third)):
+        ax = axes_row[j]
+        tab = tabs.get(key)
+        if tab is None:
+            ax.set_axis_off()
+            continue
+        tab = tab.reshape(tab.shape[0], -1)
+        x = np.asarray(tabs.get(f"theta_{key}", npf_sample_angles(key, tab.shape[0])), float)
+        for c in range(min(3, tab.shape[1])):
+            col = _RGB[c] if tab.shape[1] > 1 else "k"
+            if key == "D":
+                ax.semilogy(np.degrees(x), np.maximum(tab[:, c], 1e-8), color=col, lw=1)
+            else:
+                ax.plot(np.degrees(x), tab[:, c], color=col, lw=1)
+        ax.set(title=f"{name}: {key} per channel", xlabel=f"{label} (°)")
 
 
 # ------------------------------------------------------------------------------------------

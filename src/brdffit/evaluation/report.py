@@ -31,10 +31,11 @@ from typing import Iterable
 import numpy as np
 
 from .._atomic import atomic_write
-from .._json import json_default
+from .._json import float_or_none as _num, json_default, standard_json
 from ..errors import printable
 from .metrics import count_wins
 from ..paths import slug
+from .report_viewer import viewer_sections
 
 __all__ = ["RESULT_NAME", "slugify", "write_result", "read_results", "write_material_page",
            "write_index", "local_links", "missing_links", "summarize"]
@@ -123,24 +124,11 @@ def slugify(name: str) -> str:
     return slug(name)
 
 
-def _clean(obj):
-    """Replace non-finite floats by strings so the JSON stays standard ("inf", "nan")."""
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, (float, np.floating)) and not math.isfinite(float(obj)):
-        return str(float(obj))
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
-
-
 def write_result(material_dir, result: dict) -> Path:
     """Write ``result.json`` of one material atomically."""
     path = Path(material_dir) / RESULT_NAME
     with atomic_write(path, "w") as fh:
-        json.dump(_clean(result), fh, indent=1, default=json_default, allow_nan=False)
+        json.dump(standard_json(result), fh, indent=1, default=json_default, allow_nan=False)
     return path
 
 
@@ -160,16 +148,6 @@ def read_results(out_dir) -> list[dict]:
 # ------------------------------------------------------------------------------------------
 # formatting helpers
 # ------------------------------------------------------------------------------------------
-def _num(x) -> float | None:
-    if x is None:
-        return None
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        return None
-    return v
-
-
 def _fmt(x, digits: int = 2, unit: str = "") -> str:
     v = _num(x)
     if v is None:
@@ -358,6 +336,7 @@ def write_material_page(out_dir, result: dict, colorbar: str | None = "../assets
     # renderings and dE maps, metrics
     if scenes:
         parts += _scene_sections(scenes, models, disp, colorbar)
+        parts += viewer_sections(out_dir, mdir, result, disp, _cell)
     else:
         parts += _single_scene_sections(ref, models, disp, colorbar)
     parts.append(_metrics_table(models, scenes, best))
@@ -825,92 +804,111 @@ def write_index(out_dir, title: str = "brdffit comparison report") -> Path:
         parts.append('<p class="note">Batch tables (one row per material and model: α, glTF '
                      "roughness, F0, ρd, errors, PSNR ± se, fit time, fit file): "
                      + ", ".join(batch_links) + ".</p>")
-    # per-model summary
-    rows = []
-    for n in names:
-        s = summ["per_model"][n]
-        rows.append(f'<tr><td class="l">{_e(n)}</td>' + _td(s["n"], 0) + _td(s["mean_psnr"])
-                    + _td(s["median_psnr"]) + _td(s.get("median_psnr_se"), 3)
-                    + _td(s["mean_de2000"]) + _td(s["median_de2000"])
-                    + _td(s.get("mean_cos_rel_error"), 4) + "</tr>")
-    parts.append("<h2>Per model</h2><table class=\"sortable\" id=\"summary\"><thead><tr>"
-                 "<th class=\"l\">model</th><th>materials</th><th>mean PSNR</th>"
-                 "<th>median PSNR</th><th>median standard error</th>"
-                 "<th>mean dE2000</th><th>median dE2000</th>"
-                 "<th>mean cos-weighted rel. error (BRDF space)</th></tr></thead>"
-                 "<tbody>" + "".join(rows) + "</tbody></table>")
-    # wins/ties matrix
+    parts.append(_per_model_table(summ))
     if len(names) > 1:
-        head = "".join(f"<th>{_e(b)}</th>" for b in names)
-        rows = []
-        for a in names:
-            cells = []
-            for b in names:
-                if a == b:
-                    cells.append("<td>–</td>")
-                    continue
-                w = summ["wins"][a][b]
-                cells.append(f'<td data-sort="{w["wins"]}">{w["wins"]} / {w["ties"]} / '
-                             f'{w["losses"]}</td>')
-            rows.append(f'<tr><td class="l">{_e(a)}</td>{"".join(cells)}</tr>')
-        parts.append("<h2>Wins / ties / losses (row vs column; tie = PSNRs within "
-                     f"{summ['tie_z']:g}·√(se<sub>a</sub>² + se<sub>b</sub>²), their measured "
-                     f"standard errors, or {summ['tie_db']:g} dB where one is missing)</h2>"
-                     "<table class=\"sortable\" id=\"wins\"><thead>"
-                     f"<tr><th class=\"l\">model</th>{head}</tr></thead><tbody>"
-                     + "".join(rows) + "</tbody></table>")
-    # per material (results of older versions may carry a noise floor instead of errors)
-    legacy_floor = any(_num(r.get("noise_floor_psnr")) is not None for r in results)
-    head = "".join(f"<th>{_e(n)} PSNR</th><th>{_e(n)} dE</th>" for n in names)
-    rows = []
-    for r in results:
-        slug = r["slug"]
-        ref = r.get("reference") or {}
-        thumb = (_img(slug + "/" + ref["png"], str(r.get("material", slug)) + " reference", cls="thumb")
-                 if isinstance(ref.get("png"), str) and _url(ref["png"]) is not None else "")
-        by = {m.get("name"): m for m in _models(r)}
-        tied = _tied_with_best([m for m in by.values() if _ok(m)])
-        cells = []
-        for n in names:
-            m = by.get(n)
-            if m is None or not _ok(m):
-                cells.append('<td class="fail" data-sort="">' + (_e(m.get("status", "failed")) if m else "–") + "</td><td></td>")
-                continue
-            cls = "best" if n in tied else ""
-            badge = _validity_badge(m) + "<br>" if m.get("validity") else ""  # failed checks
-            if n in tied and len(tied) > 1:
-                badge += f'<span class="badge ok" title="within {TIE_Z:g} standard errors of ' \
-                         f'the best (or 2 dB without them)">tie</span><br>'
-            cells.append(_td_pm(m, cls=cls, thumb=_thumb(slug, m, r) + badge)
-                         + _td(m.get("mean_de2000")))
-        rows.append(f'<tr><td class="l">{thumb}</td><td class="l" data-sort="{_e(str(r.get("material", slug)).lower())}">'
-                    + (f'<a href="{_e(_url(slug))}/index.html">{_e(r.get("material", slug))}</a></td>'
-                       if _url(slug) else f'{_e(r.get("material", slug))}</td>')
-                    + (_td(r.get("noise_floor_psnr")) if legacy_floor else "")
-                    + (f'<td class="l">{_e(recommended.get(str(r.get("material")), "–"))}</td>'
-                       if recommended else "")
-                    + "".join(cells)
-                    + f'<td class="l use">{_use_cell(slug, list(by.values()), tied)}</td></tr>')
-    parts.append("<h2>Materials</h2>"
-                 '<p><label>Filter: <input id="filter" type="search" placeholder="material '
-                 'name"></label></p>'
-                 "<table class=\"sortable\" id=\"materials\"><thead><tr>"
-                 "<th class=\"l\">reference</th><th class=\"l\">material</th>"
-                 + ("<th>noise floor PSNR (old results)</th>" if legacy_floor else "")
-                 + ("<th class=\"l\">recommended model</th>" if recommended else "")
-                 + head + "<th class=\"l\">which file to use</th></tr></thead><tbody>" + "".join(rows) + "</tbody></table>"
-                 '<p class="note">Which file to use: <b>engine</b>, the glTF material of the '
-                 "best-rendered fit that has one (⚠: it failed a physical check, see its "
-                 "page); <b>most faithful</b>, the fit with the highest PSNR; <b>smallest</b>, the "
-                 "fit with the fewest table bytes among those tied with the best (a tie: PSNRs "
-                 f"within {TIE_Z:g} combined standard errors, or 2 dB without them).</p>")
+        parts.append(_wins_table(summ))
+    parts.append(_materials_table(results, names, recommended))
     path = out_dir / "index.html"
     with atomic_write(path, "w") as fh:
         fh.write(_page(title, "\n".join(parts)))
     summ_path = out_dir / "summary.json"
     with atomic_write(summ_path, "w") as fh:
-        json.dump(_clean(summ), fh, indent=1, default=json_default, allow_nan=False)
+        json.dump(standard_json(summ), fh, indent=1, default=json_default, allow_nan=False)
     return path
+
+
+def _per_model_table(summ: dict) -> str:
+    """The index's per-model table of :func:`summarize`'s ``per_model`` figures."""
+    rows = []
+    for n in summ["models"]:
+        s = summ["per_model"][n]
+        rows.append(f'<tr><td class="l">{_e(n)}</td>' + _td(s["n"], 0) + _td(s["mean_psnr"])
+                    + _td(s["median_psnr"]) + _td(s.get("median_psnr_se"), 3)
+                    + _td(s["mean_de2000"]) + _td(s["median_de2000"])
+                    + _td(s.get("mean_cos_rel_error"), 4) + "</tr>")
+    return ("<h2>Per model</h2><table class=\"sortable\" id=\"summary\"><thead><tr>"
+            "<th class=\"l\">model</th><th>materials</th><th>mean PSNR</th>"
+            "<th>median PSNR</th><th>median standard error</th>"
+            "<th>mean dE2000</th><th>median dE2000</th>"
+            "<th>mean cos-weighted rel. error (BRDF space)</th></tr></thead>"
+            "<tbody>" + "".join(rows) + "</tbody></table>")
+
+
+def _wins_table(summ: dict) -> str:
+    """The index's wins / ties / losses matrix (row model vs column model)."""
+    names = summ["models"]
+    head = "".join(f"<th>{_e(b)}</th>" for b in names)
+    rows = []
+    for a in names:
+        cells = []
+        for b in names:
+            if a == b:
+                cells.append("<td>–</td>")
+                continue
+            w = summ["wins"][a][b]
+            cells.append(f'<td data-sort="{w["wins"]}">{w["wins"]} / {w["ties"]} / '
+                         f'{w["losses"]}</td>')
+        rows.append(f'<tr><td class="l">{_e(a)}</td>{"".join(cells)}</tr>')
+    return ("<h2>Wins / ties / losses (row vs column; tie = PSNRs within "
+            f"{summ['tie_z']:g}·√(se<sub>a</sub>² + se<sub>b</sub>²), their measured "
+            f"standard errors, or {summ['tie_db']:g} dB where one is missing)</h2>"
+            "<table class=\"sortable\" id=\"wins\"><thead>"
+            f"<tr><th class=\"l\">model</th>{head}</tr></thead><tbody>"
+            + "".join(rows) + "</tbody></table>")
+
+
+def _materials_table(results: list[dict], names: list, recommended: dict) -> str:
+    """The index's table of materials: reference thumbnail, link to the material's page,
+    PSNR ± se and dE per model, the batch's recommended model (when known) and which file
+    to use. Results of older versions may carry a noise floor instead of errors: it gets a
+    column when any result has one."""
+    legacy_floor = any(_num(r.get("noise_floor_psnr")) is not None for r in results)
+    head = "".join(f"<th>{_e(n)} PSNR</th><th>{_e(n)} dE</th>" for n in names)
+    rows = [_material_row(r, names, legacy_floor, recommended) for r in results]
+    return ("<h2>Materials</h2>"
+            '<p><label>Filter: <input id="filter" type="search" placeholder="material '
+            'name"></label></p>'
+            "<table class=\"sortable\" id=\"materials\"><thead><tr>"
+            "<th class=\"l\">reference</th><th class=\"l\">material</th>"
+            + ("<th>noise floor PSNR (old results)</th>" if legacy_floor else "")
+            + ("<th class=\"l\">recommended model</th>" if recommended else "")
+            + head + "<th class=\"l\">which file to use</th></tr></thead><tbody>" + "".join(rows) + "</tbody></table>"
+            '<p class="note">Which file to use: <b>engine</b>, the glTF material of the '
+            "best-rendered fit that has one (⚠: it failed a physical check, see its "
+            "page); <b>most faithful</b>, the fit with the highest PSNR; <b>smallest</b>, the "
+            "fit with the fewest table bytes among those tied with the best (a tie: PSNRs "
+            f"within {TIE_Z:g} combined standard errors, or 2 dB without them).</p>")
+
+
+def _material_row(r: dict, names: list, legacy_floor: bool, recommended: dict) -> str:
+    """One row of :func:`_materials_table` (result ``r``)."""
+    slug = r["slug"]
+    ref = r.get("reference") or {}
+    thumb = (_img(slug + "/" + ref["png"], str(r.get("material", slug)) + " reference", cls="thumb")
+             if isinstance(ref.get("png"), str) and _url(ref["png"]) is not None else "")
+    by = {m.get("name"): m for m in _models(r)}
+    tied = _tied_with_best([m for m in by.values() if _ok(m)])
+    cells = []
+    for n in names:
+        m = by.get(n)
+        if m is None or not _ok(m):
+            cells.append('<td class="fail" data-sort="">' + (_e(m.get("status", "failed")) if m else "–") + "</td><td></td>")
+            continue
+        cls = "best" if n in tied else ""
+        badge = _validity_badge(m) + "<br>" if m.get("validity") else ""  # failed checks
+        if n in tied and len(tied) > 1:
+            badge += f'<span class="badge ok" title="within {TIE_Z:g} standard errors of ' \
+                     f'the best (or 2 dB without them)">tie</span><br>'
+        cells.append(_td_pm(m, cls=cls, thumb=_thumb(slug, m, r) + badge)
+                     + _td(m.get("mean_de2000")))
+    return (f'<tr><td class="l">{thumb}</td><td class="l" data-sort="{_e(str(r.get("material", slug)).lower())}">'
+            + (f'<a href="{_e(_url(slug))}/index.html">{_e(r.get("material", slug))}</a></td>'
+               if _url(slug) else f'{_e(r.get("material", slug))}</td>')
+            + (_td(r.get("noise_floor_psnr")) if legacy_floor else "")
+            + (f'<td class="l">{_e(recommended.get(str(r.get("material")), "–"))}</td>'
+               if recommended else "")
+            + "".join(cells)
+            + f'<td class="l use">{_use_cell(slug, list(by.values()), tied)}</td></tr>')
 
 
 # ------------------------------------------------------------------------------------------

@@ -29,8 +29,8 @@ from ..microfacet.coat import coat_parts
 from ..microfacet.model import MicrofacetBRDF
 from ..microfacet.shadowing import EllipticalSlopeDistribution
 
-__all__ = ["label", "fail", "principal_axes", "microfacet_parts", "is_elliptical", "LUMA",
-           "shown", "check_output_path", "write_problem", "writing", "StagedFiles"]
+__all__ = ["label", "fail", "finite_float", "principal_axes", "tangent_axes", "microfacet_parts",
+           "is_elliptical", "LUMA", "shown", "check_output_path", "write_problem", "writing", "StagedFiles"]
 
 #: Rec. 709 / linear-sRGB luminance weights (used for RGL ``luminance`` and reports)
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -185,6 +185,16 @@ class StagedFiles:
             raise
 
 
+def finite_float(x, where: str) -> float:
+    """``float(x)``; :class:`ExportError` "cannot write the non-finite value ... {where}"
+    when it is NaN or infinite (a scene or shader literal has no such value)."""
+    x = float(x)
+    if not np.isfinite(x):
+        raise ExportError(f"cannot write the non-finite value {x!r} {where}; expected finite "
+                          "parameters")
+    return x
+
+
 def fail(model, target: str, need: str):
     """Raise the :class:`ExportError` of a model that cannot go to ``target``."""
     raise ExportError(f"cannot export {label(model)} to {target}: {need}")
@@ -240,6 +250,19 @@ def principal_axes(alpha_x: float, alpha_y: float, rho: float) -> tuple[float, f
     u = evecs[:, k] * (1.0 if evecs[0, k] >= 0 else -1.0)
     phi = float(np.arctan2(u[1], u[0]))
     return float(np.sqrt(evals[k])), float(np.sqrt(evals[1 - k])), phi
+
+
+def tangent_axes(dist) -> tuple[float, float, float]:
+    """``(αt, αb, rotation)`` of an elliptical distribution in the frame whose tangent t is
+    its rougher principal axis (:func:`principal_axes`; αt ≥ αb), the rotation of t from x
+    about the normal wrapped to (−π, π] (radians): the anisotropy parametrisation of glTF's
+    ``KHR_materials_anisotropy`` and OpenPBR's ``specular_roughness_anisotropy``."""
+    au, av, phi = principal_axes(dist.alpha_x, dist.alpha_y, dist.rho)
+    if au >= av:
+        at, ab, rot = au, av, phi
+    else:
+        at, ab, rot = av, au, phi + 0.5 * np.pi
+    return at, ab, float(np.angle(np.exp(1j * rot)))
 
 
 def rotate_z(w, phi: float) -> np.ndarray:

@@ -53,8 +53,8 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ExportError
-from ._common import (StagedFiles, check_output_path, fail, is_elliptical, label, shown,
-                      writing)
+from ._common import (StagedFiles, check_output_path, fail, finite_float, is_elliptical, label,
+                      shown, writing)
 from ..evaluation import imageio
 from ..microfacet.fresnel import (
     ConductorFresnel, DielectricFresnel, GeneralizedSchlickFresnel, SchlickFresnel,
@@ -71,6 +71,17 @@ __all__ = ["GLSL_LIBRARY", "model_spec", "glsl_source", "write_glsl", "pack_npf_
 
 UBER_WIDTH = 272
 TABLE_NODES = 1024
+
+#: The opening of the NPF evaluations of :data:`GLSL_LIBRARY` (``@NPF_UV@`` there): zero
+#: below the horizon, the half vector h, θh and θd, and the table coordinates uh (θ'_h =
+#: sqrt(θh / (π/2)) · 90) and ud (θd in degrees).
+_NPF_UV = r"""    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
+    vec3 h = normalize(wi + wo);
+    float th = acos(clamp(h.z, -1.0, 1.0));
+    float td = acos(clamp(dot(wi, h), -1.0, 1.0));
+    float uh = sqrt(clamp(th, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI)) * 90.0;
+    float ud = clamp(td, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI / 90.0);
+"""
 
 GLSL_LIBRARY = r"""
 // ---- brdffit GLSL library (brdffit.export.glsl; NumPy twin in the project's tests) ----
@@ -241,12 +252,7 @@ vec3 bf_npf_G(sampler2D uber, int row, float theta) {
     return a * (1.0 - t) + b * t;
 }
 vec3 bf_npf(vec3 wi, vec3 wo, sampler2D uber, int row) {
-    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
-    vec3 h = normalize(wi + wo);
-    float th = acos(clamp(h.z, -1.0, 1.0));
-    float td = acos(clamp(dot(wi, h), -1.0, 1.0));
-    float uh = sqrt(clamp(th, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI)) * 90.0;
-    float ud = clamp(td, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI / 90.0);
+    @NPF_UV@
     vec3 D = bf_row_lerp(uber, row, 0, 90, uh);
     vec3 F = bf_row_lerp(uber, row, 90, 90, ud);
     vec3 G = bf_npf_G(uber, row, acos(clamp(wi.z, -1.0, 1.0)))
@@ -270,12 +276,7 @@ float bf_phi_d(vec3 wi, vec3 h) {
 // Naive NPF (Bagher 2016 Eq. 4) from one row: D [0,90), F [90,180), H [180,360) on
 // phi_d = k degrees in [0, 180) (periodic), rho_d at 360, rho_s at 361.
 vec3 bf_npf_naive(vec3 wi, vec3 wo, sampler2D tex, int row) {
-    if (wi.z <= 0.0 || wo.z <= 0.0) return vec3(0.0);
-    vec3 h = normalize(wi + wo);
-    float th = acos(clamp(h.z, -1.0, 1.0));
-    float td = acos(clamp(dot(wi, h), -1.0, 1.0));
-    float uh = sqrt(clamp(th, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI)) * 90.0;
-    float ud = clamp(td, 0.0, 0.5 * BF_PI) / (0.5 * BF_PI / 90.0);
+    @NPF_UV@
     float up = mod(mod(bf_phi_d(wi, h), BF_PI) / (BF_PI / 180.0), 180.0);
     int i0 = int(floor(up)) % 180;
     float t = up - floor(up);
@@ -305,7 +306,7 @@ vec3 bf_npf_bivariate(vec3 wi, vec3 wo, sampler2D tex) {
          + (1.0 - s) * t * texelFetch(tex, ivec2(j0 + 1, i0), 0).rgb
          + s * t * texelFetch(tex, ivec2(j0 + 1, i0 + 1), 0).rgb;
 }
-"""
+""".replace("    @NPF_UV@\n", _NPF_UV)
 
 
 # ------------------------------------------------------------------------------------------
@@ -449,11 +450,7 @@ def model_spec(model) -> dict:
 # spec -> GLSL text
 # ------------------------------------------------------------------------------------------
 def _f(x) -> str:
-    x = float(x)
-    if not np.isfinite(x):
-        raise ExportError(f"cannot write the non-finite value {x!r} as a GLSL literal; expected "
-                          "finite parameters")
-    s = repr(x)
+    s = repr(finite_float(x, "as a GLSL literal"))
     return s if ("." in s or "e" in s) else s + ".0"
 
 

@@ -113,7 +113,7 @@ from ..microfacet.model import MicrofacetBRDF
 from ..microfacet.tabulated import TabulatedSlopeDistribution
 from ._common import (LUMA, base_for_albedo, check_output_path, closer_to,
                       cosine_weighted_albedo, diffuse_kept_fraction, fail, is_elliptical, shown,
-                      principal_axes, single_lobe_of, writing)
+                      single_lobe_of, tangent_axes, writing)
 from .gltf_brdf import GLTFBRDF
 from .gltf_cycles import CyclesPrincipledBRDF, _Lobe
 
@@ -158,12 +158,7 @@ def _anisotropy(d):
     """``(αb, strength, rotation)`` of KHR_materials_anisotropy for GGX(αx, αy, ρ): principal
     axes (Dupuy 2015 App. C), the rougher one is the extension's direction t with
     ``αt = mix(αb, 1, s²)``; ``None`` when αt > 1 (not representable)."""
-    au, av, phi = principal_axes(d.alpha_x, d.alpha_y, d.rho)
-    if au >= av:
-        at, ab, rot = au, av, phi
-    else:
-        at, ab, rot = av, au, phi + 0.5 * np.pi
-    rot = float(np.angle(np.exp(1j * rot)))
+    at, ab, rot = tangent_axes(d)
     if at > 1.0 or ab >= 1.0:
         return None
     return ab, float(np.sqrt((at - ab) / (1.0 - ab))), rot
@@ -261,60 +256,15 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True,
     to ``KHR_materials_clearcoat`` (``"clearcoat"`` entry)."""
     parts = coat_parts(model)
     if parts is not None:
-        # glTF's clearcoat (Fresnel of N·V, layered) departs from the fit's added coat on
-        # rough, heavy coats: export whichever is closer to the fit, the coat or one lobe
-        cands = {"clearcoat": _with_clearcoat(gltf_parameters(parts[0], anisotropy, specular,
-                                                              max_ior),
-                                              parts[1]),
-                 "one lobe": gltf_parameters(single_lobe_of(model), anisotropy, specular,
-                                             max_ior)}
-        label, p, err = closer_to(model, cands, _brdf_of)
-        other = next(k for k in err if k != label)
-        p = dict(p, notes=p["notes"] + [f"coated fit exported as {label} (cos_rel_error vs the "
-                                         f"fit {err[label]:.4g}; as {other}: {err[other]:.4g})"])
-        return p
+        return _coated_parameters(model, parts, anisotropy, specular, max_ior)
     m, notes = _ggx_model(model)
-    d = m.distribution
-    alpha = float(np.sqrt(d.alpha_x * d.alpha_y))
-    aniso = None
-    if d.alpha_x != d.alpha_y or d.rho != 0:
-        aniso = _anisotropy(d) if anisotropy else None
-        if aniso is None:
-            notes.append(f"anisotropy dropped: alpha_x={d.alpha_x:.4g}, alpha_y={d.alpha_y:.4g}, "
-                         f"rho={d.rho:.4g} -> isotropic alpha={alpha:.4g} (geometric mean)")
-        else:
-            alpha = aniso[0]
-            notes.append(f"anisotropy via KHR_materials_anisotropy: strength={aniso[1]:.4g}, "
-                         f"rotation={aniso[2]:.4g} rad (principal axes of the slope matrix)")
-    if alpha > 1.0:
-        notes.append(f"alpha={alpha:.4g} > 1 clipped to glTF's largest roughness 1")
+    alpha, aniso = _roughness(m.distribution, anisotropy, notes)
     F0, F90, rd = reflectances(m)
     F0c = np.clip(F0, 0.0, 1.0)
     # a metal's F90 is 1 in glTF: with the extensions, a fit whose grazing reflectance is far
     # below 1 keeps it (and its diffuse term) as a dielectric with specularFactor = F90
     metal = is_metal(m, F0c, rd, np.clip(F90, 0.0, None) if specular else None)
-    spec = None
-    if metal:
-        base = F0c
-        if m.diffuse is not None:
-            notes.append("metal: the fit's diffuse term is dropped")
-        notes.append("metal: Schlick with F0 = baseColor and F90 = 1 (fit's F90: "
-                     f"{np.round(F90, 4).tolist()})")
-    else:
-        base = np.clip(rd, 0.0, 1.0)
-        if specular:
-            spec = _specular_extension(F0, F90, max_ior)
-            if "note" in spec:
-                notes.append(spec.pop("note"))
-            notes.append(f"dielectric: F0 {np.round(F0c, 4).tolist()} via KHR_materials_specular"
-                         f" + KHR_materials_ior (ior={spec['ior']:.4g}), F90 = specularFactor "
-                         f"{spec['specularFactor']:.4g} (fit: {np.round(F90, 4).tolist()}); "
-                         "diffuse weighted by (1 - F)")
-            if _is_default_specular(spec):
-                spec = None
-        else:
-            notes.append(f"dielectric: specular F0 fixed by glTF to 0.04 (fit: "
-                         f"{np.round(F0, 4).tolist()}), diffuse weighted by (1 - F)")
+    base, spec = _base_and_specular(m, metal, (F0, F90, rd), specular, max_ior, notes)
     if m.correlated and aniso is None:
         notes.append("height-correlated Smith G of the fit replaced by glTF's separable Smith")
     if not m.correlated and aniso is not None:
@@ -328,8 +278,83 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True,
                                                      "anisotropyRotation": aniso[2]},
            "specular": spec, "F0": F0.tolist(), "F90": F90.tolist(), "rho_d": rd.tolist(),
            "notes": notes}
+    _match_base(out, m, metal, base, F0c)
+    return out
 
-    def with_base(b) -> GLTFBRDF:  # the material above with base colour b (affine in b)
+
+def _coated_parameters(model, parts, anisotropy: bool, specular: bool, max_ior: float) -> dict:
+    """:func:`gltf_parameters` of a coated fit (``parts`` = its base and coat lobes):
+    glTF's clearcoat (Fresnel of N·V, layered) departs from the fit's added coat on rough,
+    heavy coats, so whichever is closer to the fit is exported, the coat or one lobe."""
+    cands = {"clearcoat": _with_clearcoat(gltf_parameters(parts[0], anisotropy, specular,
+                                                          max_ior),
+                                          parts[1]),
+             "one lobe": gltf_parameters(single_lobe_of(model), anisotropy, specular,
+                                         max_ior)}
+    label, p, err = closer_to(model, cands, _brdf_of)
+    other = next(k for k in err if k != label)
+    return dict(p, notes=p["notes"] + [f"coated fit exported as {label} (cos_rel_error vs the "
+                                        f"fit {err[label]:.4g}; as {other}: {err[other]:.4g})"])
+
+
+def _roughness(d, anisotropy: bool, notes: list) -> tuple[float, tuple | None]:
+    """``(α, anisotropy)`` of GGX ``d``: α = √(αx αy), or αb with ``anisotropy`` =
+    :func:`_anisotropy` ``(αb, strength, rotation)`` when the distribution is anisotropic
+    or correlated, ``anisotropy`` is on and the extension can hold it (``None`` otherwise);
+    what is lost is appended to ``notes``."""
+    alpha = float(np.sqrt(d.alpha_x * d.alpha_y))
+    aniso = None
+    if d.alpha_x != d.alpha_y or d.rho != 0:
+        aniso = _anisotropy(d) if anisotropy else None
+        if aniso is None:
+            notes.append(f"anisotropy dropped: alpha_x={d.alpha_x:.4g}, alpha_y={d.alpha_y:.4g}, "
+                         f"rho={d.rho:.4g} -> isotropic alpha={alpha:.4g} (geometric mean)")
+        else:
+            alpha = aniso[0]
+            notes.append(f"anisotropy via KHR_materials_anisotropy: strength={aniso[1]:.4g}, "
+                         f"rotation={aniso[2]:.4g} rad (principal axes of the slope matrix)")
+    if alpha > 1.0:
+        notes.append(f"alpha={alpha:.4g} > 1 clipped to glTF's largest roughness 1")
+    return alpha, aniso
+
+
+def _base_and_specular(m, metal: bool, reflect, specular: bool, max_ior: float, notes: list):
+    """``(base colour, specular extension or None)`` before the albedo matching of
+    :func:`_match_base`: a metal's base is its F0 (diffuse term dropped, F90 = 1); a
+    dielectric's is ρd, with its F0/F90 in :func:`_specular_extension` when ``specular``
+    (``None`` when that is glTF's default), else glTF's fixed F0 = 0.04. ``reflect`` is
+    ``(F0, F90, ρd)`` of :func:`reflectances`; the notes go to ``notes``."""
+    F0, F90, rd = reflect
+    F0c = np.clip(F0, 0.0, 1.0)
+    if metal:
+        if m.diffuse is not None:
+            notes.append("metal: the fit's diffuse term is dropped")
+        notes.append("metal: Schlick with F0 = baseColor and F90 = 1 (fit's F90: "
+                     f"{np.round(F90, 4).tolist()})")
+        return F0c, None
+    base = np.clip(rd, 0.0, 1.0)
+    if not specular:
+        notes.append(f"dielectric: specular F0 fixed by glTF to 0.04 (fit: "
+                     f"{np.round(F0, 4).tolist()}), diffuse weighted by (1 - F)")
+        return base, None
+    spec = _specular_extension(F0, F90, max_ior)
+    if "note" in spec:
+        notes.append(spec.pop("note"))
+    notes.append(f"dielectric: F0 {np.round(F0c, 4).tolist()} via KHR_materials_specular"
+                 f" + KHR_materials_ior (ior={spec['ior']:.4g}), F90 = specularFactor "
+                 f"{spec['specularFactor']:.4g} (fit: {np.round(F90, 4).tolist()}); "
+                 "diffuse weighted by (1 - F)")
+    return base, None if _is_default_specular(spec) else spec
+
+
+def _match_base(out: dict, m, metal: bool, base, F0c) -> None:
+    """Set ``out``'s base colour (and a note) so that glTF's material keeps the fit's
+    diffuse energy: a metal with a diffuse term takes the base whose cosine-weighted mean
+    albedo is the fit's, a dielectric divides ρd by the fraction of the base the specular
+    layer lets through."""
+    notes = out["notes"]
+
+    def with_base(b) -> GLTFBRDF:  # the material of out with base colour b (affine in b)
         return _brdf_of(dict(out, baseColorFactor=[float(x) for x in b] + [1.0]))
 
     if metal and m.diffuse is not None:
@@ -355,7 +380,6 @@ def gltf_parameters(model, anisotropy: bool = True, specular: bool = True,
         notes.append(f"baseColor {np.round(base, 4).tolist()} = rho_d / the fraction of the "
                      f"base the specular layer lets through ({np.round(kept, 4).tolist()}, "
                      "cosine-weighted mean)" + (": clipped to 1" if np.any(base >= 1) else ""))
-    return out
 
 
 def _with_clearcoat(p: dict, coat) -> dict:

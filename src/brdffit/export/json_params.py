@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from .._atomic import atomic_write
+from .._json import strict_json_default
 from ..errors import BRDFFormatError, ExportError
 from ._common import check_output_path, fail, is_elliptical, label, shown, writing
 from ..fit import import_all
@@ -186,21 +187,13 @@ def write_json(model, path, **_ignored) -> dict:
     path = check_output_path(path)
     doc = to_json_dict(model)
     try:
-        text = json.dumps(doc, indent=1, allow_nan=False, default=_default)  # ASCII: \u escapes
+        text = json.dumps(doc, indent=1, allow_nan=False, default=strict_json_default)  # ASCII: \u escapes
     except ValueError as exc:
         raise ExportError(f"cannot export {label(model)} to {shown(path)}: expected finite "
                           f"parameters, found NaN or infinity ({exc})") from None
     with writing(path), atomic_write(path, "wb") as fh:
         fh.write(text.encode("ascii"))
     return {"files": [str(path)], "target": "json", "model": doc["model"]}
-
-
-def _default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
 def _from_parameters(p: dict, path):

@@ -72,7 +72,7 @@ import numpy as np
 from .._atomic import atomic_write
 from ..brdf import IsotropicBRDF, _as_dirs
 from ._common import (LUMA, base_for_albedo, check_output_path, closer_to,
-                      cosine_weighted_albedo, diffuse_kept_fraction, principal_axes, shown,
+                      cosine_weighted_albedo, diffuse_kept_fraction, shown, tangent_axes,
                       single_lobe_of, writing)
 from ..errors import ExportError
 from ..evaluation.metrics import BRDFMetrics, brdf_metrics
@@ -260,48 +260,72 @@ def openpbr_parameters(model, metal: bool | None = None) -> dict:
     ``coat_darkening`` = 0."""
     parts = coat_parts(model)
     if parts is not None and metal is None:
-        # the base lobe of a coated fit can be metal-like with a low grazing reflectance (the
-        # coat took the rise: polyethylene), which OpenPBR's dielectric renders badly: map it
-        # both ways and keep the one closer to the fit
-        # ... and, as for glTF, one lobe fitted to the coated fit may be closer than the coat
-        cands = {"coat over a dielectric base": openpbr_parameters(model, metal=False),
-                 "coat over a metal base": openpbr_parameters(model, metal=True),
-                 "one lobe": openpbr_parameters(single_lobe_of(model))}
-        label, p, err = closer_to(model, cands, _brdf_of)
-        others = "; ".join(f"{k}: {v:.4g}" for k, v in err.items() if k != label)
-        return dict(p, notes=p["notes"] + [f"coated fit exported as {label} (cos_rel_error vs "
-                                           f"the fit {err[label]:.4g}; {others})"])
+        return _closest_coated(model)
     if parts is not None:
-        p = openpbr_parameters(parts[0], metal=metal)
-        alpha, w = coat_alpha_weight(parts[1])
-        c = float(np.sqrt(min(alpha, 1.0)))
-        p.update(coat_weight=w, coat_roughness=c, coat_ior=1.5, coat_darkening=0.0)
-        notes = [f"coat (white, index 1.5, weight {w:.4g}, alpha {alpha:.4g}): OpenPBR layers "
-                 "it over the base (the fit adds it)"]
-        # OpenPBR roughens the base specular under the coat and makes its index relative to
-        # the coat's (both mixed in by coat_weight): invert both so that the effective values
-        # are the base lobe's
-        r, ok_r = _uncoated(lambda x: _coat_roughened(x, c, w), p["specular_roughness"],
-                            0.0, 1.0)
-        eta, ok_e = _uncoated(lambda x: _coat_relative_ior(x, 1.5, w), p["specular_ior"],
-                              1.0 + 1e-9, max(10.0, 4.0 * p["specular_ior"]))
-        p.update(specular_roughness=r, specular_ior=eta)
-        notes.append("specular_roughness and specular_ior chosen so that OpenPBR's coat-"
-                     "roughened roughness and coat-relative index are the base lobe's"
-                     + ("" if ok_r and ok_e else
-                        " (not reachable: " + ", ".join(k for k, ok in (("roughness", ok_r),
-                                                                         ("index", ok_e))
-                                                        if not ok) + " clipped)"))
-        p["notes"] = p["notes"] + notes
-        return p
+        return _with_coat(openpbr_parameters(parts[0], metal=metal), parts[1])
     m, notes = _ggx_model(model, "MaterialX")
-    d = m.distribution
-    au, av, phi = principal_axes(d.alpha_x, d.alpha_y, d.rho)
-    if au >= av:
-        at, ab, rot = au, av, phi
+    p = _specular_lobe(m.distribution, notes)
+    F0, F90, rd = reflectances(m)
+    F0c, F90c = np.clip(F0, 0.0, 1.0), np.clip(F90, 0.0, 1.0)
+    # as for glTF: a fit whose grazing reflectance stays far below 1 is no metal (OpenPBR's
+    # metal would drop its diffuse term; measured gains: docs/design/exports.md)
+    metal = is_metal(m, F0c, rd, F90c) if metal is None else bool(metal)
+    if metal:
+        _metal_base(m, p, F0, F90, notes)
     else:
-        at, ab, rot = av, au, phi + 0.5 * np.pi
-    rot = float(np.angle(np.exp(1j * rot)))
+        p.update(base_metalness=0.0, base_color=np.clip(rd, 0, 1).tolist(), specular_weight=1.0)
+        p.update(_dielectric_choice(m, p, F0c, F90c, notes))
+    notes.append("MaterialX GLSL: energy compensation and average-alpha G2 on the specular lobe")
+    p.update(notes=notes, F0=F0.tolist(), F90=F90.tolist(), rho_d=rd.tolist())
+    return p
+
+
+def _closest_coated(model) -> dict:
+    """:func:`openpbr_parameters` of a coated fit as whichever is closer to the fit: the coat
+    over a dielectric base, over a metal base (the base lobe of a coated fit can be
+    metal-like with a low grazing reflectance, the coat having taken the rise:
+    polyethylene, which OpenPBR's dielectric renders badly) or, as for glTF, one lobe
+    fitted to the coated fit."""
+    cands = {"coat over a dielectric base": openpbr_parameters(model, metal=False),
+             "coat over a metal base": openpbr_parameters(model, metal=True),
+             "one lobe": openpbr_parameters(single_lobe_of(model))}
+    label, p, err = closer_to(model, cands, _brdf_of)
+    others = "; ".join(f"{k}: {v:.4g}" for k, v in err.items() if k != label)
+    return dict(p, notes=p["notes"] + [f"coated fit exported as {label} (cos_rel_error vs "
+                                       f"the fit {err[label]:.4g}; {others})"])
+
+
+def _with_coat(p: dict, coat) -> dict:
+    """``p`` (the base lobe's inputs) with ``coat`` as OpenPBR's coat. OpenPBR roughens the
+    base specular under the coat and makes its index relative to the coat's (both mixed in
+    by ``coat_weight``): both are inverted so that the effective values are the base
+    lobe's."""
+    alpha, w = coat_alpha_weight(coat)
+    c = float(np.sqrt(min(alpha, 1.0)))
+    p.update(coat_weight=w, coat_roughness=c, coat_ior=1.5, coat_darkening=0.0)
+    notes = [f"coat (white, index 1.5, weight {w:.4g}, alpha {alpha:.4g}): OpenPBR layers "
+             "it over the base (the fit adds it)"]
+    r, ok_r = _uncoated(lambda x: _coat_roughened(x, c, w), p["specular_roughness"],
+                        0.0, 1.0)
+    eta, ok_e = _uncoated(lambda x: _coat_relative_ior(x, 1.5, w), p["specular_ior"],
+                          1.0 + 1e-9, max(10.0, 4.0 * p["specular_ior"]))
+    p.update(specular_roughness=r, specular_ior=eta)
+    notes.append("specular_roughness and specular_ior chosen so that OpenPBR's coat-"
+                 "roughened roughness and coat-relative index are the base lobe's"
+                 + ("" if ok_r and ok_e else
+                    " (not reachable: " + ", ".join(k for k, ok in (("roughness", ok_r),
+                                                                     ("index", ok_e))
+                                                    if not ok) + " clipped)"))
+    p["notes"] = p["notes"] + notes
+    return p
+
+
+def _specular_lobe(d, notes: list) -> dict:
+    """``specular_roughness``, ``specular_roughness_anisotropy``, ``base_weight``,
+    ``base_diffuse_roughness`` and ``tangent_rotation_deg`` of GGX ``d`` (module
+    docstring: αt clipped to 1, a = 1 − αb/αt, the tangent rotated to the rougher principal
+    axis); notes go to ``notes``."""
+    at, ab, rot = tangent_axes(d)
     if at > 1.0:
         notes.append(f"alpha {at:.4g} > 1 clipped to OpenPBR's largest roughness")
         at, ab = 1.0, min(ab, 1.0)
@@ -313,36 +337,30 @@ def openpbr_parameters(model, metal: bool | None = None) -> dict:
         notes.append(f"anisotropy: geometry_tangent = the mesh tangent rotated by "
                      f"{np.degrees(rot):.6g} deg about the normal (rotate3d), the rougher "
                      "principal axis of the fit")
-    F0, F90, rd = reflectances(m)
+    return {"specular_roughness": r, "specular_roughness_anisotropy": float(a),
+            "base_weight": 1.0, "base_diffuse_roughness": 0.0,
+            "tangent_rotation_deg": float(np.degrees(rot))}
+
+
+def _metal_base(m, p: dict, F0, F90, notes: list) -> None:
+    """Set the metal inputs of ``p``: ``specular_weight`` sw = the largest of F0 and F90
+    (clipped to [0, 1]) times Schlick(base_color = F0/sw, 1). OpenPBR's metal drops the
+    diffuse term and stops at F90 = 1: a fit with a diffuse term takes the base colour whose
+    cosine-weighted mean albedo is the fit's (polyethylene), as for glTF."""
     F0c, F90c = np.clip(F0, 0.0, 1.0), np.clip(F90, 0.0, 1.0)
-    # as for glTF: a fit whose grazing reflectance stays far below 1 is no metal (OpenPBR's
-    # metal would drop its diffuse term; measured gains: docs/design/exports.md)
-    metal = is_metal(m, F0c, rd, F90c) if metal is None else bool(metal)
-    p = {"specular_roughness": r, "specular_roughness_anisotropy": float(a),
-         "base_weight": 1.0, "base_diffuse_roughness": 0.0,
-         "tangent_rotation_deg": float(np.degrees(rot))}
-    if metal:
-        sw = float(max(F90c.max(), F0c.max(), 1e-12))
-        p.update(base_metalness=1.0, base_color=np.clip(F0c / sw, 0, 1).tolist(),
-                 specular_weight=sw, specular_color=[1.0, 1.0, 1.0], specular_ior=1.5)
-        notes.append(f"metal: specular_weight {sw:.4g} x Schlick(base_color, 1) (fit F90: "
-                     f"{np.round(F90, 4).tolist()})")
-        if m.diffuse is not None:
-            # as for glTF: OpenPBR's metal drops the diffuse term and stops at F90 = 1; take
-            # the base colour whose cosine-weighted mean albedo is the fit's (polyethylene)
-            target = cosine_weighted_albedo(m)
-            base, wanted = base_for_albedo(lambda b: _brdf_of(dict(p, base_color=b)), target)
-            p["base_color"] = base.tolist()
-            notes.append(f"metal: base_color {np.round(base, 4).tolist()} keeps the fit's "
-                         f"cosine-weighted mean albedo {np.round(target, 4).tolist()} (its "
-                         f"diffuse term folded in; F0: {np.round(F0c, 4).tolist()})"
-                         + (": clipped" if np.any(wanted > 1) else ""))
-    else:
-        p.update(base_metalness=0.0, base_color=np.clip(rd, 0, 1).tolist(), specular_weight=1.0)
-        p.update(_dielectric_choice(m, p, F0c, F90c, notes))
-    notes.append("MaterialX GLSL: energy compensation and average-alpha G2 on the specular lobe")
-    p.update(notes=notes, F0=F0.tolist(), F90=F90.tolist(), rho_d=rd.tolist())
-    return p
+    sw = float(max(F90c.max(), F0c.max(), 1e-12))
+    p.update(base_metalness=1.0, base_color=np.clip(F0c / sw, 0, 1).tolist(),
+             specular_weight=sw, specular_color=[1.0, 1.0, 1.0], specular_ior=1.5)
+    notes.append(f"metal: specular_weight {sw:.4g} x Schlick(base_color, 1) (fit F90: "
+                 f"{np.round(F90, 4).tolist()})")
+    if m.diffuse is not None:
+        target = cosine_weighted_albedo(m)
+        base, wanted = base_for_albedo(lambda b: _brdf_of(dict(p, base_color=b)), target)
+        p["base_color"] = base.tolist()
+        notes.append(f"metal: base_color {np.round(base, 4).tolist()} keeps the fit's "
+                     f"cosine-weighted mean albedo {np.round(target, 4).tolist()} (its "
+                     f"diffuse term folded in; F0: {np.round(F0c, 4).tolist()})"
+                     + (": clipped" if np.any(wanted > 1) else ""))
 
 
 def _coat_roughened(r: float, coat_roughness: float, coat_weight: float) -> float:
@@ -542,12 +560,12 @@ def materialx_document(model, name: str | None = None):
                          "surfaceshader")
     for key in ("base_weight", "base_metalness", "base_diffuse_roughness", "specular_weight",
                 "specular_roughness", "specular_roughness_anisotropy", "specular_ior"):
-        shader.addInput(key, "float").setValueString(_num(p[key]))
+        shader.addInput(key, "float").setValueString(_value_string(p[key]))
     for key in ("base_color", "specular_color"):
-        shader.addInput(key, "color3").setValueString(", ".join(_num(v) for v in p[key]))
+        shader.addInput(key, "color3").setValueString(", ".join(_value_string(v) for v in p[key]))
     if p.get("coat_weight", 0.0) > 0.0:
         for key in ("coat_weight", "coat_roughness", "coat_ior", "coat_darkening"):
-            shader.addInput(key, "float").setValueString(_num(p[key]))
+            shader.addInput(key, "float").setValueString(_value_string(p[key]))
     if p["tangent_rotation_deg"] != 0.0:
         # MaterialX's rotate3d turns v into v cos + (v × axis) sin + ...: clockwise about the
         # axis for a positive amount, hence the minus sign
@@ -558,14 +576,15 @@ def materialx_document(model, name: str | None = None):
         rot = doc.addNode("rotate3d", doc.createValidChildName(f"{mat_name}_rotated_tangent"),
                           "vector3")
         rot.addInput("in", "vector3").setConnectedNode(tangent)
-        rot.addInput("amount", "float").setValueString(_num(-p["tangent_rotation_deg"]))
+        rot.addInput("amount", "float").setValueString(_value_string(-p["tangent_rotation_deg"]))
         rot.addInput("axis", "vector3").setConnectedNode(normal)
         shader.addInput("geometry_tangent", "vector3").setConnectedNode(rot)
     doc.addMaterialNode(mat_name, shader)
     return doc, p
 
 
-def _num(v) -> str:
+def _value_string(v) -> str:
+    """A float input's MaterialX value string (9 significant digits: float32 round trip)."""
     return f"{float(v):.9g}"
 
 

@@ -64,8 +64,8 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..errors import ExportError
-from ._common import (StagedFiles, check_output_path, fail, is_elliptical, label,
-                      principal_axes, writing)
+from ._common import (StagedFiles, check_output_path, fail, finite_float, is_elliptical,
+                      label, principal_axes, writing)
 from ..evaluation.metrics import brdf_metrics
 from ..evaluation.render import to_evaluator
 from ..evaluation.render._mitsuba import load
@@ -392,11 +392,7 @@ _BSDF_TYPES = {"diffuse", "roughconductor", "blendbsdf", "roughplastic", "roughd
 
 
 def _fmt(x) -> str:
-    x = float(x)
-    if not math.isfinite(x):
-        raise ExportError(f"cannot write the non-finite value {x!r} in a Mitsuba scene; expected "
-                          "finite parameters")
-    return repr(x)
+    return repr(finite_float(x, "in a Mitsuba scene"))
 
 
 # characters XML 1.0 cannot hold at all (not even escaped)

@@ -192,8 +192,8 @@ def rgl_fields(model, n_theta: int = 32, n_ndf: int = 256, vndf_res: int | None 
     """The tensor-file fields of ``model`` (see module docstring).
 
     ``vndf_res`` defaults to 128 for isotropic models and 64 for anisotropic ones (per slice:
-    halving it changed the read-back error of the anisotropic tabulated fit of ``aniso-ggx``
-    from 0.48 % to 0.50 % and keeps the default files within the 64 MiB the reader accepts).
+    the read-back error of the anisotropic tabulated fit of ``aniso-ggx`` is 0.50 % at 64
+    and 0.48 % at 128, and 64 keeps the default files within the 64 MiB the reader accepts).
     ``n_phi`` (anisotropic models only, ≥ 3: two or fewer would make Mitsuba read the file as
     isotropic) defaults to :func:`default_n_phi` of the model's :func:`rgl_reduction`."""
     isotropic = bool(getattr(model, "isotropic", False))
@@ -202,18 +202,39 @@ def rgl_fields(model, n_theta: int = 32, n_ndf: int = 256, vndf_res: int | None 
     sizes = {"n_theta": n_theta, "n_ndf": n_ndf, "vndf_res": vndf_res, "rgb_res": rgb_res}
     _check_sizes(sizes, 1)
     n_theta, n_ndf, vndf_res, rgb_res = (int(v) for v in sizes.values())
-    if isotropic:
-        phi_i = np.zeros(1, np.float32)
-    else:
-        reduction = rgl_reduction(model)
-        n_phi = default_n_phi(reduction) if n_phi is None else n_phi
-        if isinstance(n_phi, bool) or not isinstance(n_phi, (int, np.integer)) \
-                or not 3 <= n_phi <= 4096:
-            raise ExportError(f"expected n_phi to be an integer in [3, 4096] for an anisotropic "
-                              f"model (Mitsuba reads 2 or fewer phi_i as isotropic), found "
-                              f"{n_phi!r}")
-        _check_sizes(sizes, int(n_phi))
-        phi_i = _phi_grid(reduction, int(n_phi)).astype(np.float32)
+    phi_i = np.zeros(1, np.float32) if isotropic else _anisotropic_phi_i(model, n_phi, sizes)
+    D_of, sigma_of = _warp_functions(model)
+    ndf, sigma = _ndf_sigma(D_of, sigma_of, n_ndf, isotropic)
+    theta_i = _u_grid(n_theta)[1].astype(np.float32)
+    vndf, rgb = _vndf_rgb(model, D_of, (ndf, sigma), phi_i, theta_i, (vndf_res, rgb_res),
+                          isotropic)
+    lum = np.einsum("c,ptcyx->ptyx", LUMA, np.maximum(rgb, 0.0).astype(np.float64))
+    lum = lum + 1e-6 * max(float(lum.max()), 1e-12)
+    return {"version": np.array([1, 0], np.uint32),
+            "description": f"brdffit export of {label(model)}",
+            "phi_i": phi_i, "theta_i": theta_i,
+            "sigma": sigma, "ndf": ndf, "vndf": vndf, "luminance": lum.astype(np.float32),
+            "rgb": rgb, "jacobian": np.array([1], np.uint8)}
+
+
+def _anisotropic_phi_i(model, n_phi, sizes: dict) -> np.ndarray:
+    """The ``phi_i`` grid (float32) of an anisotropic model: ``n_phi`` (default
+    :func:`default_n_phi`) azimuths over the model's :func:`rgl_reduction`."""
+    reduction = rgl_reduction(model)
+    n_phi = default_n_phi(reduction) if n_phi is None else n_phi
+    if isinstance(n_phi, bool) or not isinstance(n_phi, (int, np.integer)) \
+            or not 3 <= n_phi <= 4096:
+        raise ExportError(f"expected n_phi to be an integer in [3, 4096] for an anisotropic "
+                          f"model (Mitsuba reads 2 or fewer phi_i as isotropic), found "
+                          f"{n_phi!r}")
+    _check_sizes(sizes, int(n_phi))
+    return _phi_grid(reduction, int(n_phi)).astype(np.float32)
+
+
+def _warp_functions(model):
+    """``(D_of, sigma_of)``: the NDF and projected area σ of the distribution the file
+    samples, the model's own (microfacet models) or a proxy, mixed with the uniform NDF
+    (D = 1/π, σ = (1 + cos θ)/2) at the weight ``wd`` of the diffuse part."""
     if isinstance(model, MicrofacetBRDF):
         dist, wd = model.distribution, _diffuse_weight(model)
     else:
@@ -226,21 +247,34 @@ def rgl_fields(model, n_theta: int = 32, n_ndf: int = 256, vndf_res: int | None 
     def sigma_of(w):
         return (1.0 - wd) * np.asarray(dist.sigma(w), float) + wd * 0.5 * (1.0 + w[..., 2])
 
-    # ndf / sigma tables (J rows of φ, K columns of θ; two equal rows when isotropic)
+    return D_of, sigma_of
+
+
+def _ndf_sigma(D_of, sigma_of, n_ndf: int, isotropic: bool):
+    """The ``ndf`` and ``sigma`` tables (float32): J rows of φ, K columns of θ; two equal
+    rows when isotropic."""
     _, th = _u_grid(n_ndf)
     th_eval = np.minimum(th, 0.5 * np.pi - 1e-6)
     if isotropic:
         w = _dirs(th_eval)
         ndf = np.repeat(D_of(w)[None], 2, 0).astype(np.float32)
         sigma = np.repeat(sigma_of(w)[None], 2, 0).astype(np.float32)
-    else:
-        ph = u_to_phi(np.linspace(0.0, 1.0, n_ndf))
-        w = _dirs(th_eval[None, :], ph[:, None])
-        ndf, sigma = D_of(w).astype(np.float32), sigma_of(w).astype(np.float32)
-    ndf_w = _Marginal2D(ndf, (), normalize=False, enable_sampling=False)
-    sig_w = _Marginal2D(sigma, (), normalize=False, enable_sampling=False)
-    # the (u_θm, u_φm) grid of the vndf tables (φm relative to φi = 0 or absolute: same grid)
-    theta_i = _u_grid(n_theta)[1].astype(np.float32)
+        return ndf, sigma
+    ph = u_to_phi(np.linspace(0.0, 1.0, n_ndf))
+    w = _dirs(th_eval[None, :], ph[:, None])
+    return D_of(w).astype(np.float32), sigma_of(w).astype(np.float32)
+
+
+def _vndf_rgb(model, D_of, tables, phi_i, theta_i, res: tuple[int, int], isotropic: bool):
+    """The ``vndf`` and ``rgb`` tables (float32) for each ``phi_i``, all θi slices at once:
+    the visible NDF on the (u_θm, u_φm) grid (φm relative to φi = 0 or absolute: same grid),
+    and the model's cosine-weighted value divided by the sampling density at the samples
+    the VNDF warp maps a ``rgb_res``² grid to. ``tables`` = ``(ndf, sigma)``, ``res`` =
+    ``(vndf_res, rgb_res)``."""
+    vndf_res, rgb_res = res
+    ndf_w = _Marginal2D(tables[0], (), normalize=False, enable_sampling=False)
+    sig_w = _Marginal2D(tables[1], (), normalize=False, enable_sampling=False)
+    n_theta = theta_i.size
     th_i = np.minimum(theta_i.astype(np.float64), 0.5 * np.pi - 1e-3)
     uu = np.linspace(0.0, 1.0, vndf_res)
     ux, uy = np.meshgrid(uu, uu, indexing="xy")                 # (H=φ, W=θ)
@@ -260,8 +294,8 @@ def rgl_fields(model, n_theta: int = 32, n_ndf: int = 256, vndf_res: int | None 
         v = Dm[None] * np.maximum(np.einsum("hwk,tk->thw", m, wi), 0.0) * jac[None]
         v = np.maximum(v, 1e-12 * v.max(axis=(1, 2), keepdims=True))
         vndf[p] = v
-        # all Nθ slices at once: each sample's corner is its own slice (weight 1), as
-        # Marginal2D's lookup at a parameter node
+        # each sample's corner is its own slice (weight 1), as Marginal2D's lookup at a
+        # parameter node
         warp = _Marginal2D(vndf[p], (theta_i,))
         u_m, _ = warp.sample(samples, [(slice_of, np.ones(slice_of.size))])
         mm = _dirs(u_to_theta(u_m[:, 0]), u_to_phi(u_m[:, 1]) + (phi if isotropic else 0.0))
@@ -276,13 +310,7 @@ def rgl_fields(model, n_theta: int = 32, n_ndf: int = 256, vndf_res: int | None 
             val = np.where(d[:, None] > 0, f / (d / (4.0 * sg))[:, None], 0.0)
         rgb[p] = np.nan_to_num(val).reshape(n_theta, n_s, 3).transpose(0, 2, 1) \
             .reshape(n_theta, 3, rgb_res, rgb_res)
-    lum = np.einsum("c,ptcyx->ptyx", LUMA, np.maximum(rgb, 0.0).astype(np.float64))
-    lum = lum + 1e-6 * max(float(lum.max()), 1e-12)
-    return {"version": np.array([1, 0], np.uint32),
-            "description": f"brdffit export of {label(model)}",
-            "phi_i": phi_i, "theta_i": theta_i,
-            "sigma": sigma, "ndf": ndf, "vndf": vndf, "luminance": lum.astype(np.float32),
-            "rgb": rgb, "jacobian": np.array([1], np.uint8)}
+    return vndf, rgb
 
 
 def rgl_error(model, path, n: int = 1 << 14, seed: int = 0) -> dict:

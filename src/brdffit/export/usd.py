@@ -9,13 +9,14 @@ binding, on a preview sphere.
     (Pixar's UsdPreviewSurface specification, metallic workflow): ``diffuseColor`` = glTF's
     base colour, ``metallic``, ``roughness`` (perceptual, α = roughness²), ``ior``,
     ``clearcoat`` and ``clearcoatRoughness``, all from the glTF mapping of the fit
-    (:func:`brdffit.export.gltf.gltf_parameters`: the same rules, notes and bounds, ior ≤ 3);
+    (:func:`brdffit.export.gltf.gltf_parameters`: the same rules, notes and bounds, ior ≤ 3;
+    a dielectric's ior holds the fit's F0, :func:`preview_surface_inputs`);
   - ``outputs:mtlx:surface`` (the ``mtlx`` render context, read by USD's MaterialX support)
     ← a shader whose ``info:id`` is ``ND_open_pbr_surface_surfaceshader`` with the inputs of
     the ``.mtlx`` export (:func:`brdffit.export.materialx.openpbr_parameters`).
 
-* ``/Root/Sphere``, a unit ``UsdGeom.Sphere`` bound to the material (``mesh="none"``: the
-  material alone).
+* ``/Root/Sphere``, the glTF export's unit UV sphere as a ``UsdGeom.Mesh`` bound to the
+  material (``mesh="none"``: the material alone).
 
 What UsdPreviewSurface cannot hold is dropped and said in ``notes``: glTF's
 ``KHR_materials_specular`` (a coloured F0 and F90 below 1: UsdPreviewSurface's dielectric
@@ -40,8 +41,8 @@ import numpy as np
 from .._atomic import atomic_write
 from ..errors import ExportError
 from ._common import check_output_path, label, shown, writing
-from .gltf import gltf_parameters
-from .materialx import _library, openpbr_parameters
+from .gltf import gltf_parameters, uv_sphere
+from .materialx import _ior_of_f0, _library, openpbr_parameters
 
 __all__ = ["usd_layer", "write_usd", "check_usd", "PREVIEW_INPUTS", "MTLX_SHADER_ID"]
 
@@ -55,6 +56,8 @@ _MTLX_FLOATS = ("base_weight", "base_metalness", "base_diffuse_roughness", "spec
                 "specular_roughness", "specular_roughness_anisotropy", "specular_ior",
                 "coat_weight", "coat_roughness", "coat_ior", "coat_darkening")
 _MTLX_COLORS = ("base_color", "specular_color")
+#: the largest dielectric F0 written as UsdPreviewSurface's ior (ior 3)
+USD_F0_MAX = 0.25
 
 
 def _pxr():
@@ -66,7 +69,15 @@ def _pxr():
 
 
 def preview_surface_inputs(p: dict) -> tuple[dict, list[str]]:
-    """``(inputs, notes)``: UsdPreviewSurface inputs of the glTF parameters ``p``."""
+    """``(inputs, notes)``: UsdPreviewSurface inputs of the glTF parameters ``p``.
+
+    A dielectric whose glTF material needs ``KHR_materials_specular`` (a coloured F0, or an
+    F90 below 1 that the glTF index raised to keep F0) has no such input here: its ``ior``
+    is the one whose Fresnel reflectance at normal incidence is the fit's mean F0 (at most
+    :data:`USD_F0_MAX`, ior ≤ 3), not the glTF ``ior``, which only holds F0 together with
+    the extension's factors. UsdPreviewSurface's specular workflow (``specularColor`` = F0)
+    would keep the colour, but Blender's USD importer (5.0) reads ``specularColor`` as the
+    Principled BSDF's specular tint, a factor on the F0 of ``ior``."""
     base = [float(x) for x in p["baseColorFactor"][:3]]
     spec = p.get("specular") or {}
     inputs = {"diffuseColor": base, "metallic": float(p["metallicFactor"]),
@@ -79,10 +90,13 @@ def preview_surface_inputs(p: dict) -> tuple[dict, list[str]]:
         inputs["clearcoatRoughness"] = float(coat["clearcoatRoughnessFactor"])
     if spec and (spec.get("specularFactor", 1.0) != 1.0
                  or np.any(np.asarray(spec.get("specularColorFactor", [1.0] * 3)) != 1.0)):
+        f0 = float(np.clip(np.mean(p["F0"]), 0.0, USD_F0_MAX))
+        inputs["ior"] = _ior_of_f0(f0)
         notes.append("UsdPreviewSurface: KHR_materials_specular dropped (specularFactor "
                      f"{float(spec.get('specularFactor', 1.0)):.4g}, specularColorFactor "
-                     f"{np.round(spec.get('specularColorFactor', [1.0] * 3), 4).tolist()}): its "
-                     "dielectric reflectance is the Fresnel of ior, reaching 1 at grazing")
+                     f"{np.round(spec.get('specularColorFactor', [1.0] * 3), 4).tolist()}): the "
+                     f"dielectric reflectance is the Fresnel of ior {inputs['ior']:.4g}, the "
+                     f"fit's mean F0 {f0:.4g} at normal incidence, reaching 1 at grazing")
     if p.get("anisotropy"):
         notes.append("UsdPreviewSurface: anisotropy dropped (no such input; the MaterialX "
                      "binding keeps specular_roughness_anisotropy)")
@@ -138,10 +152,7 @@ def usd_layer(model, name: str | None = None, mesh: str = "sphere") -> tuple[str
                      f"({mtlx['tangent_rotation_deg']:.6g} deg) is not carried")
 
     if mesh == "sphere":
-        sphere = UsdGeom.Sphere.Define(stage, "/Root/Sphere")
-        sphere.CreateRadiusAttr(1.0)
-        sphere.CreateExtentAttr([(-1.0, -1.0, -1.0), (1.0, 1.0, 1.0)])
-        UsdShade.MaterialBindingAPI.Apply(sphere.GetPrim()).Bind(material)
+        _preview_sphere(stage, material)
     text = stage.GetRootLayer().ExportToString()
     summary = {"target": "usd", "material": f"/Root/Looks/{ident}",
                "preview_surface": preview,
@@ -150,6 +161,30 @@ def usd_layer(model, name: str | None = None, mesh: str = "sphere") -> tuple[str
                                                     for n in mtlx["notes"]],
                "mesh": mesh}
     return text, summary
+
+
+def _preview_sphere(stage, material) -> None:
+    """``/Root/Sphere``: the glTF export's preview sphere (:func:`brdffit.export.gltf.uv_sphere`)
+    as a ``UsdGeom.Mesh`` (triangles, vertex normals, ``primvars:st``, no subdivision), bound
+    to ``material``. A mesh, not a ``UsdGeom.Sphere``: Blender's USD importer (5.0) makes a
+    coarse mesh of a sphere shape and does not bind its material."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade, Vt
+
+    s = uv_sphere()
+    sphere = UsdGeom.Mesh.Define(stage, "/Root/Sphere")
+    sphere.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(s["positions"]))
+    sphere.CreateNormalsAttr(Vt.Vec3fArray.FromNumpy(s["normals"]))
+    sphere.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    indices = s["indices"].astype(np.int32)
+    sphere.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(indices) // 3, 3,
+                                                                    np.int32)))
+    sphere.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(indices))
+    sphere.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    sphere.CreateExtentAttr([Gf.Vec3f(-1.0, -1.0, -1.0), Gf.Vec3f(1.0, 1.0, 1.0)])
+    st = UsdGeom.PrimvarsAPI(sphere).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                   UsdGeom.Tokens.vertex)
+    st.Set(Vt.Vec2fArray.FromNumpy(s["texcoords"]))
+    UsdShade.MaterialBindingAPI.Apply(sphere.GetPrim()).Bind(material)
 
 
 def _mtlx_problems(stage) -> list[str]:

@@ -1297,21 +1297,15 @@ def fit_ggx_diffuse(brdf, **kwargs) -> MicrofacetBRDF | SumBRDF:
 
 
 def fit_beckmann_diffuse(brdf, **kwargs) -> MicrofacetBRDF | SumBRDF:
-    """Beckmann + Lambert (ρd/π), fitted like :func:`fit_ggx_diffuse` (same options and
-    result, with a Beckmann distribution).
-
-    Parameters
-    ----------
-    brdf : BRDF
-        Any BRDF (isotropic, or anisotropic with ``anisotropic=True``).
-    **kwargs
-        The options of :func:`fit_analytic_diffuse` (see :func:`fit_ggx_diffuse`).
+    """Beckmann + Lambert (ρd/π), fitted like :func:`fit_ggx_diffuse`: the same parameters
+    (``brdf``, the options of :func:`fit_analytic_diffuse`) and result, with a Beckmann
+    distribution.
 
     Examples
     --------
-    >>> import brdffit
-    >>> m = brdffit.fit_beckmann_diffuse(brdffit.synthetic("plastic-beckmann"))
-    >>> round(float(m.distribution.alpha_x), 3)
+    >>> from brdffit import fit_beckmann_diffuse, synthetic
+    >>> alpha = fit_beckmann_diffuse(synthetic("plastic-beckmann")).distribution.alpha_x
+    >>> round(float(alpha), 3)
     0.18
     """
     return fit_analytic_diffuse(brdf, "beckmann", **kwargs)

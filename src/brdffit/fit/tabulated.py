@@ -23,7 +23,11 @@ Pipeline of :func:`fit_tabulated`:
    ``f_r,id = D G2 / (4 cos θi cos θo)`` (Eq. 1 with F = 1 and the height-correlated Eq. 2),
    averaged over every valid MERL sample (supplemental Eq. 33-39) for isotropic input. For
    materials outside microfacet theory this is a *residual*, not a physical Fresnel
-   reflectance (Dupuy 2015 §4.4); it is clamped to ``[0, fresnel_max]`` and never NaN.
+   reflectance (Dupuy 2015 §4.4); it is clamped to ``[0, fresnel_max]`` and never NaN. The
+   paper's F is a ratio to the model and unbounded: on diffuse materials it absorbs the
+   diffuse part and exceeds 1 (F0 up to 2 on RGL ``paper_white``); the default
+   ``fresnel_max`` = 1 keeps a reflectance (with a Smith G and a normalised D, F ≤ 1 keeps
+   the lobe's directional albedo ≤ 1).
 
 The dominant eigenvalue is ``F0`` in the paper's notation (reported in ``fit_info``).
 
@@ -680,10 +684,9 @@ def _split_diffuse(brdf: BRDF, model, info: dict, refit, merl=None):
 
 @with_single_blas_thread
 def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
-                  tol: float | None = None,
-                  anisotropic: bool | None = None, per_channel: bool = False, n_phi: int = 90,
-                  rule: str = "auto", hotspot: str = "G2",
-                  max_iterations: int = DEFAULT_MAX_ITERATIONS,
+                  tol: float | None = None, anisotropic: bool | None = None,
+                  per_channel: bool = False, n_phi: int = 90, rule: str = "auto",
+                  hotspot: str = "G2", max_iterations: int = DEFAULT_MAX_ITERATIONS,
                   fresnel_max: float = 1.0, p_floor: float = 1e-6,
                   fresnel_max_theta_deg: float | None = 89.0, diffuse: bool = True) -> BRDF:
     """Fit the tabulated microfacet model of Dupuy et al. 2015 to ``brdf``.
@@ -695,13 +698,10 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
     n, n_phi:
         Elevation nodes (paper: 90 for MERL, 360 for Table 1); azimuth nodes when 2D.
     iterations, tol, max_iterations:
-        Stopping rule of the power iteration (:func:`iteration_plan`). **Default: converged**
-        — iterate until the relative change ``max|p_k − p_{k−1}| / max p_k`` of the
-        normalised slope PDF is ≤ ``tol`` (:data:`DEFAULT_TOL` = 1e-6 when None), at most
-        ``max_iterations`` = 1000 (a safety cap; ``fit_info["cap_reached"]`` and a
-        ``message`` say when it is hit). **Paper mode**: ``iterations=4`` (with ``tol`` None)
-        runs exactly the paper's 4 iterations (Dupuy 2015 Alg. 1; on MERL, a relative change
-        of ~3.5e-3 is left). Both given: stop at ``tol`` or after ``iterations``.
+        Stopping rule of the power iteration (:func:`iteration_plan`, module docstring's
+        **Convergence**): by default converged, to ``tol`` (:data:`DEFAULT_TOL` when None)
+        within ``max_iterations``; ``iterations=4`` (``tol`` None) is the paper's mode; both
+        given: stop at ``tol`` or after ``iterations``.
     anisotropic:
         2D ``(θ, φ)`` fit (``n × n_phi``) or 1D radial fit; default ``not brdf.isotropic``.
     per_channel:
@@ -718,12 +718,9 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
         model is evaluated with, so the fit reproduces the input's backscattering) or ``"G1"``
         (the paper's Eq. 11: α −2 % at GGX α = 0.2, −16 % at α = 0.8 on a G2 microsurface).
     fresnel_max:
-        Upper clamp of the extracted Fresnel table. Default 1: a reflectance, so that the
-        model is physical (with a Smith G and a normalised D, F ≤ 1 keeps the lobe's
-        directional albedo ≤ 1). The paper's F (Eq. 19-20) is a ratio to the model and is
-        unbounded: on diffuse materials it absorbs the diffuse part and exceeds 1 (F0 up to 2
-        on RGL ``paper_white``); ``fresnel_max`` > 1 keeps such an F, which the validity
-        checks then report.
+        Upper clamp of the extracted Fresnel table. Default 1: a reflectance, which keeps the
+        lobe's directional albedo ≤ 1; the paper's unbounded ratio (module docstring, step 4)
+        is kept with ``fresnel_max`` > 1, and the validity checks then report it.
     p_floor:
         Samples where the fitted slope PDF is below ``p_floor · max P`` are left out of the
         Fresnel average (the ratio is undefined there).
@@ -749,12 +746,7 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
     """
     t0 = time.perf_counter()
     anisotropic = not bool(getattr(brdf, "isotropic", False)) if anisotropic is None else anisotropic
-    if rule == "auto":
-        has_merl = getattr(brdf, "merl_table", None) is not None
-        rule = "merl" if (has_merl and n == N_THETA_H and not anisotropic) else "gauss"
-    merl = None
-    if not anisotropic and getattr(brdf, "isotropic", False):
-        merl = tabulate_merl_grid(brdf)
+    rule, merl = _rule_and_grid(brdf, n, anisotropic, rule)
     _, tol_eff = iteration_plan(iterations, tol, max_iterations)  # validates early
     kw = dict(n=n, n_phi=n_phi, rule=rule, iterations=iterations, tol=tol,
               max_iterations=max_iterations, anisotropic=anisotropic, hotspot=hotspot,
@@ -762,23 +754,50 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
                               "max_theta_deg": fresnel_max_theta_deg})
     model, info = _fit_channels(brdf, merl, per_channel, kw)
     if diffuse:
-        def refit(rho_d):
-            residual = (None if merl is None else
-                        (merl[0] - np.asarray(rho_d) / np.pi, merl[1]))
-            return _fit_channels(_without_lambert(brdf, rho_d), residual, per_channel, kw)
-
-        model, info = _split_diffuse(brdf, model, info, refit, merl)
+        model, info = _split_diffuse(brdf, model, info, _refit(brdf, merl, per_channel, kw),
+                                     merl)
     info["time"] = info["time_total"] = time.perf_counter() - t0
     if merl is not None:
         info["merl_grid"] = True
-    model.fit_options = {
-        "n": int(n), "iterations": None if iterations is None else int(iterations),
-        "tol": tol_eff, "anisotropic": bool(anisotropic), "per_channel": bool(per_channel),
-        "n_phi": int(n_phi) if anisotropic else None, "rule": rule, "hotspot": hotspot,
-        "max_iterations": int(max_iterations), "fresnel_max": fresnel_max, "p_floor": p_floor,
-        "fresnel_max_theta_deg": fresnel_max_theta_deg, "diffuse": bool(diffuse)}
+    model.fit_options = _fit_options(kw, tol_eff, per_channel, diffuse)
     return record(model, info, success=info["success"], converged=info["converged"],
                   message=info["message"], nit=info["nit"], time=info["time"])
+
+
+def _rule_and_grid(brdf: BRDF, n: int, anisotropic: bool, rule: str):
+    """``(rule, merl)``: ``"auto"`` resolved (``"merl"`` for isotropic fits of MERL-grid input
+    with ``n = 90``, else ``"gauss"``) and the MERL-grid table of an isotropic input of an
+    isotropic fit (:func:`~brdffit.grid.tabulate_merl_grid`; else ``None``)."""
+    if rule == "auto":
+        has_merl = getattr(brdf, "merl_table", None) is not None
+        rule = "merl" if (has_merl and n == N_THETA_H and not anisotropic) else "gauss"
+    merl = None
+    if not anisotropic and getattr(brdf, "isotropic", False):
+        merl = tabulate_merl_grid(brdf)
+    return rule, merl
+
+
+def _refit(brdf: BRDF, merl, per_channel: bool, kw: dict):
+    """The refit of :func:`_split_diffuse`: ``refit(ρd)`` fits the lobe to ``f − ρd/π``."""
+    def refit(rho_d):
+        residual = (None if merl is None else
+                    (merl[0] - np.asarray(rho_d) / np.pi, merl[1]))
+        return _fit_channels(_without_lambert(brdf, rho_d), residual, per_channel, kw)
+
+    return refit
+
+
+def _fit_options(kw: dict, tol_eff, per_channel: bool, diffuse: bool) -> dict:
+    """``fit_options`` of :func:`fit_tabulated` from the options ``kw`` of :func:`_fit_one`
+    and the effective tolerance ``tol_eff``."""
+    iterations, anisotropic, fresnel = kw["iterations"], kw["anisotropic"], kw["fresnel_kwargs"]
+    return {
+        "n": int(kw["n"]), "iterations": None if iterations is None else int(iterations),
+        "tol": tol_eff, "anisotropic": bool(anisotropic), "per_channel": bool(per_channel),
+        "n_phi": int(kw["n_phi"]) if anisotropic else None, "rule": kw["rule"],
+        "hotspot": kw["hotspot"], "max_iterations": int(kw["max_iterations"]),
+        "fresnel_max": fresnel["fresnel_max"], "p_floor": fresnel["p_floor"],
+        "fresnel_max_theta_deg": fresnel["max_theta_deg"], "diffuse": bool(diffuse)}
 
 
 def _fit_channels(data: BRDF, merl, per_channel: bool, kw: dict) -> tuple[BRDF, dict]:
@@ -838,17 +857,9 @@ def fit_beckmann(brdf: BRDF, **kwargs) -> MicrofacetBRDF:
 
 def fit_ggx(brdf: BRDF, **kwargs) -> MicrofacetBRDF:
     """GGX fit by slope moments (Dupuy et al. 2015 App. C): :func:`fit_tabulated`, then
-    :func:`~brdffit.microfacet.conversions.to_ggx` (same Fresnel table). For an engine
-    material fitted over the whole data with a Lambert term, see :func:`brdffit.fit.analytic.fit_ggx_diffuse`.
-
-    Parameters
-    ----------
-    brdf : BRDF
-        Any BRDF (isotropic or not).
-    **kwargs
-        Every option of :func:`fit_tabulated` (``n``, ``iterations``, ``tol``,
-        ``anisotropic``, ``rule``, ``max_iterations``, ...), for the tabulated fit the
-        moments are taken from.
+    :func:`~brdffit.microfacet.conversions.to_ggx` (same Fresnel table); the parameters are
+    those of :func:`fit_beckmann`. For an engine material fitted over the whole data with a
+    Lambert term, see :func:`brdffit.fit.analytic.fit_ggx_diffuse`.
 
     Returns
     -------
@@ -858,8 +869,8 @@ def fit_ggx(brdf: BRDF, **kwargs) -> MicrofacetBRDF:
     Examples
     --------
     >>> import brdffit
-    >>> m = brdffit.fit_ggx(brdffit.synthetic("gold-ggx"))
-    >>> round(float(m.distribution.alpha_x), 3)
+    >>> gold = brdffit.synthetic("gold-ggx")                  # GGX α = 0.12, conductor
+    >>> round(float(brdffit.fit_ggx(gold).distribution.alpha_x), 3)
     0.12
     """
     return to_ggx(fit_tabulated(brdf, **kwargs))

@@ -191,6 +191,15 @@ class _Marginal2D:
         fx, fy = f[:, 0], f[:, 1]
         return (1 - fy) * ((1 - fx) * v00 + fx * v10) + fy * ((1 - fx) * v01 + fx * v11)
 
+    def _columns(self, corners, i, fy):
+        """The data of cell ``i`` (its corner texel's index) interpolated at ``fy`` along its
+        left and right columns: ``(c0, c1)``."""
+        v00 = self._lookup(self.data, self.n_data, corners, i)
+        v10 = self._lookup(self.data, self.n_data, corners, i + 1)
+        v01 = self._lookup(self.data, self.n_data, corners, i + self.w)
+        v11 = self._lookup(self.data, self.n_data, corners, i + self.w + 1)
+        return v00 + (v01 - v00) * fy, v10 + (v11 - v10) * fy
+
     def invert(self, sample, corners):
         """``Marginal2D::invert_continuous``: the sample in [0,1]² mapping to ``sample``."""
         ip, f = self._cell(sample)
@@ -198,12 +207,7 @@ class _Marginal2D:
         fx, fy = f[:, 0], f[:, 1]
         i = py * self.w + px
         lk = lambda t, n, idx: self._lookup(t, n, corners, idx)  # noqa: E731
-        v00 = lk(self.data, self.n_data, i)
-        v10 = lk(self.data, self.n_data, i + 1)
-        v01 = lk(self.data, self.n_data, i + self.w)
-        v11 = lk(self.data, self.n_data, i + self.w + 1)
-        c0 = v00 + (v01 - v00) * fy
-        c1 = v10 + (v11 - v10) * fy
+        c0, c1 = self._columns(corners, i, fy)
         pdf = c0 + (c1 - c0) * fx
         # invert_segment(x, 1/(W-1), c0, c1)
         x = fx * (c0 + (c1 - c0) * (0.5 * fx)) / (self.w - 1)
@@ -270,13 +274,7 @@ class _Marginal2D:
 
         col = self._lower_bound(n, 0, wm1, lambda i: cond_at(i) < x)
         x = x - np.where(col > 0, cond_at(np.maximum(col - 1, 0)), 0.0)
-        i = row * self.w + col
-        v00 = lk(self.data, self.n_data, i)
-        v10 = lk(self.data, self.n_data, i + 1)
-        v01 = lk(self.data, self.n_data, i + self.w)
-        v11 = lk(self.data, self.n_data, i + self.w + 1)
-        c0 = v00 + (v01 - v00) * y
-        c1 = v10 + (v11 - v10) * y
+        c0, c1 = self._columns(corners, row * self.w + col, y)
         x = self._sample_segment(x, wm1, c0, c1)
         pos = np.stack([(col + x) / wm1, (row + y) / (self.h - 1)], axis=-1)
         return pos, c0 + (c1 - c0) * x
@@ -357,21 +355,31 @@ class RGLBRDF(BRDF):
     def __init__(self, fields: dict, source=None, name: str | None = None):
         self.fields = dict(fields)
         self.source = None if source is None else str(source)
-        path = self.source
+        self._read_fields()
+        self._check_fields()
+        self.name = name or (Path(self.source).stem if self.source else "rgl")
+        # Measured(): m_isotropic = phi_i.shape[0] <= 2
+        self.isotropic = self.phi_i.size <= 2
+        self.reduction = phi_i_reduction(self.phi_i)
+        self._build_warps()
+
+    def _need(self, key, ndim, dtype=np.float32) -> np.ndarray:
+        """The field ``key``, an ``ndim``-D array of ``dtype``; raises BRDFFormatError."""
         f = self.fields
+        if key not in f:
+            raise BRDFFormatError(self.source, f"expected a field {key!r} in an RGL .bsdf "
+                                               f"file, found fields {sorted(f)}")
+        a = f[key]
+        if not isinstance(a, np.ndarray) or a.ndim != ndim or a.dtype != dtype:
+            got = (type(a).__name__ if not isinstance(a, np.ndarray)
+                   else f"{a.dtype} array of shape {a.shape}")
+            raise BRDFFormatError(self.source, f"expected field {key!r} as a {ndim}-D "
+                                               f"{np.dtype(dtype)} array, found {got}")
+        return a
 
-        def need(key, ndim, dtype=np.float32):
-            if key not in f:
-                raise BRDFFormatError(path, f"expected a field {key!r} in an RGL .bsdf file, "
-                                            f"found fields {sorted(f)}")
-            a = f[key]
-            if not isinstance(a, np.ndarray) or a.ndim != ndim or a.dtype != dtype:
-                got = (type(a).__name__ if not isinstance(a, np.ndarray)
-                       else f"{a.dtype} array of shape {a.shape}")
-                raise BRDFFormatError(path, f"expected field {key!r} as a {ndim}-D "
-                                            f"{np.dtype(dtype)} array, found {got}")
-            return a
-
+    def _read_fields(self) -> None:
+        """The attributes of the file's fields, the required ones type-checked."""
+        path, f, need = self.source, self.fields, self._need
         self.theta_i = need("theta_i", 1)
         self.phi_i = need("phi_i", 1)
         self.ndf = need("ndf", 2)
@@ -390,6 +398,10 @@ class RGLBRDF(BRDF):
         self.rgb = f.get("rgb")
         self.valid = f.get("valid")
         self.version = f.get("version")
+
+    def _check_fields(self) -> None:
+        """The shapes, ranges and signs of the tables; raises BRDFFormatError."""
+        path, need = self.source, self._need
         nphi, nth = self.phi_i.size, self.theta_i.size
         if nphi < 1 or nth < 1:
             raise BRDFFormatError(path, f"expected at least one θi and φi, found {nth} and {nphi}")
@@ -434,10 +446,10 @@ class RGLBRDF(BRDF):
                 raise BRDFFormatError(path, f"expected every {key} slice to have a positive "
                                             "integral, found an all-zero slice")
 
-        self.name = name or (Path(self.source).stem if self.source else "rgl")
-        # Measured(): m_isotropic = phi_i.shape[0] <= 2
-        self.isotropic = nphi <= 2
-        self.reduction = phi_i_reduction(self.phi_i)
+    def _build_warps(self) -> None:
+        """The interpolants of Mitsuba's ``measured`` plugin and the RGB table (spectra
+        converted to linear sRGB, :func:`spectral_to_srgb_weights`)."""
+        path = self.source
         params = (self.phi_i, self.theta_i)
         self._ndf = _Marginal2D(self.ndf, (), normalize=False, enable_sampling=False)
         self._sigma = _Marginal2D(self.sigma, (), normalize=False, enable_sampling=False)
@@ -561,21 +573,11 @@ class RGLBRDF(BRDF):
         active = (wi[:, 2] > 0) & (wo[:, 2] > 0)
         if active.any():
             wi, wo, lam_a = wi[active], wo[active], lam[active]
-            fx, fy = self._fold(wi)
-            wi[:, 0] *= fx; wi[:, 1] *= fy; wo[:, 0] *= fx; wo[:, 1] *= fy  # noqa: E702
-            m = wi + wo
-            m /= np.linalg.norm(m, axis=-1, keepdims=True)
-            theta_i, phi_i, u_m = self._warp_angles(wi, m)
-            u_wi = np.stack([theta_to_u(theta_i), phi_to_u(phi_i)], -1)
+            _, theta_i, phi_i, u_m = self._half_vector(wi, wo)
             sample, _ = self._vndf.invert(u_m, self._vndf.corners([phi_i, theta_i]))
             val = np.stack([self._spectral.eval(sample, self._spectral.corners(
                 [phi_i, theta_i, lam_a[:, k]])) for k in range(lam.shape[1])], -1)
-            if self.jacobian:
-                d = self._ndf.eval(u_m, self._ndf.corners([]))
-                sg = self._sigma.eval(u_wi, self._sigma.corners([]))
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    val = val * (d / (4.0 * sg))[:, None]
-            out[active] = val
+            out[active] = self._with_jacobian(val, u_m, theta_i, phi_i)
         return out.reshape(shape + (lam.shape[1],))
 
     def _eval_flat(self, wi, wo):
@@ -584,16 +586,7 @@ class RGLBRDF(BRDF):
         if not active.any():
             return out
         wi, wo = wi[active].copy(), wo[active].copy()
-        if self.reduction >= 2:
-            fx, fy = self._fold(wi)       # symmetry reduction (see _fold)
-            wi[:, 0] *= fx
-            wi[:, 1] *= fy
-            wo[:, 0] *= fx
-            wo[:, 1] *= fy
-        m = wi + wo
-        m /= np.linalg.norm(m, axis=-1, keepdims=True)
-        theta_i, phi_i, u_m = self._warp_angles(wi, m)
-        u_wi = np.stack([theta_to_u(theta_i), phi_to_u(phi_i)], -1)
+        _, theta_i, phi_i, u_m = self._half_vector(wi, wo)
         params = [phi_i, theta_i]
         corners = self._vndf.corners(params)          # same params for vndf and rgb
         sample, _ = self._vndf.invert(u_m, corners)
@@ -610,13 +603,29 @@ class RGLBRDF(BRDF):
             v01, v11 = np.take(t, base + w.w, axis=0), np.take(t, base + w.w + 1, axis=0)
             spec = spec + wt[:, None] * ((1 - fy) * ((1 - fx) * v00 + fx * v10)
                                          + fy * ((1 - fx) * v01 + fx * v11))
-        if self.jacobian:
-            d = self._ndf.eval(u_m, self._ndf.corners([]))
-            sg = self._sigma.eval(u_wi, self._sigma.corners([]))
-            with np.errstate(divide="ignore", invalid="ignore"):
-                spec = spec * (d / (4.0 * sg))[:, None]
-        out[active] = spec
+        out[active] = self._with_jacobian(spec, u_m, theta_i, phi_i)
         return out
+
+    def _half_vector(self, wi, wo):
+        """Fold ``wi`` and ``wo`` in place by the symmetry reduction (:meth:`_fold`); return
+        their half vector ``m`` and :meth:`_warp_angles` ``(theta_i, phi_i, u_m)``."""
+        if self.reduction >= 2:
+            fx, fy = self._fold(wi)
+            wi[:, 0] *= fx; wi[:, 1] *= fy; wo[:, 0] *= fx; wo[:, 1] *= fy  # noqa: E702
+        m = wi + wo
+        m /= np.linalg.norm(m, axis=-1, keepdims=True)
+        return (m,) + self._warp_angles(wi, m)
+
+    def _with_jacobian(self, val, u_m, theta_i, phi_i):
+        """``val`` (N, C) times ``D(m) / (4 σ(wi))`` when the file's ``jacobian`` flag is set
+        (the stored values are then divided by it, as Mitsuba's ``measured`` reads them)."""
+        if not self.jacobian:
+            return val
+        u_wi = np.stack([theta_to_u(theta_i), phi_to_u(phi_i)], -1)
+        d = self._ndf.eval(u_m, self._ndf.corners([]))
+        sg = self._sigma.eval(u_wi, self._sigma.corners([]))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return val * (d / (4.0 * sg))[:, None]
 
     def _fold(self, wi):
         """Symmetry reduction of ``Measured``: per-sample sign multipliers for x and y.
@@ -654,11 +663,7 @@ class RGLBRDF(BRDF):
         active = (wi[:, 2] > 0) & (wo[:, 2] > 0)
         if active.any():
             wi, wo = wi[active], wo[active]
-            fx, fy = self._fold(wi)
-            wi[:, 0] *= fx; wi[:, 1] *= fy; wo[:, 0] *= fx; wo[:, 1] *= fy  # noqa: E702
-            m = wi + wo
-            m /= np.linalg.norm(m, axis=-1, keepdims=True)
-            theta_i, phi_i, u_m = self._warp_angles(wi, m)
+            m, theta_i, phi_i, u_m = self._half_vector(wi, wo)
             corners = self._vndf.corners([phi_i, theta_i])
             sample, vndf_pdf = self._vndf.invert(u_m, corners)
             lum_pdf = self._luminance.eval(sample, corners)

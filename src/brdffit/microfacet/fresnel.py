@@ -59,10 +59,25 @@ def _cos(cos_theta_d) -> np.ndarray:
     return np.clip(np.asarray(cos_theta_d, dtype=np.float64), 0.0, 1.0)[..., None]
 
 
-class SchlickFresnel(Fresnel):
+class _RGBParameters(Fresnel):
+    """A Fresnel given by the RGB arrays named in ``rgb_params``: its ``params()`` maps each
+    name to its list, its repr shows each rounded to 4 decimals."""
+
+    rgb_params: tuple[str, ...] = ()
+
+    def params(self) -> dict:
+        return {k: getattr(self, k).tolist() for k in self.rgb_params}
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={np.round(getattr(self, k), 4).tolist()}" for k in self.rgb_params)
+        return f"{type(self).__name__}({args})"
+
+
+class SchlickFresnel(_RGBParameters):
     """Schlick's approximation ``F0 + (1 − F0)(1 − cos θd)⁵`` (Schlick 1994)."""
 
     kind = "schlick"
+    rgb_params = ("f0",)
     state_schema = Schema({"f0": RGB(ge=0, le=1)}, required=("f0",), strict=True)
 
     def __init__(self, f0):
@@ -75,14 +90,8 @@ class SchlickFresnel(Fresnel):
         x5 *= x
         return self.f0 + (1.0 - self.f0) * x5
 
-    def params(self) -> dict:
-        return {"f0": self.f0.tolist()}
 
-    def __repr__(self) -> str:
-        return f"SchlickFresnel(f0={np.round(self.f0, 4).tolist()})"
-
-
-class GeneralizedSchlickFresnel(Fresnel):
+class GeneralizedSchlickFresnel(_RGBParameters):
     """Bagher et al. 2012 Eq. 11: ``F0 + (1 − F0)(1 − cos θd)⁵ − F1 cos θd``.
 
     Values are returned as computed (they may leave [0, 1] for extreme ``F1``; a fit is
@@ -90,6 +99,7 @@ class GeneralizedSchlickFresnel(Fresnel):
     """
 
     kind = "generalized_schlick"
+    rgb_params = ("F0", "F1")
     state_schema = Schema({"F0": RGB(ge=0, le=1), "F1": RGB(ge=-F1_MAX, le=F1_MAX)},
                           required=("F0",), strict=True)
 
@@ -105,15 +115,8 @@ class GeneralizedSchlickFresnel(Fresnel):
         x5 *= x
         return self.F0 + (1.0 - self.F0) * x5 - self.F1 * c
 
-    def params(self) -> dict:
-        return {"F0": self.F0.tolist(), "F1": self.F1.tolist()}
 
-    def __repr__(self) -> str:
-        return (f"GeneralizedSchlickFresnel(F0={np.round(self.F0, 4).tolist()}, "
-                f"F1={np.round(self.F1, 4).tolist()})")
-
-
-class DielectricFresnel(Fresnel):
+class DielectricFresnel(_RGBParameters):
     """Exact unpolarised dielectric Fresnel, relative index ``eta = n_t / n_i`` (> 0).
 
     ``F = ½ ((g − c)/(g + c))² (1 + ((c(g + c) − 1)/(c(g − c) + 1))²)`` with
@@ -121,6 +124,7 @@ class DielectricFresnel(Fresnel):
     """
 
     kind = "dielectric"
+    rgb_params = ("eta",)
     state_schema = Schema({"eta": RGB(gt=0, le=INDEX_MAX)}, required=("eta",), strict=True)
 
     def __init__(self, eta):
@@ -130,12 +134,6 @@ class DielectricFresnel(Fresnel):
 
     def eval(self, cos_theta_d) -> np.ndarray:
         return dielectric_reflectance(_cos(cos_theta_d), self.eta)
-
-    def params(self) -> dict:
-        return {"eta": self.eta.tolist()}
-
-    def __repr__(self) -> str:
-        return f"DielectricFresnel(eta={np.round(self.eta, 4).tolist()})"
 
 
 def dielectric_reflectance(c, eta) -> np.ndarray:
@@ -190,7 +188,7 @@ def conductor_reflectance(c, eta, k) -> np.ndarray:
     return np.clip(np.where(np.isfinite(F), F, 1.0), 0.0, 1.0)
 
 
-class ConductorFresnel(Fresnel):
+class ConductorFresnel(_RGBParameters):
     """Exact unpolarised Fresnel of a conductor with complex index ``eta + i k`` (RGB).
 
     ``r_s = (cos θ − n cos θt)/(cos θ + n cos θt)``, ``r_p = (n cos θ − cos θt)/(n cos θ + cos θt)``,
@@ -199,6 +197,7 @@ class ConductorFresnel(Fresnel):
     """
 
     kind = "conductor"
+    rgb_params = ("eta", "k")
     state_schema = Schema({"eta": RGB(gt=0, le=INDEX_MAX), "k": RGB(ge=0, le=INDEX_MAX)},
                           required=("eta", "k"), strict=True)
 
@@ -212,13 +211,6 @@ class ConductorFresnel(Fresnel):
     def eval(self, cos_theta_d) -> np.ndarray:
         """:func:`conductor_reflectance` of the RGB index, ``(..., 3)``."""
         return conductor_reflectance(_cos(cos_theta_d), self.eta, self.k)
-
-    def params(self) -> dict:
-        return {"eta": self.eta.tolist(), "k": self.k.tolist()}
-
-    def __repr__(self) -> str:
-        return (f"ConductorFresnel(eta={np.round(self.eta, 4).tolist()}, "
-                f"k={np.round(self.k, 4).tolist()})")
 
 
 class TabulatedFresnel(Fresnel):

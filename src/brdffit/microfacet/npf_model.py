@@ -253,6 +253,14 @@ _CELL_EDGES = (np.arange(N_THETA_H + 1) / N_THETA_H) ** 2 * (np.pi / 2)     # θ
 class _HalfVectorSampling:
     """Mixture of cosine sampling and tabulated half-vector sampling (see module docstring)."""
 
+    def _identify(self, variant: str, name: str, source: str | None) -> None:
+        """Set the model's variant, name and source; the sampling table is built on first
+        use."""
+        self.variant = variant
+        self.name = name
+        self.source = source
+        self._h_cdf = None
+
     def _spec_profile(self) -> np.ndarray:
         """Non-negative scalar profile over the 90 θh knots (upper bound of the specular
         part's θh dependence)."""
@@ -361,6 +369,22 @@ class _DiffuseFigures:
         return {"rho_d": [float(np.pi * x) for x in np.asarray(self.rho_d, dtype=np.float64)]}
 
 
+def _factor_arrays(model, third: str) -> dict[str, np.ndarray]:
+    """The fit-file arrays of a three-factor model: D, F and ``third`` (``"G"`` or ``"H"``)
+    as float32, and ``rho`` = (ρd, ρs) (2, 3)."""
+    return {"D": model.D.astype(np.float32), "F": model.F.astype(np.float32),
+            third: getattr(model, third).astype(np.float32),
+            "rho": np.stack([model.rho_d, model.rho_s]).astype(np.float32)}
+
+
+def _rho_of(arrays) -> np.ndarray:
+    """(ρd, ρs) (2, 3) of a fit file's ``rho``; raises ValueError for another shape."""
+    rho = np.asarray(arrays["rho"], dtype=np.float64)
+    if rho.shape != (2, 3):
+        raise ValueError(f"rho: expected shape (2, 3), found {rho.shape}")
+    return rho
+
+
 class NPFMicrofacetBRDF(_DiffuseFigures, _HalfVectorSampling, SerializableModel, IsotropicBRDF):
     """Non-parametric factor microfacet BRDF (Bagher et al. 2016, Eq. 3).
 
@@ -385,10 +409,7 @@ class NPFMicrofacetBRDF(_DiffuseFigures, _HalfVectorSampling, SerializableModel,
         self.G = _as_table(G, N_G, "G")
         self.rho_d = _as_rgb(rho_d, "rho_d")
         self.rho_s = _as_rgb(rho_s, "rho_s")
-        self.variant = str(variant)
-        self.name = name
-        self.source = source
-        self._h_cdf = None
+        self._identify(str(variant), name, source)
 
     # evaluation
     def _spec(self, theta_h, theta_d, theta_i, theta_o, cos_i, cos_o):
@@ -423,17 +444,13 @@ class NPFMicrofacetBRDF(_DiffuseFigures, _HalfVectorSampling, SerializableModel,
 
     # serialisation
     def to_state(self) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        arrays = {"D": self.D.astype(np.float32), "F": self.F.astype(np.float32),
-                  "G": self.G.astype(np.float32),
-                  "rho": np.stack([self.rho_d, self.rho_s]).astype(np.float32)}
+        arrays = _factor_arrays(self, "G")
         return {"variant": self.variant, "name": self.name,
                 "layout": "D[θ'h],F[θd],G[θ=k°] (90,3); rho=(ρd,ρs) (2,3)"}, arrays
 
     @classmethod
     def from_state(cls, params, arrays):
-        rho = np.asarray(arrays["rho"], dtype=np.float64)
-        if rho.shape != (2, 3):
-            raise ValueError(f"rho: expected shape (2, 3), found {rho.shape}")
+        rho = _rho_of(arrays)
         return cls(arrays["D"], arrays["F"], arrays["G"], rho[0], rho[1],
                    variant=params.get("variant", "independent-g"),
                    name=params.get("name", "npf"))
@@ -463,10 +480,7 @@ class NPFNaiveBRDF(_DiffuseFigures, _HalfVectorSampling, SerializableModel, Isot
         self.H = _as_table(H, N_PHI_D, "H")
         self.rho_d = _as_rgb(rho_d, "rho_d")
         self.rho_s = _as_rgb(rho_s, "rho_s")
-        self.variant = "naive"
-        self.name = name
-        self.source = source
-        self._h_cdf = None
+        self._identify("naive", name, source)
 
     def eval_hd(self, theta_h, theta_d, phi_d):
         th, td, pd, ci, co = _hd_cosines(theta_h, theta_d, phi_d)
@@ -481,16 +495,12 @@ class NPFNaiveBRDF(_DiffuseFigures, _HalfVectorSampling, SerializableModel, Isot
         return _estimate_diffuse_fraction(self, float(np.pi * self.rho_d.mean()))
 
     def to_state(self):
-        arrays = {"D": self.D.astype(np.float32), "F": self.F.astype(np.float32),
-                  "H": self.H.astype(np.float32),
-                  "rho": np.stack([self.rho_d, self.rho_s]).astype(np.float32)}
+        arrays = _factor_arrays(self, "H")
         return {"name": self.name, "layout": "D,F (90,3); H[φd=k°] (180,3); rho (2,3)"}, arrays
 
     @classmethod
     def from_state(cls, params, arrays):
-        rho = np.asarray(arrays["rho"], dtype=np.float64)
-        if rho.shape != (2, 3):
-            raise ValueError(f"rho: expected shape (2, 3), found {rho.shape}")
+        rho = _rho_of(arrays)
         return cls(arrays["D"], arrays["F"], arrays["H"], rho[0], rho[1],
                    name=params.get("name", "npf-naive"))
 
@@ -512,10 +522,7 @@ class NPFBivariateBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
         if B.shape != (N_THETA_H, N_THETA_D, 3):
             raise ValueError(f"B: expected shape (90, 90, 3), found {B.shape}")
         self.B = B
-        self.variant = "bivariate"
-        self.name = name
-        self.source = source
-        self._h_cdf = None
+        self._identify("bivariate", name, source)
 
     def eval_hd(self, theta_h, theta_d, phi_d):
         th, td, pd, ci, co = _hd_cosines(theta_h, theta_d, phi_d)

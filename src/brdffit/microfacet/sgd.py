@@ -145,6 +145,33 @@ def g1_eq9(theta, lam: float, c: float, k: float) -> np.ndarray:
     return np.where(theta < np.pi / 2, np.clip(g, 0.0, 1.0), 0.0)
 
 
+def _refit_over_cap(solve, c_of, best, over):
+    """The best admissible Eq. 9 fit of :meth:`SGD.g1_approximation`: a start that wanted
+    ``c = ln(1+1/λ)/w^k`` > :data:`EQ9_C_MAX` (``over``; the sharp G1 edge of mirror-like
+    SGDs) is refitted with ``solve(x0, k_max)``, k capped so that ``c`` (``c_of``) stays
+    representable at its w, up to 4 times while it beats ``best``; returns ``best`` or the
+    better refit."""
+    for _ in range(4):
+        if over is None or (best is not None and best.cost <= over.cost):
+            break
+        lam, w, _k = np.exp(over.x)
+        if w >= 1.0:
+            break
+        k_cap = 0.95 * np.log(EQ9_C_MAX / np.log1p(1.0 / lam)) / np.log(1.0 / w)
+        if not k_cap > 0.05:
+            break
+        x0 = over.x.copy()
+        x0[2] = np.log(min(np.exp(x0[2]), 0.99 * k_cap))
+        res = solve(x0, k_cap)
+        if res is None:
+            break
+        if c_of(res.x) <= EQ9_C_MAX:
+            if best is None or res.cost < best.cost:
+                best = res
+            break
+        over = res
+    return best
+
 class SGD(SlopeDistribution):
     """Shifted Gamma micro-facet Distribution (Bagher, Soler, Holzschuch 2012, §4.2-4.3).
 
@@ -371,27 +398,7 @@ class SGD(SlopeDistribution):
                 best = res
             if 2.0 * best.cost / len(theta) < 1e-7:     # mse already at the paper's level
                 break
-        # Starts that wanted c = ln(1+1/λ)/w^k > EQ9_C_MAX (the sharp G1 edge of mirror-like
-        # SGDs) are refitted with k capped so that c stays representable at their w.
-        for _ in range(4):
-            if over is None or (best is not None and best.cost <= over.cost):
-                break
-            lam, w, _k = np.exp(over.x)
-            if w >= 1.0:
-                break
-            k_cap = 0.95 * np.log(EQ9_C_MAX / np.log1p(1.0 / lam)) / np.log(1.0 / w)
-            if not k_cap > 0.05:
-                break
-            x0 = over.x.copy()
-            x0[2] = np.log(min(np.exp(x0[2]), 0.99 * k_cap))
-            res = solve(x0, k_cap)
-            if res is None:
-                break
-            if c_of(res.x) <= EQ9_C_MAX:
-                if best is None or res.cost < best.cost:
-                    best = res
-                break
-            over = res
+        best = _refit_over_cap(solve, c_of, best, over)
         if best is None:                              # never reached on real SGDs
             best = type("Flat", (), {"x": np.log([1e-6, np.pi / 2, 1.0])})()
         lam, w, k = np.exp(best.x)

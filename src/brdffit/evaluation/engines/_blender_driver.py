@@ -1,19 +1,22 @@
 """Blender side of the Blender round trip: run by the Python interpreter that has ``bpy``
 (``python _blender_driver.py JOB.json``), never imported by brdffit.
 
-The job (JSON, written by :func:`brdffit.evaluation.engines.blender.render_gltf`) names the
-glTF file, the output directory and the scene in *glTF / Mitsuba coordinates* (+Y up):
+The job (JSON, written by :func:`brdffit.evaluation.engines.blender.render_file`) names the
+glTF or USD file, the output directory and the scene in *glTF / Mitsuba coordinates* (+Y up):
 camera origin, target, up and horizontal field of view; the directional light's direction of
-travel and irradiance. Blender is +Z up and its glTF importer maps a glTF point (x, y, z) to
-(x, −z, y); the scene is mapped the same way, so the imported mesh and the rebuilt scene
-agree.
+travel and irradiance. Blender is +Z up; its glTF importer maps a glTF point (x, y, z) to
+(x, −z, y), and its USD importer rotates a +Y-up stage by 90° about X, the same map; the
+scene is mapped the same way, so the imported mesh and the rebuilt scene agree.
 
 What is done, in order: an empty scene (factory settings, no startup file); the file is
-imported with Blender's own glTF importer and **its default options** (the job may ask for
-``import_unused_materials``); with no seeds, the import report is all; else the camera (its
-field of view on the sensor's width), a sun lamp (angle 0: a directional light; strength =
-irradiance in W/m², Cycles' unit) and a black world (strength 0, transparent film: the alpha
-is the coverage) are added; Cycles on the CPU renders one image per seed with a 1-pixel box
+imported with Blender's own glTF or USD importer (by its suffix) and **its default options**
+(the job may ask for ``import_unused_materials``, the USD importer's
+``import_all_materials``); with no seeds, the import report is all; else the camera (its
+field of view on the sensor's width) and either a sun lamp (angle 0: a directional light;
+strength = irradiance in W/m², Cycles' unit) with a black world, or a world of the job's
+environment map (an equirectangular texture, linear, strength 1, looked up along the
+direction turned about +Z to Mitsuba's lat-long convention) are added (transparent film: the
+alpha is the coverage); Cycles on the CPU renders one image per seed with a 1-pixel box
 filter, no denoising, no adaptive sampling, no clamping and no light threshold, so the
 estimate is unbiased like Mitsuba's ``direct`` integrator. The Principled BSDF's
 microfacet distribution is left as the importer set it unless the job names one
@@ -56,6 +59,54 @@ def principled_nodes(mat):
     return [n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED"]
 
 
+def import_file(path, unused_materials):
+    """Import ``path`` with Blender's importer for its suffix, default options."""
+    if path.lower().endswith((".usd", ".usda", ".usdc")):
+        return bpy.ops.wm.usd_import(filepath=path, import_all_materials=unused_materials)
+    return bpy.ops.import_scene.gltf(filepath=path, import_unused_materials=unused_materials)
+
+
+def add_sun(scene, sun):
+    """A sun lamp of angle 0 (a directional light) travelling along ``sun["direction"]``,
+    strength = the irradiance."""
+    travel = to_blender(sun["direction"]).normalized()
+    sun_data = bpy.data.lights.new("sun", type="SUN")
+    sun_data.energy = float(sun["irradiance"])
+    sun_data.angle = 0.0
+    sun_data.color = (1.0, 1.0, 1.0)
+    sun_obj = bpy.data.objects.new("sun", sun_data)
+    # a sun lamp shines along its local −Z
+    sun_obj.rotation_mode = "QUATERNION"
+    sun_obj.rotation_quaternion = travel.to_track_quat("-Z", "Y")
+    scene.collection.objects.link(sun_obj)
+
+
+def make_world(env):
+    """The world: black (strength 0), or the environment map ``env["exr"]`` (linear,
+    strength 1) looked up along the direction turned by ``env["rotation_z_deg"]`` about +Z."""
+    world = bpy.data.worlds.new("world")
+    world.use_nodes = True
+    nodes, links = world.node_tree.nodes, world.node_tree.links
+    bg = next(n for n in nodes if n.type == "BACKGROUND")
+    if env is None:
+        bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
+        bg.inputs["Strength"].default_value = 0.0
+        return world
+    tex = nodes.new("ShaderNodeTexEnvironment")
+    tex.image = bpy.data.images.load(env["exr"])
+    tex.image.colorspace_settings.name = "Linear Rec.709"
+    tex.interpolation = "Linear"
+    coord = nodes.new("ShaderNodeTexCoord")
+    mapping = nodes.new("ShaderNodeMapping")
+    mapping.vector_type = "VECTOR"
+    mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(env["rotation_z_deg"]))
+    links.new(coord.outputs["Generated"], mapping.inputs["Vector"])
+    links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    links.new(tex.outputs["Color"], bg.inputs["Color"])
+    bg.inputs["Strength"].default_value = 1.0
+    return world
+
+
 def build_scene(job):
     scene = bpy.context.scene
     cam = job["camera"]
@@ -74,24 +125,9 @@ def build_scene(job):
     scene.collection.objects.link(cam_obj)
     scene.camera = cam_obj
 
-    sun = job["sun"]
-    travel = to_blender(sun["direction"]).normalized()
-    sun_data = bpy.data.lights.new("sun", type="SUN")
-    sun_data.energy = float(sun["irradiance"])
-    sun_data.angle = 0.0
-    sun_data.color = (1.0, 1.0, 1.0)
-    sun_obj = bpy.data.objects.new("sun", sun_data)
-    # a sun lamp shines along its local −Z
-    sun_obj.rotation_mode = "QUATERNION"
-    sun_obj.rotation_quaternion = travel.to_track_quat("-Z", "Y")
-    scene.collection.objects.link(sun_obj)
-
-    world = bpy.data.worlds.new("black")
-    world.use_nodes = True
-    bg = next(n for n in world.node_tree.nodes if n.type == "BACKGROUND")
-    bg.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-    bg.inputs["Strength"].default_value = 0.0
-    scene.world = world
+    if "sun" in job:
+        add_sun(scene, job["sun"])
+    scene.world = make_world(job.get("world"))
 
     res = int(job["resolution"])
     scene.render.engine = "CYCLES"
@@ -125,8 +161,7 @@ def main(job_path):
     bpy.ops.wm.read_factory_settings(use_empty=True)
     before_objects = set(bpy.data.objects)
     before_materials = set(bpy.data.materials)
-    result = bpy.ops.import_scene.gltf(
-        filepath=job["gltf"], import_unused_materials=bool(job["import_unused_materials"]))
+    result = import_file(job["file"], bool(job["import_unused_materials"]))
     objects = [o for o in bpy.data.objects if o not in before_objects]
     materials = [m for m in bpy.data.materials if m not in before_materials]
     report = {"blender": bpy.app.version_string, "import_result": sorted(result),

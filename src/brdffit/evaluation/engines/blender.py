@@ -1,13 +1,15 @@
-"""glTF files rendered by Blender (Cycles), compared with our render of the fit.
+"""glTF and USD files rendered by Blender (Cycles), compared with our render of the fit.
 
 A real engine, used as a user would: Blender as a Python module (``bpy`` from PyPI) imports
-the exported ``.gltf`` with **its own importer and default options** and renders it with
-Cycles on the CPU in our scene rebuilt in Blender (:func:`render_gltf`; the Blender side is
+the exported ``.gltf`` or ``.usda`` with **its own importer (glTF or USD) and default
+options** and renders it with Cycles on the CPU in our scene rebuilt in Blender
+(:func:`render_file`; the Blender side is
 the script :mod:`._blender_driver`). Only ``sphere-distant`` is rebuilt: the camera
 (:data:`~brdffit.evaluation.render.scenes.CAMERA`), the directional light
 (:data:`~brdffit.evaluation.render.scenes.DISTANT_LIGHT`: a sun lamp of angle 0 whose
 strength is the irradiance) and a black world; the object is the mesh the file carries (the
-preview sphere of :func:`brdffit.export.gltf.write_gltf`).
+preview sphere of :func:`brdffit.export.gltf.write_gltf` or
+:func:`brdffit.export.usd.write_usd`).
 
 Blender runs in a **child process** with its own interpreter: ``bpy`` pins numpy < 2 and
 bundles its own libraries (its own LLVM among them, where ours has Mitsuba's); the job is a
@@ -48,14 +50,21 @@ import numpy as np
 from ...errors import BRDFError
 from ..metrics import crn_psnr
 from ..render.core import Renderer
-from ..render.scenes import CAMERA, DISTANT_LIGHT
+from ..imageio import write_exr
+from ..render.scenes import CAMERA, DISTANT_LIGHT, load_envmap, scene_spec
 
 __all__ = ["BlenderUnavailable", "BlenderFailed", "BlenderRender", "blender_python",
-           "available", "import_report", "render_gltf", "render_fit", "compare_renders",
+           "available", "import_report", "render_file", "render_fit", "compare_renders",
            "rim_mask", "round_trip", "RIM_FRACTION", "SCENES"]
 
-#: the scenes rebuilt in Blender
-SCENES = ("sphere-distant",)
+#: the scenes rebuilt in Blender: the directional light, and the sphere under an environment
+#: map (``sphere-env``: the procedural map; ``sphere-<map>``: a map of the shared set, as the
+#: paper suite's ``sphere-courtyard``, ``sphere-studio``, ``sphere-sunrise``)
+SCENES = ("sphere-distant", "sphere-env", "sphere-<map>")
+#: rotation about Blender's +Z of the direction looked up in the environment texture: Mitsuba's
+#: lat-long ``u = atan2(x, −z)/2π`` in its +Y-up frame is Blender's equirectangular ``u``
+#: turned by a quarter turn in Blender's +Z-up frame (the importer's (x, y, z) → (x, −z, y))
+ENVMAP_ROTATION_DEG = 90.0
 #: the rim: pixels farther than this fraction of the sphere's projected radius from its centre
 RIM_FRACTION = 0.85
 _DRIVER = Path(__file__).with_name("_blender_driver.py")
@@ -125,13 +134,25 @@ class BlenderRender:
     seconds: float
 
 
-def _scene_job(scene: str) -> dict:
-    if scene not in SCENES:
-        raise ValueError(f"scene {scene!r} is not rebuilt in Blender; expected one of "
-                         f"{', '.join(SCENES)}")
-    return {"camera": {k: (list(v) if isinstance(v, tuple) else v) for k, v in CAMERA.items()},
-            "sun": {"direction": list(DISTANT_LIGHT["direction"]),
-                    "irradiance": float(DISTANT_LIGHT["irradiance"])}}
+def _scene_job(scene: str, out_dir: Path) -> dict:
+    """The job's scene: the camera, and the sun of ``sphere-distant`` or the environment map
+    of a ``sphere-env`` scene (written to ``out_dir`` as an EXR, clamped at 0 as our renderer
+    loads it)."""
+    job = {"camera": {k: (list(v) if isinstance(v, tuple) else v) for k, v in CAMERA.items()}}
+    if scene == "sphere-distant":
+        job["sun"] = {"direction": list(DISTANT_LIGHT["direction"]),
+                      "irradiance": float(DISTANT_LIGHT["irradiance"])}
+        return job
+    try:
+        spec = scene_spec(scene)
+    except ValueError:
+        spec = None
+    if spec is None or spec.base != "sphere-env":
+        raise ValueError(f"scene {scene!r} is not rebuilt in Blender; expected "
+                         f"sphere-distant, sphere-env or sphere-<map>")
+    path = write_exr(out_dir / "envmap.exr", load_envmap(spec.envmap))
+    job["world"] = {"exr": str(path), "rotation_z_deg": ENVMAP_ROTATION_DEG}
+    return job
 
 
 def _run_driver(path: Path, job: dict, timeout: float) -> tuple[dict, Path, float]:
@@ -161,40 +182,48 @@ def _run_driver(path: Path, job: dict, timeout: float) -> tuple[dict, Path, floa
     return json.loads(report_path.read_text(encoding="utf-8")), out_dir, seconds
 
 
-def _checked_file(gltf_path) -> Path:
-    path = Path(gltf_path)
+#: the file suffixes Blender imports here: its glTF and its USD importer
+SUFFIXES = (".gltf", ".glb", ".usd", ".usda", ".usdc")
+
+
+def _checked_file(path) -> Path:
+    path = Path(path)
+    if path.suffix.lower() not in SUFFIXES:
+        raise ValueError(f"{path}: expected a file ending in {', '.join(SUFFIXES)}")
     if not path.is_file():
-        raise FileNotFoundError(f"glTF file not found: {path}")
+        raise FileNotFoundError(f"file not found: {path}")
     return path
 
 
-def import_report(gltf_path, import_unused_materials: bool = False,
+def import_report(path, import_unused_materials: bool = False,
                   timeout: float = 600.0) -> dict:
-    """Import ``gltf_path`` with Blender's glTF importer (default options, or with
-    ``import_unused_materials``) and return what it created: ``objects`` (name, type,
+    """Import ``path`` with Blender's glTF or USD importer (default options, or with
+    ``import_unused_materials``, the USD importer's ``import_all_materials``) and return what
+    it created: ``objects`` (name, type,
     materials), ``materials`` (the Principled BSDF's distribution and unlinked inputs),
     ``import_result`` and Blender's version. :class:`BlenderFailed` if the import fails."""
-    path = _checked_file(gltf_path)
+    path = _checked_file(path)
     with tempfile.TemporaryDirectory(prefix="brdffit-blender-") as tmp:
-        job = {"gltf": str(path.resolve()), "out_dir": tmp, "seeds": [],
+        job = {"file": str(path.resolve()), "out_dir": tmp, "seeds": [],
                "import_unused_materials": bool(import_unused_materials)}
         report, _, _ = _run_driver(path, job, timeout)
     return report
 
 
-def render_gltf(gltf_path, scene: str = "sphere-distant", resolution: int = 64,
+def render_file(path, scene: str = "sphere-distant", resolution: int = 64,
                 spp: int = 64, seeds=(0, 1, 2, 3), distribution: str | None = None,
                 threads: int | None = None, max_bounces: int = 1,
                 timeout: float = 1800.0) -> BlenderRender:
-    """Import ``gltf_path`` with Blender's glTF importer (default options) and render it with
-    Cycles (CPU) in ``scene``, once per seed (see the module docstring).
+    """Import ``path`` (glTF or USD, :data:`SUFFIXES`) with Blender's importer for it (default
+    options) and render it with Cycles (CPU) in ``scene``, once per seed (see the module
+    docstring).
 
     ``distribution``: ``None`` leaves the Principled BSDF as imported; ``"GGX"`` or
     ``"MULTI_GGX"`` sets it (to measure what the importer's choice costs). ``max_bounces``:
     Cycles' path depth (1: direct light only, as our ``direct`` integrator; the sphere is
     convex). ``threads``: Cycles' threads (default: all CPUs).
     """
-    path = _checked_file(gltf_path)
+    path = _checked_file(path)
     resolution, spp, max_bounces = int(resolution), int(spp), int(max_bounces)
     if not 8 <= resolution <= 4096:
         raise ValueError(f"resolution: expected 8 to 4096 pixels, got {resolution}")
@@ -210,14 +239,14 @@ def render_gltf(gltf_path, scene: str = "sphere-distant", resolution: int = 64,
                          f"{distribution!r}")
     threads = int(threads or os.cpu_count() or 1)
     with tempfile.TemporaryDirectory(prefix="brdffit-blender-") as tmp:
-        job = {"gltf": str(path.resolve()), "out_dir": tmp, "resolution": resolution,
+        job = {"file": str(path.resolve()), "out_dir": tmp, "resolution": resolution,
                "spp": spp, "seeds": list(seeds), "distribution": distribution,
                "threads": threads, "max_bounces": max_bounces,
-               "import_unused_materials": False, **_scene_job(scene)}
+               "import_unused_materials": False, **_scene_job(scene, Path(tmp))}
         report, out_dir, seconds = _run_driver(path, job, timeout)
         frames = [np.load(out_dir / f"render_{s}.npy") for s in seeds]
     if not any(o["type"] == "MESH" for o in report["objects"]):
-        raise BlenderFailed(f"Blender's glTF importer created no mesh from {path}: the file "
+        raise BlenderFailed(f"Blender's importer created no mesh from {path}: the file "
                             "holds no mesh to render (export it with mesh='sphere')")
     report["resolution"], report["spp"], report["threads"] = resolution, spp, threads
     report["distribution_forced"] = distribution
@@ -296,17 +325,17 @@ def render_fit(model, scene: str = "sphere-distant", resolution: int = 64, spp: 
     return np.stack([x.image for x in res]), res[0].alpha
 
 
-def round_trip(model, gltf_path, scene: str = "sphere-distant", resolution: int = 64,
+def round_trip(model, path, scene: str = "sphere-distant", resolution: int = 64,
                spp: int = 64, seeds=(0, 1, 2, 3), distribution: str | None = None,
                fit_spp: int | None = None, flip: bool = True) -> dict:
-    """Render the fit ``model`` (ours) and its exported glTF file ``gltf_path`` (Blender)
+    """Render the fit ``model`` (ours) and its exported glTF or USD file ``path`` (Blender)
     with the same seeds and compare them (:func:`compare_renders`). Returns the comparison
     plus ``blender`` (the import report) and the seconds of each side. ``fit_spp``: the spp
     of our render (default ``spp``)."""
     t0 = time.perf_counter()
     ref, ref_alpha = render_fit(model, scene, resolution, fit_spp or spp, seeds)
     fit_seconds = time.perf_counter() - t0
-    b = render_gltf(gltf_path, scene, resolution, spp, seeds, distribution)
+    b = render_file(path, scene, resolution, spp, seeds, distribution)
     out = compare_renders(ref, ref_alpha, b.images, b.alpha, flip=flip)
     out.update(scene=scene, resolution=int(resolution), spp=int(spp),
                fit_spp=int(fit_spp or spp), seeds=list(b.seeds), blender=b.report,

@@ -1,6 +1,6 @@
 """MaterialX documents rendered by MaterialX's own shader generation, run in the browser.
 
-A real MaterialX implementation for the round trip of issue 34: MaterialX's ESSL generator
+A real MaterialX implementation for the export round trip: MaterialX's ESSL generator
 (``MaterialX.PyMaterialXGenGlsl.EsslShaderGenerator``, GLSL ES 3.00 for WebGL 2, the one
 MaterialX's own web viewer runs) turns the ``surfacematerial`` of an exported ``.mtlx``
 (``brdffit export FIT --to materialx``: an ``open_pbr_surface``) into a vertex and a pixel

@@ -1,6 +1,6 @@
 """glTF materials rendered by three.js (``MeshPhysicalMaterial``, WebGL 2) in headless Chromium.
 
-The round trip of issue 34 for three.js: an exported ``.gltf`` (``brdffit export FIT --to
+The export round trip for three.js: an exported ``.gltf`` (``brdffit export FIT --to
 gltf``) is loaded by three's own ``GLTFLoader``; its material ``materials[i]``
 (``parser.getDependency('material', i)``: a ``MeshPhysicalMaterial`` when the file uses
 ``KHR_materials_*`` extensions, else a ``MeshStandardMaterial``) is put on a

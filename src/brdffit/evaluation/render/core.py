@@ -218,15 +218,118 @@ def crn_integrator(evaluators, proposal, max_depth: int = 2, alpha_texture=None)
     return _INTEGRATOR_CLS(list(evaluators), proposal, int(max_depth), alpha_texture)
 
 
-def _make_integrator_class(mi, dr):
-    def flip(v, f):
-        return mi.Vector3f(v.x, v.y, dr.select(f, -v.z, v.z))
+def _flip(v, f):
+    """``v`` with z negated where ``f`` (two-sided shading)."""
+    mi, dr = load()
+    return mi.Vector3f(v.x, v.y, dr.select(f, -v.z, v.z))
 
-    def power(a, b):
-        a2, b2 = dr.square(a), dr.square(b)
-        return dr.detach(dr.select(a2 + b2 > 0, a2 / (a2 + b2), 0.0))
+
+def _power(a, b):
+    """The power-heuristic MIS weight ``a² / (a² + b²)`` of densities a, b (0 when both are 0)."""
+    _, dr = load()
+    a2, b2 = dr.square(a), dr.square(b)
+    return dr.detach(dr.select(a2 + b2 > 0, a2 / (a2 + b2), 0.0))
+
+
+def _crn_aov_names(self):
+    """The film's AOV channels: ``m<i>.R/G/B`` per evaluator."""
+    return [f"m{i}.{c}" for i in range(len(self.evs)) for c in "RGB"]
+
+
+def _crn_to_string(self):
+    return f"CRNIntegrator[{len(self.evs)} models, max_depth={self.max_depth}]"
+
+
+def _crn_sample(self, scene, sampler, ray, medium=None, active=True):
+    """``SamplingIntegrator.sample`` of :func:`crn_integrator`: the paths of every model
+    along the same vertices (module docstring); returns model 0's radiance, the validity
+    mask and every model's RGB as AOVs."""
+    mi, dr = load()
+    n = len(self.evs)
+    out = [mi.Color3f(0.0) for _ in range(n)]
+    thr = [mi.Color3f(1.0) for _ in range(n)]
+    si = scene.ray_intersect(ray, active)
+    valid = mi.Bool(active) & si.is_valid()
+    act = mi.Bool(valid)
+    for depth in range(1, self.max_depth):
+        last = depth == self.max_depth - 1
+        f_ = si.wi.z < 0
+        view = _flip(si.wi, f_)
+        s = 1.0
+        if self.alpha_tex is not None:
+            s = dr.maximum(self.alpha_tex.eval(si.uv)[0], 1e-3)
+        frame = (view, f_, s)
+        self.emitter_sampling(scene, sampler, si, act, frame, out, thr)
+        si_b, ok_b = self.proposal_sampling(scene, sampler, si, act, frame, out, thr, last)
+        if not last:
+            si = si_b
+            act = ok_b & si_b.is_valid()
+    aovs = []
+    for o in out:
+        aovs += [o.x, o.y, o.z]
+    return out[0], valid, aovs
+
+
+def _crn_emitter_sampling(self, scene, sampler, si, act, frame, out, thr):
+    """Add each model's emitter-sampled light at ``si`` (model-independent samples, MIS
+    with the proposal) to ``out``; ``frame`` = (view, flip, roughness scale)."""
+    _, dr = load()
+    view, f_, s = frame
+    ds, em_w = scene.sample_emitter_direction(si, sampler.next_2d(act), True, act)
+    act_e = act & (ds.pdf != 0)
+    light = _flip(si.to_local(ds.d), f_)
+    ok_e = act_e & (light.z > 0) & (view.z > 0)
+    p_b = self.proposal.pdf(view, light, 1.0, ok_e)
+    mis_e = dr.select(ds.delta, 1.0, _power(ds.pdf, p_b))
+    c_e = em_w * (mis_e * light.z)
+    for i, ev in enumerate(self.evs):
+        f = ev.eval(light, view, s if self.rough[i] else 1.0, ok_e)
+        out[i] += dr.select(ok_e, thr[i] * f * c_e, 0.0)
+
+
+def _crn_proposal_sampling(self, scene, sampler, si, act, frame, out, thr, last):
+    """Sample the proposal at ``si``, add each model's emitter hit (MIS with emitter
+    sampling) to ``out`` and, unless ``last``, weight ``thr`` by the bounce; returns the
+    next interaction and its mask."""
+    mi, dr = load()
+    view, f_, s = frame
+    # Mitsuba's direct integrator passes next_1d(), next_2d() as arguments of
+    # bsdf->sample; the compiler evaluates them right to left, so the 2D sample is
+    # drawn first. Same order here: same random numbers as Mitsuba + the plugin.
+    u2 = sampler.next_2d(act)
+    u1 = sampler.next_1d(act)
+    lb, pb = self.proposal.sample(view, u1, u2, 1.0, act)
+    ok_b = act & (lb.z > 0) & (view.z > 0) & (pb > 0)
+    si_b = scene.ray_intersect(si.spawn_ray(si.to_world(_flip(lb, f_))), ok_b)
+    ds_b = mi.DirectionSample3f(scene, si_b, si)
+    em_b = ds_b.emitter
+    hit_e = ok_b & (em_b != None)  # noqa: E711 – Dr.Jit pointer comparison
+    p_em = scene.pdf_emitter_direction(si, ds_b, hit_e)
+    le = em_b.eval(si_b, hit_e)
+    c_b = dr.select(hit_e, le * _power(pb, p_em), 0.0)
+    inv_p = dr.select(ok_b, 1.0 / pb, 0.0) * lb.z
+    for i, ev in enumerate(self.evs):
+        w = dr.select(ok_b, ev.eval(lb, view, s if self.rough[i] else 1.0, ok_b)
+                      * inv_p, 0.0)
+        out[i] += thr[i] * w * c_b
+        if not last:
+            thr[i] = thr[i] * w
+    return si_b, ok_b
+
+
+def _make_integrator_class(mi, dr):
+    """The ``mi.SamplingIntegrator`` subclass of :func:`crn_integrator` (made at first use:
+    Mitsuba is loaded lazily); its methods are the ``_crn_*`` functions. Attributes:
+    ``evs`` (evaluators), ``proposal``, ``max_depth``, ``alpha_tex`` (``mi.Texture2f`` or
+    None) and ``rough`` (per evaluator: whether it takes the roughness scale)."""
 
     class CRNIntegrator(mi.SamplingIntegrator):
+        aov_names = _crn_aov_names
+        to_string = _crn_to_string
+        sample = _crn_sample
+        emitter_sampling = _crn_emitter_sampling
+        proposal_sampling = _crn_proposal_sampling
+
         def __init__(self, evaluators, proposal, max_depth, alpha_texture):
             mi.SamplingIntegrator.__init__(self, mi.Properties())
             if max_depth < 2:
@@ -241,68 +344,6 @@ def _make_integrator_class(mi, dr):
                                               filter_mode=dr.FilterMode.Linear,
                                               wrap_mode=dr.WrapMode.Repeat)
             self.rough = [bool(getattr(e, "supports_roughness", False)) for e in evaluators]
-
-        def aov_names(self):
-            return [f"m{i}.{c}" for i in range(len(self.evs)) for c in "RGB"]
-
-        def to_string(self):
-            return f"CRNIntegrator[{len(self.evs)} models, max_depth={self.max_depth}]"
-
-        def sample(self, scene, sampler, ray, medium=None, active=True):
-            n = len(self.evs)
-            out = [mi.Color3f(0.0) for _ in range(n)]
-            thr = [mi.Color3f(1.0) for _ in range(n)]
-            si = scene.ray_intersect(ray, active)
-            valid = mi.Bool(active) & si.is_valid()
-            act = mi.Bool(valid)
-            prop = self.proposal
-            for depth in range(1, self.max_depth):
-                last = depth == self.max_depth - 1
-                f_ = si.wi.z < 0
-                view = flip(si.wi, f_)
-                s = 1.0
-                if self.alpha_tex is not None:
-                    s = dr.maximum(self.alpha_tex.eval(si.uv)[0], 1e-3)
-                # -- emitter sampling (model-independent), MIS with the proposal --------
-                ds, em_w = scene.sample_emitter_direction(si, sampler.next_2d(act), True, act)
-                act_e = act & (ds.pdf != 0)
-                light = flip(si.to_local(ds.d), f_)
-                ok_e = act_e & (light.z > 0) & (view.z > 0)
-                p_b = prop.pdf(view, light, 1.0, ok_e)
-                mis_e = dr.select(ds.delta, 1.0, power(ds.pdf, p_b))
-                c_e = em_w * (mis_e * light.z)
-                for i, ev in enumerate(self.evs):
-                    f = ev.eval(light, view, s if self.rough[i] else 1.0, ok_e)
-                    out[i] += dr.select(ok_e, thr[i] * f * c_e, 0.0)
-                # -- proposal sampling -----------------------------------------------------
-                # Mitsuba's direct integrator passes next_1d(), next_2d() as arguments of
-                # bsdf->sample; the compiler evaluates them right to left, so the 2D sample is
-                # drawn first. Same order here: same random numbers as Mitsuba + the plugin.
-                u2 = sampler.next_2d(act)
-                u1 = sampler.next_1d(act)
-                lb, pb = prop.sample(view, u1, u2, 1.0, act)
-                ok_b = act & (lb.z > 0) & (view.z > 0) & (pb > 0)
-                si_b = scene.ray_intersect(si.spawn_ray(si.to_world(flip(lb, f_))), ok_b)
-                ds_b = mi.DirectionSample3f(scene, si_b, si)
-                em_b = ds_b.emitter
-                hit_e = ok_b & (em_b != None)  # noqa: E711 – Dr.Jit pointer comparison
-                p_em = scene.pdf_emitter_direction(si, ds_b, hit_e)
-                le = em_b.eval(si_b, hit_e)
-                c_b = dr.select(hit_e, le * power(pb, p_em), 0.0)
-                inv_p = dr.select(ok_b, 1.0 / pb, 0.0) * lb.z
-                for i, ev in enumerate(self.evs):
-                    w = dr.select(ok_b, ev.eval(lb, view, s if self.rough[i] else 1.0, ok_b)
-                                  * inv_p, 0.0)
-                    out[i] += thr[i] * w * c_b
-                    if not last:
-                        thr[i] = thr[i] * w
-                if not last:
-                    si = si_b
-                    act = ok_b & si_b.is_valid()
-            aovs = []
-            for o in out:
-                aovs += [o.x, o.y, o.z]
-            return out[0], valid, aovs
 
     return CRNIntegrator
 

@@ -244,6 +244,18 @@ class _ProxySampling:
 
 
 # -- generic tables -------------------------------------------------------------------------
+def _table_buffer(v: np.ndarray, interp: str):
+    """``(ε, buffer)`` of a table ``v`` (float64, ≥ 0) as the evaluators interpolate it:
+    ``log(v + ε)`` with ε = 5 % of the median of the positive values (at least 1e-6) for
+    ``interp="log"``, ``v`` itself with ε = 0 for ``"linear"``; the buffer is a flat
+    float32 ``mi.Float``."""
+    if interp == "log":
+        pos = v[v > 0]
+        eps = float(max(0.05 * np.median(pos), 1e-6)) if pos.size else 1e-6
+        return eps, mi.Float(np.log(v + eps).astype(np.float32).ravel())
+    return 0.0, mi.Float(v.astype(np.float32).ravel())
+
+
 class MERLTableEval(_ProxySampling):
     """Trilinear lookup in a MERL-grid table ``(90, 90, Nφ, 3)`` (generic isotropic path).
 
@@ -278,13 +290,7 @@ class MERLTableEval(_ProxySampling):
         self.period = np.pi if self.n_phi == 180 else 2.0 * np.pi
         self.values = v.astype(np.float32)
         self.interp = interp
-        if interp == "log":
-            pos = v[v > 0]
-            self.eps = float(max(0.05 * np.median(pos), 1e-6)) if pos.size else 1e-6
-            self.buffer = mi.Float(np.log(v + self.eps).astype(np.float32).ravel())
-        else:
-            self.eps = 0.0
-            self.buffer = mi.Float(self.values.ravel())
+        self.eps, self.buffer = _table_buffer(v, interp)
         lum = self.values[:, 0, 0, :] @ np.array([0.2126, 0.7152, 0.0722], np.float32)
         self.proxy_alpha, self.proxy_weight = fit_ggx_proxy(merl_theta_h(), lum)
 
@@ -372,13 +378,7 @@ class Table4DEval(_ProxySampling):
         v = np.where(np.isfinite(v), np.maximum(v, 0.0), 0.0)
         self.values = v.astype(np.float32)
         self.interp = interp
-        if interp == "log":   # as MERLTableEval: log(f + ε), ε = 5 % of the median
-            pos = v[v > 0]
-            self.eps = float(max(0.05 * np.median(pos), 1e-6)) if pos.size else 1e-6
-            self.buffer = mi.Float(np.log(v + self.eps).astype(np.float32).ravel())
-        else:
-            self.eps = 0.0
-            self.buffer = mi.Float(self.values.ravel())
+        self.eps, self.buffer = _table_buffer(v, interp)
         self.proxy_alpha, self.proxy_weight = float(proxy_alpha), float(proxy_weight)
 
     @staticmethod

@@ -47,6 +47,9 @@ Deviations from the paper (deliberate, documented):
 * The start "from the SGD fit" uses :func:`brdffit.fit.sgd.fit_sgd` when that module exists
   (the paper used its authors' earlier Bagher et al. 2012 fits); otherwise it is skipped and
   ``fit_info["starts"]`` says so.
+* ``fit_info["start_basins"]`` (:func:`start_basins`) says how far apart the screened starts
+  ended per channel: distinct objectives (more than :data:`BASIN_TOLERANCE` apart) and the
+  spread (largest over smallest).
 
 Stopping rule: see :mod:`._solver` (relative decrease below ``tol`` for 3 iterations, exact
 fit, or ``max_iter``; the polish: below ``tol`` for 2 iterations, no damped step lowering the
@@ -85,7 +88,7 @@ from ._solver import MFState, NaiveState, Samples
 from ...loading import load
 
 __all__ = ["fit_npf", "fit_npf_independent_g", "fit_npf_g_from_d", "fit_npf_naive",
-           "fit_npf_bivariate", "VARIANTS", "ALL_STARTS", "summary"]
+           "fit_npf_bivariate", "VARIANTS", "ALL_STARTS", "summary", "start_basins", "BASIN_TOLERANCE"]
 
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
 ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
@@ -454,7 +457,8 @@ def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max
     runs, (bst, bE, blab) = _multi_start(
         start_states, lambda label, st: run(label, st, screen, f"start {label}"), verbose,
         f"{pb.source or pb.name}: independent-G fit")
-    extra = {"starts": runs, "best_start_per_channel": blab}
+    extra = {"starts": runs, "best_start_per_channel": blab,
+             "start_basins": start_basins(runs)}
     bst, bE = _continue_best(runs, (bst, bE, blab), extra, screen, pb.max_iter,
                              lambda st, n: run("best", st, n, "best start, continued"))
     if pb.polish > 0:
@@ -527,6 +531,26 @@ def _multi_start(start_states, run_start, verbose: bool, what: str):
         raise FitError(f"{what}: no start produced a valid model "
                        f"({[r.get('status') for r in runs]})")
     return runs, best
+
+
+#: screened start objectives closer than this (relative) count as one basin
+BASIN_TOLERANCE = 0.01
+
+
+def start_basins(runs, tol: float = BASIN_TOLERANCE) -> dict:
+    """How far apart the screened starts ended, per channel: ``distinct`` (objectives more
+    than ``tol`` apart, relative, after sorting: the basins the starts reached, as far as
+    ``start_max_iter`` iterations tell) and ``spread`` (largest over smallest objective), over
+    the ``starts`` that gave finite factors."""
+    E = np.array([r["objective_per_channel"] for r in runs if r.get("status") == "ok"])
+    if E.size == 0:
+        return {"starts": 0, "distinct": [0, 0, 0], "spread": [None] * 3}
+    srt = np.sort(E, axis=0)
+    distinct = 1 + np.sum(srt[1:] > srt[:-1] * (1 + tol), axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        spread = np.where(srt[0] > 0, srt[-1] / srt[0], 1.0)
+    return {"starts": len(E), "distinct": [int(d) for d in distinct],
+            "spread": [float(x) for x in spread]}
 
 
 def _keep_better(best, res, label):

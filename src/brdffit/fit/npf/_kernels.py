@@ -19,6 +19,20 @@ def _lerp(G, c, k, t):  # pragma: no cover
 
 
 @njit(cache=True, nogil=True, inline="always")
+def _g_pair(G, c, a, t, b, s):  # pragma: no cover
+    """G of channel ``c`` at θi (cell ``a``, weight ``t``) and at θo (cell ``b``, weight ``s``)."""
+    return _lerp(G, c, a, t), _lerp(G, c, b, s)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _clear(x, y, z):  # pragma: no cover
+    """Set the accumulators ``x``, ``y``, ``z`` to 0."""
+    x[:] = 0.0
+    y[:] = 0.0
+    z[:] = 0.0
+
+
+@njit(cache=True, nogil=True, inline="always")
 def _sample(hd, gi0, gti, go0, gto, inv_cc, j):  # pragma: no cover
     """Sample ``j``: its bin, the G cells and weights of θi and θo, ``1/(cos θi cos θo)``."""
     return hd[j], gi0[j], gti[j], go0[j], gto[j], inv_cc[j]
@@ -31,14 +45,11 @@ def p_stats(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz):  # 
     ``ρd + X[hd] P`` (``X = ρs D F`` per bin, (3, 8100))."""
     n = hd.shape[0]
     E = np.zeros(3)
-    S1[:] = 0.0
-    S2[:] = 0.0
-    Spz[:] = 0.0
+    _clear(S1, S2, Spz)
     for j in range(n):
         k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
         for c in range(3):
-            g_i = _lerp(G, c, a, t)
-            g_o = _lerp(G, c, b, s)
+            g_i, g_o = _g_pair(G, c, a, t, b, s)
             P = g_i * g_o * ic
             wj = w[c, j]
             zj = z[c, j]
@@ -51,6 +62,19 @@ def p_stats(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz):  # 
     return E
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _add_tridiagonal(A_d, A_o, rhs, c, a, t, wj, y, r):  # pragma: no cover
+    """Add one sample's terms to the normal equations of the unknown G cells ``a``, ``a + 1``
+    (weights ``1 - t``, ``t``) of a model ``y ((1 - t) G_a + t G_{a+1})``, residual ``r``."""
+    wy2 = wj * y * y
+    wyr = wj * y * r
+    A_d[c, a] += wy2 * (1.0 - t) * (1.0 - t)
+    A_d[c, a + 1] += wy2 * t * t
+    A_o[c, a] += wy2 * t * (1.0 - t)
+    rhs[c, a] += wyr * (1.0 - t)
+    rhs[c, a + 1] += wyr * t
+
+
 @njit(cache=True, nogil=True)
 def g_normal_equations(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
                        Ai_d, Ai_o, bi, Ao_d, Ao_o, bo):  # pragma: no cover
@@ -59,38 +83,19 @@ def g_normal_equations(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
     super-diagonal, ``bi`` right-hand side, each per channel) and for G(θo) with G(θi) fixed
     (``Ao_*``, ``bo``)."""
     n = hd.shape[0]
-    Ai_d[:] = 0.0
-    Ai_o[:] = 0.0
-    bi[:] = 0.0
-    Ao_d[:] = 0.0
-    Ao_o[:] = 0.0
-    bo[:] = 0.0
+    _clear(Ai_d, Ai_o, bi)
+    _clear(Ao_d, Ao_o, bo)
     for j in range(n):
         k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
         for c in range(3):
-            g_i = _lerp(G, c, a, t)
-            g_o = _lerp(G, c, b, s)
+            g_i, g_o = _g_pair(G, c, a, t, b, s)
             wj = w[c, j]
             r = z[c, j] - rho_d[c]
             xk = X[c, k] * ic
             # G(θi) unknown: model = y_i · ((1-t) G_a + t G_{a+1}), y_i = X G(θo) / cc
-            y = xk * g_o
-            wy2 = wj * y * y
-            wyr = wj * y * r
-            Ai_d[c, a] += wy2 * (1.0 - t) * (1.0 - t)
-            Ai_d[c, a + 1] += wy2 * t * t
-            Ai_o[c, a] += wy2 * t * (1.0 - t)
-            bi[c, a] += wyr * (1.0 - t)
-            bi[c, a + 1] += wyr * t
+            _add_tridiagonal(Ai_d, Ai_o, bi, c, a, t, wj, xk * g_o, r)
             # G(θo) unknown
-            y = xk * g_i
-            wy2 = wj * y * y
-            wyr = wj * y * r
-            Ao_d[c, b] += wy2 * (1.0 - s) * (1.0 - s)
-            Ao_d[c, b + 1] += wy2 * s * s
-            Ao_o[c, b] += wy2 * s * (1.0 - s)
-            bo[c, b] += wyr * (1.0 - s)
-            bo[c, b + 1] += wyr * s
+            _add_tridiagonal(Ao_d, Ao_o, bo, c, b, s, wj, xk * g_i, r)
 
 
 @njit(cache=True, nogil=True)
@@ -106,35 +111,23 @@ def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_
     G(θi)G(θo)), ``HDG``, ``HFG``, ``HsG`` (with ρs), shaped as their JᵀWJ counterparts."""
     n = hd.shape[0]
     nd = F.shape[1]
-    GG[:] = 0.0
-    DG[:] = 0.0
-    FG[:] = 0.0
-    Grd[:] = 0.0
-    Grs[:] = 0.0
-    gG[:] = 0.0
+    _clear(GG, DG, FG)
+    _clear(Grd, Grs, gG)
     if curvature:
-        HGG[:] = 0.0
-        HDG[:] = 0.0
-        HFG[:] = 0.0
+        _clear(HGG, HDG, HFG)
         HsG[:] = 0.0
     idx = np.empty(4, dtype=np.int64)
     dp = np.empty(4)
     for j in range(n):
-        k = hd[j]
+        k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
         h = k // nd
         d = k - h * nd
-        a = gi0[j]
-        t = gti[j]
-        b = go0[j]
-        s = gto[j]
-        ic = inv_cc[j]
         idx[0] = a
         idx[1] = a + 1
         idx[2] = b
         idx[3] = b + 1
         for c in range(3):
-            g_i = _lerp(G, c, a, t)
-            g_o = _lerp(G, c, b, s)
+            g_i, g_o = _g_pair(G, c, a, t, b, s)
             P = g_i * g_o * ic
             df = D[c, h] * F[c, d]
             # ∂P/∂G_u, P = G(θi) G(θo) / (cos θi cos θo); ∂m/∂G_u = ρs D F ∂P/∂G_u
@@ -188,10 +181,8 @@ def p_stats_line(hd, gi0, gti, go0, gto, inv_cc, w, z, G, dG, Q):  # pragma: no 
     for j in range(n):
         k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
         for c in range(3):
-            g_i = _lerp(G, c, a, t)
-            g_o = _lerp(G, c, b, s)
-            d_i = _lerp(dG, c, a, t)
-            d_o = _lerp(dG, c, b, s)
+            g_i, g_o = _g_pair(G, c, a, t, b, s)
+            d_i, d_o = _g_pair(dG, c, a, t, b, s)
             wj = w[c, j] * ic
             p0 = g_i * g_o
             p1 = g_i * d_o + d_i * g_o

@@ -273,6 +273,11 @@ class MFState:
     rho_s: np.ndarray
 
 
+def _stats(st: MFState, smp: Samples):
+    """``(E, S)`` of :meth:`Samples.stats` for the model of ``st``, ``X = ρs D F`` per bin."""
+    return smp.stats(st.G, st.rho_s[:, None] * outer_df(st.D, st.F), st.rho_d)
+
+
 def _rho_update(st: MFState, smp: Samples, S):
     S1, S2, Spz = S
     x = outer_df(st.D, st.F)
@@ -290,20 +295,15 @@ def expanded_objective(st: MFState, smp: Samples, S):
     return np.maximum(E, 0.0)
 
 
-def _d_update(st: MFState, S):
+def _factor_update(st: MFState, S, name: str):
+    """Eq. 14 for D (``name="D"``, the sums over θd) or F (``"F"``, over θh), the other
+    factor, ρd and ρs fixed."""
     S1, S2, Spz = (s.reshape(3, NH, ND) for s in S)
     r = Spz - st.rho_d[:, None, None] * S1
-    num = st.rho_s[:, None] * np.einsum("chd,cd->ch", r, st.F)
-    den = st.rho_s[:, None] ** 2 * np.einsum("chd,cd->ch", S2, st.F * st.F)
-    return ls_update(num, den, st.D)
-
-
-def _f_update(st: MFState, S):
-    S1, S2, Spz = (s.reshape(3, NH, ND) for s in S)
-    r = Spz - st.rho_d[:, None, None] * S1
-    num = st.rho_s[:, None] * np.einsum("chd,ch->cd", r, st.D)
-    den = st.rho_s[:, None] ** 2 * np.einsum("chd,ch->cd", S2, st.D * st.D)
-    return ls_update(num, den, st.F)
+    other, sums = (st.F, "chd,cd->ch") if name == "D" else (st.D, "chd,ch->cd")
+    num = st.rho_s[:, None] * np.einsum(sums, r, other)
+    den = st.rho_s[:, None] ** 2 * np.einsum(sums, S2, other * other)
+    return ls_update(num, den, getattr(st, name))
 
 
 def _solve_tridiag(diag, off, rhs, old):
@@ -405,17 +405,36 @@ def _extrapolate(st: MFState, prev: MFState, beta, smp: Samples, eps, E, g_from_
     _normalise_factors(cand, eps, g_from_d)
     if g_from_d:
         cand.G = smith_g_from_d(cand.D.T).T
-    X = cand.rho_s[:, None] * outer_df(cand.D, cand.F)
-    _, S = smp.stats(cand.G, X, cand.rho_d)
+    _, S = _stats(cand, smp)
     _rho_update(cand, smp, S)
     Ec = expanded_objective(cand, smp, S)
     acc = Ec < E
     if np.any(acc):
-        for nm in ("D", "F", "G"):
-            setattr(st, nm, np.where(acc[:, None], getattr(cand, nm), getattr(st, nm)))
-        for nm in ("rho_d", "rho_s"):
-            setattr(st, nm, np.where(acc, getattr(cand, nm), getattr(st, nm)))
+        _take(st, cand, acc)
     return acc, S, np.where(acc, Ec, E)
+
+
+def _take(st: MFState, cand: MFState, acc) -> None:
+    """Replace in place the factors and ρd, ρs of ``st`` by those of ``cand`` in the
+    channels where ``acc`` (3,) holds."""
+    for nm in ("D", "F", "G"):
+        setattr(st, nm, np.where(acc[:, None], getattr(cand, nm), getattr(st, nm)))
+    for nm in ("rho_d", "rho_s"):
+        setattr(st, nm, np.where(acc, getattr(cand, nm), getattr(st, nm)))
+
+
+def _extrapolation_step(st: MFState, prev: MFState, beta, smp: Samples, eps, E, S,
+                        g_from_d=False):
+    """One :func:`_extrapolate` after a sweep: returns ``(S, E, beta, accepted)``, the bin
+    statistics and objective of the channels where it was accepted replaced, ``beta`` grown
+    ×1.5 (at most 50) where accepted and halved (at least 0.5) elsewhere, and whether any
+    channel accepted."""
+    acc, S_e, E = _extrapolate(st, prev, beta, smp, eps, E, g_from_d=g_from_d)
+    accepted = bool(np.any(acc))
+    if accepted:
+        S = tuple(np.where(acc[:, None], a, b) for a, b in zip(S_e, S))
+    beta = np.where(acc, np.minimum(beta * 1.5, 50.0), np.maximum(beta * 0.5, 0.5))
+    return S, E, beta, accepted
 
 
 def _state_arrays(st: MFState):
@@ -433,8 +452,7 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
     caused by the near-ambiguity between F(θd) and G(θi)G(θo)."""
     t0 = time.perf_counter()
     _normalise_factors(st, eps, g_from_d=False)
-    X = st.rho_s[:, None] * outer_df(st.D, st.F)
-    E, S = smp.stats(st.G, X, st.rho_d)
+    E, S = _stats(st, smp)
     _rho_update(st, smp, S)
     mon = Monitor(smp.sum_wzz, tol, max_iter)
     g_step_cap = G_STEP_CAP if g_step_cap is None else float(g_step_cap)
@@ -445,8 +463,8 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
     n_extra = 0
     while True:
         prev = MFState(*(np.array(x) for x in _state_arrays(st)))
-        st.D, st.rho_s = normalise(_d_update(st, S), st.rho_s, eps)
-        st.F, st.rho_s = normalise(_f_update(st, S), st.rho_s, eps)
+        st.D, st.rho_s = normalise(_factor_update(st, S, "D"), st.rho_s, eps)
+        st.F, st.rho_s = normalise(_factor_update(st, S, "F"), st.rho_s, eps)
         _rho_update(st, smp, S)
         X = st.rho_s[:, None] * outer_df(st.D, st.F)
         Ai_d, Ai_o, bi, Ao_d, Ao_o, bo = smp.g_system(st.G, X, st.rho_d)
@@ -470,21 +488,60 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
         _rho_update(st, smp, S)
         E = expanded_objective(st, smp, S)
         if extrapolate and len(mon.history) > 1:
-            acc, S_e, E = _extrapolate(st, prev, beta, smp, eps, E)
-            if np.any(acc):
-                n_extra += 1
-                S = tuple(np.where(acc[:, None], a, b) for a, b in zip(S_e, S))
-            beta = np.where(acc, np.minimum(beta * 1.5, 50.0), np.maximum(beta * 0.5, 0.5))
+            S, E, beta, accepted = _extrapolation_step(st, prev, beta, smp, eps, E, S)
+            n_extra += accepted
         if callback is not None:
             callback(len(mon.history), float(E.sum()))
         if mon.push(E):
             break
-    X = st.rho_s[:, None] * outer_df(st.D, st.F)
-    E, _ = smp.stats(st.G, X, st.rho_d)        # exact final objective
+    E, _ = _stats(st, smp)        # exact final objective
     n_it = len(mon.history) - 1          # one G line search (one pass) per iteration
     return RunResult(st, E, n_it, mon.history, mon.reason, n_it, n_it,
                      time.perf_counter() - t0,
                      {"g_steps_over_relaxed": over_relaxed, "sweeps_extrapolated": n_extra})
+
+
+def _g_from_d_d_step(st: MFState, smp: Samples, S, E, t_prev, eps, search_evals):
+    """G-from-D's D step, in place: D by Eq. 14, ρs·D max-normalised, G from D (Eq. 19), and
+    where the objective increases over ``E`` a :func:`parabolic_search` along the step from
+    ``t_prev`` (a channel whose search finds no decrease keeps D, G, ρs). Returns the bin
+    statistics, the updated ``t_prev`` and the search's evaluations (0: no search)."""
+    A_old = st.rho_s[:, None] * st.D                      # ρs·D, the scale-free quantity
+    d_raw = np.maximum(_factor_update(st, S, "D"), eps)
+    A_new = st.rho_s[:, None] * d_raw
+    e_before = E
+
+    def make(A):
+        m = A.max(axis=1)
+        m = np.where(m > 0, m, 1.0)
+        D = np.maximum(A / m[:, None], eps)
+        G = smith_g_from_d(D.T).T
+        e, s = smp.stats(G, m[:, None] * outer_df(D, st.F), st.rho_d)
+        return e, (D, G, m) + s
+
+    e_new, aux = make(A_new)
+    # e_before comes from the expanded form: allow for its rounding (≈1e-15 Σwz²)
+    need = e_new > e_before + 1e-12 * smp.sum_wzz
+    n = 0
+    if np.any(need):
+
+        def fun(t):
+            return make(A_old + t[:, None] * (A_new - A_old))
+
+        t, _, aux_g, n = parabolic_search(fun, need, e_before, e_new, aux, search_evals,
+                                          t_prev)
+        t_prev = np.where(need & (t > 0), t, t_prev)
+        aux = tuple(np.where(need[:, None] if np.ndim(a) == 2 else need, a, b)
+                    for a, b in zip(aux_g, aux))
+        keep = need & (t == 0.0)
+    else:
+        keep = np.zeros(3, bool)
+    D, G, m = aux[0], aux[1], aux[2]
+    S_new = aux[3:]
+    st.D = np.where(keep[:, None], st.D, D)
+    st.G = np.where(keep[:, None], st.G, G)
+    st.rho_s = np.where(keep, st.rho_s, m)
+    return tuple(np.where(keep[:, None], a, b) for a, b in zip(S, S_new)), t_prev, n
 
 
 def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
@@ -506,8 +563,7 @@ def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
     st.D, st.rho_s = normalise(np.maximum(st.D, eps), st.rho_s, eps)
     st.F, st.rho_s = normalise(np.maximum(st.F, eps), st.rho_s, eps)
     st.G = smith_g_from_d(st.D.T).T
-    X = st.rho_s[:, None] * outer_df(st.D, st.F)
-    _, S = smp.stats(st.G, X, st.rho_d)
+    _, S = _stats(st, smp)
     _rho_update(st, smp, S)
     E = expanded_objective(st, smp, S)
     mon = Monitor(smp.sum_wzz, tol, max_iter)
@@ -518,58 +574,21 @@ def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
     n_extra = 0
     while True:
         prev = MFState(*(np.array(x) for x in _state_arrays(st)))
-        A_old = st.rho_s[:, None] * st.D                      # ρs·D, the scale-free quantity
-        d_raw = np.maximum(_d_update(st, S), eps)
-        A_new = st.rho_s[:, None] * d_raw
-        e_before = E
-
-        def make(A):
-            m = A.max(axis=1)
-            m = np.where(m > 0, m, 1.0)
-            D = np.maximum(A / m[:, None], eps)
-            G = smith_g_from_d(D.T).T
-            e, s = smp.stats(G, m[:, None] * outer_df(D, st.F), st.rho_d)
-            return e, (D, G, m) + s
-
-        e_new, aux = make(A_new)
-        # e_before comes from the expanded form: allow for its rounding (≈1e-15 Σwz²)
-        need = e_new > e_before + 1e-12 * smp.sum_wzz
-        if np.any(need):
-            line_searches += 1
-
-            def fun(t):
-                return make(A_old + t[:, None] * (A_new - A_old))
-
-            t, _, aux_g, n = parabolic_search(fun, need, e_before, e_new, aux, search_evals,
-                                              t_prev)
-            t_prev = np.where(need & (t > 0), t, t_prev)
-            line_search_evals += n
-            aux = tuple(np.where(need[:, None] if np.ndim(a) == 2 else need, a, b)
-                        for a, b in zip(aux_g, aux))
-            keep = need & (t == 0.0)
-        else:
-            keep = np.zeros(3, bool)
-        D, G, m = aux[0], aux[1], aux[2]
-        S_new = aux[3:]
-        st.D = np.where(keep[:, None], st.D, D)
-        st.G = np.where(keep[:, None], st.G, G)
-        st.rho_s = np.where(keep, st.rho_s, m)
-        S = tuple(np.where(keep[:, None], a, b) for a, b in zip(S, S_new))
-        st.F, st.rho_s = normalise(np.maximum(_f_update(st, S), eps), st.rho_s, eps)
+        S, t_prev, n = _g_from_d_d_step(st, smp, S, E, t_prev, eps, search_evals)
+        line_searches += n > 0
+        line_search_evals += n
+        st.F, st.rho_s = normalise(np.maximum(_factor_update(st, S, "F"), eps), st.rho_s, eps)
         _rho_update(st, smp, S)
         E = expanded_objective(st, smp, S)
         if extrapolate_after is not None and len(mon.history) > max(extrapolate_after, 1):
-            acc, S_e, E = _extrapolate(st, prev, beta, smp, eps, E, g_from_d=True)
-            if np.any(acc):
-                n_extra += 1
-                S = tuple(np.where(acc[:, None], a, b) for a, b in zip(S_e, S))
-            beta = np.where(acc, np.minimum(beta * 1.5, 50.0), np.maximum(beta * 0.5, 0.5))
+            S, E, beta, accepted = _extrapolation_step(st, prev, beta, smp, eps, E, S,
+                                                       g_from_d=True)
+            n_extra += accepted
         if callback is not None:
             callback(len(mon.history), float(E.sum()))
         if mon.push(E):
             break
-    X = st.rho_s[:, None] * outer_df(st.D, st.F)
-    E, _ = smp.stats(st.G, X, st.rho_d)
+    E, _ = _stats(st, smp)
     return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, line_searches,
                      line_search_evals, time.perf_counter() - t0,
                      {"sweeps_extrapolated": n_extra})
@@ -794,7 +813,9 @@ def _log_params(st: MFState, g_from_d: bool) -> np.ndarray:
                           + [np.ones((3, 1)), st.rho_s[:, None]], axis=1)
 
 
-#: The largest damping of :func:`polish_lm` (a channel that fails there is done).
+#: The largest damping of :func:`polish_lm`. A channel whose step fails there is done: its
+#: parameters, and so its next step, can no longer change (channels are independent), and
+#: trying it again would only re-run the passes over the samples for the others.
 LAM_MAX = 1e30
 
 
@@ -841,117 +862,27 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
     start = np.log(np.maximum(_log_params(st, g_from_d), 1e-300))
     if g_from_d:
         st.G = smith_g_from_d(st.D.T).T
-    X = st.rho_s[:, None] * outer_df(st.D, st.F)
-    E, S = smp.stats(st.G, X, st.rho_d)
+    E, S = _stats(st, smp)
     mon = Monitor(smp.sum_wzz, tol, max_iter, patience=2)
     mon.history.append(float(E.sum()))
     lam = np.full(3, 1e-12)
-    iG = slice(NH + ND, NH + ND + (0 if g_from_d else NG))
-    n = iG.stop + 2
-    log_bound = None
-    if bound is not None:           # per parameter; inf for the groups not in ``bounded``
-        groups = {"D": slice(0, NH), "F": slice(NH, NH + ND), "G": iG, "rho_s": slice(n - 1, n)}
-        log_bound = np.full(n, np.inf)
-        for name in (groups if bounded is None else bounded):
-            if name not in groups:
-                raise ValueError(f"polish_lm: bounded expects names among {tuple(groups)}, "
-                                 f"found {name!r}")
-            log_bound[groups[name]] = np.log(bound)
-    # gauge: the starting max components of D, F (and G) stay fixed throughout, removing the
-    # scale ambiguities (ρs absorbs the scale) from the system; the factors are
-    # max-normalised once, at the end (re-normalising every step moved the gauge from one
-    # near-maximal sample to another and made the steps zigzag)
-    gauge_free = np.ones((3, n), bool)
-    for c in range(3):
-        fixed = [int(np.argmax(st.D[c])), NH + int(np.argmax(st.F[c]))]
-        if not g_from_d:
-            fixed.append(NH + ND + int(np.argmax(st.G[c])))
-        gauge_free[c, fixed] = False
-    n_eval = 0
+    n = NH + ND + (0 if g_from_d else NG) + 2
+    log_bound = None if bound is None else _polish_log_bound(n, g_from_d, bound, bounded)
+    gauge_free = _gauge_free(st, n, g_from_d)
     while True:
-        A, g, curvature = _normal_matrix(st, smp, S, curvature=newton)
-        if g_from_d:
-            J = smith_g_jacobian(st.D)[1]
-            if newton:
-                curvature = _g_from_d_curvature(st, curvature, g, J)
-            A, g = _chain_g_from_d(A, g, J)
-        # multiplicative (log) parameters for D, F, G and ρs: the near-ambiguity
-        # F(θd)·G(θi)G(θo) ≈ F(θd)e^{-2kθd}·G(θi)e^{kθi}·G(θo)e^{kθo} is a straight line in
-        # log space, so Gauss–Newton crosses it in few steps
-        sc = np.maximum(_log_params(st, g_from_d), 1e-300)
-        A = A * sc[:, :, None] * sc[:, None, :]
-        g = g * sc
-        damping_scale = np.maximum(np.diagonal(A, axis1=1, axis2=2), 1e-300)
-        A_newton = None
-        if newton:
-            # in log parameters x = ln p: ∂²E/∂x² gains g·p on the diagonal (∂²p/∂x² = p);
-            # ρd (index -2) is additive
-            A_newton = A + curvature * sc[:, :, None] * sc[:, None, :]
-            log_diag = g.copy()
-            log_diag[:, -2] = 0.0
-            A_newton[:, np.arange(n), np.arange(n)] += log_diag
-        free = gauge_free.copy()
-        # room left to each face of the feasible box in log parameters (≥ 0; a parameter
-        # pushed out by the clamp may only move back in): the factors' floor ``eps`` (the
-        # gauge samples stay 1, so the floor is the AWLS's dynamic-range clamp) and, with
-        # ``bound``, the trust region around the start; ρd ≥ 0 (Eq. 18; its step is additive,
-        # and unbounded above). A parameter at a face whose descent direction (−g) leaves
-        # the box is held: steps into the clamp were cut by it, and the quadratic model
-        # then promised decreases the step could not give (aluminium: a predicted 1.5e-3
-        # for an actual 5e-5, every iteration)
-        log_p = np.log(sc)
-        room_down = np.full((3, n), np.inf)
-        room_up = np.full((3, n), np.inf)
-        room_down[:, :iG.stop] = np.maximum(log_p[:, :iG.stop] - np.log(max(eps, 1e-300)), 0.0)
-        if log_bound is not None:
-            room_down = np.minimum(room_down, np.maximum(log_p - (start - log_bound), 0.0))
-            room_up = np.maximum(start + log_bound - log_p, 0.0)
-        room_down[:, -2], room_up[:, -2] = np.maximum(st.rho_d, 0.0), np.inf   # ρd ≥ 0, additive
-        free &= ~(((room_down <= 1e-12) & (g > 0)) | ((room_up <= 1e-12) & (g < 0)))
-        # a channel whose step failed at the largest damping is done: its parameters, and so
-        # its next step, can no longer change (channels are independent), and trying it again
-        # would only re-run the passes over the samples for the others
-        todo = lam < LAM_MAX
+        A, g, A_newton, sc = _polish_system(st, smp, S, g_from_d, newton)
+        free, room_down, room_up = _polish_box(st, sc, g, gauge_free, start, log_bound, eps,
+                                               g_from_d)
+        todo = lam < LAM_MAX                            # the channels not done
         for _attempt in range(8 if todo.any() else 0):  # raise the damping until it helps
-            step = np.zeros((3, n))
-            for c in np.flatnonzero(todo):
-                damp = np.diag(lam[c] * damping_scale[c] + 1e-300)
-                M = A[c] + damp
-                if A_newton is not None:
-                    # Newton's damped matrix where it is positive definite (far from a
-                    # minimum it may not be, and its step then climbs), else Gauss–Newton's
-                    M_newton = A_newton[c] + damp
-                    try:
-                        np.linalg.cholesky(M_newton[np.ix_(free[c], free[c])])
-                        M = M_newton
-                    except np.linalg.LinAlgError:
-                        pass
-                step[c] = _damped_step_in_box(M, g[c], free[c], room_down[c], room_up[c])
-            mult = np.exp(np.clip(step, -5.0, 5.0))
-            cand = MFState(np.maximum(st.D * mult[:, :NH], eps),
-                           np.maximum(st.F * mult[:, NH:NH + ND], eps),
-                           st.G if g_from_d else np.maximum(st.G * mult[:, iG], eps),
-                           np.maximum(st.rho_d + step[:, -2], 0.0),
-                           np.maximum(st.rho_s * mult[:, -1], 1e-300))
-            if g_from_d:
-                cand.G = smith_g_from_d(cand.D.T).T
-            Xc = cand.rho_s[:, None] * outer_df(cand.D, cand.F)
-            Ec, Sc = smp.stats(cand.G, Xc, cand.rho_d)
-            n_eval += 1
-            # a step is taken only if it lowers the objective and the model stays storable
-            # (a fit file holds factors ≤ FACTOR_MAX; ρs of the max-normalised factors)
-            rho_s_stored = (cand.rho_s * cand.D.max(1) * cand.F.max(1)
-                            * (1.0 if g_from_d else cand.G.max(1) ** 2))
-            storable = (rho_s_stored <= FACTOR_MAX) & (cand.rho_d <= FACTOR_MAX)
-            acc = todo & np.isfinite(Ec) & (Ec < E) & storable
-            for nm in ("D", "F", "G"):
-                setattr(st, nm, np.where(acc[:, None], getattr(cand, nm), getattr(st, nm)))
-            for nm in ("rho_d", "rho_s"):
-                setattr(st, nm, np.where(acc, getattr(cand, nm), getattr(st, nm)))
+            step = _polish_step(A, g, A_newton, lam, todo, free, room_down, room_up)
+            cand = _polish_candidate(st, step, eps, g_from_d)
+            Ec, Sc = _stats(cand, smp)
+            acc = todo & np.isfinite(Ec) & (Ec < E) & _storable(cand, g_from_d)
+            _take(st, cand, acc)
             S = tuple(np.where(acc[:, None], x, y) for x, y in zip(Sc, S))
             E = np.where(acc, Ec, E)
-            lam = np.where(acc, np.maximum(lam / 10.0, 1e-12),
-                           np.where(todo, np.minimum(lam * 100.0, LAM_MAX), lam))
+            lam = _next_damping(lam, acc, todo)
             todo &= ~acc
             if not np.any(todo):
                 break
@@ -963,9 +894,136 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
             mon.reason = "damping limit (no further decrease)"
             break
     _normalise_factors(st, 0.0, g_from_d)    # a change of gauge: the model is unchanged
-    E, _ = smp.stats(st.G, st.rho_s[:, None] * outer_df(st.D, st.F), st.rho_d)
+    E, _ = _stats(st, smp)
     return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, 0, 0,
                      time.perf_counter() - t0)
+
+
+def _polish_log_bound(n, g_from_d, bound, bounded) -> np.ndarray:
+    """The trust region of :func:`polish_lm` per log parameter (n,): ``ln bound`` for the
+    groups in ``bounded`` (default all), inf for the others."""
+    iG = slice(NH + ND, NH + ND + (0 if g_from_d else NG))
+    groups = {"D": slice(0, NH), "F": slice(NH, NH + ND), "G": iG, "rho_s": slice(n - 1, n)}
+    log_bound = np.full(n, np.inf)
+    for name in (groups if bounded is None else bounded):
+        if name not in groups:
+            raise ValueError(f"polish_lm: bounded expects names among {tuple(groups)}, "
+                             f"found {name!r}")
+        log_bound[groups[name]] = np.log(bound)
+    return log_bound
+
+
+def _gauge_free(st: MFState, n, g_from_d) -> np.ndarray:
+    """(3, n): False at the gauge of :func:`polish_lm`, the starting max samples of D, F (and
+    G), which stay fixed throughout, removing the scale ambiguities (ρs absorbs the scale)
+    from the system; the factors are max-normalised once, at the end (re-normalising every
+    step would move the gauge from one near-maximal sample to another and make the steps
+    zigzag)."""
+    gauge_free = np.ones((3, n), bool)
+    for c in range(3):
+        fixed = [int(np.argmax(st.D[c])), NH + int(np.argmax(st.F[c]))]
+        if not g_from_d:
+            fixed.append(NH + ND + int(np.argmax(st.G[c])))
+        gauge_free[c, fixed] = False
+    return gauge_free
+
+
+def _polish_system(st: MFState, smp: Samples, S, g_from_d, newton):
+    """The damped system of :func:`polish_lm` in log parameters: ``(A, g, A_newton, sc)``,
+    JᵀWJ and JᵀWr scaled by the parameter values ``sc`` (3, n), and with ``newton`` the
+    same plus the residual curvature (else ``None``)."""
+    A, g, curvature = _normal_matrix(st, smp, S, curvature=newton)
+    if g_from_d:
+        J = smith_g_jacobian(st.D)[1]
+        if newton:
+            curvature = _g_from_d_curvature(st, curvature, g, J)
+        A, g = _chain_g_from_d(A, g, J)
+    # multiplicative (log) parameters for D, F, G and ρs: the near-ambiguity
+    # F(θd)·G(θi)G(θo) ≈ F(θd)e^{-2kθd}·G(θi)e^{kθi}·G(θo)e^{kθo} is a straight line in
+    # log space, so Gauss–Newton crosses it in few steps
+    sc = np.maximum(_log_params(st, g_from_d), 1e-300)
+    A = A * sc[:, :, None] * sc[:, None, :]
+    g = g * sc
+    A_newton = None
+    if newton:
+        # in log parameters x = ln p: ∂²E/∂x² gains g·p on the diagonal (∂²p/∂x² = p);
+        # ρd (index -2) is additive
+        n = A.shape[1]
+        A_newton = A + curvature * sc[:, :, None] * sc[:, None, :]
+        log_diag = g.copy()
+        log_diag[:, -2] = 0.0
+        A_newton[:, np.arange(n), np.arange(n)] += log_diag
+    return A, g, A_newton, sc
+
+
+def _polish_box(st: MFState, sc, g, gauge_free, start, log_bound, eps, g_from_d):
+    """``(free, room_down, room_up)`` (3, n): the parameters free to move, and the room left to each face of :func:`polish_lm`'s
+    feasible box in log parameters (≥ 0; a parameter pushed out by the clamp may only move
+    back in): the factors' floor ``eps`` (the gauge samples stay 1, so the floor is the
+    AWLS's dynamic-range clamp) and, with ``log_bound``, the trust region around the start;
+    ρd ≥ 0 (Eq. 18; its step is additive, and unbounded above). A parameter at a face whose
+    descent direction (−g) leaves the box is held: steps into the clamp are cut by it, and
+    the quadratic model then promises decreases the step cannot give (aluminium: a
+    predicted 1.5e-3 for an actual 5e-5, every iteration)."""
+    n_f = NH + ND + (0 if g_from_d else NG)
+    log_p = np.log(sc)
+    room_down = np.full(sc.shape, np.inf)
+    room_up = np.full(sc.shape, np.inf)
+    room_down[:, :n_f] = np.maximum(log_p[:, :n_f] - np.log(max(eps, 1e-300)), 0.0)
+    if log_bound is not None:
+        room_down = np.minimum(room_down, np.maximum(log_p - (start - log_bound), 0.0))
+        room_up = np.maximum(start + log_bound - log_p, 0.0)
+    room_down[:, -2], room_up[:, -2] = np.maximum(st.rho_d, 0.0), np.inf   # ρd ≥ 0, additive
+    held = ((room_down <= 1e-12) & (g > 0)) | ((room_up <= 1e-12) & (g < 0))
+    return gauge_free & ~held, room_down, room_up
+
+
+def _next_damping(lam, acc, todo) -> np.ndarray:
+    """Levenberg–Marquardt's damping after an attempt: ÷10 (at least 1e-12) where the step
+    was accepted, ×100 (at most :data:`LAM_MAX`) where it was tried and failed."""
+    return np.where(acc, np.maximum(lam / 10.0, 1e-12),
+                    np.where(todo, np.minimum(lam * 100.0, LAM_MAX), lam))
+
+
+def _polish_step(A, g, A_newton, lam, todo, free, room_down, room_up) -> np.ndarray:
+    """The damped steps (3, n) of the channels in ``todo`` (0 elsewhere), damping ``lam``
+    scaled by JᵀWJ's diagonal: Newton's damped matrix where it is positive definite (far
+    from a minimum it may not be, and its step then climbs), else Gauss–Newton's."""
+    damping_scale = np.maximum(np.diagonal(A, axis1=1, axis2=2), 1e-300)
+    step = np.zeros(g.shape)
+    for c in np.flatnonzero(todo):
+        damp = np.diag(lam[c] * damping_scale[c] + 1e-300)
+        M = A[c] + damp
+        if A_newton is not None:
+            M_newton = A_newton[c] + damp
+            try:
+                np.linalg.cholesky(M_newton[np.ix_(free[c], free[c])])
+                M = M_newton
+            except np.linalg.LinAlgError:
+                pass
+        step[c] = _damped_step_in_box(M, g[c], free[c], room_down[c], room_up[c])
+    return step
+
+
+def _polish_candidate(st: MFState, step, eps, g_from_d) -> MFState:
+    """The state after ``step`` in log parameters (ρd additive), clamped like the AWLS."""
+    mult = np.exp(np.clip(step, -5.0, 5.0))
+    cand = MFState(np.maximum(st.D * mult[:, :NH], eps),
+                   np.maximum(st.F * mult[:, NH:NH + ND], eps),
+                   st.G if g_from_d else np.maximum(st.G * mult[:, NH + ND:NH + ND + NG], eps),
+                   np.maximum(st.rho_d + step[:, -2], 0.0),
+                   np.maximum(st.rho_s * mult[:, -1], 1e-300))
+    if g_from_d:
+        cand.G = smith_g_from_d(cand.D.T).T
+    return cand
+
+
+def _storable(cand: MFState, g_from_d) -> np.ndarray:
+    """Per channel: the model stays storable (a fit file holds factors ≤ FACTOR_MAX; ρs of
+    the max-normalised factors)."""
+    rho_s_stored = (cand.rho_s * cand.D.max(1) * cand.F.max(1)
+                    * (1.0 if g_from_d else cand.G.max(1) ** 2))
+    return (rho_s_stored <= FACTOR_MAX) & (cand.rho_d <= FACTOR_MAX)
 
 
 def _damped_step(M, g, free, held_step=None):
