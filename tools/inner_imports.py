@@ -27,7 +27,9 @@ def _imported(node: ast.Import | ast.ImportFrom, module: str, is_package: bool) 
         return [node.module or ""]
     base = module.split(".") if is_package else module.split(".")[:-1]
     base = base[:len(base) - (node.level - 1)]
-    return [".".join(base + ([node.module] if node.module else []))]
+    if node.module:
+        return [".".join(base + [node.module])]
+    return [".".join(base + [alias.name]) for alias in node.names]  # from . import a, b
 
 
 def inner_imports(root: Path) -> list[tuple[str, int, str, str]]:

@@ -86,44 +86,49 @@ def synthetic(name: str) -> BRDF:
 
 
 # -- built-in materials ----------------------------------------------------------------------
-def _gold_ggx():
-    from .microfacet import GGX, ConductorFresnel, MicrofacetBRDF
-    from .microfacet.fresnel import GOLD_ETA, GOLD_K
+def _microfacet():
+    """:mod:`brdffit.microfacet`, imported when the first material is built: ``import
+    brdffit`` imports this module (and its names) without NumPy."""
+    from . import microfacet
 
-    return MicrofacetBRDF(GGX(0.12), ConductorFresnel(GOLD_ETA, GOLD_K))
+    return microfacet
+
+
+def _gold_ggx():
+    m = _microfacet()
+    return m.MicrofacetBRDF(m.GGX(0.12), m.ConductorFresnel(m.fresnel.GOLD_ETA, m.fresnel.GOLD_K))
 
 
 def _plastic_beckmann():
-    from .microfacet import Beckmann, DielectricFresnel, MicrofacetBRDF
-
-    return MicrofacetBRDF(Beckmann(0.18), DielectricFresnel(1.5), diffuse=(0.45, 0.06, 0.04))
+    m = _microfacet()
+    return m.MicrofacetBRDF(m.Beckmann(0.18), m.DielectricFresnel(1.5),
+                            diffuse=(0.45, 0.06, 0.04))
 
 
 def _aniso_ggx():
-    from .microfacet import GGX, ConductorFresnel, MicrofacetBRDF
-
-    return MicrofacetBRDF(GGX(0.06, 0.3, rho=0.45), ConductorFresnel(ALUMINIUM_ETA, ALUMINIUM_K))
+    m = _microfacet()
+    return m.MicrofacetBRDF(m.GGX(0.06, 0.3, rho=0.45),
+                            m.ConductorFresnel(ALUMINIUM_ETA, ALUMINIUM_K))
 
 
 def _sgd_paint():
-    from .microfacet import GeneralizedSchlickFresnel, MicrofacetBRDF
-
+    m = _microfacet()
     try:
-        from .microfacet.sgd import SGD
-    except ImportError as exc:
+        sgd = m.SGD
+    except AttributeError as exc:  # brdffit.microfacet.sgd could not be imported
         raise BRDFError(f"synthetic material 'sgd-paint' needs the SGD distribution "
-                        f"(brdffit.microfacet.sgd), which could not be imported: {exc}") from exc
-    return MicrofacetBRDF(SGD(0.15, 1.2), GeneralizedSchlickFresnel(0.06, 0.02),
-                          diffuse=(0.04, 0.07, 0.30))
+                        f"(brdffit.microfacet.sgd), which could not be imported: "
+                        f"{exc.__cause__ or exc}") from exc
+    return m.MicrofacetBRDF(sgd(0.15, 1.2), m.GeneralizedSchlickFresnel(0.06, 0.02),
+                            diffuse=(0.04, 0.07, 0.30))
 
 
 def _two_lobe():
-    from .microfacet import GGX, MicrofacetBRDF, SchlickFresnel, SumBRDF
-
-    sharp = MicrofacetBRDF(GGX(0.04), SchlickFresnel(0.9), specular=0.35, name="sharp")
-    broad = MicrofacetBRDF(GGX(0.35), SchlickFresnel((0.95, 0.64, 0.54)), specular=0.6,
-                           name="broad")
-    return SumBRDF([sharp, broad])
+    m = _microfacet()
+    sharp = m.MicrofacetBRDF(m.GGX(0.04), m.SchlickFresnel(0.9), specular=0.35, name="sharp")
+    broad = m.MicrofacetBRDF(m.GGX(0.35), m.SchlickFresnel((0.95, 0.64, 0.54)), specular=0.6,
+                             name="broad")
+    return m.SumBRDF([sharp, broad])
 
 
 register_synthetic("gold-ggx", _gold_ggx, "isotropic GGX α=0.12, conductor Fresnel (gold)")

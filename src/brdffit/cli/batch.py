@@ -9,47 +9,12 @@ from __future__ import annotations
 
 import sys
 
-from . import (DEFAULT_MODELS, EXIT_ERROR, EXIT_FAILED_TASKS, EXIT_USAGE, add_command,
-               add_render_options, at_least, between, check_models, check_render_settings,
-               models_help, usage_error)
+from . import EXIT_ERROR, EXIT_FAILED_TASKS, EXIT_USAGE
+from ..batch import OutputLocked, RenderSettings, enumerate_materials, make_tasks, run_batch
 from ..errors import printable
-
-
-def register(commands) -> None:
-    cmd = add_command(commands, "batch", batch_cmd, epilog=models_help())
-    cmd.add_argument("source", metavar="SOURCE",
-                     help="Folder of measured files, a Neural-BRDF .zip collection, a list "
-                          "file, or synthetic:[a,b].")
-    cmd.add_argument("-m", "--models", default=DEFAULT_MODELS, metavar="A,B",
-                     help="Comma-separated model names (list below).")
-    cmd.add_argument("-o", "--out", required=True, metavar="DIR",
-                     help="Output folder (created; re-runs resume).")
-    cmd.add_argument("--only", default="", metavar="A,B",
-                     help="Comma-separated material names to keep.")
-    cmd.add_argument("--limit", type=at_least(0), default=0, metavar="N",
-                     help="Keep only the first N materials (0: all).")
-    cmd.add_argument("--scheduler", default="", metavar="ADDRESS",
-                     help="Address of an existing Dask scheduler, e.g. tcp://host:8786 "
-                          "(default: a local cluster). Its workers must share OUT and the data "
-                          "at the same paths and run the same brdffit version.")
-    cmd.add_argument("--workers", type=between(1, 256), default=2, metavar="N",
-                     help="Local cluster: worker processes.")
-    cmd.add_argument("--memory-limit", default="", metavar="SIZE",
-                     help="Local cluster: memory per worker, e.g. 8GiB.")
-    cmd.add_argument("--retries", type=between(0, 100), default=2, metavar="N",
-                     help="Local cluster: how many more times a task that kills its worker "
-                          "(out of memory...) is tried before it is recorded as failed.")
-    cmd.add_argument("--no-metrics", action="store_true", help="Skip BRDF-space metrics.")
-    cmd.add_argument("--render", action="store_true",
-                     help="Also render every material and its fits (Mitsuba 3) and write the "
-                          "HTML report to OUT/report/.")
-    add_render_options(cmd, when="--render: ")
-    cmd.add_argument("--retry-failed", action="store_true",
-                     help="Redo tasks recorded as failed.")
-    cmd.add_argument("--wait-lock", action="store_true",
-                     help="If another batch is writing to OUT, wait for it (default: exit with "
-                          "status 2).")
-    cmd.add_argument("-q", "--quiet", action="store_true", help="No progress bar.")
+from ..evaluation.render.scenes import scene_suite
+from ._checks import check_models, check_render_settings
+from ._parsing import DEFAULT_MODELS, usage_error
 
 
 def batch_cmd(source: str, out: str, models: str = DEFAULT_MODELS, only: str = "",
@@ -58,27 +23,12 @@ def batch_cmd(source: str, out: str, models: str = DEFAULT_MODELS, only: str = "
               scenes: str = "paper", spp: int = 64, batches: int = 8, resolution: int = 256,
               retry_failed: bool = False, wait_lock: bool = False,
               quiet: bool = False) -> int | None:
-    """Fit every material of SOURCE with every model (Dask, resumable).
-
-            Writes OUT/fits/, OUT/records/ and OUT/summary.csv (one row per material and
-            model: α and glTF roughness, F0, ρd, errors, PSNR ± se and dE2000 when rendered,
-            time, status, fit file, and the recommended model of each material).
-
-            \b
-            Example:
-              brdffit batch merl_nbrdf.zip -m tabulated,ggx --limit 10 --out runs/merl
-
-            With --render, each material is also rendered once its fits are done, and
-            OUT/report/index.html compares every model over the database. Exit status: 0 all
-            done, 1 error, 2 usage or OUT locked by another batch, 3 some tasks failed.
-            """
-    from ..batch import (OutputLocked, RenderSettings, enumerate_materials, make_tasks,
-                         run_batch)
+    """Run ``brdffit batch`` (its options: :func:`brdffit.cli._commands.batch`)."""
     model_list = check_models([m.strip() for m in models.split(",") if m.strip()])
     if not model_list:
         raise usage_error("--models", f"expected at least one model name, found {models!r}")
     if memory_limit:
-        from dask.utils import parse_bytes
+        from dask.utils import parse_bytes  # Dask only when a size is given
 
         try:
             parse_bytes(memory_limit)
@@ -86,7 +36,6 @@ def batch_cmd(source: str, out: str, models: str = DEFAULT_MODELS, only: str = "
             raise usage_error("--memory-limit", f"expected a size such as 8GiB, found "
                                                 f"{memory_limit!r}") from None
     if render:
-        from ..evaluation.render.scenes import scene_suite
         check_render_settings(spp, batches, resolution)
         try:
             scene_suite(scenes)

@@ -12,67 +12,34 @@ without ``:MATERIAL`` compares all its materials (``--limit`` keeps the first N)
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 from pathlib import Path
 
-from . import (DEFAULT_MODELS, EXIT_FAILED_TASKS, MAX_SEED, add_command, add_render_options,
-               at_least, between, check_models, check_render_settings, models_help, path, positive,
-               positive_or, usage_error)
+from . import EXIT_FAILED_TASKS
 from ..errors import printable
+from ..batch import compare_with_exports
+from ..evaluation.compare import compare_many
+from ..evaluation.report import write_index
+from ..fit.options import OptionError
 from ..fit.registry import check_options
+from ..io import resolve_spec
+from ..io.nbrdf import list_materials
+from ._checks import check_models, check_render_settings
+from ._parsing import DEFAULT_MODELS, usage_error
 
-__all__ = ["register", "compare_cmd"]
+__all__ = ["compare_cmd"]
 
 
 def _materials(spec: str, limit: int | None) -> list[str]:
     if not spec.lower().endswith(".zip"):
         return [spec]
-    from ..io import resolve_spec
-
     kind, path, member = resolve_spec(spec)
     if kind == "nbrdf-collection" and not member:
-        from ..io.nbrdf import list_materials
-
         names = list_materials(path)
         names = names[:limit] if limit else names
         return [f"{path}:{n}" for n in names]
     return [spec]
-
-
-def register(commands) -> None:
-    cmd = add_command(commands, "compare", compare_cmd, epilog=models_help())
-    cmd.add_argument("spec", metavar="INPUT[:MATERIAL]",
-                     help="Reference BRDF: a file, collection.zip[:material], synthetic:NAME "
-                          "or a fit file.")
-    cmd.add_argument("-m", "--models", default=DEFAULT_MODELS, metavar="A,B",
-                     help="Comma-separated model names to fit (list below), and/or saved fits "
-                          "as NAME=fit.npz or fit.npz.")
-    cmd.add_argument("-o", "--out", type=path, default=Path("report"), metavar="DIR",
-                     help="Report directory.")
-    add_render_options(cmd)
-    cmd.add_argument("--scene", help=argparse.SUPPRESS)  # hidden: the single-scene form of --scenes NAME
-    cmd.add_argument("--seed", type=between(0, MAX_SEED - (1 << 20)), default=0, metavar="N",
-                     help="Seed of the sample streams (all models).")
-    cmd.add_argument("--exposure", type=positive_or("scene", "auto"), default="scene",
-                     metavar="EV",
-                     help="Tone-mapping exposure: 'scene' (fixed per scene), 'auto' (from "
-                          "each scene's reference) or a positive number.")
-    cmd.add_argument("--gamma", type=positive(10.0), metavar="G",
-                     help="Tone-mapping gamma (default: the scene's, 2.2).")
-    # ignored (standard errors replaced the noise floor); accepted for old command lines
-    cmd.add_argument("--noise-floor", action=argparse.BooleanOptionalAction, default=True,
-                     help=argparse.SUPPRESS)
-    cmd.add_argument("--envmap", metavar="MAP",
-                     help="Environment map of the plain sphere-env/knot scenes: a name of "
-                          "../shared/data/envmaps or an EXR (default procedural).")
-    cmd.add_argument("--limit", type=at_least(1), metavar="N",
-                     help="With a collection: only its first N materials.")
-    cmd.add_argument("--fit-options", metavar="JSON",
-                     help='Fitter keyword arguments as JSON per model, e.g. '
-                          '\'{"npf": {"max_iter": 100}}\'.')
-    cmd.add_argument("-q", "--quiet", action="store_true", help="No progress messages.")
 
 
 def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("report"),
@@ -81,11 +48,7 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
                 exposure: str = "scene", gamma: float | None = None, noise_floor: bool = True,
                 envmap: str | None = None, limit: int | None = None,
                 fit_options: str | None = None, quiet: bool = False) -> int | None:
-    """Fit, render and measure models against a reference (HTML report)."""
-    from ..batch import compare_with_exports
-    from ..evaluation.compare import compare_many
-    from ..evaluation.report import write_index
-
+    """Run ``brdffit compare`` (its options: :func:`brdffit.cli._commands.compare`)."""
     model_list = [m.strip() for m in models.split(",") if m.strip()]
     if not model_list:
         raise ValueError(f"--models: expected at least one model name, found {models!r}")
@@ -101,7 +64,6 @@ def compare_cmd(spec: str, models: str = DEFAULT_MODELS, out: Path = Path("repor
         raise ValueError(f"--fit-options: expected a JSON object {{model: {{option: value}}}}, "
                          f"found {fit_options!r}")
     if fopts:
-        from ..fit.options import OptionError
         labels = [m.split("=", 1)[0] if "=" in m else Path(m).stem if m.endswith(".npz")
                   else m for m in model_list]
         for label, opts in fopts.items():

@@ -9,20 +9,20 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .._atomic import WRITE_THROUGH, destination_kind
 from ..errors import BRDFFormatError, printable
-from . import add_command, output_file, path
+from ..io.merl import resample_to_merl
+from ..io.utia import read_utia, write_utia
+from ..loading import load
+from ._checks import output_file
 
-__all__ = ["register", "convert_cmd", "convert"]
+__all__ = ["convert_cmd", "convert"]
 
 _OUTPUTS = {".binary": "merl", ".bin": "utia"}
 
 
 def convert(spec, out) -> dict:
     """Load ``spec`` and write it to ``out`` (format from the extension); return a summary."""
-    from ..loading import load
-
-    from .._atomic import WRITE_THROUGH, destination_kind
-
     out = Path(out)
     # a device or FIFO has no extension: MERL, the format every tool reads
     kind = "merl" if destination_kind(out) in WRITE_THROUGH else _OUTPUTS.get(out.suffix.lower())
@@ -31,29 +31,17 @@ def convert(spec, out) -> dict:
                                    f"(MERL .binary, UTIA .bin), found {out.suffix or 'none'!r}")
     brdf = load(spec)
     if kind == "merl":
-        from ..io.merl import resample_to_merl
-
         table = resample_to_merl(brdf, out)
         return {"out": str(out), "format": "merl", "n_samples": table.n_samples,
                 "n_invalid": table.n_invalid, "name": getattr(brdf, "name", None)}
-    from ..io.utia import read_utia, write_utia
-
     write_utia(brdf, out)
     check = read_utia(out)
     return {"out": str(out), "format": "utia", "n_samples": check.n_samples,
             "n_invalid": check.n_invalid, "name": getattr(brdf, "name", None)}
 
 
-def register(commands) -> None:
-    cmd = add_command(commands, "convert", convert_cmd)
-    cmd.add_argument("src", metavar="IN",
-                     help="A BRDF file, collection.zip:material or synthetic:NAME.")
-    cmd.add_argument("dst", type=path, metavar="OUT",
-                     help="Output file: .binary (MERL) or .bin (UTIA).")
-
-
 def convert_cmd(src: str, dst: Path) -> None:
-    """Resample a BRDF to a MERL (.binary) or UTIA (.bin) file."""
+    """Run ``brdffit convert`` (its options: :func:`brdffit.cli._commands.convert`)."""
     output_file(dst, tuple(_OUTPUTS), option="OUT")
     info = convert(src, dst)
     print(printable(f"wrote {info['out']} ({info['format']}, {info['n_samples']} samples, "

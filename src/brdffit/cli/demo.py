@@ -2,15 +2,24 @@
 
 from __future__ import annotations
 
+import os
+import queue
 import time
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
-from . import (EXIT_FAILED_TASKS, MAX_RESOLUTION, MAX_SPP, add_command, at_least, between,
-               check_models, check_render_settings, models_help, usage_error)
+from . import EXIT_FAILED_TASKS
+from .._isolation import ChildCrashed, IsolatedProcess
+from ..batch import compare_with_exports, enumerate_materials
 from ..errors import printable as safe
+from ..evaluation import report as R
+from ..evaluation.compare import DEFAULT_BATCHES
+from ..evaluation.report import write_index
+from ..progress import report
+from ._checks import check_models, check_render_settings
+from ._commands import DEMO_MODELS
+from ._parsing import usage_error
 
-# the paper's models and the engine-ready GGX + Lambert (+ coat)
-DEMO_MODELS = "tabulated,ggx,beckmann,ggx-diffuse,sgd,npf-g-from-d,npf"
 # The demo's independent-G NPF runs one start (from the G-from-D fit) for a bounded number of
 # AWLS iterations, to stay within a few minutes; `brdffit fit/compare` run all starts.
 DEMO_FIT_OPTIONS = {"npf": {"starts": ("g-from-d",), "max_iter": 60, "start_max_iter": 60}}
@@ -19,33 +28,11 @@ NEXT_STEP = ("fit synthetic:plastic-beckmann -m ggx-diffuse -o plastic.npz",
              "export plastic.npz --to gltf -o plastic.gltf")
 
 
-def register(commands) -> None:
-    cmd = add_command(commands, "demo", demo_cmd, epilog=models_help())
-    cmd.add_argument("-o", "--out", default="demo-out", metavar="DIR", help="Report folder.")
-    cmd.add_argument("--data", default="", metavar="SOURCE",
-                     help="Run on real data instead: a folder, a Neural-BRDF .zip collection "
-                          "or a list file.")
-    cmd.add_argument("--limit", type=at_least(0), default=0, metavar="N",
-                     help="With --data: first N materials only.")
-    cmd.add_argument("-m", "--models", default=DEMO_MODELS, metavar="A,B",
-                     help="Models to fit (list below).")
-    cmd.add_argument("--spp", type=between(1, MAX_SPP), default=64, metavar="N",
-                     help="Samples per pixel of the renderings (in up to 8 batches: a "
-                          "multiple of 8, or fewer than 8).")
-    cmd.add_argument("--resolution", type=between(8, MAX_RESOLUTION), default=128,
-                     metavar="PX", help="Image size in pixels.")
-    cmd.add_argument("-j", "--jobs", type=between(0, 64), default=0, metavar="N",
-                     help="Materials at a time, each in its own process (0: one per CPU).")
-
-
 def _one_material(name: str, spec: str, model_list: list[str], out: str, spp: int,
                   resolution: int) -> tuple[float, list[str], int]:
     """Fit, render and compare one material (in a worker process): ``(seconds, per-model
     and per-scene texts, failures)``; what it is doing goes out as progress stages (a crash
     message names the last one)."""
-    from ..batch import compare_with_exports
-    from ..progress import report
-
     t = time.perf_counter()
     result = compare_with_exports(
         spec, model_list, out, name=name, spp=spp, resolution=resolution,
@@ -71,8 +58,6 @@ def _one_material(name: str, spec: str, model_list: list[str], out: str, spp: in
 def _record_crash(out: str, name: str, model_list: list[str], error: str) -> None:
     """The material's result and page when its worker died: every model failed with
     ``error``, so that the index shows the row."""
-    from ..evaluation import report as R
-
     slug = R.slugify(name)
     result = {"material": name, "slug": slug, "error": error,
               "models": [{"name": m, "status": "failed", "error": error} for m in model_list],
@@ -83,22 +68,10 @@ def _record_crash(out: str, name: str, model_list: list[str], error: str) -> Non
 
 def demo_cmd(out: str = "demo-out", data: str = "", limit: int = 0, models: str = DEMO_MODELS,
              spp: int = 64, resolution: int = 128, jobs: int = 0) -> int | None:
-    """Fit and render built-in synthetic materials; write a report.
-
-    No external data or network is needed. Example: brdffit demo --out demo-out
-    Exit status: 0 all done, 1 error, 2 usage, 3 some fits failed (the rest is written).
-    """
-    import os
-    import queue
-    from concurrent.futures import ThreadPoolExecutor, as_completed
-
-    from .._isolation import ChildCrashed, IsolatedProcess
-    from ..batch import enumerate_materials
-    from ..evaluation.report import write_index
+    """Run ``brdffit demo`` (its options: :func:`brdffit.cli._commands.demo`)."""
     model_list = check_models([m.strip() for m in models.split(",") if m.strip()])
     if not model_list:
         raise usage_error("--models", f"expected at least one model name, found {models!r}")
-    from ..evaluation.compare import DEFAULT_BATCHES
     check_render_settings(spp, DEFAULT_BATCHES, resolution, batches_option=None)
     source = data or "synthetic:"
     materials = enumerate_materials(source, limit=limit or None)

@@ -14,14 +14,22 @@ and one line naming the file (nothing partial is left behind); an unknown target
 
 from __future__ import annotations
 
+import inspect
 import json
+import math
+import typing
+from importlib import import_module
 from pathlib import Path
+
 from ..errors import ExportError, printable
 from ..export import SUFFIXES, TARGETS, check_model, export, load_json
+from ..export._common import check_output_path, shown
+from ..io.fitfile import load_fit
 from ..synthetic import synthetic
-from . import add_command, output_file, path, usage_error
+from ._checks import output_file, parse_options
+from ._parsing import usage_error
 
-__all__ = ["register", "export_cmd", "load_model", "run_export", "target_options",
+__all__ = ["export_cmd", "load_model", "run_export", "target_options",
            "check_options"]
 
 
@@ -31,22 +39,16 @@ def load_model(spec: str):
         return synthetic(spec.split(":", 1)[1])
     if Path(spec).suffix.lower() == ".json":
         return load_json(spec)
-    from ..io.fitfile import load_fit
-
     return load_fit(spec)
 
 
 def _writer(to: str):
-    from importlib import import_module
-
     mod, fn = TARGETS[to]
     return getattr(import_module(mod, "brdffit.export"), fn)
 
 
 def target_options(to: str) -> dict:
     """``{option: default}`` of the writer of target ``to`` (what ``--option`` accepts)."""
-    import inspect
-
     params = inspect.signature(_writer(to)).parameters
     return {k: p.default for k, p in params.items()
             if k not in ("model", "models", "path") and p.kind is p.POSITIONAL_OR_KEYWORD
@@ -55,8 +57,6 @@ def target_options(to: str) -> dict:
 
 def _choices(to: str) -> dict:
     """``{option: allowed values}`` of the writer's options annotated ``Literal[...]``."""
-    import typing
-
     try:
         hints = typing.get_type_hints(_writer(to))
     except (NameError, TypeError):          # an annotation that does not resolve: no choices
@@ -69,8 +69,6 @@ def check_options(to: str, options: dict) -> None:
     """Raise ``ValueError`` (one line) for an option the target does not know or a value of
     the wrong type (the type of the option's default: boolean, integer, number, string) or,
     for an option annotated ``Literal[...]``, not one of its values."""
-    import math
-
     known = target_options(to)
     choices = _choices(to)
     for key, val in options.items():
@@ -98,11 +96,9 @@ def check_options(to: str, options: dict) -> None:
 
 def run_export(fits: list[str], to: str, out: Path, options: dict | None = None) -> dict:
     """Load ``fits`` and export them to ``to`` at ``out``; returns the summary."""
-    from ..export._common import check_output_path
-
     out = check_output_path(out)
     models = [load_model(f) for f in fits]
-    if to == "npf-uber":
+    if to == "npf-uber":  # the GLSL writer (~0.1 s of imports) for this target only
         from ..export.glsl import pack_npf_uber_texture
 
         for m in models:
@@ -114,24 +110,9 @@ def run_export(fits: list[str], to: str, out: Path, options: dict | None = None)
     return export(models[0], to, out, **(options or {}))
 
 
-def register(commands) -> None:
-    cmd = add_command(commands, "export", export_cmd)
-    cmd.add_argument("fits", nargs="+", metavar="FIT",
-                     help="Fit file (.npz), parameter JSON or synthetic:NAME.")
-    cmd.add_argument("--to", required=True, help=f"Target: {', '.join(TARGETS)}.")
-    cmd.add_argument("-o", "--out", type=path, required=True, help="Output file.")
-    cmd.add_argument("--option", action="append",
-                     help="Target option key=value (JSON values).")
-    cmd.add_argument("--json", dest="as_json", action="store_true",
-                     help="Print the summary as JSON.")
-
-
 def export_cmd(fits: list[str], to: str, out: Path, option: list[str] | None = None,
                as_json: bool = False) -> None:
-    """Export a fit to Mitsuba 3, glTF, MaterialX, USD, GLSL or JSON."""
-    from ..export._common import shown
-    from .fit import parse_options
-
+    """Run ``brdffit export`` (its options: :func:`brdffit.cli._commands.export`)."""
     targets = list(TARGETS)
     if to not in targets:
         raise usage_error("--to", f"expected one of {', '.join(targets)}, found {to!r}")

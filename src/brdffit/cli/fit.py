@@ -19,43 +19,31 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
+import re
 import sys
+import textwrap
+import threading
 import time
 from pathlib import Path
+
 from ..errors import ExportError, printable
 from ..fit import registry
 from ..fit.registry import check_options as check, figures, options_class
-from . import add_command, at_least, check_models, models_help, output_file, path, usage_error
+from ..loading import load
+from ._checks import check_models, output_file, parse_options
+from ._commands import DEFAULT_MODEL
+from ._parsing import usage_error
 
-__all__ = ["register", "fit_cmd", "parse_options", "run_fit", "accepted_options",
+__all__ = ["fit_cmd", "parse_options", "run_fit", "accepted_options",
            "check_options", "DEFAULT_MODEL"]
 
-#: The model of ``brdffit fit`` without ``--model``: GGX + Lambert (+ coat), fitted over the
-#: whole data (:mod:`brdffit.fit.analytic`). Chosen over the tabulated fit because it is
-#: engine-ready (glTF, MaterialX, Mitsuba's built-in plugins) and, unlike a specular-only
-#: model, has a diffuse term: on the RGL measurements the tabulated default put the diffuse
-#: base into F (F0 up to 2) with 13-105 % error where ggx-diffuse gave 4-52 %.
-DEFAULT_MODEL = "ggx-diffuse"
 #: A fit's error (:func:`quick_error`) above this is called large and the other candidate
 #: models are tried (median of the default on MERL-100: 13 %; the RGL interference
 #: materials: 44-49 %).
 LARGE_ERROR = 0.25
 #: The models tried on a large error (fast, physically checked, isotropic ones last).
 ALTERNATIVES = ("ggx-diffuse", "sgd", "npf-g-from-d")
-
-
-def parse_options(items: list[str] | None) -> dict:
-    """``["k=v", ...]`` → dict, values parsed as JSON when possible (else strings)."""
-    out: dict = {}
-    for item in items or []:
-        if "=" not in item:
-            raise usage_error("--option", f"expected key=value, found {item!r}")
-        key, val = item.split("=", 1)
-        try:
-            out[key.strip()] = json.loads(val)
-        except json.JSONDecodeError:
-            out[key.strip()] = val
-    return out
 
 
 def accepted_options(model: str) -> tuple[set, bool]:
@@ -79,8 +67,6 @@ def check_options(model: str, options: dict) -> dict:
 
 def _unexpected_option(exc: TypeError, options: dict) -> str | None:
     """The user option a fitter rejected with ``TypeError: ... unexpected keyword argument``."""
-    import re
-
     m = re.search(r"unexpected keyword argument '([^']+)'", str(exc))
     return m.group(1) if m and m.group(1) in options else None
 
@@ -183,8 +169,6 @@ def quick_error(reference, model, n_pairs: int = QUICK_ERROR_PAIRS) -> dict:
 def _figures_summary(fitted) -> dict:
     """The labelled figures of a fit (:func:`brdffit.fit.registry.figures`) with glTF
     roughness √α next to α."""
-    import math
-
     fig = figures(fitted)
     out = {"alpha": None, "gltf_roughness": None, "alpha_kind": fig.get("alpha_kind"),
            "alpha_rgb": fig.get("alpha_rgb"), "f0": fig.get("f0"), "rho_d": fig.get("rho_d"),
@@ -224,7 +208,7 @@ def _live_progress(enabled: bool):
     if not enabled:
         yield
         return
-    from ..progress import describe, listening
+    from ..progress import describe, listening  # a status line on a terminal only
 
     live: dict = {}
 
@@ -247,8 +231,6 @@ def _live_progress(enabled: bool):
 def _in_background(fn, *args):
     """Run ``fn(*args)`` on a thread now; the returned callable waits for its result (or
     re-raises its error). Hashing the input (hashlib releases the GIL) overlaps the imports."""
-    import threading
-
     box: dict = {}
 
     def run() -> None:
@@ -279,7 +261,6 @@ def run_fit(spec: str, model: str = DEFAULT_MODEL, out: Path | None = None,
     ``error=False``), ``time_s`` (the fit), ``timings_s`` (load, fit, save, error),
     ``output`` (``None`` when not saved), and the model's own summary under ``details``.
     """
-    from ..loading import load
     from ..io._checksum import source_checksum
 
     timings: dict[str, float] = {}
@@ -398,8 +379,6 @@ _SHOWN = {"alpha", "fresnel_0", "F0", "rho_d", "model", "time_s"}
 def format_summary(s: dict) -> list[str]:
     """The text ``brdffit fit`` prints for a :func:`run_fit` summary: one labelled line per
     figure, 80 columns."""
-    import textwrap
-
     out = [f"{s['input']}: {s['model']} fit in {s['time_s']:.3f} s"]
 
     def row(label: str, text: str, wrap: bool = True) -> None:
@@ -465,30 +444,10 @@ def warning_lines(s: dict) -> list[str]:
             + (f"; {w['advice']}" if w.get("advice") else "") for w in s.get("warnings") or ()]
 
 
-def register(commands) -> None:
-    cmd = add_command(commands, "fit", fit_cmd, epilog=models_help())
-    cmd.add_argument("spec", metavar="INPUT[:MATERIAL]",
-                     help="A BRDF file, collection.zip:material or synthetic:NAME.")
-    cmd.add_argument("-m", "--model", default=DEFAULT_MODEL, metavar="NAME",
-                     help="Model to fit (list below); the default is engine-ready: GGX + "
-                          "Lambert (+ a clear coat where it pays), physically checked.")
-    cmd.add_argument("-o", "--output", dest="out", type=path, metavar="FILE.npz",
-                     help="Write the fit file here (default: not saved).")
-    cmd.add_argument("--iterations", type=at_least(1), metavar="N",
-                     help="Power / optimiser iterations (model's default).")
-    cmd.add_argument("-O", "--option", action="append", metavar="KEY=VALUE",
-                     help="Extra fitting option (repeatable).")
-    cmd.add_argument("--no-error", action="store_true",
-                     help="Skip the error against the input and the physical checks (the "
-                          "fastest fit).")
-    cmd.add_argument("--json", dest="as_json", action="store_true",
-                     help="Print the summary as JSON.")
-
-
 def fit_cmd(spec: str, model: str = DEFAULT_MODEL, out: Path | None = None,
             iterations: int | None = None, option: list[str] | None = None,
             no_error: bool = False, as_json: bool = False) -> None:
-    """Fit a model to a measured BRDF; print its parameters and error."""
+    """Run ``brdffit fit`` (its options: :func:`brdffit.cli._commands.fit`)."""
     opts = parse_options(option)
     if iterations is not None:
         opts["iterations"] = iterations

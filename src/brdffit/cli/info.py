@@ -12,19 +12,22 @@ from __future__ import annotations
 import builtins
 import json
 import os
+
+import numpy as np
+
 from ..errors import printable
-from . import add_command, between
+from ..geometry import spherical_to_cartesian
+from ..grid import merl_phi_d, merl_theta_d, merl_theta_h
+from ..io import resolve_spec
+from ..io.nbrdf import list_materials
+from ..loading import load
 
-# NumPy and the readers are imported when the command runs (fast `brdffit --help`).
-
-__all__ = ["register", "info_cmd", "summarize", "ALBEDO_ANGLES_DEG"]
+__all__ = ["info_cmd", "summarize", "ALBEDO_ANGLES_DEG"]
 
 ALBEDO_ANGLES_DEG = (0.0, 30.0, 60.0, 75.0)
 
 
 def _range_of(values, valid) -> dict:
-    import numpy as np
-
     v = values.reshape(-1, values.shape[-1])
     if valid is not None:
         v = v[valid.reshape(-1)]
@@ -36,18 +39,12 @@ def _range_of(values, valid) -> dict:
 def _sampled_values(brdf):
     """Evaluate a BRDF without a stored table on a fixed, deterministic set of configurations;
     returns ``(values, how)``."""
-    import numpy as np
-
     if getattr(brdf, "isotropic", False):
-        from ..grid import merl_phi_d, merl_theta_d, merl_theta_h
-
         # every 3rd MERL sample (θh = 0 included: the specular peak of glossy materials)
         th, td, pd = np.meshgrid(merl_theta_h()[::3], merl_theta_d()[::3], merl_phi_d()[::3],
                                  indexing="ij")
         return brdf.eval_hd(th.ravel(), td.ravel(), pd.ravel()), \
             f"evaluated at {th.size} MERL-grid configurations (every 3rd sample)"
-    from ..geometry import spherical_to_cartesian
-
     t = np.radians(np.arange(0.0, 90.0, 5.0))
     p = np.radians(np.arange(0.0, 360.0, 15.0))
     ti, pi, tv, pv = (a.ravel() for a in np.meshgrid(t, p, t, p, indexing="ij"))
@@ -57,8 +54,6 @@ def _sampled_values(brdf):
 
 def summarize(brdf, spec=None, *, albedo_samples: int = 65536) -> dict:
     """A JSON-able summary of a BRDF (what ``brdffit info`` prints)."""
-    import numpy as np
-
     desc = {k: v for k, v in brdf.describe().items()}
     fmt = getattr(brdf, "format", None) or desc.get("format")
     if str(spec or "").startswith("synthetic:"):
@@ -163,22 +158,8 @@ def _print_summary(s: dict) -> None:
         print(f"  {'albedo' if k == 0 else '':<11} {angle:>2}°: {_fmt_rgb(rgb)}")
 
 
-def register(commands) -> None:
-    cmd = add_command(commands, "info", info_cmd)
-    cmd.add_argument("spec", metavar="FILE[:MATERIAL]",
-                     help="A BRDF file, collection.zip:material or synthetic:NAME.")
-    cmd.add_argument("--json", dest="as_json", action="store_true",
-                     help="Print one JSON object.")
-    cmd.add_argument("--albedo-samples", type=between(16, 1 << 22), default=65536, metavar="N",
-                     help="Monte Carlo samples per albedo angle.")
-
-
 def info_cmd(spec: str, as_json: bool = False, albedo_samples: int = 65536) -> None:
-    """Format, sample counts, value range and albedo of a BRDF file."""
-    from ..io import resolve_spec
-    from ..loading import load
-    from ..io.nbrdf import list_materials
-
+    """Run ``brdffit info`` (its options: :func:`brdffit.cli._commands.info`)."""
     kind, path, member = resolve_spec(spec)
     if kind == "nbrdf-collection" and not member:
         names = list_materials(path)

@@ -16,11 +16,16 @@ from __future__ import annotations
 
 import json
 import sys
+import textwrap
+import time
+from pathlib import Path
+
 from ..fit import registry
 from ..fit.registry import options_class
-from . import add_command, check_models
+from ..loading import load
+from ._checks import check_models
 
-__all__ = ["register", "models_cmd", "model_table", "measure", "model_options"]
+__all__ = ["models_cmd", "model_table", "measure", "model_options"]
 
 
 def model_table() -> list[dict]:
@@ -52,10 +57,7 @@ def measure(rows: list[dict], spec: str, say=lambda msg: None) -> list[dict]:
     """Fit every model of ``rows`` to ``spec`` and replace the declared figures by measured
     ones (``figures: "measured on SPEC"``; a model that fails or does not apply says why)."""
     import tempfile
-    import time
-    from pathlib import Path
 
-    from ..loading import load
     from ..io.fitfile import save_fit
     from .fit import quick_error
 
@@ -98,8 +100,6 @@ def _num(v, unit: str = "") -> str:
 def format_table(rows: list[dict]) -> list[str]:
     """The text of ``brdffit models`` (80 columns): a line of figures and a line of
     description per model, then its options when the rows have them (``--options``)."""
-    import textwrap
-
     lines = [f"{'MODEL':<17}{'ISO':<4}{'FILE B':>8}{'TABLE B':>9}{'FIT CPU':>10}  PAPER"]
     for r in rows:
         lines.append(f"{r['name']:<17}{'yes' if r['isotropic_only'] else 'no':<4}"
@@ -114,28 +114,9 @@ def format_table(rows: list[dict]) -> list[str]:
     return lines
 
 
-def register(commands) -> None:
-    cmd = add_command(commands, "models", models_cmd)
-    cmd.add_argument("--json", dest="as_json", action="store_true",
-                     help="Print the rows as JSON.")
-    cmd.add_argument("--measure", dest="do_measure", action="store_true",
-                     help="Fit each model now and measure its figures.")
-    cmd.add_argument("--on", default="synthetic:gold-ggx", metavar="INPUT",
-                     help="--measure: the input to fit.")
-    cmd.add_argument("-m", "--models", default="", metavar="A,B",
-                     help="Only these models (comma-separated).")
-    cmd.add_argument("--options", dest="with_options", action="store_true",
-                     help="Also list each model's fitting options (-O KEY=VALUE): type, "
-                          "default, range.")
-
-
 def models_cmd(as_json: bool = False, do_measure: bool = False, on: str = "synthetic:gold-ggx",
                models: str = "", with_options: bool = False) -> None:
-    """List the models: paper, isotropy, fit size and time.
-
-    The sizes and times are typical figures declared in the registry (measured by
-    bench/bench_cli.py --models, see below) unless --measure measures them now.
-    """
+    """Run ``brdffit models`` (its options: :func:`brdffit.cli._commands.models`)."""
     rows = model_table()
     if models:
         keep = check_models([m.strip() for m in models.split(",") if m.strip()])
@@ -148,8 +129,6 @@ def models_cmd(as_json: bool = False, do_measure: bool = False, on: str = "synth
         print(json.dumps({"models": rows, "source": None if do_measure
                           else registry.TYPICAL_SOURCE}, indent=1))
         return
-    import textwrap
-
     for line in format_table(rows):
         print(line)
     notes = ["ISO: fits isotropic inputs only. FILE B: bytes of the fit file (.npz); "

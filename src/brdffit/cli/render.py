@@ -11,71 +11,37 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from . import (MAX_RESOLUTION, MAX_SEED, MAX_SPP, add_command, between, check_render_size,
-               output_file, path, positive, positive_or, usage_error)
-from ..errors import BRDFError, printable
+import numpy as np
 
-__all__ = ["register", "render_cmd", "load_brdf"]
+from .._atomic import WRITE_THROUGH
+from ..errors import BRDFError, printable
+from ..evaluation.imageio import read_image, write_exr, write_png
+from ..evaluation.render import Renderer
+from ..evaluation.render.scenes import SCENES
+from ..evaluation.render.translate import resampling_error
+from ..evaluation.tonemap import tonemap
+from ..io.fitfile import is_fit_file, load_fit
+from ..loading import load
+from ._checks import check_render_size, output_file
+from ._parsing import usage_error
+
+__all__ = ["render_cmd", "load_brdf"]
 
 
 def load_brdf(spec: str):
     """A fit file (``.npz`` with a brdffit header) via ``load_fit``, anything else via
     ``brdffit.load``."""
-    from ..io.fitfile import is_fit_file, load_fit
-
     p = Path(spec)
     if p.suffix.lower() == ".npz" and p.is_file() and is_fit_file(p):
         return load_fit(p)
-    from ..loading import load
-
     return load(spec)
-
-
-def register(commands) -> None:
-    cmd = add_command(commands, "render", render_cmd)
-    cmd.add_argument("spec", metavar="INPUT_OR_FIT",
-                     help="BRDF file/spec (brdffit.load) or a fit .npz.")
-    cmd.add_argument("-o", "--output", type=path, required=True, metavar="IMAGE",
-                     help="Output image (.exr or .png).")
-    cmd.add_argument("--scene", default="sphere-env", metavar="SCENE",
-                     help="sphere-env, sphere-point, sphere-distant, knot, sphere-svrough.")
-    cmd.add_argument("--envmap", metavar="MAP",
-                     help="Environment: a name of ../shared/data/envmaps (studio, city, ...), "
-                          "an EXR path, or 'procedural' (default).")
-    cmd.add_argument("--spp", type=between(1, MAX_SPP), default=256, metavar="N",
-                     help="Samples per pixel.")
-    cmd.add_argument("--resolution", type=between(8, MAX_RESOLUTION), default=256,
-                     metavar="PX", help="Image width = height.")
-    cmd.add_argument("--seed", type=between(0, MAX_SEED), default=0, metavar="N",
-                     help="Sampler seed.")
-    cmd.add_argument("--mode", default="auto", metavar="MODE",
-                     help="auto (closed form when available), table, closed.")
-    cmd.add_argument("--exposure", type=positive_or("auto"), default="auto", metavar="EV",
-                     help="PNG tone-mapping exposure (a positive number or 'auto').")
-    cmd.add_argument("--gamma", type=positive(10.0), default=2.2, metavar="G",
-                     help="PNG tone-mapping gamma.")
-    cmd.add_argument("--roughness-texture", type=path, metavar="IMAGE",
-                     help="Roughness-scale texture for microfacet models (Dupuy 2015 Eq. 9): "
-                          "an EXR whose first channel is the α multiplier, or a PNG with "
-                          "multiplier 2·value/255 (mid-grey = 1). Default for --scene "
-                          "sphere-svrough: built-in.")
-    cmd.add_argument("--resampling-error", dest="report_error", action="store_true",
-                     help="Also measure the Dr.Jit evaluator's error vs brdf.eval.")
 
 
 def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str | None = None,
                spp: int = 256, resolution: int = 256, seed: int = 0, mode: str = "auto",
                exposure: str = "auto", gamma: float = 2.2,
                roughness_texture: Path | None = None, report_error: bool = False) -> None:
-    """Render a BRDF or fit with Mitsuba 3 to an EXR or PNG image."""
-    import numpy as np
-
-    from .._atomic import WRITE_THROUGH
-    from ..evaluation.imageio import write_exr, write_png
-    from ..evaluation.render import Renderer
-    from ..evaluation.render.scenes import SCENES
-    from ..evaluation.tonemap import tonemap
-
+    """Run ``brdffit render`` (its options: :func:`brdffit.cli._commands.render`)."""
     if scene not in SCENES:
         raise usage_error("--scene", f"expected one of {', '.join(SCENES)}, found {scene!r}")
     if mode not in ("auto", "table", "closed"):
@@ -89,8 +55,6 @@ def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str |
     env = None if envmap in (None, "", "procedural", "default") else envmap
     tex = None
     if roughness_texture is not None:
-        from ..evaluation.imageio import read_image
-
         t = read_image(roughness_texture)
         tex = (t[..., 0].astype(np.float64) if t.dtype != np.uint8
                else t[..., 0].astype(np.float64) * (2.0 / 255.0))
@@ -109,8 +73,6 @@ def render_cmd(spec: str, output: Path, scene: str = "sphere-env", envmap: str |
                     f"{res.info['evaluator']} ({res.info['path']}), set-up "
                     f"{r.setup_seconds:.2f} s, render {res.seconds:.2f} s"))
     if report_error:
-        from ..evaluation.render.translate import resampling_error
-
         e = resampling_error(brdf, r.evaluator)
         print(f"resampling error vs brdf.eval: cosine-weighted relative {e['rel_cos']:.3g}, "
                    f"RMS {e['rel_rms']:.3g}, albedo {e['albedo_rel']:.3g}")

@@ -23,6 +23,7 @@ import types
 from importlib import import_module
 from typing import TYPE_CHECKING
 
+from ..loading import load
 from .registry import check_options, known_names
 from .registry import fit as _fit
 
@@ -103,8 +104,6 @@ def fit(brdf: BRDF | str, model: str = "ggx-diffuse", **options) -> BRDF:
         raise ValueError(f"unknown model {model!r}; expected one of {', '.join(known_names())}")
     options = check_options(model, options)
     if isinstance(brdf, str):
-        from ..loading import load
-
         brdf = load(brdf)
     return _fit(model, brdf, options)
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import inspect
+import itertools
 import json
 import time
 from collections.abc import Mapping
@@ -130,43 +131,40 @@ PAPERS = {
 }
 
 
-def _model(name, function, options, description, paper, isotropic_only=False) -> ModelInfo:
-    module = function.split(":")[0]
-    return ModelInfo(name, module, function, f"{module}:summary", description, paper,
-                     isotropic_only, f"options:{options}")
+def _family(module: str, options: str, paper: str, isotropic_only: bool,
+            members: dict[str, tuple[str, str]]) -> list[ModelInfo]:
+    """The models of the fitting module ``module`` that share an options dataclass of
+    :mod:`brdffit.fit.options`, a paper and their isotropy; ``members`` maps each name to
+    its fitting function and its description (the summary function: the module's
+    ``summary``)."""
+    return [ModelInfo(name, module, f"{module}:{function}", f"{module}:summary", description,
+                      paper, isotropic_only, f"options:{options}")
+            for name, (function, description) in members.items()]
 
 
-#: Every built-in model, in the order the CLI lists them (summary function: the module's
-#: ``summary``; options: a dataclass of :mod:`brdffit.fit.options`).
-MODELS: dict[str, ModelInfo] = {m.name: m for m in (
-    _model("tabulated", "tabulated:fit_tabulated", "TabulatedOptions",
-           "tabulated NDF + Fresnel by power iteration", "Dupuy 2015"),
-    _model("ggx", "tabulated:fit_ggx", "TabulatedOptions",
-           "GGX from the tabulated fit's slope moments", "Dupuy 2015"),
-    _model("beckmann", "tabulated:fit_beckmann", "TabulatedOptions",
-           "Beckmann from the tabulated fit's slope moments", "Dupuy 2015"),
-    _model("ggx-diffuse", "analytic:fit_ggx_diffuse", "DiffuseOptions",
-           "GGX + Lambert (+ coat), Schlick/dielectric/conductor", "Dupuy 2015, Bagher 2016"),
-    _model("beckmann-diffuse", "analytic:fit_beckmann_diffuse", "DiffuseOptions",
-           "Beckmann + Lambert (+ coat), Schlick/diel./conductor", "Dupuy 2015, Bagher 2016"),
-    _model("sgd", "sgd:fit_sgd", "TwoSliceOptions", "Shifted Gamma Distribution per channel",
-           "Bagher 2012", True),
-    _model("beckmann-2s", "sgd:fit_beckmann_two_slice", "TwoSliceOptions",
-           "Beckmann per channel, two-slice fit", "Bagher 2012", True),
-    _model("ggx-2s", "sgd:fit_ggx_two_slice", "TwoSliceOptions",
-           "GGX per channel, two-slice fit", "Bagher 2012", True),
-    _model("beckmann-ct", "sgd:fit_beckmann_ct", "CookTorranceOptions",
-           "Cook-Torrance Beckmann per channel, least squares", "Cook 1982, Bagher 2012", True),
-    _model("ggx-ct", "sgd:fit_ggx_ct", "CookTorranceOptions",
-           "Cook-Torrance GGX per channel, least squares", "Cook 1982, Bagher 2012", True),
-    _model("npf", "npf:fit_npf_independent_g", "NPFOptions",
-           "non-parametric factors D, F, G (independent G)", "Bagher 2016", True),
-    _model("npf-g-from-d", "npf:fit_npf_g_from_d", "NPFOptions",
-           "non-parametric factors, G derived from D", "Bagher 2016", True),
-    _model("npf-naive", "npf:fit_npf_naive", "NPFOptions",
-           "non-parametric factors D, F, H (no shadowing)", "Bagher 2016", True),
-    _model("npf-bivariate", "npf:fit_npf_bivariate", "NPFOptions",
-           "non-parametric bivariate D(θh, θd) and F", "Bagher 2016", True),
+#: Every built-in model, in the order the CLI lists them.
+MODELS: dict[str, ModelInfo] = {m.name: m for m in itertools.chain(
+    _family("tabulated", "TabulatedOptions", "Dupuy 2015", False, {
+        "tabulated": ("fit_tabulated", "tabulated NDF + Fresnel by power iteration"),
+        "ggx": ("fit_ggx", "GGX from the tabulated fit's slope moments"),
+        "beckmann": ("fit_beckmann", "Beckmann from the tabulated fit's slope moments")}),
+    _family("analytic", "DiffuseOptions", "Dupuy 2015, Bagher 2016", False, {
+        "ggx-diffuse": ("fit_ggx_diffuse",
+                        "GGX + Lambert (+ coat), Schlick/dielectric/conductor"),
+        "beckmann-diffuse": ("fit_beckmann_diffuse",
+                             "Beckmann + Lambert (+ coat), Schlick/diel./conductor")}),
+    _family("sgd", "TwoSliceOptions", "Bagher 2012", True, {
+        "sgd": ("fit_sgd", "Shifted Gamma Distribution per channel"),
+        "beckmann-2s": ("fit_beckmann_two_slice", "Beckmann per channel, two-slice fit"),
+        "ggx-2s": ("fit_ggx_two_slice", "GGX per channel, two-slice fit")}),
+    _family("sgd", "CookTorranceOptions", "Cook 1982, Bagher 2012", True, {
+        "beckmann-ct": ("fit_beckmann_ct", "Cook-Torrance Beckmann per channel, least squares"),
+        "ggx-ct": ("fit_ggx_ct", "Cook-Torrance GGX per channel, least squares")}),
+    _family("npf", "NPFOptions", "Bagher 2016", True, {
+        "npf": ("fit_npf_independent_g", "non-parametric factors D, F, G (independent G)"),
+        "npf-g-from-d": ("fit_npf_g_from_d", "non-parametric factors, G derived from D"),
+        "npf-naive": ("fit_npf_naive", "non-parametric factors D, F, H (no shadowing)"),
+        "npf-bivariate": ("fit_npf_bivariate", "non-parametric bivariate D(θh, θd) and F")}),
 )}
 
 

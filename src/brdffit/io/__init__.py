@@ -58,6 +58,14 @@ def _lazy(name: str):
     return getattr(import_module(_LAZY[name], __name__), name)
 
 
+def _checks():
+    """:mod:`brdffit.io._limits` (the checks of files and archives before they are read),
+    imported on first use: it imports NumPy."""
+    from . import _limits
+
+    return _limits
+
+
 def __getattr__(name):
     if name in _LAZY:
         return _lazy(name)
@@ -108,10 +116,8 @@ def _sniff(path: Path) -> str | None:
     if head.startswith(b"\x89HDF\r\n\x1a\n"):
         return "nbrdf"
     if head.startswith(b"PK"):
-        from ._limits import open_zip
-
         try:
-            with open_zip(path, "a .zip archive") as zf:
+            with _checks().open_zip(path, "a .zip archive") as zf:
                 names = zf.namelist()
         except BRDFFormatError:
             return None
@@ -141,10 +147,8 @@ def _find_checked(path: Path, shown) -> Path | None:
     try:
         return _find(path)
     except (OSError, ValueError) as exc:
-        from ._limits import describe_exception
-
         raise BRDFFormatError(shown, f"expected a BRDF file, found an unusable path "
-                                     f"({describe_exception(exc)})") from None
+                                     f"({_checks().describe_exception(exc)})") from None
 
 
 def resolve_spec(spec) -> tuple[str, Path | None, str | None]:
@@ -175,9 +179,7 @@ def resolve_spec(spec) -> tuple[str, Path | None, str | None]:
     if found is None:
         raise BRDFFormatError(text, "expected a BRDF file or spec (path, collection.zip:material "
                                     "or synthetic:NAME), found no such file")
-    from ._limits import regular_file_size
-
-    regular_file_size(found, "a BRDF file")  # directories, FIFOs, devices: never opened
+    _checks().regular_file_size(found, "a BRDF file")  # directories, FIFOs, devices: never opened
     kind = SUPPORTED_FORMATS.get(found.suffix.lower()) or _sniff(found)
     if kind is None:
         raise BRDFFormatError(found, f"expected one of the formats {sorted(SUPPORTED_FORMATS)} "

@@ -49,6 +49,7 @@ from scipy import interpolate, optimize, special
 from ..schema import ALPHA_MAX, ALPHA_MIN, P_EXPONENT_MAX, Number, Schema
 from .base import SlopeDistribution
 from .gamma import upper_gamma
+from .model import register_distribution
 
 __all__ = ["SGD", "SGDApproxG1", "g1_eq9", "sgd_log_p22", "sgd_mu_lambda"]
 
@@ -495,13 +496,6 @@ class SGDApproxG1(SGD):
         return hash(("SGDApproxG1",) + tuple(self.params().values()))
 
 
-def _register_components() -> None:
-    try:
-        from .model import register_distribution
-    except ImportError:      # pragma: no cover - model.py absent in a partial checkout
-        return
-    register_distribution("sgd", SGD)
-    register_distribution("sgd_eq9", SGDApproxG1)
-
-
-_register_components()
+# the fit-file kinds of these distributions (brdffit.microfacet.model)
+register_distribution("sgd", SGD)
+register_distribution("sgd_eq9", SGDApproxG1)
