@@ -26,7 +26,8 @@ One module per target (conventions of every target in ``docs/conventions.md``):
 * :mod:`.tables` – import of published SGD (CSV) and NPF (uber-texture) parameter tables.
 
 :func:`export` dispatches on ``to`` (one of :data:`TARGETS`); :func:`report_exports` writes the
-engine files a comparison report links (``compare(..., exports=report_exports)``).
+engine files a comparison report links (written by its callers between the fit and the report:
+:func:`brdffit.batch.compare_with_exports`).
 """
 
 from __future__ import annotations
