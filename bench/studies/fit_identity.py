@@ -35,7 +35,8 @@ def _without_time(obj):
     """``obj`` with every mapping entry whose key names a time measurement removed."""
     if isinstance(obj, dict):
         return {k: _without_time(v) for k, v in obj.items()
-                if k not in TIME_KEYS and not k.endswith("_time_s") and not k.endswith("_seconds")}
+                if k not in TIME_KEYS and not k.startswith("time_")
+                and not k.endswith(("_time_s", "_seconds"))}
     if isinstance(obj, list):
         return [_without_time(v) for v in obj]
     return obj
