@@ -125,11 +125,17 @@ BENCHMARKS = (
           ("analytic.json",), _analytic),
     Entry("export", "export fidelity and times per target (`--real`, `--render`)",
           "bench/bench_export.py [--real]", ("export.json",), _export),
-    Entry("engines", "glTF exports rendered by Blender's importer and Cycles in "
-          "`sphere-distant` vs our render of the fit: PSNR ± se, ratios, FLIP (≈ 10 min; "
-          "`make blender`)", "bench/bench_engines.py [--label NAME]",
+    Entry("engines", "glTF (and USD) exports rendered by Blender's importers and Cycles in "
+          "`sphere-distant` and the paper suite's spheres vs our render of the fit: PSNR ± se, "
+          "ratios, FLIP, our Cycles model's prediction (≈ 15 min; `make blender`)", "bench/bench_engines.py [--label NAME]",
           ("engines_blender.json",),
-          lambda r: "Blender " + _mean_min(r["after"]["summary"]["blender"])),
+          lambda r: "Blender, sphere-distant: "
+                    + _mean_min(r["current"]["summary"]["sphere-distant"]["blender"])
+                    + "; paper suite's spheres (per-material mean): "
+                    + f"{r['current']['summary']['paper_suite_spheres']['blender_psnr_mean']:.1f}"
+                    + " dB mean, "
+                    + f"{r['current']['summary']['paper_suite_spheres']['blender_psnr_min']:.1f}"
+                    + " dB lowest"),
     Entry("engines_params", "the glTF parameters of the rules and of `optimize=\"engines\"` "
           "through the specification's BRDF and our models of Blender and three.js "
           "(no engine, noise-free)", "bench/bench_engines_params.py", ("engines_params.json",),
