@@ -64,8 +64,8 @@ def _random(init_key: str, n: int, **extra) -> list[tuple[str, dict]]:
 
 #: model -> [(configuration, options)]; the first is the product's default
 CONFIGS = {
-    "sgd": [("default", {}), ("starts-20", {"starts": 20}), ("starts-100", {"starts": 100}),
-            ("grid-36x16", {"starts": 20, "grid": (36, 16)}),
+    "sgd": [("default", {}), ("starts-20", {"starts": 20}),
+            ("starts-100", {"starts": 100}), ("grid-36x16", {"starts": 20, "grid": (36, 16)}),
             ("refine-1", {"refine": 1}), ("refine-8", {"starts": 20, "refine": 8})],
     "npf-g-from-d": [("default", {}), ("ones", {"init": "ones"}),
                      *_random("init", N_RANDOM_SEEDS),
@@ -90,8 +90,9 @@ def _measure(model_fit, objective_data, values, valid) -> dict:
             "cos_rel": float(rel)}
 
 
-def run_material(name: str, models, done: set) -> list[dict]:
-    """Every configuration of ``models`` not in ``done`` on material ``name``."""
+def run_material(name: str, models, done: set, only=()) -> list[dict]:
+    """Every configuration of ``models`` (those named in ``only``, when given) not in
+    ``done`` on material ``name``."""
     loaded = load(f"{NBRDF}:{name}")
     values, valid = tabulate_merl_grid(loaded)
     table = MERLBRDF(values, valid, name=name)
@@ -99,7 +100,7 @@ def run_material(name: str, models, done: set) -> list[dict]:
     rows = []
     for model in models:
         for config, options in CONFIGS[model]:
-            if (name, model, config) in done:
+            if (name, model, config) in done or (only and config not in only):
                 continue
             # the default from the loaded file (what users run), the others from its table
             source = loaded if config == "default" else table
@@ -180,6 +181,8 @@ def main(argv=None) -> int:
                     help=f"comma-separated subset of {', '.join(CONFIGS)}")
     ap.add_argument("--materials", default=",".join(ISSUE_MATERIALS),
                     help="comma-separated MERL names, or 'all'")
+    ap.add_argument("--configs", default="",
+                    help="comma-separated subset of the configurations (default: all)")
     ap.add_argument("--out", default=str(RESULTS))
     args = ap.parse_args(argv)
     models = [m for m in args.models.split(",") if m]
@@ -194,7 +197,7 @@ def main(argv=None) -> int:
     done = {(r["material"], r["model"], r["config"]) for r in rows}
     load0 = os.getloadavg()
     for name in names:
-        rows += run_material(name, models, done)
+        rows += run_material(name, models, done, [c for c in args.configs.split(",") if c])
         summary = {"benchmark": "best_known", "command": " ".join(sys.argv),
                    "date": time.strftime("%Y-%m-%dT%H:%M:%S"), "load_average_start": load0,
                    "load_average_now": os.getloadavg(), "configs": {

@@ -366,8 +366,12 @@ def test_grid_g1_tables_equal_direct_evaluation():
 
 
 def test_sgd_fit_info_convergence_report():
-    model = fit_sgd(_truth(MATERIALS["glossy-paint"]))
+    truth = _truth(MATERIALS["glossy-paint"])
+    model = fit_sgd(truth)
     info = model.fit_info
+    # refine=1 refines the selected candidate of each channel: three more local runs
+    refined = fit_sgd(truth, refine=1).fit_info
+    assert refined["n_local_runs"] == info["n_local_runs"] + 3 and refined["converged"]
     for key in ("converged", "success", "status", "message", "criterion", "iterations", "nit",
                 "max_iterations", "cap_reached", "final_relative_change"):
         assert key in info, key
