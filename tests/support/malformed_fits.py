@@ -392,20 +392,16 @@ def _container_cases() -> list[Case]:
         write_zip(p, m)
     C.append(_raw_case("too-many-members", many, ("members",), "300 extra tiny members"))
 
-    def encrypted(p):
-        header, arrays = _state("ggx")
-        m = _members_of(header, arrays)
-        m[0]["flags"] = 1
-        write_zip(p, m)
-    C.append(_raw_case("encrypted-member", encrypted, ("encrypted",),
+    def header_member_with(**fields):
+        def make(p):
+            header, arrays = _state("ggx")
+            m = _members_of(header, arrays)
+            m[0].update(fields)
+            write_zip(p, m)
+        return make
+    C.append(_raw_case("encrypted-member", header_member_with(flags=1), ("encrypted",),
                        "the header member flagged as encrypted"))
-
-    def bzip(p):
-        header, arrays = _state("ggx")
-        m = _members_of(header, arrays)
-        m[0]["method"] = 12
-        write_zip(p, m)
-    C.append(_raw_case("bzip2-member", bzip, ("compression",),
+    C.append(_raw_case("bzip2-member", header_member_with(method=12), ("compression",),
                        "a member claiming bzip2 compression"))
 
     def bomb(p):
@@ -508,31 +504,20 @@ def _container_cases() -> list[Case]:
     C.append(_raw_case("pickled-header", pickled_header, ("__header__", "object"),
                        "the header itself is a pickled object array"))
 
-    def bad_magic(p):
-        header, arrays = _state("tab-fresnel")
-        raw = bytearray(_npy_bytes(arrays["fresnel.values"]))
-        raw[:6] = b"NOTNPY"
-        arrays["fresnel.values"] = bytes(raw)
-        write_npz(p, header, arrays)
-    C.append(_raw_case("bad-npy-magic", bad_magic, ("fresnel.values",),
+    def fresnel_npy_patched(start: int, data: bytes):
+        def make(p):
+            header, arrays = _state("tab-fresnel")
+            raw = bytearray(_npy_bytes(arrays["fresnel.values"]))
+            raw[start:start + len(data)] = data
+            arrays["fresnel.values"] = bytes(raw)
+            write_npz(p, header, arrays)
+        return make
+    C.append(_raw_case("bad-npy-magic", fresnel_npy_patched(0, b"NOTNPY"), ("fresnel.values",),
                        "a member without the .npy magic"))
-
-    def npy_v3(p):
-        header, arrays = _state("tab-fresnel")
-        raw = bytearray(_npy_bytes(arrays["fresnel.values"]))
-        raw[6] = 9
-        arrays["fresnel.values"] = bytes(raw)
-        write_npz(p, header, arrays)
-    C.append(_raw_case("npy-version-9", npy_v3, ("fresnel.values",),
+    C.append(_raw_case("npy-version-9", fresnel_npy_patched(6, b"\x09"), ("fresnel.values",),
                        "a .npy header of an unknown format version"))
-
-    def npy_garbage_header(p):
-        header, arrays = _state("tab-fresnel")
-        raw = bytearray(_npy_bytes(arrays["fresnel.values"]))
-        raw[10:20] = b"__import__"
-        arrays["fresnel.values"] = bytes(raw)
-        write_npz(p, header, arrays)
-    C.append(_raw_case("npy-header-code", npy_garbage_header, ("fresnel.values",),
+    C.append(_raw_case("npy-header-code", fresnel_npy_patched(10, b"__import__"),
+                       ("fresnel.values",),
                        "a .npy header dictionary replaced by Python code"))
 
     def header_float(p):
