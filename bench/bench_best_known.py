@@ -64,9 +64,9 @@ def _random(init_key: str, n: int, **extra) -> list[tuple[str, dict]]:
 
 #: model -> [(configuration, options)]; the first is the product's default
 CONFIGS = {
-    "sgd": [("default", {}), ("starts-20", {"starts": 20}),
+    "sgd": [("default", {}), ("refine-0", {"refine": 0}), ("starts-20", {"starts": 20}),
             ("starts-100", {"starts": 100}), ("grid-36x16", {"starts": 20, "grid": (36, 16)}),
-            ("refine-1", {"refine": 1}), ("refine-8", {"starts": 20, "refine": 8})],
+            ("refine-8", {"starts": 20, "refine": 8})],
     "npf-g-from-d": [("default", {}), ("ones", {"init": "ones"}),
                      *_random("init", N_RANDOM_SEEDS),
                      ("long", {"max_iter": 1200, "polish": 240})],

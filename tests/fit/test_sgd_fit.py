@@ -367,10 +367,10 @@ def test_grid_g1_tables_equal_direct_evaluation():
 
 def test_sgd_fit_info_convergence_report():
     truth = _truth(MATERIALS["glossy-paint"])
-    model = fit_sgd(truth)
+    model = fit_sgd(truth, refine=0)
     info = model.fit_info
-    # refine=1 refines the selected candidate of each channel: three more local runs
-    refined = fit_sgd(truth, refine=1).fit_info
+    # the default refine=1 refines the selected candidate of each channel: three more runs
+    refined = fit_sgd(truth).fit_info
     assert refined["n_local_runs"] == info["n_local_runs"] + 3 and refined["converged"]
     for key in ("converged", "success", "status", "message", "criterion", "iterations", "nit",
                 "max_iterations", "cap_reached", "final_relative_change"):
@@ -421,3 +421,32 @@ def test_pruned_candidate_selection_equals_full_evaluation(name, monkeypatch):
         [c["candidate"] for c in full.fit_info["selection"]]
     assert pruned.channel_params() == full.channel_params()
     assert all(c["n_evaluated"] <= c["n_candidates"] for c in pruned.fit_info["selection"])
+
+
+@pytest.mark.parametrize("A, B, E", [(0.3, 0.1, 0.05), (0.0, 0.2, 0.4), (0.02, 0.0, 0.5),
+                                     (0.0, 0.0, 0.7), (1e-14, 0.0, 0.7), (0.0, 0.0, 0.0)])
+def test_eq11_coefficients_convert_to_the_same_term(A, B, E):
+    """(ρs, F0, F1) of the linear solution (A, B, E) give back ρs F = A(1 − c) + B(1 − c)⁵
+    + E c at every θd, including A = B = 0 (ρs → 0; it used to become a constant F = E, ×17
+    too bright at grazing angles on a mirror-like MERL channel)."""
+    from brdffit.fit import sgd as S
+    from brdffit.microfacet.fresnel import GeneralizedSchlickFresnel
+
+    rho_s, F0, F1 = S._coefs_to_fresnel(A, B, E)
+    c = np.cos(np.linspace(0.0, np.pi / 2, 91))
+    want = A * (1 - c) + B * (1 - c) ** 5 + E * c
+    got = rho_s * GeneralizedSchlickFresnel(F0, F1).eval(c)[..., 0]
+    np.testing.assert_allclose(got, want, rtol=1e-8, atol=1e-8 * max(E, 1e-300))
+    assert 0 <= F0 <= 1 and rho_s >= 0
+
+
+def test_pruning_keeps_the_k_best_candidates_for_refinement(monkeypatch):
+    from brdffit.fit import sgd as S
+
+    brdf = _truth(MATERIALS["glossy-paint"])
+    pruned = fit_sgd(brdf, refine=2)
+    monkeypatch.setattr(S, "_PRUNE", False)
+    full = fit_sgd(brdf, refine=2)
+    assert pruned.channel_params() == full.channel_params()
+    assert [c["source"] for c in pruned.fit_info["selection"]] == \
+        [c["source"] for c in full.fit_info["selection"]]

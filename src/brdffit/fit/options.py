@@ -138,7 +138,7 @@ class TwoSliceOptions:
     bounded: bool = True
     selection_strides: tuple[int, int] = (4, 15)
     scan_grid: bool = True
-    refine: int = 0
+    refine: int = 1
     name: str | None = None
 
 

@@ -63,13 +63,14 @@ weights also give the peak (θh < 5°) little weight. Hence, per channel:
    89°) as in :mod:`brdffit.losses.objective` (the §6.3 L2 weights alone let the few
    largest grazing values decide). Grid: all 90 θh, every 4th θd below 76° and every θd
    from 76° (grazing rows vary fast), every 15th φd (≈ 20 000 samples with θi, θo ≤ 89°).
-   ``refine=k`` then refines the k best candidates by bounded TRF on this error (off by
-   default: over the 100 MERL stand-ins ``k = 1`` lowers Eq. 7 by 2.6 % (median) on 75 but
-   raises it 6-7× on chrome and steel, whose sharp peaks the selection grid undersamples;
-   docs/design/sgd-fit.md).
+   ``refine=k`` (default 1) then refines the k best candidates by bounded TRF on this
+   error over (ln α[, p]), the linear part eliminated (variable projection, unbounded
+   NNLS from the normal equations, G1 from :data:`_G1_SCAN_NODES`); the refined
+   candidates are scored as the others and the lowest cost wins
+   (docs/design/sgd-fit.md).
 
 Remaining differences from the paper: (α, p) may come from the grid scan rather than the
-step-1 optimum (then it is a grid node unless ``refine`` > 0), and ρd, ρs, F0, F1 come from
+step-1 optimum or its refinement, and ρd, ρs, F0, F1 come from
 the full data; the slices still drive step 1.
 
 Computation: the grid scan solves every node's non-negative linear least squares from its
@@ -79,8 +80,9 @@ absolute; the scan only ranks nodes, the candidates are then evaluated with the 
 D is evaluated on the 90 θh nodes and the G1 interpolation cells are precomputed; the G1
 tables of the fixed grid nodes are memoised for the process (:func:`clear_caches`); the
 bounded candidate evaluations (albedo rows, QP) are pruned exactly — a candidate whose
-unbounded cost (a lower bound of its bounded cost) exceeds the best bounded cost found
-cannot win; shapes and G1 tables are shared by the channels.
+unbounded cost (a lower bound of its bounded cost) exceeds the k-th best bounded cost found
+(k = max(``refine``, 1)) cannot be among the k best; shapes and G1 tables are shared by the
+channels.
 
 Convergence report (``fit_info``, fields as the tabulated fit's): the iterative parts are
 the step-1 local least-squares runs; ``converged`` says every run stopped on its tolerance
@@ -571,13 +573,23 @@ def _fresnel_columns(cos_d: np.ndarray) -> np.ndarray:
     return np.stack([1.0 - cos_d, (1.0 - cos_d) ** 5, cos_d], -1)
 
 
+#: ρs / E below which ``ρs F = E cos θd`` (A = B = 0) is held as ρs = this × E, F0 = 1
+_RHO_S_FLOOR = 1e-9
+
+
 def _coefs_to_fresnel(A: float, B: float, E: float) -> tuple[float, float, float]:
-    """``(ρs, F0, F1)`` from ``(A, B, E)`` with ``F(π/2) = 1`` (§5.2)."""
+    """``(ρs, F0, F1)`` from ``(A, B, E)`` with ``F(π/2) = 1`` (§5.2):
+    ``ρs = A + B``, ``F0 = A / ρs``, ``F1 = (A − E) / ρs``.
+
+    ``A = B = 0`` (``ρs F = E cos θd``, no grazing increase) is the limit ``ρs → 0``; it is
+    held as ``ρs = ε E``, ``F0 = 1``, ``F1 = 1 − 1/ε`` (ε = :data:`_RHO_S_FLOOR`), i.e.
+    ``ρs F = E cos θd + ε E (1 − cos θd)``: the fitted term to within ``ε E``."""
     rho_s = A + B
-    if rho_s > 0 and rho_s > 1e-12 * max(E, 1e-300):
+    if rho_s > _RHO_S_FLOOR * max(E, 0.0) and rho_s > 0:
         return float(rho_s), float(A / rho_s), float((A - E) / rho_s)
-    if E > 0:                        # no grazing increase at all: constant F (F0 = 1, F1 = 0)
-        return float(E), 1.0, 0.0
+    if E > 0:
+        rho_s = _RHO_S_FLOOR * E
+        return float(rho_s), 1.0, float(1.0 - E / rho_s)
     return 0.0, 1.0, 0.0
 
 
@@ -720,14 +732,17 @@ def _interp_cells(g: np.ndarray, cell: np.ndarray, frac: np.ndarray) -> np.ndarr
 
 
 def _spec_shape(kind: str, alpha: float, p: float | None, data: dict,
-                scan: bool = False) -> np.ndarray:
+                scan: bool = False, grid_node: bool = True) -> np.ndarray:
     """``D G1 G1 / (π cos θi cos θo)`` on the selection grid (G1 interpolated, Eq. 6).
 
-    ``scan=True``: G1 from the coarser :data:`_G1_SCAN_NODES` (the grid scan only ranks
-    nodes; the candidates are then evaluated with the full table)."""
+    ``scan=True``: G1 from the coarser :data:`_G1_SCAN_NODES` (the grid scan and the
+    refinement's steps only rank or move (α, p); the candidates are then evaluated with the
+    full table), memoised for the process when ``grid_node`` (a node of the fixed grid)."""
     ln = _sgd_log_norm(alpha, p) if kind == "sgd" else None
-    if scan:
+    if scan and grid_node:
         g = _grid_g1(kind, alpha, p)[1]
+    elif scan:
+        g = _g1_nodes(kind, alpha, p, _G1_SCAN_NODES)
     else:
         g = _g1_nodes(kind, alpha, p, _G1_NODES, data.get("g1_cache"))
     tag = "scan_" if scan else ""
@@ -764,12 +779,13 @@ def _gram_data(data: dict) -> dict:
     return g
 
 
-def _scan_linear(data: dict, shapes: np.ndarray) -> np.ndarray:
+def _scan_linear(data: dict, shapes: np.ndarray, solutions: bool = False):
     """Costs ``(N, C)`` of the unbounded non-negative least squares of :func:`_linear_full`
     (same minimiser) for ``N`` shapes at once — the weighted squared error :func:`_score` of
     its solution — from the normal equations of :func:`_gram_data` (two matrix products over
     the samples for all shapes and channels). Each 4 × 4 problem is solved by NNLS on the
-    square root of its column-scaled Gram matrix.
+    square root of its column-scaled Gram matrix. ``solutions=True``: also the minimisers
+    ``(N, C, 4)`` (ρd, A, B, E).
     """
     g = _gram_data(data)
     C = g["C"]
@@ -800,15 +816,16 @@ def _scan_linear(data: dict, shapes: np.ndarray) -> np.ndarray:
     R = sq[..., :, None] * np.swapaxes(V, -1, -2)          # RᵀR = Gs (on its range)
     z = np.where(big, np.einsum("...ji,...j->...i", V, b / scale) / np.where(big, sq, 1.0), 0.0)
     cost = np.full((N, C), np.inf)
+    X = np.zeros((N, C, 4))
     for i in range(N):
         for c in range(C):
             if not finite[i, c]:
                 continue
             x, _ = optimize.nnls(R[i, c], z[i, c], maxiter=200)
-            x = x / scale[i, c]
+            X[i, c] = x = x / scale[i, c]
             v = yy[c] - 2.0 * float(b[i, c] @ x) + float(x @ G[i, c] @ x)
             cost[i, c] = max(v, 0.0) if np.isfinite(v) else np.inf
-    return cost
+    return (cost, X) if solutions else cost
 
 
 def _score(data: dict, c: int, shape: np.ndarray, rho_d: float, abe) -> float:
@@ -871,9 +888,10 @@ def _refine_full(kind: str, data: dict, c: int, cand: dict, max_nfev: int = 40) 
     m, sw = data["m"][:, c], data["sw"][:, c]
 
     def resid(q):
-        shape = _spec_shape(kind, float(np.exp(q[0])), float(q[1]) if sgd else None, data)
-        rho_d, abe = _linear_full(data, c, shape)
-        r = (rho_d / np.pi + shape * (data["fres"] @ abe) - m) * sw
+        shape = _spec_shape(kind, float(np.exp(q[0])), float(q[1]) if sgd else None, data,
+                            scan=True, grid_node=False)
+        x = _scan_linear(data, shape, solutions=True)[1][0, c]
+        r = (x[0] / np.pi + shape * (data["fres"] @ x[1:]) - m) * sw
         return np.where(np.isfinite(r), r, 1e6)
 
     try:
@@ -893,7 +911,7 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
                   starts: int = 3, grid: tuple[int, int] = (18, 8), g1_approximation: bool = True,
                   selection: str = "full", linear: str = "full", bounded: bool = True,
                   selection_strides: tuple[int, int] = SELECTION_STRIDES,
-                  scan_grid: bool = True, refine: int = 0,
+                  scan_grid: bool = True, refine: int = 1,
                   name: str | None = None) -> PerChannelMicrofacetBRDF:
     """Two-slice fit of Bagher 2012 §5 with an SGD, Beckmann or GGX distribution, per channel.
 
@@ -1041,8 +1059,7 @@ def _select(scorer: _Scorer, all_cands, refine: int):
     unbounded least-squares cost of a candidate is a lower bound of its bounded cost, so a
     candidate whose lower bound exceeds the best bounded cost found so far cannot win."""
     data, dist = scorer.data, scorer.distribution
-    prune = bool(_PRUNE and scorer.bounded and scorer.linear == "full" and data is not None
-                 and not refine)
+    prune = bool(_PRUNE and scorer.bounded and scorer.linear == "full" and data is not None)
     lower, slack = {}, None
     if prune:
         keys = list(dict.fromkeys((cd["alpha"], cd["p"]) for cs in all_cands for cd in cs))
@@ -1053,7 +1070,8 @@ def _select(scorer: _Scorer, all_cands, refine: int):
     channels, chosen, refined = [], [], []
     for c in range(3):
         cands = all_cands[c]
-        scored = (_pruned_scores(scorer, c, cands, lower, slack[c]) if prune else
+        keep = max(refine, 1)
+        scored = (_pruned_scores(scorer, c, cands, lower, slack[c], keep) if prune else
                   sorted(((*scorer.evaluate(c, cd), k, cd) for k, cd in enumerate(cands)),
                          key=_by_score))
         n_evaluated = len(scored)
@@ -1074,18 +1092,20 @@ def _select(scorer: _Scorer, all_cands, refine: int):
     return channels, chosen, refined
 
 
-def _pruned_scores(scorer: _Scorer, c, cands, lower, slack):
+def _pruned_scores(scorer: _Scorer, c, cands, lower, slack, keep: int = 1):
     """The candidates of channel ``c`` evaluated in the order of their lower bounds, until a
-    lower bound exceeds the best cost found (:func:`_select`); sorted by cost."""
+    lower bound exceeds the ``keep``-th best cost found (:func:`_select`: the ``keep`` best
+    are then exact); sorted by cost."""
     order = sorted(range(len(cands)), key=lambda k: (
         lower[(cands[k]["alpha"], cands[k]["p"])][c], k))
-    scored, best = [], np.inf
+    scored, costs = [], []
     for k in order:
-        if lower[(cands[k]["alpha"], cands[k]["p"])][c] > best * (1 + 1e-6) + slack:
+        bar = costs[keep - 1] if len(costs) >= keep else np.inf
+        if lower[(cands[k]["alpha"], cands[k]["p"])][c] > bar * (1 + 1e-6) + slack:
             break
         t = (*scorer.evaluate(c, cands[k]), k, cands[k])
         scored.append(t)
-        best = min(best, float(np.nan_to_num(t[0], nan=np.inf)))
+        costs = sorted(costs + [float(np.nan_to_num(t[0], nan=np.inf))])
     scored.sort(key=_by_score)
     return scored
 

@@ -119,9 +119,15 @@ class PerChannelMicrofacetBRDF(IsotropicBRDF, SerializableModel):
         return props
 
     def _lobe_probabilities(self) -> np.ndarray:
-        """[p_diffuse, p_spec_r, p_spec_g, p_spec_b] ∝ [Σρd, ρs_r, ρs_g, ρs_b] (§4.5)."""
-        w = np.array([sum(ch["rho_d"] for ch in self.channels)]
-                     + [ch["rho_s"] for ch in self.channels], dtype=np.float64)
+        """[p_diffuse, p_spec_r, p_spec_g, p_spec_b] ∝ [Σρd, s_r, s_g, s_b] with
+        ``s_c = ρs_c · max(1, F_c(θd = 0))``, the largest ``ρs F`` of Eq. 11 over θd.
+
+        Deviation from §4.5 (``s_c = ρs_c``): that is the largest ``ρs F`` only when F ≤ 1.
+        Fits with ``F1 < 0`` have ``F(0) = F0 − F1 > 1`` (``ρs → 0`` with ``ρs F`` fixed: e.g.
+        ρs = 2e-4, F(0) = 423 on a mirror-like MERL channel), and weights ∝ ρs would leave
+        their lobe almost never sampled. Any positive weights keep the mixture unbiased."""
+        peak = [ch["rho_s"] * max(1.0, ch["F0"] - ch["F1"]) for ch in self.channels]
+        w = np.array([sum(ch["rho_d"] for ch in self.channels)] + peak, dtype=np.float64)
         tot = w.sum()
         return w / tot if tot > 0 else np.array([1.0, 0.0, 0.0, 0.0])
 
