@@ -26,6 +26,7 @@ This module is also the objective "as a function of two BRDFs" for the metrics c
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import asdict, dataclass
 
@@ -73,14 +74,23 @@ def merl_grid_geometry() -> dict[str, np.ndarray]:
     cosines from Eq. 1-2 (in the convention of :func:`brdffit.geometry.half_diff_to_io`,
     which swaps the roles of i and o with respect to the paper's Eq. 1-2; the model and the
     weights are symmetric in i and o so this does not matter), and ``w_volume``: Eq. 9 at the
-    cell centres times the cell volume (see the module docstring).
+    cell centres times the cell volume (see the module docstring). The arrays are computed
+    once per process and read-only.
     """
+    return dict(_merl_grid_geometry())
+
+
+@functools.lru_cache(maxsize=1)
+def _merl_grid_geometry() -> dict[str, np.ndarray]:
     th, td, pd = np.meshgrid(merl_theta_h(), merl_theta_d(), merl_phi_d(), indexing="ij")
     ch, sh, cd, sd, cp = np.cos(th), np.sin(th), np.cos(td), np.sin(td), np.cos(pd)
     cos_i = ch * cd - sh * sd * cp
     cos_o = ch * cd + sh * sd * cp
-    return {"theta_h": th, "theta_d": td, "phi_d": pd, "cos_i": cos_i, "cos_o": cos_o,
-            "w_volume": volume_form_weight()}
+    geo = {"theta_h": th, "theta_d": td, "phi_d": pd, "cos_i": cos_i, "cos_o": cos_o,
+           "w_volume": volume_form_weight()}
+    for a in geo.values():
+        a.setflags(write=False)
+    return geo
 
 
 def volume_form_weight() -> np.ndarray:
