@@ -1,42 +1,54 @@
-"""three.js round trip (issue 34): glTF exports of ggx-diffuse fits rendered by three.js
-(``MeshPhysicalMaterial``, WebGL 2 on SwiftShader, headless Chromium) in ``sphere-distant``,
-against our Mitsuba render of the fit; and their MaterialX exports rendered by MaterialX's own
-ESSL shaders in the same browser.
+"""three.js and MaterialX round trip (issue 34): glTF exports of ggx-diffuse fits rendered by
+three.js (``MeshPhysicalMaterial``, WebGL 2 on SwiftShader, headless Chromium) and their
+MaterialX exports rendered by MaterialX's own ESSL shaders in the same browser, in
+``sphere-distant`` and the paper suite's spheres (``sphere-courtyard``, ``sphere-studio``,
+``sphere-sunrise``: the map alone, three's PMREM image-based lighting and MaterialX's FIS
+environment lighting), against our Mitsuba render of the fit in the same scene.
 
 Run: ``.venv/bin/python bench/bench_engines_threejs.py`` (the issue's four MERL stand-ins and
-the 7 RGL files); ``--merl all`` for the 100 Neural-BRDF MERL materials (``--every 5``: 20 of
-them, written with ``--out bench/results/engines_threejs_merl.json``), ``--merl a,b`` for a
-subset, ``--no-rgl``; ``--res``, ``--ss`` (samples per pixel side in three.js), ``--spp`` and
-``--batches`` (Mitsuba). Needs ``make npmdeps`` (three), Chromium and ``../shared/data``.
-Writes ``bench/results/engines_threejs.json`` (atomically, after every material) and
-``engines_threejs.csv``.
+the 7 RGL files, the default scenes); ``--scenes a,b`` (sphere-distant, sphere-point: three.js
+only, sphere-env, sphere-<map>); ``--merl all`` for the 100 Neural-BRDF MERL materials
+(``--every 5``: 20 of them, written with ``--out bench/results/engines_threejs_merl.json``),
+``--merl a,b`` for a subset, ``--no-rgl``; ``--res``, ``--ss`` (samples per pixel side in
+three.js), ``--mx-ss`` (in MaterialX: its FIS loop is what SwiftShader spends the time on),
+``--env-samples`` (MaterialX's FIS samples per lobe), ``--spp`` and ``--batches`` (Mitsuba).
+Needs ``make npmdeps`` (three), Chromium and ``../shared/data``. Writes
+``bench/results/engines_threejs.json`` (atomically, after every material) and
+``engines_threejs.csv`` (one row per material and scene).
 
-Per material (``fit`` = ``brdffit.fit(material, model="ggx-diffuse")``, the file =
-``write_gltf(fit)``, as ``brdffit fit`` + ``brdffit export --to gltf`` make them):
+Per material (``fit`` = ``brdffit.fit(material, model="ggx-diffuse")``, the files =
+``write_gltf(fit)`` and ``write_materialx(fit)``, as ``brdffit fit`` + ``brdffit export``
+make them), ``scenes[scene]``:
 
 * ``three``: :func:`brdffit.evaluation.engines.threejs.compare_render` of the three.js image
   against K Mitsuba renders of the fit: ``psnr`` ± ``psnr_se``, ``mean_ratio`` and
   ``rim_ratio`` (RGB, r > 0.85 R), ``flip`` (HDR-FLIP over the foreground), coverage and
   peak pixel;
-* ``model_vs_three``: PSNR of :class:`ThreeJSBRDF` (our model of three's shader, noise-free
-  shader :func:`shade_sphere`) against the three.js image: how well the model explains it;
-* ``shader_vs_mitsuba_fit``: the noise-free shader of the fit (16 × 16 samples per pixel)
-  against Mitsuba's render of it (a check of the shader; limited by Mitsuba's noise on sharp
-  highlights), ``three_vs_converged_fit``: three.js against that converged image, and
-  ``three_grid_vs_converged``: the model on three's sample grid against it on the 16 × 16 one
-  (what the engine's pixel sampling alone costs);
-* ``estimate``: the cheap estimate of the engine's PSNR vs the fit (model vs the fit, both
-  through :func:`shade_sphere`, no browser, no Monte Carlo) and its error to the measured one;
-* ``gltf_spec_vs_fit``: the glTF specification's BRDF (:class:`GLTFBRDF`, what the exporter
-  optimises) vs the fit, same shader;
-* ``ablations``: the model vs the fit with one of three's departures from the specification
-  switched off (``no_multiscatter``, ``pow5_fresnel``, ``no_geometry_roughness``,
-  ``no_min_roughness``): which departure costs what;
-* ``materialx`` (``--materialx``, default on): the same figures for the MaterialX export
-  (``write_materialx``) rendered by MaterialX's own ESSL shaders in the browser
-  (:mod:`brdffit.evaluation.engines.materialx_web`), with ``model_vs_engine`` and
-  ``estimate`` from :class:`OpenPBRBRDF` (the exporter's model of MaterialX's GLSL);
-* timings (fit, export, three.js, MaterialX, Mitsuba) and the load average before and after.
+* ``materialx``: the same figures for the MaterialX export
+  (:mod:`brdffit.evaluation.engines.materialx_web`; ``--no-materialx`` skips it);
+* in ``sphere-distant``, the noise-free diagnostics: ``model_vs_three`` (:class:`ThreeJSBRDF`,
+  our model of three's shader, through :func:`shade_sphere`, against the three.js image),
+  ``shader_vs_mitsuba_fit``, ``three_vs_converged_fit``, ``three_grid_vs_converged``,
+  ``estimate`` (the cheap estimate of the engine's PSNR: model vs fit, no browser, no Monte
+  Carlo) and its error, ``gltf_spec_vs_fit``, ``ablations`` (three's departures from the
+  specification switched off one at a time); for MaterialX ``model_vs_engine``,
+  ``vs_converged_fit`` and ``estimate`` from :class:`OpenPBRBRDF`;
+* in the environment scenes ``estimate`` is ``None``: :func:`shade_sphere` shades a
+  directional light only, and an estimate of an environment scene would need the map's
+  integral, i.e. a renderer. In its place, ``three_model_mitsuba`` and
+  ``materialx.model_mitsuba``: the engine's model (:class:`ThreeJSBRDF` of the file,
+  :class:`OpenPBRBRDF` of the fit) rendered by Mitsuba in the scene against the fit (same
+  seeds, :func:`crn_psnr`): what the engine would score if it integrated the map exactly, so
+  that the gap to the measured PSNR is what its environment lighting costs;
+* timings (fit, export, three.js, MaterialX, Mitsuba).
+
+``summary``: per scene and engine the PSNR mean and lowest (and which material), the
+ratio ranges, FLIP; over the paper suite's three spheres per engine each material's mean,
+their mean and lowest, the lowest single PSNR and the issue's goals (three.js: mean ≥ 45 dB,
+none below 30 dB; MaterialX: mean ≥ 40 dB); ``sphere-distant``: the detailed summary of the
+diagnostics. Also the load average before and after, wall and CPU time (this process and
+its reaped children: a lower bound, as Chromium's own child processes may be reaped by init
+when Chromium is stopped).
 """
 
 from __future__ import annotations
@@ -65,44 +77,127 @@ if not DATA.is_dir():
 NBRDF = DATA / "nbrdf" / "merl_nbrdf.zip"
 RGL = DATA / "rgl"
 ISSUE_MERL = ["ss440", "gold-metallic-paint", "maroon-plastic", "white-paint"]
-FIELDS = ["material", "psnr", "psnr_se", "psnr_vs_converged", "mx_psnr", "mx_psnr_se",
+FIELDS = ["material", "scene", "psnr", "psnr_se", "psnr_vs_converged", "mx_psnr", "mx_psnr_se",
           "mx_mean_r", "mx_mean_g", "mx_mean_b", "mx_rim_r", "mx_flip", "mx_model_vs_engine",
-          "mean_r", "mean_g", "mean_b", "rim_r", "rim_g", "rim_b",
-          "flip", "model_vs_three", "estimate", "estimate_error", "gltf_spec_vs_fit",
-          "no_multiscatter", "pow5_fresnel", "no_geometry_roughness", "three_s"]
+          "mx_model_mitsuba", "mean_r", "mean_g", "mean_b", "rim_r", "rim_g", "rim_b",
+          "flip", "model_vs_three", "model_mitsuba", "estimate", "estimate_error",
+          "gltf_spec_vs_fit", "no_multiscatter", "pow5_fresnel", "no_geometry_roughness",
+          "three_s", "mx_s"]
+PAPER_SPHERES = ("sphere-courtyard", "sphere-studio", "sphere-sunrise")
+DEFAULT_SCENES = ("sphere-distant",) + PAPER_SPHERES
+#: the issue's goals over the paper suite's spheres: (mean ≥, none below) in dB
+GOALS = {"three": (45.0, 30.0), "materialx": (40.0, None)}
 
 
-def bench_material(name, spec, args) -> dict:
-    import brdffit
+def _export(fit, tmp: Path, args) -> dict:
+    """The fit's glTF and MaterialX files in ``tmp`` and their timings."""
+    from brdffit.export.gltf import write_gltf
+
+    out = {"gltf": tmp / "m.gltf", "timings": {}}
+    t = time.perf_counter()
+    write_gltf(fit, out["gltf"], fidelity=False, optimize=args.optimize)
+    out["timings"]["export_s"] = time.perf_counter() - t
+    if args.materialx:
+        from brdffit.export.materialx import write_materialx
+
+        out["mtlx"] = tmp / "m.mtlx"
+        write_materialx(fit, out["mtlx"], fidelity=False)
+    return out
+
+
+def _compare(T, image, alpha, refs, ra) -> dict:
+    c = T.compare_render(image, alpha, refs, ra)
+    crn = c.pop("crn")
+    return c | {"crn": {k: crn[k] for k in ("mse", "mse_se", "noise_mse", "resolved", "bound",
+                                            "psnr_plain", "batches")}}
+
+
+def _model_in_mitsuba(T, model, scene, refs, mask, args) -> dict:
+    """An engine's model (its shading of a light, as a BRDF) integrated by Mitsuba in an
+    environment scene, against the fit's render with the same seeds: what the engine would
+    score if it integrated the map exactly."""
+    from brdffit.evaluation.metrics import crn_psnr
+
+    stack, _ = T.reference_renders(model, scene, args.res, args.spp, args.batches)
+    c = crn_psnr(refs, stack, mask)
+    ref = refs.mean(0)
+    return {"psnr": c["psnr"], "psnr_se": c.get("psnr_se"),
+            "mean_ratio": (stack.mean(0)[mask].sum(0) / ref[mask].sum(0)).tolist()}
+
+
+def bench_scene(fit, files: dict, scene: str, args) -> dict:
+    """One scene: three.js (and MaterialX) against K Mitsuba renders of the fit; in
+    sphere-distant also the noise-free diagnostics of :func:`_distant_diagnostics`, in the
+    environment scenes the engines' models integrated by Mitsuba (the noise-free estimate
+    handles a directional light only: ``estimate`` is None there)."""
+    from brdffit.evaluation.engines import threejs as T
+    from brdffit.evaluation.engines import threejs_brdf as TB
+
+    out = {"scene": scene, "timings": {}}
+    t = time.perf_counter()
+    r = T.render_gltf(files["gltf"], scene, resolution=args.res, supersample=args.ss)
+    out["timings"]["three_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    refs, ra = T.reference_renders(fit, scene, args.res, args.spp, args.batches)
+    out["timings"]["mitsuba_s"] = time.perf_counter() - t
+    out["three"] = _compare(T, r.image, r.alpha, refs, ra)
+    out["three_info"] = r.info
+    mask = r.mask & (ra >= 0.999)
+    if scene == "sphere-distant":
+        out |= _distant_diagnostics(fit, files["gltf"], r, refs, mask, args)
+    else:
+        out["estimate"] = None
+        out["three_model_mitsuba"] = _model_in_mitsuba(T, TB.from_gltf(files["gltf"]), scene,
+                                                       refs, mask, args)
+    if args.materialx:
+        try:
+            out["materialx"] = _bench_materialx(fit, files["mtlx"], scene, refs, ra, args,
+                                                out["timings"])
+        except Exception as exc:  # noqa: BLE001 - keep three's figures of the scene
+            out["materialx_error"] = f"{type(exc).__name__}: {exc}"
+    return out
+
+
+def _bench_materialx(fit, mtlx: Path, scene: str, refs, ra, args, timings: dict) -> dict:
+    from brdffit.evaluation.engines import materialx_web as MX
     from brdffit.evaluation.engines import threejs as T
     from brdffit.evaluation.engines import threejs_brdf as TB
     from brdffit.evaluation.metrics import rendered_psnr
-    from brdffit.export.gltf import gltf_equivalent, write_gltf
+    from brdffit.export.materialx import openpbr_equivalent
 
-    out = {"material": name, "spec": spec, "timings": {}}
     t = time.perf_counter()
-    fit = brdffit.fit(brdffit.load(spec), model="ggx-diffuse")
-    out["timings"]["fit_s"] = time.perf_counter() - t
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "m.gltf"
-        t = time.perf_counter()
-        write_gltf(fit, path, fidelity=False, optimize=args.optimize)
-        out["timings"]["export_s"] = time.perf_counter() - t
-        doc = json.loads(path.read_text())
-        out["gltf_material"] = {k: v for k, v in doc["materials"][0].items() if k != "extras"}
-        t = time.perf_counter()
-        r = T.render_gltf(path, "sphere-distant", resolution=args.res, supersample=args.ss)
-        out["timings"]["three_s"] = time.perf_counter() - t
-        model = TB.from_gltf(path)
-    t = time.perf_counter()
-    refs, ra = T.reference_renders(fit, "sphere-distant", args.res, args.spp, args.batches)
-    out["timings"]["mitsuba_s"] = time.perf_counter() - t
-    c = T.compare_render(r.image, r.alpha, refs, ra)
-    crn = c.pop("crn")
-    out["three"] = c | {"crn": {k: crn[k] for k in ("mse", "mse_se", "noise_mse", "resolved",
-                                                       "bound", "psnr_plain", "batches")}}
-    out["three_info"] = r.info
-    mask = r.mask & (ra >= 0.999)
+    rm = MX.render_mtlx(mtlx, scene, resolution=args.res, supersample=args.mx_ss,
+                        env_samples=args.env_samples)
+    timings["materialx_s"] = time.perf_counter() - t
+    cm = T.compare_render(rm.image, rm.alpha, refs, ra)
+    cm.pop("crn")
+    mmask = rm.mask & (ra >= 0.999)
+    out = cm | {"info": rm.info}
+    if scene != "sphere-distant":
+        return out | {"estimate": None, "model_mitsuba": _model_in_mitsuba(
+            T, openpbr_equivalent(fit), scene, refs, mmask, args)}
+    kw = {"resolution": args.res, "supersample": args.mx_ss}
+    fit_img, _ = TB.shade_sphere(fit, geometry_roughness=False, resolution=args.res,
+                                 supersample=max(16, args.mx_ss))
+    eq, _ = TB.shade_sphere(openpbr_equivalent(fit), geometry_roughness=False, **kw)
+    e = rendered_psnr(fit_img, eq, mmask)
+    return out | {"vs_converged_fit": rendered_psnr(fit_img, rm.image, mmask),
+                  "model_vs_engine": rendered_psnr(rm.image, eq, mmask),
+                  "estimate": {"psnr": e, "error_db": e - cm["psnr"]}}
+
+
+def _distant_diagnostics(fit, path: Path, r, refs, mask, args) -> dict:
+    """sphere-distant only: :class:`ThreeJSBRDF` and the glTF specification's BRDF through the
+    noise-free shader (module docstring: model_vs_three, shader_vs_mitsuba_fit,
+    three_vs_converged_fit, three_grid_vs_converged, estimate, gltf_spec_vs_fit, ablations)."""
+    from brdffit.evaluation.engines import threejs_brdf as TB
+    from brdffit.evaluation.metrics import rendered_psnr
+    from brdffit.export.gltf import gltf_equivalent
+
+    out = {}
+    doc = json.loads(path.read_text())
+    out["gltf_material"] = {k: v for k, v in doc["materials"][0].items() if k != "extras"}
+    model = TB.from_gltf(path)
     kw = {"resolution": args.res, "supersample": args.ss}
     # the fit's pixel integrals converged (a 16 × 16 grid at least), as Mitsuba's estimate
     fit_img, _ = TB.shade_sphere(fit, geometry_roughness=False, resolution=args.res,
@@ -116,7 +211,7 @@ def bench_material(name, spec, args) -> dict:
     fine, _ = TB.shade_sphere(model, resolution=args.res, supersample=max(16, args.ss))
     out["three_grid_vs_converged"] = rendered_psnr(fine, est, mask)
     e = rendered_psnr(fit_img, est, mask)
-    out["estimate"] = {"psnr": e, "error_db": e - c["psnr"]}
+    out["estimate"] = {"psnr": e, "error_db": None}
     spec_img, _ = TB.shade_sphere(gltf_equivalent(fit, optimize=args.optimize),
                                   geometry_roughness=False, **kw)
     out["gltf_spec_vs_fit"] = rendered_psnr(fit_img, spec_img, mask)
@@ -131,51 +226,135 @@ def bench_material(name, spec, args) -> dict:
         abl[key] = {"psnr_vs_fit": rendered_psnr(fit_img, img, mask),
                     "mean_ratio": (img[mask].sum(0) / fit_img[mask].sum(0)).tolist()}
     out["ablations"] = abl
-    if args.materialx:
-        from brdffit.evaluation.engines import materialx_web as MX
-        from brdffit.export.materialx import openpbr_equivalent, write_materialx
-
-        with tempfile.TemporaryDirectory() as tmp:
-            mpath = Path(tmp) / "m.mtlx"
-            write_materialx(fit, mpath, fidelity=False)
-            t = time.perf_counter()
-            rm = MX.render_mtlx(mpath, "sphere-distant", resolution=args.res, supersample=args.ss)
-            out["timings"]["materialx_s"] = time.perf_counter() - t
-        cm = T.compare_render(rm.image, rm.alpha, refs, ra)
-        cm.pop("crn")
-        eq, _ = TB.shade_sphere(openpbr_equivalent(fit), geometry_roughness=False, **kw)
-        mmask = rm.mask & (ra >= 0.999)
-        e = rendered_psnr(fit_img, eq, mmask)
-        out["materialx"] = cm | {"vs_converged_fit": rendered_psnr(fit_img, rm.image, mmask),
-                                 "model_vs_engine": rendered_psnr(rm.image, eq, mmask),
-                                 "estimate": {"psnr": e, "error_db": e - cm["psnr"]},
-                                 "info": rm.info}
     return out
 
 
-def _row(r: dict) -> dict:
+def bench_material(name, spec, args) -> dict:
+    """Fit ``spec`` (ggx-diffuse), export it, and measure every scene of ``args.scenes``."""
+    import brdffit
+
+    out = {"material": name, "spec": spec, "timings": {}, "scenes": {}}
+    t = time.perf_counter()
+    fit = brdffit.fit(brdffit.load(spec), model="ggx-diffuse")
+    out["timings"]["fit_s"] = time.perf_counter() - t
+    with tempfile.TemporaryDirectory() as tmp:
+        files = _export(fit, Path(tmp), args)
+        out["timings"] |= files.pop("timings")
+        for scene in args.scenes:
+            try:
+                sc = bench_scene(fit, files, scene, args)
+            except Exception as exc:  # noqa: BLE001 - keep measuring the other scenes
+                sc = {"scene": scene, "error": f"{type(exc).__name__}: {exc}"}
+            if sc.get("estimate") is not None and "three" in sc:
+                sc["estimate"]["error_db"] = sc["estimate"]["psnr"] - sc["three"]["psnr"]
+            out["scenes"][scene] = sc
+    return out
+
+
+def _rows(r: dict) -> list[dict]:
+    """The CSV rows of one material: one per scene measured."""
+    return [_row(r["material"], sc) for sc in r.get("scenes", {}).values() if "three" in sc]
+
+
+def _row(material: str, r: dict) -> dict:
     c = r["three"]
-    return {"material": r["material"], "psnr": c["psnr"], "psnr_se": c["psnr_se"],
-            "psnr_vs_converged": r["three_vs_converged_fit"],
-            "mean_r": c["mean_ratio"][0], "mean_g": c["mean_ratio"][1],
-            "mean_b": c["mean_ratio"][2], "rim_r": c["rim_ratio"][0], "rim_g": c["rim_ratio"][1],
-            "rim_b": c["rim_ratio"][2], "flip": c["flip"], "model_vs_three": r["model_vs_three"],
-            "estimate": r["estimate"]["psnr"], "estimate_error": r["estimate"]["error_db"],
-            "gltf_spec_vs_fit": r["gltf_spec_vs_fit"],
-            "no_multiscatter": r["ablations"]["no_multiscatter"]["psnr_vs_fit"],
-            "pow5_fresnel": r["ablations"]["pow5_fresnel"]["psnr_vs_fit"],
-            "no_geometry_roughness": r["ablations"]["no_geometry_roughness"]["psnr_vs_fit"],
-            "three_s": r["timings"]["three_s"]} | ({
-                "mx_psnr": r["materialx"]["psnr"], "mx_psnr_se": r["materialx"]["psnr_se"],
-                "mx_mean_r": r["materialx"]["mean_ratio"][0],
-                "mx_mean_g": r["materialx"]["mean_ratio"][1],
-                "mx_mean_b": r["materialx"]["mean_ratio"][2],
-                "mx_rim_r": r["materialx"]["rim_ratio"][0], "mx_flip": r["materialx"]["flip"],
-                "mx_model_vs_engine": r["materialx"]["model_vs_engine"]}
-                if "materialx" in r else {})
+    row = {"material": material, "scene": r["scene"], "psnr": c["psnr"], "psnr_se": c["psnr_se"],
+           "mean_r": c["mean_ratio"][0], "mean_g": c["mean_ratio"][1],
+           "mean_b": c["mean_ratio"][2], "rim_r": c["rim_ratio"][0], "rim_g": c["rim_ratio"][1],
+           "rim_b": c["rim_ratio"][2], "flip": c["flip"], "three_s": r["timings"]["three_s"]}
+    if "three_model_mitsuba" in r:
+        row["model_mitsuba"] = r["three_model_mitsuba"]["psnr"]
+    if r.get("estimate") is not None:
+        row |= {"psnr_vs_converged": r["three_vs_converged_fit"],
+                "model_vs_three": r["model_vs_three"],
+                "estimate": r["estimate"]["psnr"], "estimate_error": r["estimate"]["error_db"],
+                "gltf_spec_vs_fit": r["gltf_spec_vs_fit"],
+                "no_multiscatter": r["ablations"]["no_multiscatter"]["psnr_vs_fit"],
+                "pow5_fresnel": r["ablations"]["pow5_fresnel"]["psnr_vs_fit"],
+                "no_geometry_roughness": r["ablations"]["no_geometry_roughness"]["psnr_vs_fit"]}
+    m = r.get("materialx")
+    if m:
+        row |= {"mx_psnr": m["psnr"], "mx_psnr_se": m["psnr_se"],
+                "mx_mean_r": m["mean_ratio"][0], "mx_mean_g": m["mean_ratio"][1],
+                "mx_mean_b": m["mean_ratio"][2], "mx_rim_r": m["rim_ratio"][0],
+                "mx_flip": m["flip"], "mx_s": r["timings"].get("materialx_s")}
+        if "model_vs_engine" in m:
+            row["mx_model_vs_engine"] = m["model_vs_engine"]
+        if m.get("model_mitsuba"):
+            row["mx_model_mitsuba"] = m["model_mitsuba"]["psnr"]
+    return row
 
 
 def summarise(results: list[dict]) -> dict:
+    """Per scene: PSNR (mean, lowest and where), ratio ranges and FLIP per engine; over the
+    paper suite's spheres: per material the mean of its three PSNRs, their mean and lowest,
+    the lowest single PSNR, and the issue's goals; sphere-distant: :func:`summarise_distant`."""
+    scenes = list(dict.fromkeys(s for r in results for s in r.get("scenes", {})))
+    out = {"materials": len(results), "scenes": {}}
+    for scene in scenes:
+        views = [{"material": r["material"]} | r["scenes"][scene] for r in results
+                 if "three" in r.get("scenes", {}).get(scene, {})]
+        out["scenes"][scene] = {"measured": len(views),
+                                "errors": sum(1 for r in results
+                                              if "error" in r.get("scenes", {}).get(scene, {})),
+                                "three": _scene_engine(views, "three"),
+                                "materialx": _scene_engine(views, "materialx")}
+        if scene == "sphere-distant" and views:
+            out["sphere-distant"] = summarise_distant(views)
+    out["paper_suite"] = {e: _paper_suite(results, e) for e in ("three", "materialx")}
+    return out
+
+
+def _scene_engine(views: list[dict], engine: str) -> dict | None:
+    """PSNR mean / lowest (and which material), mean and rim ratio ranges and FLIP of one
+    engine in one scene; the engine's model integrated by Mitsuba, where measured."""
+    rs = [(v["material"], v[engine]) for v in views if v.get(engine)]
+    if not rs:
+        return None
+    p = np.array([c["psnr"] for _, c in rs])
+    mr = np.array([c["mean_ratio"] for _, c in rs])
+    rim = np.array([c["rim_ratio"] for _, c in rs])
+    flip = [c["flip"] for _, c in rs if c.get("flip") is not None]
+    model = [c.get("model_mitsuba") or v.get("three_model_mitsuba") if engine == "three"
+             else c.get("model_mitsuba") for v, (_, c) in zip(views, rs)]
+    model = [m["psnr"] for m in model if m]
+    return {"materials": len(rs), "psnr_mean": float(p.mean()), "psnr_min": float(p.min()),
+            "lowest": rs[int(np.argmin(p))][0],
+            "mean_ratio_range": [float(mr.min()), float(mr.max())],
+            "rim_ratio_range": [float(rim.min()), float(rim.max())],
+            "flip_mean": float(np.mean(flip)) if flip else None,
+            "model_mitsuba_psnr_mean": float(np.mean(model)) if model else None}
+
+
+def _paper_suite(results: list[dict], engine: str) -> dict | None:
+    """Over the materials measured in all three paper-suite spheres: each material's mean
+    PSNR over them, the mean and lowest of those, the lowest single PSNR, and the goal."""
+    per = {}
+    for r in results:
+        cs = [r.get("scenes", {}).get(s, {}).get(engine) for s in PAPER_SPHERES]
+        if all(cs):
+            per[r["material"]] = {"mean": float(np.mean([c["psnr"] for c in cs])),
+                                  "min": float(min(c["psnr"] for c in cs)),
+                                  "psnr": {s: float(c["psnr"]) for s, c in zip(PAPER_SPHERES, cs)}}
+    if not per:
+        return None
+    means = {m: v["mean"] for m, v in per.items()}
+    low = min(per, key=lambda m: per[m]["min"])
+    mean_goal, floor = GOALS[engine]
+    mean = float(np.mean(list(means.values())))
+    return {"scenes": list(PAPER_SPHERES), "materials": len(per), "mean": mean,
+            "lowest_material_mean": min(means.values()),
+            "lowest_material": min(means, key=means.get),
+            "lowest_single": per[low]["min"], "lowest_single_at": low,
+            "per_material": per,
+            "goal": {"mean_at_least": mean_goal, "none_below": floor,
+                     "met": bool(mean >= mean_goal and (floor is None
+                                                        or per[low]["min"] >= floor))}}
+
+
+def summarise_distant(results: list[dict]) -> dict:
+    """sphere-distant in detail (the noise-free model, the estimate and its error, the
+    ablations), over the per-material views of that scene."""
     ok = [r for r in results if "three" in r]
     if not ok:
         return {"materials": 0}
@@ -239,7 +418,7 @@ def _summarise_engine(rs: list[dict]) -> dict | None:
             "estimate_within_2db_vs_converged": int(np.sum(np.abs(np.array(est_c)) <= 2))}
 
 
-def main(argv=None) -> int:
+def _arguments(argv):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--merl", default=",".join(ISSUE_MERL),
                     help="comma-separated Neural-BRDF MERL names, or 'all' (default: the issue's 4)")
@@ -248,17 +427,83 @@ def main(argv=None) -> int:
     ap.add_argument("--no-rgl", action="store_true", help="skip the 7 RGL files")
     ap.add_argument("--no-materialx", dest="materialx", action="store_false",
                     help="skip the MaterialX round trip")
-    ap.add_argument("--res", type=int, default=128)
+    ap.add_argument("--scenes", default=",".join(DEFAULT_SCENES),
+                    help="comma-separated scenes: sphere-distant, sphere-point (three.js only), "
+                         "sphere-env, sphere-<map> (default: sphere-distant and the paper "
+                         "suite's spheres)")
+    ap.add_argument("--res", type=int, default=96)
     ap.add_argument("--optimize", default=False,
                     help="the exporter's refinement (brdffit.export.gltf.OPTIMIZE), e.g. engines")
-    ap.add_argument("--ss", type=int, default=8, help="three.js samples per pixel side")
+    ap.add_argument("--ss", type=int, default=4, help="three.js samples per pixel side")
+    ap.add_argument("--mx-ss", type=int, default=2,
+                    help="MaterialX samples per pixel side (its FIS loop is SwiftShader's cost)")
+    ap.add_argument("--env-samples", type=int, default=256,
+                    help="MaterialX FIS samples per specular lobe (u_envRadianceSamples)")
     ap.add_argument("--spp", type=int, default=256, help="Mitsuba samples per pixel per batch")
     ap.add_argument("--batches", type=int, default=8, help="Mitsuba batches (independent seeds)")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "engines_threejs.json")
     ap.add_argument("--summarise-only", action="store_true",
                     help="recompute the summary of the results already in --out (no rendering)")
     args = ap.parse_args(argv)
+    args.scenes = [x.strip() for x in args.scenes.split(",") if x.strip()]
+    return args
 
+
+def _materials(args) -> list[tuple[str, str]]:
+    mats = []
+    if args.merl:
+        from _common import merl_materials
+
+        names = (merl_materials(NBRDF)[::max(1, args.every)] if args.merl == "all"
+                 else args.merl.split(","))
+        mats += [(n, f"{NBRDF}:{n}") for n in names]
+    if not args.no_rgl:
+        mats += [(p.name.removesuffix("_rgb.bsdf") + " (RGL)", str(p))
+                 for p in sorted(RGL.glob("*_rgb.bsdf"))]
+    return mats
+
+
+def _report(r: dict) -> None:
+    """One line per scene and engine."""
+    if "error" in r:
+        print(f"{r['material']:28s} ERROR {r['error']}", flush=True)
+        return
+    for scene, sc in r["scenes"].items():
+        if "error" in sc:
+            print(f"{r['material']:28s} {scene:17s} ERROR {sc['error']}", flush=True)
+            continue
+        for label, c in (("three", sc["three"]), ("MaterialX", sc.get("materialx"))):
+            if not c:
+                continue
+            print(f"{r['material']:28s} {scene:17s} {label:9s} {c['psnr']:6.2f} ± "
+                  f"{c['psnr_se'] or 0:.2f} dB | mean {'/'.join(f'{x:.3f}' for x in c['mean_ratio'])}"
+                  f" | rim {'/'.join(f'{x:.3f}' for x in c['rim_ratio'])} | FLIP "
+                  f"{c['flip'] if c['flip'] is not None else float('nan'):.4f}", flush=True)
+        if "materialx_error" in sc:
+            print(f"{'':28s} {scene:17s} MaterialX ERROR {sc['materialx_error']}", flush=True)
+
+
+def _settings(args, T) -> dict:
+    from brdffit.evaluation.engines import materialx_web as MX
+
+    return {"scenes": args.scenes, "resolution": args.res, "three_supersample": args.ss,
+            "materialx_supersample": args.mx_ss, "materialx_env_samples": args.env_samples,
+            "materialx_specular_environment": "FIS",
+            "materialx_irradiance": f"brute-force E/π, {MX.IRRADIANCE_WIDTH}×"
+                                    f"{MX.IRRADIANCE_WIDTH // 2} from the map at 256×128",
+            "environment_texture": "the map's own resolution, half floats",
+            "mitsuba_spp": args.spp, "mitsuba_batches": args.batches, "model": "ggx-diffuse",
+            "optimize": args.optimize, "three": T.three_version()}
+
+
+def _cpu_seconds() -> float:
+    """CPU time of this process and of its finished children (Chromium and its processes)."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
+def main(argv=None) -> int:
+    args = _arguments(argv)
     from brdffit._atomic import atomic_write
 
     if args.summarise_only:
@@ -270,25 +515,15 @@ def main(argv=None) -> int:
         return 0
     from brdffit.evaluation.engines import threejs as T
 
+    for scene in args.scenes:
+        T.resolve_scene(scene)                 # a clear error before any work
     ok, why = T.available()
     if not ok:
         print(f"three.js round trip unavailable: {why}")
         return 1
-    mats = []
-    if args.merl:
-        from _common import merl_materials
-
-        names = (merl_materials(NBRDF)[::max(1, args.every)] if args.merl == "all"
-                 else args.merl.split(","))
-        mats += [(n, f"{NBRDF}:{n}") for n in names]
-    if not args.no_rgl:
-        mats += [(p.name.removesuffix("_rgb.bsdf") + " (RGL)", str(p))
-                 for p in sorted(RGL.glob("*_rgb.bsdf"))]
-    load0 = list(os.getloadavg())
-    t0 = time.perf_counter()
-    results = []
-    doc = {}
-    for name, spec in mats:
+    load0, cpu0, t0 = list(os.getloadavg()), _cpu_seconds(), time.perf_counter()
+    results, doc = [], {}
+    for name, spec in _materials(args):
         t = time.perf_counter()
         try:
             r = bench_material(name, spec, args)
@@ -296,42 +531,22 @@ def main(argv=None) -> int:
             r = {"material": name, "spec": spec, "error": f"{type(exc).__name__}: {exc}"}
         r["wall_s"] = time.perf_counter() - t
         results.append(r)
-        if "three" in r:
-            c = r["three"]
-            print(f"{name:28s} three vs fit {c['psnr']:6.2f} ± {c['psnr_se'] or 0:.2f} dB | mean "
-                  f"{'/'.join(f'{x:.3f}' for x in c['mean_ratio'])} | rim "
-                  f"{'/'.join(f'{x:.3f}' for x in c['rim_ratio'])} | FLIP {c['flip'] or float('nan'):.4f}"
-                  f" | model vs three {r['model_vs_three']:6.2f} | estimate {r['estimate']['psnr']:6.2f}"
-                  f" | spec vs fit {r['gltf_spec_vs_fit']:6.2f} | vs converged fit "
-                  f"{r['three_vs_converged_fit']:6.2f} | {r['wall_s']:.1f}s", flush=True)
-            if "materialx" in r:
-                m = r["materialx"]
-                print(f"{'':28s} MaterialX vs fit {m['psnr']:6.2f} ± {m['psnr_se'] or 0:.2f} dB | mean "
-                      f"{'/'.join(f'{x:.3f}' for x in m['mean_ratio'])} | rim "
-                      f"{'/'.join(f'{x:.3f}' for x in m['rim_ratio'])} | FLIP "
-                      f"{m['flip'] or float('nan'):.4f} | model vs engine {m['model_vs_engine']:6.2f}"
-                      f" | estimate {m['estimate']['psnr']:6.2f} | vs converged fit "
-                      f"{m['vs_converged_fit']:6.2f}", flush=True)
-        else:
-            print(f"{name:28s} ERROR {r['error']}", flush=True)
+        _report(r)
         doc = {"benchmark": "engines_threejs",
                "command": " ".join([Path(sys.executable).name] + sys.argv),
-               "settings": {"scene": "sphere-distant", "resolution": args.res,
-                            "three_supersample": args.ss, "mitsuba_spp": args.spp,
-                            "mitsuba_batches": args.batches, "model": "ggx-diffuse",
-                            "optimize": args.optimize,
-                            "three": T.three_version()},
+               "settings": _settings(args, T),
                "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
-                           "load_average_start": load0, "load_average_end": list(os.getloadavg())},
+                           "load_average_start": load0, "load_average_end": list(os.getloadavg()),
+                           "nice": os.nice(0)},
                "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
-               "wall_s": time.perf_counter() - t0, "summary": summarise(results),
-               "results": results}
+               "wall_s": time.perf_counter() - t0, "cpu_s": _cpu_seconds() - cpu0,
+               "summary": summarise(results), "results": results}
         with atomic_write(args.out, "w") as fh:
             json.dump(doc, fh, indent=1, default=float)
     buf = io.StringIO()
     w = csv.DictWriter(buf, FIELDS)
     w.writeheader()
-    w.writerows(_row(r) for r in results if "three" in r)
+    w.writerows(row for r in results for row in _rows(r))
     with atomic_write(args.out.with_suffix(".csv"), "w") as fh:
         fh.write(buf.getvalue())
     print(json.dumps(doc.get("summary", {}), indent=1, default=float))

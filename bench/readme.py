@@ -90,9 +90,12 @@ def _render_safety(r: dict) -> str:
 
 
 def _threejs(r: dict) -> str:
-    p = r["summary"]["psnr"]
-    return (f"three.js {p['mean']:.1f} ± {p['se']:.1f} dB, lowest {p['min']:.1f} dB "
-            f"({r['summary']['materials']} materials)")
+    s = r["summary"]
+    d, p = s["scenes"]["sphere-distant"], s["paper_suite"]
+    return (f"sphere-distant: three.js {_mean_min(d['three'])}, MaterialX "
+            f"{_mean_min(d['materialx'])}; paper suite's spheres (per-material mean): three.js "
+            f"{p['three']['mean']:.1f} dB mean, {p['three']['lowest_material_mean']:.1f} dB "
+            f"lowest, MaterialX {p['materialx']['mean']:.1f} dB mean ({s['materials']} materials)")
 
 
 BENCHMARKS = (

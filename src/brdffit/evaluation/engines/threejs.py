@@ -21,7 +21,24 @@ Scenes (:data:`SCENES`, constants of :mod:`brdffit.evaluation.render.scenes`):
   radiance is ``E · (N·L) · f_r``, with ``f_r = c/π`` for Lambert, exactly Mitsuba's
   ``directional`` emitter of irradiance E;
 * ``sphere-point``: a ``PointLight`` of intensity I = 40 (W/sr as cd), no cut-off distance,
-  decay 2: ``E = I / d²``, Mitsuba's ``point`` emitter.
+  decay 2: ``E = I / d²``, Mitsuba's ``point`` emitter;
+* ``sphere-env`` (the procedural map) and ``sphere-<map>`` (a map of
+  :func:`~brdffit.evaluation.render.scenes.envmap_names`, e.g. the paper suite's
+  ``sphere-courtyard``, ``sphere-studio``, ``sphere-sunrise``): no light, the map alone
+  through three's image-based lighting, ``scene.environment`` = ``PMREMGenerator
+  .fromEquirectangular`` of a ``HalfFloatType`` RGBA ``DataTexture`` (:func:`environment_rgba`)
+  of the map at its own resolution (1024 × 512 for the shared maps, 512 × 256 for the
+  procedural one: :func:`~brdffit.evaluation.report_viewer.environment_image` at the native
+  width is the map unchanged, so nothing is resampled before three; PMREM's cube faces are
+  ``max(256, width/4)`` = 256 texels, 0.35° at a face's centre, the map's own pixel pitch),
+  clamped at 0 as :func:`~brdffit.evaluation.render.scenes.load_envmap` loads it (and at the
+  half-float maximum 65504; the brightest shared map, sunrise, peaks at 34560), turned into
+  three's equirectangular convention by
+  :func:`~brdffit.evaluation.report_viewer.three_equirect` (the orientation of Mitsuba's
+  ``envmap`` emitter in the same world frame). What three then computes is its split-sum
+  approximation (Karis 2013): radiance from the PMREM level of the material's roughness (GGX
+  prefiltered for V = N), times its analytic DFG term, plus the diffuse irradiance read from
+  PMREM's roughest level, not our Monte Carlo integral of the map.
 
 Pixels: Mitsuba integrates each pixel with a box filter (random positions in the pixel);
 three's rasteriser samples pixel centres. The page renders ``supersample``² samples per pixel
@@ -70,13 +87,20 @@ import numpy as np
 
 from ..metrics import crn_psnr
 from ..render import Renderer
-from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
+from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT, envmap_names, load_envmap
+from ..report_viewer import environment_image, three_equirect
 
 __all__ = ["SCENES", "ThreeRender", "EngineUnavailable", "three_dir", "three_version",
            "chromium_path", "available", "scene_json", "render_gltf", "run_page", "sphere_geometry_px",
-           "compare_render", "reference_renders"]
+           "compare_render", "reference_renders", "resolve_scene", "environment_rgba",
+           "environment_width", "rgba_half",
+           "HALF_MAX"]
 
-SCENES = ("sphere-distant", "sphere-point")
+#: the scenes rebuilt in three.js: the two lights, and the sphere under an environment map
+#: (``sphere-env``: the procedural map; ``sphere-<map>``: a map of the shared set)
+SCENES = ("sphere-distant", "sphere-point", "sphere-env", "sphere-<map>")
+#: the largest finite IEEE half float: environment maps are carried as half floats
+HALF_MAX = 65504.0
 _PAGE = Path(__file__).with_name("threejs_page")
 _ROOT = Path(__file__).resolve().parents[4]   # the source tree's root (src/brdffit/...)
 
@@ -126,12 +150,68 @@ def available() -> tuple[bool, str]:
     return True, ""
 
 
+def resolve_scene(scene) -> tuple[str, str | None]:
+    """``(base, envmap)`` of a scene name: ``base`` is ``sphere-distant``, ``sphere-point`` or
+    ``sphere-env``; ``envmap`` the name of the shared map of ``sphere-<map>`` (``None``: the
+    procedural map of ``sphere-env``, or no map). Only names of :func:`envmap_names` are
+    maps (not paths)."""
+    if scene in ("sphere-distant", "sphere-point", "sphere-env"):
+        return scene, None
+    if isinstance(scene, str) and scene.startswith("sphere-") and scene[7:] in envmap_names():
+        return "sphere-env", scene[7:]
+    raise ValueError(f"three.js scene: expected sphere-distant, sphere-point, sphere-env or "
+                     f"sphere-<map> with a map of {', '.join(envmap_names()) or '(none present)'}"
+                     f", got {scene!r}")
+
+
+def environment_width(envmap: str | None, width: int | None = None) -> int:
+    """Width of the texture of a map: ``width`` (validated: a multiple of 4 in [8, 8192]),
+    or the map's own width when ``None``."""
+    if width is None:
+        return int(load_envmap(envmap).shape[1])
+    if isinstance(width, bool) or not isinstance(width, (int, np.integer)) or not (
+            8 <= width <= 8192 and width % 4 == 0):
+        raise ValueError(f"environment width must be a multiple of 4 in [8, 8192], got {width!r}")
+    return int(width)
+
+
+def environment_rgba(envmap: str | None, convention: str = "three",
+                     width: int | None = None) -> tuple[bytes, int, int]:
+    """The map of ``sphere-env`` (``envmap`` ``None``) or ``sphere-<envmap>`` as the pages'
+    texture: ``(bytes, width, height)``, little-endian half floats RGBA (alpha 1), rows in
+    upload order (row 0 at texture v = 0), at the map's own resolution (or ``width`` ×
+    ``width/2``: :func:`environment_image`'s solid-angle weighted area average), clamped to
+    [0, :data:`HALF_MAX`]. ``convention``: ``"three"`` (three's equirectangular mapping,
+    :func:`three_equirect`: v = 0 at the nadir) or ``"mitsuba"`` (the map as Mitsuba's
+    ``envmap`` reads it: row 0 at the zenith, ``u = atan2(x, −z)/2π``)."""
+    if convention not in ("three", "mitsuba"):
+        raise ValueError(f"environment_rgba: convention must be 'three' or 'mitsuba', got "
+                         f"{convention!r}")
+    img = environment_image(envmap, environment_width(envmap, width))  # native: unchanged
+    if convention == "three":
+        img = three_equirect(img)
+    return rgba_half(img), int(img.shape[1]), int(img.shape[0])
+
+
+def rgba_half(img: np.ndarray) -> bytes:
+    """An (H, W, 3) image as the pages' texels: little-endian half floats RGBA, alpha 1,
+    colour clamped to [0, :data:`HALF_MAX`], rows in the order given."""
+    img = np.asarray(img)
+    if img.ndim != 3 or img.shape[-1] != 3:
+        raise ValueError(f"rgba_half: expected an (H, W, 3) image, got shape {img.shape}")
+    rgba = np.ones(img.shape[:2] + (4,), "<f2")
+    rgba[..., :3] = np.clip(np.nan_to_num(img, nan=0.0, posinf=HALF_MAX), 0.0, HALF_MAX)
+    return np.ascontiguousarray(rgba).tobytes()
+
+
 def scene_json(scene: str = "sphere-distant", resolution: int = 128, supersample: int = 4,
-               segments: tuple[int, int] = (256, 128), material_index: int = 0) -> dict:
+               segments: tuple[int, int] = (256, 128), material_index: int = 0,
+               env_width: int | None = None) -> dict:
     """The scene description sent to the page (plain data, serialised as JSON): size of the
-    render target, camera, light, sphere tessellation and the material index."""
-    if scene not in SCENES:
-        raise ValueError(f"three.js scene: expected one of {', '.join(SCENES)}, got {scene!r}")
+    render target, camera, light (for an environment-map scene: ``{"type": "environment",
+    "envmap", "width", "height"}``, the texels served at ``/environment.bin``), sphere
+    tessellation and the material index."""
+    base, envmap = resolve_scene(scene)
     for nm, v, lo, hi in (("resolution", resolution, 8, 2048), ("supersample", supersample, 1, 8),
                           ("material_index", material_index, 0, 1 << 20)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
@@ -143,9 +223,13 @@ def scene_json(scene: str = "sphere-distant", resolution: int = 128, supersample
     if len(seg) != 2 or not (3 <= seg[0] <= 2048 and 2 <= seg[1] <= 1024):
         raise ValueError(f"three.js scene: segments must be (3..2048, 2..1024), got {segments!r}")
     n = int(resolution) * int(supersample)
-    if scene == "sphere-distant":
+    if base == "sphere-distant":
         light = {"type": "directional", "direction": [float(x) for x in DISTANT_LIGHT["direction"]],
                  "irradiance": float(DISTANT_LIGHT["irradiance"])}
+    elif base == "sphere-env":
+        w = environment_width(envmap, env_width)
+        light = {"type": "environment", "envmap": envmap or "procedural", "width": w,
+                 "height": w // 2}
     else:
         light = {"type": "point", "position": [float(x) for x in POINT_LIGHT["position"]],
                  "intensity": float(POINT_LIGHT["intensity"])}
@@ -219,7 +303,8 @@ class _Handler(BaseHTTPRequestHandler):
         if path == "/scene.json":
             return self._send(json.dumps(s.scene).encode(), "application/json")
         if path in s.data:
-            return self._send(s.data[path], "application/json")
+            return self._send(s.data[path], "application/octet-stream" if path.endswith(".bin")
+                              else "application/json")
         if path == "/material.gltf" and s.gltf_name:
             return self._file(s.gltf_dir, s.gltf_name)
         if path.startswith("/three/"):
@@ -265,23 +350,30 @@ def _chromium_args(chromium: Path, profile: Path) -> list[str]:
 
 def render_gltf(gltf, scene: str = "sphere-distant", resolution: int = 128,
                 supersample: int = 4, material_index: int = 0,
-                segments: tuple[int, int] = (256, 128), timeout: float = 120.0) -> ThreeRender:
+                segments: tuple[int, int] = (256, 128), timeout: float = 120.0,
+                env_width: int | None = None) -> ThreeRender:
     """Render material ``material_index`` of the glTF file ``gltf`` on a unit sphere with
-    three.js in headless Chromium (see the module docstring). Raises
+    three.js in headless Chromium (see the module docstring; ``env_width``: the map's texture
+    width, default its own). Raises
     :class:`EngineUnavailable` when three.js or Chromium is missing, ``RuntimeError`` with the
     page's error when the page fails, ``TimeoutError`` after ``timeout`` seconds."""
     path = Path(gltf)
     if not path.is_file() or path.suffix.lower() != ".gltf":
         raise ValueError(f"render_gltf: expected an existing .gltf file, got {str(gltf)!r}")
-    sc = scene_json(scene, resolution, supersample, segments, material_index)
-    return run_page("render.js", sc, resolution, supersample, gltf=path, timeout=timeout)
+    sc = scene_json(scene, resolution, supersample, segments, material_index, env_width)
+    data = None
+    if sc["light"]["type"] == "environment":
+        data = {"/environment.bin": environment_rgba(resolve_scene(scene)[1], "three",
+                                                     sc["light"]["width"])[0]}
+    return run_page("render.js", sc, resolution, supersample, gltf=path, data=data,
+                    timeout=timeout)
 
 
 def run_page(script: str, sc: dict, resolution: int, supersample: int, gltf: Path | None = None,
              data: dict[str, bytes] | None = None, timeout: float = 120.0) -> ThreeRender:
     """Serve ``threejs_page/index.html`` with ``script`` (a file of ``threejs_page/``) as its
     module, the scene ``sc`` at ``/scene.json``, the ``three`` package, the glTF file's folder
-    and ``data`` (path → JSON bytes); run it in headless Chromium until it posts ``/result``
+    and ``data`` (path → bytes: JSON, or binary for a path ending in ``.bin``); run it in headless Chromium until it posts ``/result``
     (Float32 RGBA, rows bottom to top) or ``/error``; box-average ``supersample``² samples per
     pixel."""
     ok, why = available()
@@ -349,8 +441,7 @@ def reference_renders(brdf, scene: str = "sphere-distant", resolution: int = 128
                       spp: int = 64, batches: int = 4):
     """Our Mitsuba render of ``brdf`` in ``scene``: ``(stack (K, H, W, 3), alpha (H, W))``
     of ``batches`` independent seeds (K ≥ 2 for the standard error of :func:`compare_render`)."""
-    if scene not in SCENES:
-        raise ValueError(f"expected one of {', '.join(SCENES)}, got {scene!r}")
+    resolve_scene(scene)                       # validates the name
     if batches < 2:
         raise ValueError(f"reference_renders: batches must be ≥ 2, got {batches}")
     r = Renderer(brdf, scene, None, int(spp), int(resolution))

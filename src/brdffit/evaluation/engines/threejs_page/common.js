@@ -57,3 +57,29 @@ export function glInfo(renderer) {
   return { gl_renderer: dbg ? gl.getParameter(dbg.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER),
            gl_version: gl.getParameter(gl.VERSION) };
 }
+
+// An environment map served as binary (`url`): width x height RGBA little-endian half floats,
+// row 0 at texture v = 0 (the Python side put it in the convention of the shader that reads
+// it). Repeats around u, clamps at the poles; with `mipmaps`, WebGL's own mip chain and
+// trilinear filtering (MaterialX's filtered importance sampling reads mip levels), else
+// bilinear filtering of level 0 (three's PMREMGenerator makes its own levels).
+export async function environmentTexture(url, width, height, mipmaps = false) {
+  const response = await fetch(url);
+  if (!response.ok) throw new Error('environment map: ' + url + ' answered ' + response.status);
+  const texels = new Uint16Array(await response.arrayBuffer());
+  if (texels.length !== 4 * width * height) {
+    throw new Error('environment map: expected ' + 4 * width * height + ' half floats, got ' +
+                    texels.length);
+  }
+  const tex = new THREE.DataTexture(texels, width, height, THREE.RGBAFormat, THREE.HalfFloatType);
+  tex.mapping = THREE.EquirectangularReflectionMapping;
+  tex.colorSpace = THREE.LinearSRGBColorSpace;
+  tex.wrapS = THREE.RepeatWrapping;
+  tex.wrapT = THREE.ClampToEdgeWrapping;
+  tex.magFilter = THREE.LinearFilter;
+  tex.minFilter = mipmaps ? THREE.LinearMipmapLinearFilter : THREE.LinearFilter;
+  tex.generateMipmaps = mipmaps;
+  tex.flipY = false;
+  tex.needsUpdate = true;
+  return tex;
+}

@@ -1,10 +1,11 @@
 // Renders a sphere with the vertex and pixel shaders that MaterialX's ESSL generator made from
-// an .mtlx document (/shader.json: sources, uniform values, light) in the scene of /scene.json,
+// an .mtlx document (/shader.json: sources, uniform values, a light or an environment whose
+// maps are /environment.bin and /irradiance.bin) in the scene of /scene.json,
 // into a float render target, and posts the linear RGBA pixels (Float32, rows bottom to top)
 // to /result. three.js only supplies the sphere, the camera matrices and the render target:
 // the shaders are compiled as they are (RawShaderMaterial, GLSL ES 3.00). Errors go to /error.
 import * as THREE from 'three';
-import { floatRenderer, glInfo, post, renderFloat, sceneCamera } from './common.js';
+import { environmentTexture, floatRenderer, glInfo, post, renderFloat, sceneCamera } from './common.js';
 
 function uniformValue(u) {
   const v = u.value;
@@ -14,6 +15,8 @@ function uniformValue(u) {
     case 'vector2': return new THREE.Vector2().fromArray(v);
     case 'color3': case 'vector3': return new THREE.Vector3().fromArray(v);
     case 'color4': case 'vector4': return new THREE.Vector4().fromArray(v);
+    // MaterialX's 16 values (row vectors, row-major) are GL's column-major upload order
+    case 'matrix44': return new THREE.Matrix4().fromArray(v);
     default: return null;
   }
 }
@@ -38,12 +41,22 @@ async function main() {
   uniforms.u_viewProjectionMatrix = {
     value: new THREE.Matrix4().multiplyMatrices(cam.projectionMatrix, cam.matrixWorldInverse) };
   uniforms.u_viewPosition = { value: cam.position.clone() };
-  uniforms.u_numActiveLightSources = { value: 1 };
   uniforms.u_refractionTwoSided = { value: false };
-  // MaterialX's LightData of a directional light: direction of travel, colour, intensity
-  uniforms.u_lightData = { value: [{
-    type: sh.light.type, direction: new THREE.Vector3().fromArray(sh.light.direction),
-    color: new THREE.Vector3().fromArray(sh.light.color), intensity: sh.light.intensity }] };
+  if (sh.light) {
+    // MaterialX's LightData of a directional light: direction of travel, colour, intensity
+    uniforms.u_numActiveLightSources = { value: 1 };
+    uniforms.u_lightData = { value: [{
+      type: sh.light.type, direction: new THREE.Vector3().fromArray(sh.light.direction),
+      color: new THREE.Vector3().fromArray(sh.light.color), intensity: sh.light.intensity }] };
+  }
+  if (sh.environment) {
+    // MaterialX's environment lighting: the lat-long map with WebGL's mip chain (read by
+    // filtered importance sampling) and the irradiance map; the other u_env* uniforms are
+    // the generator's, set by the Python side
+    const e = sh.environment;
+    uniforms.u_envRadiance = { value: await environmentTexture('/environment.bin', e.width, e.height, true) };
+    uniforms.u_envIrradiance = { value: await environmentTexture('/irradiance.bin', e.irradiance_width, e.irradiance_height) };
+  }
 
   // three writes the '#version 300 es' line itself (glslVersion GLSL3) before its own
   // defines: the generator's line is taken off so that it stays the first line

@@ -1,10 +1,11 @@
 // Renders material 0 of /material.gltf on a sphere in the scene of /scene.json with three.js
-// (MeshPhysicalMaterial, WebGL 2) into a float render target, and posts the linear RGBA
+// (MeshPhysicalMaterial, WebGL 2; a light, or an environment map from /environment.bin as
+// scene.environment) into a float render target, and posts the linear RGBA
 // pixels (Float32, rows bottom to top as WebGL reads them) to /result. Errors go to /error.
 // The scene description is data (JSON), never code: see brdffit.evaluation.engines.threejs.
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
-import { floatRenderer, glInfo, post, renderFloat, sceneCamera } from './common.js';
+import { environmentTexture, floatRenderer, glInfo, post, renderFloat, sceneCamera } from './common.js';
 
 async function main() {
   const scene = await (await fetch('/scene.json')).json();
@@ -28,6 +29,7 @@ async function main() {
   const cam = sceneCamera(scene, W, H);
 
   const L = scene.light;
+  let envInfo = null;
   if (L.type === 'directional') {
     // three's DirectionalLight shines from its position towards its target; its intensity is
     // the irradiance on a surface facing it (physically based lights, no pi factor)
@@ -40,6 +42,17 @@ async function main() {
     const light = new THREE.PointLight(0xffffff, L.intensity, 0, 2);
     light.position.fromArray(L.position);
     world.add(light);
+  } else if (L.type === 'environment') {
+    // the map alone, through three's image-based lighting: PMREMGenerator prefilters it
+    // (GGX levels from a mirror to roughness 1); no light, no background
+    const map = await environmentTexture('/environment.bin', L.width, L.height);
+    const pmrem = new THREE.PMREMGenerator(renderer);
+    const target = pmrem.fromEquirectangular(map);
+    world.environment = target.texture;
+    envInfo = { pmrem_cube_size: target.width, pmrem_levels: target.texture.mipmaps.length,
+                map: [L.width, L.height] };
+    pmrem.dispose();
+    map.dispose();
   } else {
     throw new Error('unknown light type ' + L.type);
   }
@@ -47,7 +60,7 @@ async function main() {
   const pixels = renderFloat(renderer, world, cam, W, H);
 
   const info = {
-    three: THREE.REVISION, material_type: material.type, ...glInfo(renderer),
+    three: THREE.REVISION, material_type: material.type, ...glInfo(renderer), environment: envInfo,
     material: { color: material.color.toArray(), metalness: material.metalness,
                 roughness: material.roughness, ior: material.ior,
                 specularIntensity: material.specularIntensity,
