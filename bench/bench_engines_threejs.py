@@ -8,7 +8,7 @@ environment lighting), against our Mitsuba render of the fit in the same scene.
 Run: ``.venv/bin/python bench/bench_engines_threejs.py`` (the issue's four MERL stand-ins and
 the 7 RGL files, the default scenes); ``--scenes a,b`` (sphere-distant, sphere-point: three.js
 only, sphere-env, sphere-<map>); ``--merl all`` for the 100 Neural-BRDF MERL materials
-(``--every 5``: 20 of them, written with ``--out bench/results/engines_threejs_merl.json``),
+(``--every 5``: 20 of them; give such runs their own ``--out`` outside ``bench/results``),
 ``--merl a,b`` for a subset, ``--no-rgl``; ``--res``, ``--ss`` (samples per pixel side in
 three.js), ``--mx-ss`` (in MaterialX: its FIS loop is what SwiftShader spends the time on),
 ``--env-samples`` (MaterialX's FIS samples per lobe), ``--spp`` and ``--batches`` (Mitsuba).

@@ -146,10 +146,7 @@ BENCHMARKS = (
                                           for k, v in r["summary"]["rule"].items())),
     Entry("engines_threejs", "glTF in three.js (WebGL 2, headless Chromium) and MaterialX's "
           "ESSL shaders vs our render of the fit", "bench/bench_engines_threejs.py",
-          ("engines_threejs.json", "engines_threejs.csv", "engines_threejs_merl.json",
-           "engines_threejs_merl.csv", "engines_threejs_params_engines.json",
-           "engines_threejs_params_engines.csv", "engines_threejs_params_rule.json",
-           "engines_threejs_params_rule.csv"),
+          ("engines_threejs.json", "engines_threejs.csv"),
           _threejs),
     Entry("render", "Mitsuba 3 render time per model; `--crn`: CRN PSNR ± se of "
           "`synthetic:gold-ggx`", "bench/bench_render.py [--quick]; --crn",
