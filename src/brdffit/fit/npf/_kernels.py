@@ -98,6 +98,80 @@ def g_normal_equations(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
             _add_tridiagonal(Ao_d, Ao_o, bo, c, b, s, wj, xk * g_i, r)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _bin_factors(D, F, rho_s, h, d, q):  # pragma: no cover
+    """``q = ρs D_h F_d`` per channel of bin (h, d): ``∂m/∂P`` of Eq. 3."""
+    for c in range(3):
+        q[c] = rho_s[c] * D[c, h] * F[c, d]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _flush_bin(D, F, rho_s, h, d, lo, hi, T, U, V, DG, FG, Grd, Grs, gG,
+               curvature, HDG, HFG, HsG):  # pragma: no cover
+    """Add the partial sums of one bin (h, d) over its G cells ``lo..hi`` (``T = Σ w P ∂P/∂G``,
+    ``U = Σ w ∂P/∂G``, ``V = Σ w r ∂P/∂G``) times the bin's factors to the blocks, and clear
+    them: every G block but GG and HGG is such a sum times a factor constant over the bin."""
+    for c in range(3):
+        rs, Dh, Fd = rho_s[c], D[c, h], F[c, d]
+        q = rs * Dh * Fd
+        cd, cf, cs = q * rs * Fd, q * rs * Dh, q * Dh * Fd
+        for i in range(lo, hi + 1):
+            tt, v = T[c, i], V[c, i]
+            DG[c, h, i] += cd * tt
+            FG[c, d, i] += cf * tt
+            Grs[c, i] += cs * tt
+            Grd[c, i] += q * U[c, i]
+            gG[c, i] += q * v
+            if curvature:
+                HDG[c, h, i] += rs * Fd * v
+                HFG[c, d, i] += rs * Dh * v
+                HsG[c, i] += Dh * Fd * v
+            T[c, i] = 0.0
+            U[c, i] = 0.0
+            V[c, i] = 0.0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _add_cells(A, c, a, t, b, s, x, y):  # pragma: no cover
+    """``A[c, ·] +=`` ``x`` times the interpolation weights ``1 - t``, ``t`` of the θi cells
+    ``a``, ``a + 1`` and ``y`` times those (``1 - s``, ``s``) of the θo cells ``b``, ``b + 1``."""
+    A[c, a] += x * (1.0 - t)
+    A[c, a + 1] += x * t
+    A[c, b] += y * (1.0 - s)
+    A[c, b + 1] += y * s
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _add_cross(M, c, a, t, b, s, e):  # pragma: no cover
+    """``M[c, θi cell, θo cell] += e × weights``: the 2 × 2 block between cells a, a+1 and b, b+1
+    (one order; :func:`_mirror` adds the other)."""
+    M[c, a, b] += e * (1.0 - t) * (1.0 - s)
+    M[c, a, b + 1] += e * (1.0 - t) * s
+    M[c, a + 1, b] += e * t * (1.0 - s)
+    M[c, a + 1, b + 1] += e * t * s
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _add_pair(M, c, a, t, e):  # pragma: no cover
+    """``M[c] += e (1 - t, t)ᵀ(1 - t, t)`` on cells a, a+1, upper triangle with the diagonal
+    halved (:func:`_mirror` restores the whole)."""
+    M[c, a, a] += 0.5 * e * (1.0 - t) * (1.0 - t)
+    M[c, a, a + 1] += e * (1.0 - t) * t
+    M[c, a + 1, a + 1] += 0.5 * e * t * t
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _mirror(M):  # pragma: no cover
+    """``M[c] ← M[c] + M[c]ᵀ``, in place."""
+    for c in range(M.shape[0]):
+        for i in range(M.shape[1]):
+            M[c, i, i] *= 2.0
+            for j in range(i + 1, M.shape[2]):
+                x = M[c, i, j] + M[c, j, i]
+                M[c, i, j] = x
+                M[c, j, i] = x
+
+
 @njit(cache=True, nogil=True)
 def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_s,
                       GG, DG, FG, Grd, Grs, gG, curvature,
@@ -106,68 +180,60 @@ def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_
     (3, 90, 90), ``DG`` (3, 90 θh, 90 G), ``FG`` (3, 90 θd, 90 G), ``Grd``, ``Grs``, ``gG``
     (3, 90). The blocks not involving G follow from the bin statistics.
 
+    With ``P = G(θi) G(θo) / (cos θi cos θo)``, ``q = ρs D_h F_d``, ``r = ρd + q P − z`` and
+    ``∂m/∂G_u = q ∂P/∂G_u``: ``GG_uv = Σ w q² ∂P/∂G_u ∂P/∂G_v``,
+    ``DG_hu = Σ w q ρs F_d P ∂P/∂G_u``, ``FG_du = Σ w q ρs D_h P ∂P/∂G_u``,
+    ``Grs_u = Σ w q D_h F_d P ∂P/∂G_u``, ``Grd_u = Σ w q ∂P/∂G_u``, ``gG_u = Σ w q r ∂P/∂G_u``.
+
     With ``curvature``, in the same pass, the blocks involving G of the residual-curvature
     term ``Σ w r ∇²m`` that Newton's Hessian adds to JᵀWJ: ``HGG`` (G enters twice, as
-    G(θi)G(θo)), ``HDG``, ``HFG``, ``HsG`` (with ρs), shaped as their JᵀWJ counterparts."""
-    n = hd.shape[0]
-    nd = F.shape[1]
+    G(θi)G(θo): ``Σ w r q ∂²P/∂G_u∂G_v`` between a θi and a θo cell, in both orders),
+    ``HDG_hu = Σ w r ρs F_d ∂P/∂G_u``, ``HFG``, ``HsG`` (with ρs: ``D_h F_d``), shaped as their
+    JᵀWJ counterparts.
+
+    Samples come in MERL order, so a bin (h, d) is a run of samples: the factors constant over
+    a bin are applied once per run (:func:`_flush_bin`); GG and HGG are accumulated as one
+    triangle (one order of the θi–θo block) and mirrored at the end."""
+    n, ng, nd = hd.shape[0], G.shape[1], F.shape[1]
     _clear(GG, DG, FG)
     _clear(Grd, Grs, gG)
     if curvature:
         _clear(HGG, HDG, HFG)
         HsG[:] = 0.0
-    idx = np.empty(4, dtype=np.int64)
-    dp = np.empty(4)
+    T, U, V, q = np.zeros((3, ng)), np.zeros((3, ng)), np.zeros((3, ng)), np.zeros(3)
+    k0, lo, hi = -1, ng, 0
     for j in range(n):
         k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
-        h = k // nd
-        d = k - h * nd
-        idx[0] = a
-        idx[1] = a + 1
-        idx[2] = b
-        idx[3] = b + 1
+        if k != k0:
+            if k0 >= 0:
+                _flush_bin(D, F, rho_s, k0 // nd, k0 % nd, lo, hi, T, U, V, DG, FG, Grd, Grs,
+                           gG, curvature, HDG, HFG, HsG)
+            k0, lo, hi = k, ng, 0
+            _bin_factors(D, F, rho_s, k // nd, k % nd, q)
+        lo = min(lo, a, b)
+        hi = max(hi, a + 1, b + 1)
         for c in range(3):
             g_i, g_o = _g_pair(G, c, a, t, b, s)
+            x_i, x_o = ic * g_o, ic * g_i          # ∂P/∂G(θi), ∂P/∂G(θo)
             P = g_i * g_o * ic
-            df = D[c, h] * F[c, d]
-            # ∂P/∂G_u, P = G(θi) G(θo) / (cos θi cos θo); ∂m/∂G_u = ρs D F ∂P/∂G_u
-            dp[0] = ic * g_o * (1.0 - t)
-            dp[1] = ic * g_o * t
-            dp[2] = ic * g_i * (1.0 - s)
-            dp[3] = ic * g_i * s
-            q = rho_s[c] * df
             wj = w[c, j]
-            r = rho_d[c] + rho_s[c] * df * P - z[c, j]
-            jd = rho_s[c] * F[c, d] * P
-            jf = rho_s[c] * D[c, h] * P
-            js = df * P
-            for u in range(4):
-                e = wj * q * dp[u]
-                iu = idx[u]
-                DG[c, h, iu] += e * jd
-                FG[c, d, iu] += e * jf
-                Grs[c, iu] += e * js
-                Grd[c, iu] += e
-                gG[c, iu] += e * r
-                for v in range(4):
-                    GG[c, iu, idx[v]] += e * q * dp[v]
+            r = rho_d[c] + q[c] * P - z[c, j]
+            wx_i, wx_o = wj * x_i, wj * x_o
+            _add_cells(U, c, a, t, b, s, wx_i, wx_o)
+            _add_cells(T, c, a, t, b, s, wx_i * P, wx_o * P)
+            _add_cells(V, c, a, t, b, s, wx_i * r, wx_o * r)
+            wq2 = wj * q[c] * q[c]
+            _add_pair(GG, c, a, t, wq2 * x_i * x_i)
+            _add_pair(GG, c, b, s, wq2 * x_o * x_o)
+            _add_cross(GG, c, a, t, b, s, wq2 * x_i * x_o)
             if curvature:
-                # ∂²m/∂D_h∂G_u = ρs F_d ∂P/∂G_u, likewise F_d and ρs; ∂²P/∂G_u∂G_v between
-                # the θi cell (u) and the θo cell (v), in both orders
-                wr = wj * r
-                for u in range(4):
-                    e = wr * dp[u]
-                    iu = idx[u]
-                    HDG[c, h, iu] += e * rho_s[c] * F[c, d]
-                    HFG[c, d, iu] += e * rho_s[c] * D[c, h]
-                    HsG[c, iu] += e * df
-                e_io = wr * q * ic
-                for u in range(2):
-                    wu = (1.0 - t) if u == 0 else t
-                    for v in range(2, 4):
-                        e = e_io * wu * ((1.0 - s) if v == 2 else s)
-                        HGG[c, idx[u], idx[v]] += e
-                        HGG[c, idx[v], idx[u]] += e
+                _add_cross(HGG, c, a, t, b, s, wj * r * q[c] * ic)
+    if k0 >= 0:
+        _flush_bin(D, F, rho_s, k0 // nd, k0 % nd, lo, hi, T, U, V, DG, FG, Grd, Grs, gG,
+                   curvature, HDG, HFG, HsG)
+    _mirror(GG)
+    if curvature:
+        _mirror(HGG)
 
 
 @njit(cache=True, nogil=True)
