@@ -38,28 +38,56 @@ def _sample(hd, gi0, gti, go0, gto, inv_cc, j):  # pragma: no cover
     return hd[j], gi0[j], gti[j], go0[j], gto[j], inv_cc[j]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _p_terms(G, X, rho_d, w, z, c, j, k, a, t, b, s, ic, s1, s2, spz, e):  # pragma: no cover
+    """Sample ``j``'s terms of channel ``c`` added to the running sums of :func:`p_stats`."""
+    g_i, g_o = _g_pair(G, c, a, t, b, s)
+    P = g_i * g_o * ic
+    wj = w[c, j]
+    zj = z[c, j]
+    wp = wj * P
+    r = rho_d[c] + X[c, k] * P - zj
+    return s1 + wp, s2 + wp * P, spz + wp * zj, e + wj * r * r
+
+
 @njit(cache=True, nogil=True)
 def p_stats(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz):  # pragma: no cover
     """Accumulate per (θh, θd) bin ``S1 = Σ w P``, ``S2 = Σ w P²``, ``Spz = Σ w P z`` for the
     given G (3, 90) and return the exact objective (Eq. 7) per channel of the model
-    ``ρd + X[hd] P`` (``X = ρs D F`` per bin, (3, 8100))."""
+    ``ρd + X[hd] P`` (``X = ρs D F`` per bin, (3, 8100)).
+
+    Samples come in MERL order, so a bin is a run of samples: its sums are kept in scalars
+    over the run and added to the bin once (any order stays correct, one run per bin is
+    fastest)."""
     n = hd.shape[0]
-    E = np.zeros(3)
     _clear(S1, S2, Spz)
-    for j in range(n):
+    e0 = e1 = e2 = 0.0
+    s1_0 = s2_0 = sz_0 = s1_1 = s2_1 = sz_1 = s1_2 = s2_2 = sz_2 = 0.0
+    k0 = hd[0] if n else 0
+    for j in range(n + 1):
+        k = hd[j] if j < n else -1
+        if k != k0:                       # flush the run of bin k0
+            S1[0, k0] += s1_0
+            S2[0, k0] += s2_0
+            Spz[0, k0] += sz_0
+            S1[1, k0] += s1_1
+            S2[1, k0] += s2_1
+            Spz[1, k0] += sz_1
+            S1[2, k0] += s1_2
+            S2[2, k0] += s2_2
+            Spz[2, k0] += sz_2
+            s1_0 = s2_0 = sz_0 = s1_1 = s2_1 = sz_1 = s1_2 = s2_2 = sz_2 = 0.0
+            k0 = k
+        if j == n:
+            break
         k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
-        for c in range(3):
-            g_i, g_o = _g_pair(G, c, a, t, b, s)
-            P = g_i * g_o * ic
-            wj = w[c, j]
-            zj = z[c, j]
-            wp = wj * P
-            S1[c, k] += wp
-            S2[c, k] += wp * P
-            Spz[c, k] += wp * zj
-            r = rho_d[c] + X[c, k] * P - zj
-            E[c] += wj * r * r
-    return E
+        s1_0, s2_0, sz_0, e0 = _p_terms(G, X, rho_d, w, z, 0, j, k, a, t, b, s, ic,
+                                                    s1_0, s2_0, sz_0, e0)
+        s1_1, s2_1, sz_1, e1 = _p_terms(G, X, rho_d, w, z, 1, j, k, a, t, b, s, ic,
+                                                    s1_1, s2_1, sz_1, e1)
+        s1_2, s2_2, sz_2, e2 = _p_terms(G, X, rho_d, w, z, 2, j, k, a, t, b, s, ic,
+                                                    s1_2, s2_2, sz_2, e2)
+    return np.array([e0, e1, e2])
 
 
 @njit(cache=True, nogil=True, inline="always")
