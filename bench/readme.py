@@ -218,7 +218,8 @@ STUDIES = (
     Entry("fit_identity", "whether two source trees write bit-identical fits (two "
           "`fit_database.py` runs)", "bench/studies/fit_identity.py A B",
           ("fit_identity.json",),
-          lambda r: f"{r['identical']} / {r['compared']} fit files identical"),
+          lambda r: f"{r['arrays_identical']} / {r['compared']} fit files with identical "
+                    f"arrays ({r['identical']} identical headers too)"),
 )
 
 INTRO = """\

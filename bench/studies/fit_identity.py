@@ -10,7 +10,9 @@ Used to show that a change of structure leaves the fits alone::
     .venv/bin/python bench/studies/fit_identity.py /tmp/id-base /tmp/id-head
 
 Writes ``bench/results/fit_identity.json``: one row per (material, model) found in both runs,
-with the arrays and header fields that differ (empty when identical).
+with the arrays and header fields that differ (empty when identical), and the counts: files
+identical, files whose arrays are identical, the models whose arrays differ and the header
+fields that differ (with how many files each).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import argparse
 import json
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -85,10 +88,16 @@ def main(argv=None) -> int:
     different = [r for r in rows if r["arrays"] or r["header"]]
     summary = {"command": " ".join(sys.argv), "date": time.strftime("%Y-%m-%dT%H:%M:%S"),
                "a": str(args.a), "b": str(args.b), "compared": len(rows),
-               "identical": len(rows) - len(different), "only_in_a": only,
-               "different": different}
-    args.out.write_text(json.dumps(summary, indent=1) + "\n")
-    print(f"{summary['identical']} / {len(rows)} fit files identical "
+               "identical": len(rows) - len(different),
+               "arrays_identical": sum(not r["arrays"] for r in rows),
+               "arrays_differ_by_model": dict(Counter(r["model"] for r in rows if r["arrays"])),
+               "header_fields_differ": dict(Counter(f for r in rows for f in r["header"])),
+               "only_in_a": only, "different": different}
+    head = json.dumps({k: v for k, v in summary.items() if k != "different"}, indent=1)
+    rows_text = ",\n".join("  " + json.dumps(r, ensure_ascii=False) for r in different)
+    args.out.write_text(head[:-2] + ',\n "different": [\n' + rows_text + "\n ]\n}\n")
+    print(f"{summary['identical']} / {len(rows)} fit files identical, "
+          f"{summary['arrays_identical']} with identical arrays "
           f"({len(only)} only in {args.a}); written {args.out}")
     for r in different:
         print(f"  {r['material']} {r['model']}: arrays {r['arrays']} header {r['header']}")
