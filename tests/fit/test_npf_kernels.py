@@ -124,7 +124,7 @@ def test_p_stats_matches_reference(order):
     X = (f["rho_s"][:, None, None] * f["D"][:, :, None] * f["F"][:, None, :]).reshape(3, -1)
     out_new = [np.full((3, NH * ND), np.nan) for _ in range(3)]
     out_ref = [np.full((3, NH * ND), np.nan) for _ in range(3)]
-    E_new = _kernels.p_stats(*arrays, f["G"], X, f["rho_d"], *out_new)
+    E_new = _kernels.p_stats(*arrays, f["G"], X, f["rho_d"], *out_new, np.ones(3, bool))
     E_ref = ref_p_stats(*arrays, f["G"], X, f["rho_d"], *out_ref)
     _close(E_new, E_ref)
     for a, b in zip(out_new, out_ref):
@@ -132,6 +132,22 @@ def test_p_stats_matches_reference(order):
     if order == "merl":              # one run per bin: the same additions in the same order
         assert all(np.array_equal(a, b) for a, b in zip(out_new, out_ref))
         assert np.array_equal(E_new, E_ref)
+
+
+@pytest.mark.parametrize("chans", [(True, False, True), (False, True, False), (False,) * 3])
+def test_p_stats_channels_asked_are_those_of_all_channels(chans):
+    """A channel's sums and objective are bit for bit those of the all-channel pass; the
+    channels not asked for are 0."""
+    arrays, f = _samples("merl", seed=2)
+    X = (f["rho_s"][:, None, None] * f["D"][:, :, None] * f["F"][:, None, :]).reshape(3, -1)
+    full = [np.full((3, NH * ND), np.nan) for _ in range(3)]
+    part = [np.full((3, NH * ND), np.nan) for _ in range(3)]
+    E_full = _kernels.p_stats(*arrays, f["G"], X, f["rho_d"], *full, np.ones(3, bool))
+    E_part = _kernels.p_stats(*arrays, f["G"], X, f["rho_d"], *part, np.array(chans))
+    on = np.array(chans)
+    assert np.array_equal(E_part[on], E_full[on]) and np.all(E_part[~on] == 0.0)
+    for a, b in zip(part, full):
+        assert np.array_equal(a[on], b[on]) and np.all(a[~on] == 0.0)
 
 
 def _blocks(fill):

@@ -50,17 +50,11 @@ def _p_terms(G, X, rho_d, w, z, c, j, k, a, t, b, s, ic, s1, s2, spz, e):  # pra
     return s1 + wp, s2 + wp * P, spz + wp * zj, e + wj * r * r
 
 
-@njit(cache=True, nogil=True)
-def p_stats(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz):  # pragma: no cover
-    """Accumulate per (θh, θd) bin ``S1 = Σ w P``, ``S2 = Σ w P²``, ``Spz = Σ w P z`` for the
-    given G (3, 90) and return the exact objective (Eq. 7) per channel of the model
-    ``ρd + X[hd] P`` (``X = ρs D F`` per bin, (3, 8100)).
-
-    Samples come in MERL order, so a bin is a run of samples: its sums are kept in scalars
-    over the run and added to the bin once (any order stays correct, one run per bin is
-    fastest)."""
+@njit(cache=True, nogil=True, inline="always")
+def _p_runs(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz,
+            on0, on1, on2):  # pragma: no cover
+    """The pass of :func:`p_stats` for the channels ``on0``, ``on1``, ``on2``."""
     n = hd.shape[0]
-    _clear(S1, S2, Spz)
     e0 = e1 = e2 = 0.0
     s1_0 = s2_0 = sz_0 = s1_1 = s2_1 = sz_1 = s1_2 = s2_2 = sz_2 = 0.0
     k0 = hd[0] if n else 0
@@ -81,13 +75,36 @@ def p_stats(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz):  # 
         if j == n:
             break
         k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
-        s1_0, s2_0, sz_0, e0 = _p_terms(G, X, rho_d, w, z, 0, j, k, a, t, b, s, ic,
-                                                    s1_0, s2_0, sz_0, e0)
-        s1_1, s2_1, sz_1, e1 = _p_terms(G, X, rho_d, w, z, 1, j, k, a, t, b, s, ic,
-                                                    s1_1, s2_1, sz_1, e1)
-        s1_2, s2_2, sz_2, e2 = _p_terms(G, X, rho_d, w, z, 2, j, k, a, t, b, s, ic,
-                                                    s1_2, s2_2, sz_2, e2)
+        if on0:
+            s1_0, s2_0, sz_0, e0 = _p_terms(G, X, rho_d, w, z, 0, j, k, a, t, b, s, ic,
+                                            s1_0, s2_0, sz_0, e0)
+        if on1:
+            s1_1, s2_1, sz_1, e1 = _p_terms(G, X, rho_d, w, z, 1, j, k, a, t, b, s, ic,
+                                            s1_1, s2_1, sz_1, e1)
+        if on2:
+            s1_2, s2_2, sz_2, e2 = _p_terms(G, X, rho_d, w, z, 2, j, k, a, t, b, s, ic,
+                                            s1_2, s2_2, sz_2, e2)
     return np.array([e0, e1, e2])
+
+
+@njit(cache=True, nogil=True)
+def p_stats(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz,
+            chans):  # pragma: no cover
+    """Accumulate per (θh, θd) bin ``S1 = Σ w P``, ``S2 = Σ w P²``, ``Spz = Σ w P z`` for the
+    given G (3, 90) and return the exact objective (Eq. 7) per channel of the model
+    ``ρd + X[hd] P`` (``X = ρs D F`` per bin, (3, 8100)), for the channels where ``chans``
+    (3 bools) holds; the others' sums and objective are 0. A channel's sums do not depend on
+    the others', so they are the same whichever channels are asked for.
+
+    Samples come in MERL order, so a bin is a run of samples: its sums are kept in scalars
+    over the run and added to the bin once (any order stays correct, one run per bin is
+    fastest). All three channels take a copy of the pass without the channel tests."""
+    _clear(S1, S2, Spz)
+    if chans[0] and chans[1] and chans[2]:
+        return _p_runs(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz,
+                       True, True, True)
+    return _p_runs(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz,
+                   chans[0], chans[1], chans[2])
 
 
 @njit(cache=True, nogil=True, inline="always")

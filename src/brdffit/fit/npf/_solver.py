@@ -38,6 +38,8 @@ NP = 180
 #: after a fixed number of iterations among 1-2 on MERL materials; docs/design/npf-fit.md)
 G_STEP_CAP = 4.0
 G_OVER_RELAX = 1.9
+#: results kept per channel by :meth:`Samples.stats` (an exact re-use: the same inputs)
+STATS_MEMO = 2
 
 
 @dataclass
@@ -58,6 +60,7 @@ class Samples:
     sum_wzz: np.ndarray = field(default=None)
 
     e_offset: np.ndarray = field(default=None)
+    _memo: list = field(default=None, repr=False, compare=False)
 
     @classmethod
     def from_objective(cls, data: ObjectiveData, fold: bool = True) -> "Samples":
@@ -105,16 +108,33 @@ class Samples:
         s.e_offset = np.maximum(sum_wzz - (w * z * z).sum(axis=1), 0.0)
         return s
 
-    def stats(self, G, X, rho_d):
-        """One pass: ``(E, (S1, S2, Spz))`` for G (3, 90), X = ρs D F (3, 8100)."""
-        S1 = np.empty((3, NH * ND))
-        S2 = np.empty_like(S1)
-        Spz = np.empty_like(S1)
-        E = _kernels.p_stats(self.hd, self.gi0, self.gti, self.go0, self.gto, self.inv_cc,
-                             self.w, self.z, np.ascontiguousarray(G, dtype=np.float64),
-                             np.ascontiguousarray(X, dtype=np.float64),
-                             np.ascontiguousarray(rho_d, dtype=np.float64), S1, S2, Spz)
-        return E + self.e_offset, (S1, S2, Spz)
+    def stats(self, G, X, rho_d, chans=None):
+        """One pass: ``(E, (S1, S2, Spz))`` for G (3, 90), X = ρs D F (3, 8100), for the
+        channels in ``chans`` (3 bools, default all; the others' E is NaN and sums 0).
+        A channel's result for the same ``G[c]``, ``X[c]``, ``ρd[c]`` as one of its last
+        :data:`STATS_MEMO` results is that result (the kernel is deterministic and the
+        channels independent): only the other asked channels are passed over."""
+        G, X, rho_d = (np.ascontiguousarray(a, dtype=np.float64) for a in (G, X, rho_d))
+        asked = np.ones(3, bool) if chans is None else np.asarray(chans, bool)
+        keys = [G[c].tobytes() + X[c].tobytes() + rho_d[c].tobytes() for c in range(3)]
+        memo = self._memo if self._memo is not None else [[], [], []]
+        self._memo = memo
+        hits = [next((r for k, r in memo[c] if k == keys[c]), None) if asked[c] else None
+                for c in range(3)]
+        todo = asked & np.array([h is None for h in hits])
+        S1, S2, Spz = (np.zeros((3, NH * ND)) for _ in range(3))
+        E = np.full(3, np.nan)
+        if todo.any():
+            E[todo] = _kernels.p_stats(self.hd, self.gi0, self.gti, self.go0, self.gto,
+                                       self.inv_cc, self.w, self.z, G, X, rho_d, S1, S2,
+                                       Spz, todo)[todo] + self.e_offset[todo]
+        for c in range(3):
+            if hits[c] is not None:
+                E[c], S1[c], S2[c], Spz[c] = hits[c]
+            elif todo[c]:
+                memo[c] = ([(keys[c], (E[c], S1[c].copy(), S2[c].copy(), Spz[c].copy()))]
+                           + memo[c])[:STATS_MEMO]
+        return E, (S1, S2, Spz)
 
     def line_stats(self, G, dG):
         """One pass: the bin statistics along ``G + t dG`` as polynomials in t, (3, 8100, 11)
@@ -217,8 +237,9 @@ def parabolic_search(fun, need, e0, e1, aux1, max_eval=2, t_first=0.5, max_total
     points evaluated (``0`` and ``1`` included). A channel stops after ``max_eval``
     evaluations once it has found a decrease; until then the trials shrink (at most a quarter
     of the smallest failed one) until a trial below ``min_t`` has failed (the step is then
-    not a descent direction: t = 0) or ``max_total`` evaluations. ``fun(t) -> (E, aux)``
-    evaluates all channels (channels not in ``need`` at t = 1, finished ones at their best t).
+    not a descent direction: t = 0) or ``max_total`` evaluations. ``fun(t, active) ->
+    (E, aux)`` evaluates the channels still searching (``active``); the others' values are
+    not used (a channel, once finished, stays finished), so ``fun`` may skip them.
     Returns ``(t, E, aux, n_eval)`` of the best point; t = 0 where nothing beat ``e0``."""
     pts_t = [np.zeros(3), np.ones(3)]
     pts_e = [np.asarray(e0, dtype=np.float64), np.asarray(e1, dtype=np.float64)]
@@ -231,7 +252,8 @@ def parabolic_search(fun, need, e0, e1, aux1, max_eval=2, t_first=0.5, max_total
     n_eval = 0
     while np.any(active) and n_eval < max_total:
         tt = np.where(active, t_next, best_t)
-        E, aux = fun(tt)
+        E, aux = fun(tt, active.copy())
+        E = np.where(active, E, best_e)
         n_eval += 1
         better = active & (E < best_e)
         best_aux = tuple(np.where(better[:, None], x, y) if np.ndim(x) == 2 else
@@ -273,9 +295,10 @@ class MFState:
     rho_s: np.ndarray
 
 
-def _stats(st: MFState, smp: Samples):
-    """``(E, S)`` of :meth:`Samples.stats` for the model of ``st``, ``X = ρs D F`` per bin."""
-    return smp.stats(st.G, st.rho_s[:, None] * outer_df(st.D, st.F), st.rho_d)
+def _stats(st: MFState, smp: Samples, chans=None):
+    """``(E, S)`` of :meth:`Samples.stats` for the model of ``st``, ``X = ρs D F`` per bin
+    (for the channels in ``chans``, default all)."""
+    return smp.stats(st.G, st.rho_s[:, None] * outer_df(st.D, st.F), st.rho_d, chans)
 
 
 def _rho_update(st: MFState, smp: Samples, S):
@@ -511,12 +534,12 @@ def _g_from_d_d_step(st: MFState, smp: Samples, S, E, t_prev, eps, search_evals)
     A_new = st.rho_s[:, None] * d_raw
     e_before = E
 
-    def make(A):
+    def make(A, chans=None):
         m = A.max(axis=1)
         m = np.where(m > 0, m, 1.0)
         D = np.maximum(A / m[:, None], eps)
         G = smith_g_from_d(D.T).T
-        e, s = smp.stats(G, m[:, None] * outer_df(D, st.F), st.rho_d)
+        e, s = smp.stats(G, m[:, None] * outer_df(D, st.F), st.rho_d, chans)
         return e, (D, G, m) + s
 
     e_new, aux = make(A_new)
@@ -525,8 +548,8 @@ def _g_from_d_d_step(st: MFState, smp: Samples, S, E, t_prev, eps, search_evals)
     n = 0
     if np.any(need):
 
-        def fun(t):
-            return make(A_old + t[:, None] * (A_new - A_old))
+        def fun(t, active):
+            return make(A_old + t[:, None] * (A_new - A_old), active)
 
         t, _, aux_g, n = parabolic_search(fun, need, e_before, e_new, aux, search_evals,
                                           t_prev)
@@ -877,7 +900,7 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
         for _attempt in range(8 if todo.any() else 0):  # raise the damping until it helps
             step = _polish_step(A, g, A_newton, lam, todo, free, room_down, room_up)
             cand = _polish_candidate(st, step, eps, g_from_d)
-            Ec, Sc = _stats(cand, smp)
+            Ec, Sc = _stats(cand, smp, todo)       # the others' results are not used
             acc = todo & np.isfinite(Ec) & (Ec < E) & _storable(cand, g_from_d)
             _take(st, cand, acc)
             S = tuple(np.where(acc[:, None], x, y) for x, y in zip(Sc, S))
