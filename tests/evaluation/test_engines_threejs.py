@@ -92,7 +92,9 @@ def test_alignment_and_tolerance_vs_our_render(roundtrip):
     assert np.allclose(est["mean_ratio"], c["mean_ratio"], atol=0.01)
 
 
-ENV_SCENES = ["sphere-env"] + [f"sphere-{m}" for m in ("courtyard", "studio", "sunrise")]
+# the procedural map (always present) and one shared map with a sun (orientation shows most);
+# the benchmark renders every scene of the paper suite
+ENV_SCENES = ["sphere-env", "sphere-sunrise"]
 
 
 @pytest.mark.render
