@@ -22,6 +22,7 @@ from brdffit.evaluation.engines import materialx_web as MX
 from brdffit.evaluation.engines import threejs as T
 from brdffit.evaluation.engines import threejs_brdf as TB
 from brdffit.evaluation.metrics import rendered_psnr
+from tests.support.envmap_roundtrip import compare_with_turned_map
 
 OK, WHY = T.available()
 RES, SS = 48, 2
@@ -121,8 +122,8 @@ def test_environment_scene_matches_our_render_of_the_model(roundtrip, scene, tmp
     0.33 / 8. Tolerances: PSNR ≥ 38 dB (7.7 dB below the lowest), every mean ratio within
     ±4 % (2.5 points of margin), the turned map ≥ 5 dB lower (smallest gap 21 dB) with a mean
     ratio off by > 10 %. ~12 s each (SwiftShader compiles and runs the FIS loop)."""
-    from brdffit.evaluation.render import Renderer, available
-    from brdffit.evaluation.render.scenes import envmap_names, load_envmap
+    from brdffit.evaluation.render import available
+    from brdffit.evaluation.render.scenes import envmap_names
     from brdffit.export.materialx import openpbr_equivalent, write_materialx
     from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel
 
@@ -137,16 +138,7 @@ def test_environment_scene_matches_our_render_of_the_model(roundtrip, scene, tmp
     model = openpbr_equivalent(fit)
     r = MX.render_mtlx(path, scene, resolution=RES, supersample=SS)
     assert r.info["specular_environment"] == "FIS" and r.info["env_samples"] == MX.ENV_SAMPLES
-    refs, ra = T.reference_renders(model, scene, resolution=RES, spp=64, batches=3)
-    c = T.compare_render(r.image, r.alpha, refs, ra)
-    env = load_envmap(T.resolve_scene(scene)[1])
-    turned = Renderer(model, "sphere-env", np.roll(env, env.shape[1] // 2, axis=1), 64, RES)
-    w = T.compare_render(r.image, r.alpha,
-                         np.stack([turned.render(s).image for s in range(3)]), ra)
-    print(f"{scene}: PSNR {c['psnr']:.1f} ± {c['psnr_se']:.2f} dB, mean "
-          f"{np.round(c['mean_ratio'], 3).tolist()}, rim {np.round(c['rim_ratio'], 3).tolist()}"
-          f"; turned {w['psnr']:.1f} dB, mean {np.round(w['mean_ratio'], 3).tolist()}; "
-          f"{r.info['seconds']:.1f} s")
+    c, w = compare_with_turned_map(r, model, scene, RES)
     assert c["psnr"] >= 38.0, c["psnr"]
     assert np.all(np.abs(np.array(c["mean_ratio"]) - 1) < 0.04), c["mean_ratio"]
     assert w["psnr"] < c["psnr"] - 5.0, (w["psnr"], c["psnr"])

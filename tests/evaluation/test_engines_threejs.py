@@ -24,6 +24,7 @@ from brdffit.evaluation.engines import threejs as T
 from brdffit.evaluation.engines import threejs_brdf as TB
 from brdffit.evaluation.metrics import rendered_psnr
 from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel
+from tests.support.envmap_roundtrip import compare_with_turned_map
 
 OK, WHY = T.available()
 pytestmark = pytest.mark.skipif(not OK, reason=WHY)
@@ -110,8 +111,8 @@ def test_environment_scene_matches_our_render_of_the_export(roundtrip, scene):
     a mean ratio off by 0.2-6.8. Tolerances: PSNR ≥ 25 dB (3.5 dB below the lowest), every
     mean ratio within ±8 % (2 points of margin), and the turned map ≥ 3 dB lower (the
     smallest gap measured is 6.2 dB) with a mean ratio off by > 10 %."""
-    from brdffit.evaluation.render import Renderer, available
-    from brdffit.evaluation.render.scenes import envmap_names, load_envmap
+    from brdffit.evaluation.render import available
+    from brdffit.evaluation.render.scenes import envmap_names
 
     if not available():
         pytest.skip("needs Mitsuba 3 with the LLVM back-end")
@@ -121,15 +122,7 @@ def test_environment_scene_matches_our_render_of_the_export(roundtrip, scene):
     r = T.render_gltf(path, scene, resolution=48, supersample=4)
     assert r.info["environment"]["pmrem_cube_size"] == 256
     export = TB.from_gltf(path)
-    refs, ra = T.reference_renders(export, scene, resolution=48, spp=64, batches=3)
-    c = T.compare_render(r.image, r.alpha, refs, ra)
-    env = load_envmap(T.resolve_scene(scene)[1])
-    turned = Renderer(export, "sphere-env", np.roll(env, env.shape[1] // 2, axis=1), 64, 48)
-    w = T.compare_render(r.image, r.alpha, np.stack([turned.render(s).image for s in range(3)]),
-                         ra)
-    print(f"{scene}: PSNR {c['psnr']:.1f} ± {c['psnr_se']:.2f} dB, mean "
-          f"{np.round(c['mean_ratio'], 3).tolist()}, rim {np.round(c['rim_ratio'], 3).tolist()}"
-          f"; turned {w['psnr']:.1f} dB, mean {np.round(w['mean_ratio'], 3).tolist()}")
+    c, w = compare_with_turned_map(r, export, scene, 48)
     assert c["psnr"] >= 25.0, c["psnr"]
     assert np.all(np.abs(np.array(c["mean_ratio"]) - 1) < 0.08), c["mean_ratio"]
     assert w["psnr"] < c["psnr"] - 3.0, (w["psnr"], c["psnr"])
