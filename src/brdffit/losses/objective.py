@@ -122,12 +122,15 @@ def compressive_weight(rho, rho_bar, p: float = 1.4, alpha: float = math.log(2.0
 
 
 def weighted_median(values, weights) -> float:
-    """Weighted median: the smallest value whose cumulative weight reaches half the total."""
+    """Weighted median: the smallest value whose cumulative weight reaches half the total.
+
+    The sort need not be stable: the order among equal values does not change which value
+    is returned (only the rounding of the cumulative weight inside a run of equal values)."""
     v = np.asarray(values, dtype=np.float64).ravel()
     w = np.asarray(weights, dtype=np.float64).ravel()
     if v.size == 0 or not np.any(w > 0):
         raise FitError("weighted median of an empty set (no sample with positive weight)")
-    order = np.argsort(v, kind="stable")
+    order = np.argsort(v, kind="quicksort")
     cw = np.cumsum(w[order])
     k = int(np.searchsorted(cw, 0.5 * cw[-1]))
     return float(v[order][min(k, v.size - 1)])
