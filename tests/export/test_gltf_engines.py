@@ -1,6 +1,6 @@
 """Engine-aware glTF parameters (brdffit.export.gltf.optimize_for_engines, ``optimize="engines"``):
-on a rough lobe the parameters chosen for the engines lower the error of the engines' models
-(Blender's Cycles, three.js) against the fit; the option is checked; three's DFG table computed
+on a rough lobe the parameters fitted to the engines' renders bring the engines' models
+(Blender's Cycles, three.js) closer to the fit; sharp lobes keep the rule's; the option is checked; three's DFG table computed
 by quadrature is three's own. The real engines are measured in bench/bench_engines*.py."""
 
 from __future__ import annotations
@@ -29,25 +29,24 @@ def _sphere(brdf, ref, ref_alpha, geometry_roughness=False):
     return rendered_psnr(ref, img, m), img[m].sum(0) / ref[m].sum(0)
 
 
-def test_engine_aware_parameters_lower_the_modelled_engine_error_on_a_rough_lobe():
+def test_engine_aware_parameters_raise_the_modelled_engines_psnr_on_a_rough_lobe():
     fit = _rough_paint()
     rule = gltf_parameters(fit)
-    eng = optimize_for_engines(fit, rule, n=256)
+    eng = optimize_for_engines(fit, rule, resolution=32)
     assert rule["metallicFactor"] == eng["metallicFactor"] == 0.0
     k = eng["specular"]["specularFactor"] / rule["specular"]["specularFactor"]
-    assert 0.9 < k < 0.99, eng["notes"][-1]                       # lowered, by a few %
+    assert 0.8 < k < 0.995, eng["notes"][-1]                      # lowered, by a few %
     assert eng["specular"]["ior"] == rule["specular"]["ior"]
-    assert eng["baseColorFactor"] == rule["baseColorFactor"]
-    assert "multiple scattering of blender, threejs" in eng["notes"][-1]
+    assert eng["specular"]["specularColorFactor"] == rule["specular"]["specularColorFactor"]
+    assert "fitted to the renders of blender, threejs" in eng["notes"][-1]
     ref, ra = TB.shade_sphere(fit, resolution=32, supersample=4, geometry_roughness=False)
-    for engine, gain in (("blender", 8.0), ("threejs", None)):
+    for engine, gain in (("blender", 8.0), ("threejs", 3.0)):
         before_db, before_ratio = _sphere(engine_brdf(rule, engine), ref, ra)
         after_db, after_ratio = _sphere(engine_brdf(eng, engine), ref, ra)
-        # the engine's mean brightness is closer to the fit's
+        # the engine's mean brightness is closer to the fit's, its render closer
         assert np.max(np.abs(after_ratio - 1)) < np.max(np.abs(before_ratio - 1)) - 0.01, (
             engine, before_ratio, after_ratio)
-        if gain:
-            assert after_db > before_db + gain, (engine, before_db, after_db)
+        assert after_db > before_db + gain, (engine, before_db, after_db)
     # the specification's BRDF, which adds no energy, is darker than the fit now
     _, spec_ratio = _sphere(engine_brdf(eng, "specification"), ref, ra)
     assert np.all(spec_ratio < 0.995), spec_ratio
@@ -58,10 +57,10 @@ def test_engine_aware_parameters_keep_sharp_lobes_and_are_checked(tmp_path):
                            specular=[0.6, 0.6, 0.6])
     rule = gltf_parameters(sharp)
     eng = optimize_for_engines(sharp, rule)
-    # no multiple-scattering energy to take back on a sharp lobe
-    sf0 = (rule.get("specular") or {}).get("specularFactor", 1.0)
-    sf1 = (eng.get("specular") or {}).get("specularFactor", 1.0)
-    assert sf1 == pytest.approx(sf0, rel=0.01)
+    # the engine models are not trusted on sharp highlights: the rule's parameters are kept
+    assert {k: v for k, v in eng.items() if k != "notes"} == {
+        k: v for k, v in rule.items() if k != "notes"}
+    assert "not trusted on sharp highlights" in eng["notes"][-1]
     with pytest.raises(ValueError, match="optimize"):
         gltf_equivalent(sharp, optimize="nope")
     with pytest.raises(ValueError, match="engine"):

@@ -79,10 +79,10 @@ D(0) = 1/(πα²), heavier GGX tails; the loss is measured):
 * optionally (``optimize=True`` or ``"brdf"``, CLI ``--option optimize=true``) baseColor,
   metallic and roughness are refined by least squares in BRDF space
   (:func:`optimize_parameters`); with ``optimize="engines"`` (CLI ``--option
-  optimize=engines``; ``"blender"`` / ``"threejs"`` for one engine) the specular reflectance
-  (``specularFactor``, or a metal's base colour) is lowered so that the multiple-scattering
-  energy Blender and three.js add to rough lobes is taken back (:func:`optimize_for_engines`;
-  not the default: the specification's BRDF, which adds none, then renders darker);
+  optimize=engines``; ``"blender"`` / ``"threejs"`` for one engine) base colour,
+  ``specularFactor`` and roughness are fitted to what Blender and three.js render (their
+  models, in ``sphere-distant``: :func:`optimize_for_engines`; not the default: the
+  specification's BRDF then departs from the fit);
 * what Blender's importer and Cycles make of the file (f90 = 1, multiscatter GGX, the
   diffuse dimmed by one scalar) is modelled by
   :class:`brdffit.export.gltf_cycles.CyclesPrincipledBRDF`
@@ -482,8 +482,8 @@ def optimize_parameters(model, p: dict, n: int = 8192, seed: int = 0) -> dict:
 #: extensions), Blender's Cycles with the importer's multiscatter GGX or with GGX, and
 #: three.js r187 (``MeshPhysicalMaterial`` under direct light)
 ENGINES = ("specification", "blender", "blender-ggx", "threejs")
-#: the engines whose multiple scattering :func:`optimize_for_engines` compensates by default:
-#: the two measured ones
+#: the engines :func:`optimize_for_engines` fits the parameters to by default: the two measured
+#: ones
 ENGINE_TARGETS = ("blender", "threejs")
 #: the refinements of the rule-based parameters (``optimize`` of :func:`write_gltf`):
 #: ``"brdf"`` (= ``True``, :func:`optimize_parameters`), ``"engines"``
@@ -543,69 +543,66 @@ def engine_brdf(p: dict, engine: str = "specification", name: str = "gltf",
                                 multiscatter=multiscatter and engine == "blender")
 
 
-#: the view cosines μ at which :func:`optimize_for_engines` matches directional albedos
-ALBEDO_MU = (np.arange(16) + 0.5) / 16
+#: the engines' models are trusted on lobes at least this rough (glTF roughness): on sharper
+#: highlights Blender measures 2-5 % dimmer than :class:`CyclesPrincipledBRDF` (cause not found,
+#: docs/design/engines.md), so :func:`optimize_for_engines` keeps the rule's parameters there
+ENGINE_FIT_MIN_ROUGHNESS = 0.15
+#: the render :func:`optimize_for_engines` matches: ``sphere-distant``, this many pixels a side,
+#: ``ENGINE_FIT_SUPERSAMPLE``² samples per pixel on both sides
+ENGINE_FIT_RESOLUTION = 48
+ENGINE_FIT_SUPERSAMPLE = 4
+#: the PSNR above which :func:`optimize_for_engines` no longer rewards an engine (dB): its
+#: objective is the mean over the engines of ``−10 log10(MSE/peak² + 10^(−cap/10))``
+ENGINE_FIT_CAP_DB = 65.0
 
 
-def _albedo_samples(alpha: float, n: int, seed: int = 0):
-    """Directions to estimate directional albedos ``ρ(μ) = ∫ f(wi, wo) cos θi dwi`` at the view
-    cosines :data:`ALBEDO_MU`: per μ, ``n`` incident directions drawn half uniformly over the
-    hemisphere, half as the mirror of ``wo`` about a half vector drawn from GGX ``D(h) (N·H)``
-    of ``alpha`` (so that a sharp peak is sampled), and the weights ``cos θi / pdf`` of the
-    mixture (``pdf = ½/(2π) + ½ D(h) (N·H)/(4 |wo·H|)``; directions below the horizon weigh 0).
-    Returns ``(wi, wo, weight)`` of shapes ``(m n, 3)``, ``(m n, 3)``, ``(m, n)``."""
-    rng = np.random.default_rng(seed)
-    m = len(ALBEDO_MU)
-    mu = np.repeat(ALBEDO_MU, n)
-    wo = np.stack([np.sqrt(1 - mu * mu), np.zeros_like(mu), mu], -1)
-    u = rng.random((m * n, 2))
-    z, ph = u[:, 0], 2 * np.pi * u[:, 1]
-    s = np.sqrt(np.maximum(0, 1 - z * z))
-    uni = np.stack([s * np.cos(ph), s * np.sin(ph), z], -1)
-    a2 = max(alpha, 1e-3) ** 2
-    ct = np.sqrt((1 - u[:, 0]) / (1 + (a2 - 1) * u[:, 0]))
-    st = np.sqrt(np.maximum(0, 1 - ct * ct))
-    h = np.stack([st * np.cos(ph), st * np.sin(ph), ct], -1)
-    mirror = 2 * np.sum(wo * h, -1, keepdims=True) * h - wo
-    wi = np.where((np.arange(m * n) % 2 == 0)[:, None], uni, mirror)
-    hh = wi + wo
-    hh /= np.maximum(np.linalg.norm(hh, axis=-1, keepdims=True), 1e-300)
-    nh = hh[:, 2]
-    D = a2 / (np.pi * (nh * nh * (a2 - 1) + 1) ** 2)
-    pdf = 0.5 / (2 * np.pi) + 0.5 * D * nh / (4 * np.maximum(np.sum(wo * hh, -1), 1e-9))
-    w = np.where(wi[:, 2] > 0, np.maximum(wi[:, 2], 0) / pdf, 0.0)
-    return wi, wo, w.reshape(m, n)
+def _engine_fit_vector(p: dict) -> tuple[np.ndarray, bool]:
+    """``(q, has_specular)``: the parameters :func:`optimize_for_engines` varies, base colour
+    (3), ``specularFactor`` when the dielectric carries ``KHR_materials_specular``, roughness."""
+    sp = p.get("specular")
+    has_sp = bool(sp) and p["metallicFactor"] < 1.0
+    q = list(p["baseColorFactor"][:3]) + ([sp["specularFactor"]] if has_sp else [])
+    return np.array(q + [p["roughnessFactor"]], float), has_sp
 
 
-def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS, n: int = 512,
-                         seed: int = 0) -> dict:
-    """Parameters that hold across engines: the glTF material whose renderings in the
-    ``engines`` (:func:`engine_brdf`), *with* the multiple-scattering energy they add, carry the
-    energy the rule-based material ``p`` has in them without it — the energy glTF's
-    single-scattering BRDF specifies. Both engines multiply the specular lobe by a factor > 1 on
-    rough lobes (Blender's multiscatter GGX, Kulla & Conty 2017: ``1 + F_ms (1 − E)/E``;
-    three.js, Turquin 2019 Eq. 16: ``1 + f0 (1/E_ss − 1)``, ``E`` the lobe's single-scattering
-    albedo), and Cycles dims the diffuse below by that larger specular albedo; a lower specular
-    reflectance offsets it. Fitted by least squares: one factor ``k`` in [0.5, 1] on
-    ``specularFactor`` of a dielectric carrying ``KHR_materials_specular`` (the index and
-    ``specularColorFactor`` kept, so that the ior rule of :func:`_specular_extension` holds;
-    a dielectric without the extension is returned unchanged) or on a metal's base colour (its
-    reflectance); the diffuse base colour is kept (freed, it traded the specular away on rough
-    diffuse fits: docs/design/engines.md), on the residuals ``μ^1.5 (ρ_e(q; μ) − ρ_e,ss(p; μ))`` of every engine ``e`` at the view cosines
-    :data:`ALBEDO_MU`: ``ρ_e`` the directional albedo (RGB) of the engine's BRDF for the
-    parameters ``q``, ``ρ_e,ss`` that of the rule's material with the engine's multiple
-    scattering off (:func:`_albedo_samples`, ``n`` directions per μ, the same for every
-    evaluation). An engine without multiple scattering (``"specification"``) in ``engines``
-    pulls towards ``p`` unchanged; the default :data:`ENGINE_TARGETS` are the two measured
-    engines. Roughness, metallic and the coat are kept (the compensation is of energy, not of
-    the lobe's shape); anisotropic materials are returned unchanged (the engine models do not
-    cover ``KHR_materials_anisotropy``). The result replaces ``p`` only when it lowers the mean
-    over ``engines`` of the cosine-weighted relative error against ``model``
-    (:func:`brdffit.evaluation.metrics.brdf_metrics`, 2¹⁴ samples); the per-engine errors
-    before and after are in the notes. What it does not correct: Blender's f90 = 1 and its
-    scalar diffuse dimming beyond the multiple-scattering part, three's geometry roughness
-    (a property of the render, not of the material)."""
+def _with_engine_fit_vector(p: dict, q, has_sp: bool) -> dict:
+    base = [float(x) for x in np.clip(q[:3], 0.0, 1.0)]
+    r = float(np.clip(q[-1], 0.0, 1.0))
+    out = dict(p, baseColorFactor=base + [1.0], roughnessFactor=r, alpha=r * r)
+    if has_sp:
+        out["specular"] = dict(p["specular"], specularFactor=float(np.clip(q[3], 0.0, 1.0)))
+    return out
+
+
+def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS,
+                         resolution: int = ENGINE_FIT_RESOLUTION) -> dict:
+    """Parameters chosen for the engines as they render: the glTF material whose renders in
+    the ``engines`` (their models, :func:`engine_brdf`) are closest to the fit's render.
+
+    The objective is the mean over the engines of the capped log error of a noise-free render
+    of ``sphere-distant`` (:class:`brdffit.evaluation.engines.threejs_brdf.SphereSamples`,
+    ``resolution``² pixels, :data:`ENGINE_FIT_SUPERSAMPLE`² samples each, the same for the fit):
+    ``mean_e log10(MSE_e / peak² + 10^(−c/10))`` with the fit's peak and c =
+    :data:`ENGINE_FIT_CAP_DB`, i.e. the engines' mean PSNR (Bagher et al. 2016 §5), each
+    counted up to c. The cap keeps one engine's figure from being raised far above the goal
+    at the other's expense; the log keeps the worse engine from taking all of the parameters
+    (a sum of MSEs traded a good engine's 70 dB for a bad one's +1 dB). Varied, bounded to
+    [0, 1]: the base colour, ``specularFactor`` of a dielectric with ``KHR_materials_specular``,
+    the roughness (L-BFGS-B from the rule's values). Kept: metallic, the index and
+    ``specularColorFactor`` (the ior rule of :func:`_specular_extension` holds), the coat.
+
+    The engines add energy glTF's BRDF does not have (Blender's importer leaves Cycles on
+    multiscatter GGX, Kulla & Conty 2017; three.js multiplies its specular by
+    ``1 + f0 (1/E_ss − 1)``, Turquin 2019 Eq. 16) and Cycles dims the diffuse by one scalar
+    under a specular layer whose F90 is always 1; the rules follow the specification, these
+    parameters follow the engines. Unchanged (with a note): anisotropic materials (the engine
+    models do not cover ``KHR_materials_anisotropy``) and lobes sharper than
+    :data:`ENGINE_FIT_MIN_ROUGHNESS` (Blender's highlight is dimmer than its model there). The
+    result replaces ``p`` only when it raises the objective's mean PSNR by ≥ 0.1 dB; the
+    predicted PSNR per engine before and after is in the notes."""
     from scipy import optimize
+
+    from ..evaluation.engines.threejs_brdf import SphereSamples
 
     engines = tuple(engines)
     for e in engines:
@@ -614,46 +611,39 @@ def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS, n: int = 512,
     if p.get("anisotropy"):
         return dict(p, notes=p["notes"] + ["engine-aware optimisation skipped: "
                                            "KHR_materials_anisotropy is not modelled"])
-    wi, wo, weight = _albedo_samples(p["roughnessFactor"] ** 2, n, seed)
-    mu_w = ALBEDO_MU[:, None] ** 1.5
+    if p["roughnessFactor"] < ENGINE_FIT_MIN_ROUGHNESS:
+        return dict(p, notes=p["notes"] + [
+            f"engine-aware optimisation skipped: roughness {p['roughnessFactor']:.3g} < "
+            f"{ENGINE_FIT_MIN_ROUGHNESS} (the engine models are not trusted on sharp highlights)"])
+    sphere = SphereSamples("sphere-distant", resolution, ENGINE_FIT_SUPERSAMPLE)
+    ref, alpha = sphere.shade(model)
+    mask = alpha >= 0.999
+    ref_px = ref[mask]
+    peak2 = float(np.max(ref_px)) ** 2
+    floor = 10.0 ** (-ENGINE_FIT_CAP_DB / 10.0)
+    q0, has_sp = _engine_fit_vector(p)
 
-    def albedo(brdf):
-        f = np.asarray(brdf.eval(wi, wo), float).reshape(*weight.shape, 3)
-        return np.mean(f * weight[..., None], axis=1)          # (μ, RGB)
+    def psnr_each(q, cap: float = floor) -> np.ndarray:
+        pp = _with_engine_fit_vector(p, q, has_sp)
+        mse = [np.mean((sphere.shade(engine_brdf(pp, e))[0][mask] - ref_px) ** 2)
+               for e in engines]
+        return -10.0 * np.log10(np.asarray(mse) / peak2 + cap)
 
-    targets = [albedo(engine_brdf(p, e, multiscatter=False)) for e in engines]
-    sp = p.get("specular")
-    metal = p["metallicFactor"] >= 1.0
-    if not metal and not sp:
-        return dict(p, notes=p["notes"] + ["engine-aware optimisation skipped: the dielectric "
-                                           "has no specularFactor to lower"])
-    base0 = np.asarray(p["baseColorFactor"][:3], float)
+    def loss(q) -> float:
+        return -float(np.mean(psnr_each(q))) / 10.0
 
-    def params(k):
-        k = float(np.clip(np.ravel(k)[0], 0.0, 1.0))
-        if metal:
-            return dict(p, baseColorFactor=[float(x) for x in base0 * k] + [1.0])
-        return dict(p, specular=dict(sp, specularFactor=float(sp["specularFactor"] * k)))
-
-    def resid(k):
-        r = [(albedo(engine_brdf(params(k), e)) - t) * mu_w for e, t in zip(engines, targets)]
-        return np.concatenate(r).ravel() / np.sqrt(len(engines))
-
-    def errors(pp):
-        return [brdf_metrics(model, engine_brdf(pp, e), 1 << 14,
-                             metrics=("cos_rel_error",))["cos_rel_error"] for e in engines]
-
-    q = optimize.least_squares(resid, [0.95], bounds=([0.5], [1.0]), max_nfev=20).x
-    before, after = errors(p), errors(params(q))
-    if not np.mean(after) < np.mean(before):
-        return dict(p, notes=p["notes"] + ["engine-aware optimisation did not lower the "
-                                           "engines' mean error: rule kept"])
-    out = params(q)
-    what = "metal baseColor" if metal else "specularFactor"
+    res = optimize.minimize(loss, q0, method="L-BFGS-B", bounds=[(0.0, 1.0)] * len(q0),
+                            options={"maxfun": 200, "maxiter": 40, "eps": 1e-4, "ftol": 1e-4})
+    before, after = psnr_each(q0, 0.0), psnr_each(res.x, 0.0)
+    figures = ", ".join(f"{e} {b:.1f} -> {a:.1f} dB" for e, b, a in zip(engines, before, after))
+    if not -loss(res.x) >= -loss(q0) + 0.01:
+        return dict(p, notes=p["notes"] + ["engine-aware optimisation did not raise the engines' "
+                                           f"mean PSNR in sphere-distant: rule kept ({figures})"])
+    out = _with_engine_fit_vector(p, res.x, has_sp)
+    names = "base colour, " + ("specularFactor, " if has_sp else "") + "roughness"
     out["notes"] = p["notes"] + [
-        f"{what} x {float(q[0]):.4g} for the multiple scattering of {', '.join(engines)}: "
-        "cos_rel_error "
-        + ", ".join(f"{e} {b:.4g} -> {a:.4g}" for e, b, a in zip(engines, before, after))]
+        f"{names} fitted to the renders of {', '.join(engines)} in sphere-distant "
+        f"(their models' PSNR vs the fit, each counted up to {ENGINE_FIT_CAP_DB:g} dB): {figures}"]
     return out
 
 

@@ -57,7 +57,7 @@ from ..metrics import rendered_psnr
 from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
 from .threejs import EngineUnavailable, sphere_geometry_px, three_dir
 
-__all__ = ["ThreeJSBRDF", "from_gltf", "dfg_lut", "shade_sphere", "estimate"]
+__all__ = ["ThreeJSBRDF", "from_gltf", "dfg_lut", "SphereSamples", "shade_sphere", "estimate"]
 
 _MIN_ROUGHNESS = 0.045
 
@@ -263,66 +263,84 @@ def _basis(n):
     return t, bt
 
 
+class SphereSamples:
+    """The ``supersample``² pixel-centred samples per pixel of the unit sphere of ``scene``
+    (``sphere-distant`` or ``sphere-point``, module docstring) at ``resolution``²: the
+    directions ``wi``, ``wo`` (local frames) and the factor ``E (N·L)`` of every sample that
+    sees the light, for :meth:`shade`; computed once, so that many BRDFs can be shaded
+    (:func:`shade_sphere`, :func:`brdffit.export.gltf.optimize_for_engines`)."""
+
+    def __init__(self, scene: str = "sphere-distant", resolution: int = 128,
+                 supersample: int = 4):
+        if scene not in ("sphere-distant", "sphere-point"):
+            raise ValueError(f"shade_sphere: expected sphere-distant or sphere-point, got {scene!r}")
+        if int(resolution) < 1 or int(supersample) < 1:
+            raise ValueError("shade_sphere: resolution and supersample must be ≥ 1")
+        self.resolution, self.supersample = int(resolution), int(supersample)
+        n = self.resolution * self.supersample
+        t = math.tan(math.radians(CAMERA["fov_degrees"]) / 2.0)
+        c = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+        X, Y = np.meshgrid(c * t, -c * t)                      # +x right, +y up, row 0 on top
+        d = np.stack([X, Y, -np.ones_like(X)], -1)             # unnormalised ray directions
+        o = np.array(CAMERA["origin"], dtype=float)
+        # |o + s d|² = 1
+        A = np.sum(d * d, -1)
+        B = 2.0 * (d @ o)
+        C = float(o @ o) - 1.0
+        disc = B * B - 4 * A * C
+        hit = disc > 0
+        s = np.where(hit, (-B - np.sqrt(np.maximum(disc, 0.0))) / (2 * A), 0.0)
+        P = o + s[..., None] * d
+        N = P / np.maximum(np.linalg.norm(P, axis=-1, keepdims=True), 1e-300)
+        Vw = -d / np.sqrt(A)[..., None]
+        if scene == "sphere-distant":
+            Lw = -np.asarray(DISTANT_LIGHT["direction"], float)
+            Lw = np.broadcast_to(Lw / np.linalg.norm(Lw), P.shape)
+            E = np.full(P.shape[:2], float(DISTANT_LIGHT["irradiance"]))
+        else:
+            Lv = np.asarray(POINT_LIGHT["position"], float) - P
+            dist2 = np.sum(Lv * Lv, -1)
+            Lw = Lv / np.sqrt(dist2)[..., None]
+            E = float(POINT_LIGHT["intensity"]) / dist2
+        T, Bt = _basis(N)
+
+        def local(w):
+            return np.stack([np.sum(w * T, -1), np.sum(w * Bt, -1), np.sum(w * N, -1)], -1)
+
+        wi, wo = local(Lw), local(Vw)
+        m = hit & (wi[..., 2] > 0) & (wo[..., 2] > 0)
+        self.lit, self.hit = m, hit
+        self.wi, self.wo = wi[m], wo[m]
+        self.weight = E[m] * self.wi[:, 2]
+        # ray differentials per pixel of the render target, for three's geometry roughness:
+        # d_x = ∂d/∂x = (2t/n, 0, 0)
+        ndot = np.sum(N * d, -1)
+        g = np.zeros(P.shape[:2])
+        for dx in (np.array([2 * t / n, 0.0, 0.0]), np.array([0.0, -2 * t / n, 0.0])):
+            dP = s[..., None] * (dx - d * ((N @ dx) / np.where(ndot == 0, -1e-300, ndot))[..., None])
+            g = np.maximum(g, np.max(np.abs(dP), -1))
+        self.g = g[m]
+
+    def shade(self, brdf, geometry_roughness: bool = False):
+        """``(image (H, W, 3), alpha (H, W))`` of ``brdf`` (box average of the samples)."""
+        f = brdf.eval_g(self.wi, self.wo, self.g) if geometry_roughness else \
+            brdf.eval(self.wi, self.wo)
+        img = np.zeros(self.lit.shape + (3,))
+        img[self.lit] = self.weight[:, None] * f
+        r, k = self.resolution, self.supersample
+        img = img.reshape(r, k, r, k, 3).mean(axis=(1, 3))
+        return img, self.hit.reshape(r, k, r, k).mean(axis=(1, 3))
+
+
 def shade_sphere(brdf, scene: str = "sphere-distant", resolution: int = 128,
                  supersample: int = 4, geometry_roughness: bool | None = None):
     """Noise-free render of ``brdf`` on the unit sphere of ``scene`` (module docstring):
     ``(image (H, W, 3) float64, alpha (H, W))``. ``geometry_roughness`` (default: whether the
     BRDF has ``eval_g``) passes three's per-pixel geometry roughness of the
     ``resolution × supersample`` render target to ``brdf.eval_g``."""
-    if scene not in ("sphere-distant", "sphere-point"):
-        raise ValueError(f"shade_sphere: expected sphere-distant or sphere-point, got {scene!r}")
-    if int(resolution) < 1 or int(supersample) < 1:
-        raise ValueError("shade_sphere: resolution and supersample must be ≥ 1")
     if geometry_roughness is None:
         geometry_roughness = hasattr(brdf, "eval_g")
-    n = int(resolution) * int(supersample)
-    t = math.tan(math.radians(CAMERA["fov_degrees"]) / 2.0)
-    c = (np.arange(n) + 0.5) / n * 2.0 - 1.0
-    X, Y = np.meshgrid(c * t, -c * t)                          # +x right, +y up, row 0 on top
-    d = np.stack([X, Y, -np.ones_like(X)], -1)                 # unnormalised ray directions
-    o = np.array(CAMERA["origin"], dtype=float)
-    # |o + s d|² = 1
-    A = np.sum(d * d, -1)
-    B = 2.0 * (d @ o)
-    C = float(o @ o) - 1.0
-    disc = B * B - 4 * A * C
-    hit = disc > 0
-    s = np.where(hit, (-B - np.sqrt(np.maximum(disc, 0.0))) / (2 * A), 0.0)
-    P = o + s[..., None] * d
-    N = P / np.maximum(np.linalg.norm(P, axis=-1, keepdims=True), 1e-300)
-    Vw = -d / np.sqrt(A)[..., None]
-    if scene == "sphere-distant":
-        Lw = -np.asarray(DISTANT_LIGHT["direction"], float)
-        Lw = np.broadcast_to(Lw / np.linalg.norm(Lw), P.shape)
-        E = np.full(P.shape[:2], float(DISTANT_LIGHT["irradiance"]))
-    else:
-        Lv = np.asarray(POINT_LIGHT["position"], float) - P
-        dist2 = np.sum(Lv * Lv, -1)
-        Lw = Lv / np.sqrt(dist2)[..., None]
-        E = float(POINT_LIGHT["intensity"]) / dist2
-    T, Bt = _basis(N)
-
-    def local(w):
-        return np.stack([np.sum(w * T, -1), np.sum(w * Bt, -1), np.sum(w * N, -1)], -1)
-
-    wi, wo = local(Lw), local(Vw)
-    img = np.zeros(P.shape)
-    m = hit & (wi[..., 2] > 0) & (wo[..., 2] > 0)
-    if geometry_roughness:
-        # ray differentials per pixel of the render target: d_x = ∂d/∂x = (2t/n, 0, 0)
-        ndot = np.sum(N * d, -1)
-        g = np.zeros(P.shape[:2])
-        for dx in (np.array([2 * t / n, 0.0, 0.0]), np.array([0.0, -2 * t / n, 0.0])):
-            dP = s[..., None] * (dx - d * ((N @ dx) / np.where(ndot == 0, -1e-300, ndot))[..., None])
-            g = np.maximum(g, np.max(np.abs(dP), -1))
-        f = brdf.eval_g(wi[m], wo[m], g[m])
-    else:
-        f = brdf.eval(wi[m], wo[m])
-    img[m] = (E[m] * wi[m][:, 2])[:, None] * f
-    k = int(supersample)
-    img = img.reshape(resolution, k, resolution, k, 3).mean(axis=(1, 3))
-    alpha = hit.reshape(resolution, k, resolution, k).mean(axis=(1, 3))
-    return img, alpha
+    return SphereSamples(scene, resolution, supersample).shade(brdf, geometry_roughness)
 
 
 def estimate(fit, gltf, scene: str = "sphere-distant", resolution: int = 128,
