@@ -587,7 +587,7 @@ def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS,
     counted up to c. The cap keeps one engine's figure from being raised far above the goal
     at the other's expense; the log keeps the worse engine from taking all of the parameters
     (a sum of MSEs traded a good engine's 70 dB for a bad one's +1 dB). Varied, bounded to
-    [0, 1]: the base colour, ``specularFactor`` of a dielectric with ``KHR_materials_specular``,
+    [0, 1]: the base colour (a channel the rule leaves at 0 stays 0), ``specularFactor`` of a dielectric with ``KHR_materials_specular``,
     the roughness (L-BFGS-B from the rule's values). Kept: metallic, the index and
     ``specularColorFactor`` (the ior rule of :func:`_specular_extension` holds), the coat.
 
@@ -632,7 +632,9 @@ def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS,
     def loss(q) -> float:
         return -float(np.mean(psnr_each(q))) / 10.0
 
-    res = optimize.minimize(loss, q0, method="L-BFGS-B", bounds=[(0.0, 1.0)] * len(q0),
+    # a base channel the rule leaves black stays black (the fit has no diffuse there)
+    bounds = [(0.0, 0.0) if i < 3 and q0[i] <= 0.0 else (0.0, 1.0) for i in range(len(q0))]
+    res = optimize.minimize(loss, q0, method="L-BFGS-B", bounds=bounds,
                             options={"maxfun": 200, "maxiter": 40, "eps": 1e-4, "ftol": 1e-4})
     before, after = psnr_each(q0, 0.0), psnr_each(res.x, 0.0)
     figures = ", ".join(f"{e} {b:.1f} -> {a:.1f} dB" for e, b, a in zip(engines, before, after))
