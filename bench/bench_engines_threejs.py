@@ -14,7 +14,8 @@ three.js), ``--mx-ss`` (in MaterialX: its FIS loop is what SwiftShader spends th
 ``--env-samples`` (MaterialX's FIS samples per lobe), ``--spp`` and ``--batches`` (Mitsuba).
 Needs ``make npmdeps`` (three), Chromium and ``../shared/data``. Writes
 ``bench/results/engines_threejs.json`` (atomically, after every material) and
-``engines_threejs.csv`` (one row per material and scene).
+``engines_threejs.csv`` (one row per material and scene); ``--optimize engines --label
+engines`` stores a run of the exporter's option under ``labelled["engines"]`` of the same JSON.
 
 Per material (``fit`` = ``brdffit.fit(material, model="ggx-diffuse")``, the files =
 ``write_gltf(fit)`` and ``write_materialx(fit)``, as ``brdffit fit`` + ``brdffit export``
@@ -442,6 +443,9 @@ def _arguments(argv):
     ap.add_argument("--spp", type=int, default=256, help="Mitsuba samples per pixel per batch")
     ap.add_argument("--batches", type=int, default=8, help="Mitsuba batches (independent seeds)")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "engines_threejs.json")
+    ap.add_argument("--label", default=None,
+                    help="store this run under labelled[LABEL] of --out, next to the main run "
+                         "(which is kept, as is the CSV); e.g. --optimize engines --label engines")
     ap.add_argument("--summarise-only", action="store_true",
                     help="recompute the summary of the results already in --out (no rendering)")
     args = ap.parse_args(argv)
@@ -502,6 +506,23 @@ def _cpu_seconds() -> float:
     return t.user + t.system + t.children_user + t.children_system
 
 
+def _store(args, run: dict) -> None:
+    """Write ``run`` to ``args.out`` atomically: as the file, or with ``--label`` under
+    ``labelled[label]`` of the file's current content (the main run kept)."""
+    from brdffit._atomic import atomic_write
+
+    doc = run
+    if args.label:
+        doc = json.loads(args.out.read_text()) if args.out.is_file() else {}
+        doc.setdefault("labelled", {})[args.label] = run
+    elif args.out.is_file():
+        old = json.loads(args.out.read_text()).get("labelled")
+        if old:
+            doc = dict(run, labelled=old)
+    with atomic_write(args.out, "w") as fh:
+        json.dump(doc, fh, indent=1, default=float)
+
+
 def main(argv=None) -> int:
     args = _arguments(argv)
     from brdffit._atomic import atomic_write
@@ -541,8 +562,11 @@ def main(argv=None) -> int:
                "date": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                "wall_s": time.perf_counter() - t0, "cpu_s": _cpu_seconds() - cpu0,
                "summary": summarise(results), "results": results}
-        with atomic_write(args.out, "w") as fh:
-            json.dump(doc, fh, indent=1, default=float)
+        _store(args, doc)
+    if args.label:
+        print(json.dumps(doc.get("summary", {}), indent=1, default=float))
+        print(f"wrote labelled[{args.label!r}] of {args.out}")
+        return 0
     buf = io.StringIO()
     w = csv.DictWriter(buf, FIELDS)
     w.writeheader()
