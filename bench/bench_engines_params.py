@@ -1,8 +1,9 @@
 """Engine-aware glTF parameters, measured on the engine models (no engine, no Monte Carlo).
 
 Per material (MERL Neural-BRDF stand-ins and the RGL files, ``ggx-diffuse`` fits): the glTF
-parameters of the rules (``optimize=False``) and of :func:`brdffit.export.gltf.optimize_for_engines`
-(``optimize="engines"``), each rendered in ``sphere-distant`` (128², noise-free,
+parameters of the rules (``optimize=False``), of :func:`brdffit.export.gltf.optimize_for_engines`
+(``optimize="engines"``) and of the same for one engine alone (``"blender"``, ``"threejs"``: the
+best the optimiser finds for that engine by its model, how far one glTF file can take it), each rendered in ``sphere-distant`` (128², noise-free,
 :func:`brdffit.evaluation.engines.threejs_brdf.shade_sphere`) through the specification's BRDF,
 the model of Blender (:class:`brdffit.export.gltf_cycles.CyclesPrincipledBRDF`, multiscatter GGX)
 and the model of three.js (:class:`brdffit.evaluation.engines.threejs_brdf.ThreeJSBRDF` with
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -27,8 +29,14 @@ import numpy as np
 from _common import NBRDF, RGL_DIR, ROOT, use_project_sources  # bench/ is on sys.path
 
 use_project_sources()
-DEFAULT = ("gold-metallic-paint,white-paint,maroon-plastic,ss440,paper_white,ilm_l3_37_matte,"
-           "chm_mint")
+DEFAULT = ("ss440,gold-metallic-paint,maroon-plastic,white-paint,chrome-steel,blue-metallic-paint,"
+           "red-plastic,alum-bronze,acrylic_felt_green,cc_ibiza_sunset,cc_iris_purple_gem,chm_mint,"
+           "colodur_napoli_4f,ilm_l3_37_matte,paper_white")
+#: the parameter sets compared: the rules, the exporter's option for both engines, and the
+#: same for one engine alone (the best the optimiser finds for that engine: how far a single
+#: glTF file can take it, by its model)
+LABELS = (("rule", False), ("engines", "engines"), ("blender_only", "blender"),
+          ("threejs_only", "threejs"))
 
 
 def _spec(name: str) -> str:
@@ -48,10 +56,10 @@ def bench_material(name: str, res: int) -> dict:
     cx, cy, R = sphere_geometry_px(res)
     yy, xx = np.mgrid[0:res, 0:res] + 0.5
     out = {"material": name}
-    for label, opt in (("rule", False), ("engines", "engines")):
-        t = time.perf_counter()
+    for label, opt in LABELS:
+        t = time.process_time()
         p = _refine(fit, gltf_parameters(fit), opt)
-        row = {"seconds": time.perf_counter() - t, "baseColorFactor": p["baseColorFactor"][:3],
+        row = {"cpu_seconds": time.process_time() - t, "baseColorFactor": p["baseColorFactor"][:3],
                "specular": p.get("specular"), "metallic": p["metallicFactor"],
                "roughness": p["roughnessFactor"], "notes": p["notes"][-1:]}
         for engine in ("specification", "blender", "threejs"):
@@ -79,23 +87,25 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     from brdffit._atomic import atomic_write
 
-    rows = []
+    rows, load0 = [], list(os.getloadavg())
     for name in args.materials.split(","):
         r = bench_material(name, args.res)
         rows.append(r)
-        cells = []
-        for label in ("rule", "engines"):
-            cells.append(" ".join(f"{r[label][e]['psnr']:6.2f}"
-                                  for e in ("specification", "blender", "threejs")))
-        print(f"{name:22s} spec/blender/three dB: rule {cells[0]} | engines {cells[1]} "
-              f"| {r['engines']['seconds']:.1f} s", flush=True)
+        cells = " | ".join(label + " " + " ".join(f"{r[label][e]['psnr']:6.2f}" for e in
+                                                  ("specification", "blender", "threejs"))
+                           for label, _ in LABELS)
+        print(f"{name:22s} spec/blender/three dB: {cells} | engines "
+              f"{r['engines']['cpu_seconds']:.1f} s CPU", flush=True)
     summary = {}
-    for label in ("rule", "engines"):
+    for label, _ in LABELS:
         summary[label] = {e: {"psnr_mean": float(np.mean([r[label][e]["psnr"] for r in rows])),
                               "psnr_min": float(np.min([r[label][e]["psnr"] for r in rows]))}
                           for e in ("specification", "blender", "threejs")}
+    summary["engines"]["cpu_seconds_mean"] = float(np.mean([r["engines"]["cpu_seconds"]
+                                                             for r in rows]))
     doc = {"command": "bench/bench_engines_params.py " + " ".join(argv or sys.argv[1:]),
            "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "resolution": args.res,
+           "load_average_start": load0, "load_average_end": list(os.getloadavg()),
            "summary": summary, "materials": rows}
     with atomic_write(args.out, "w") as fh:
         fh.write(json.dumps(doc, indent=1, default=float) + "\n")
