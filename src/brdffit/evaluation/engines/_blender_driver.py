@@ -20,7 +20,8 @@ alpha is the coverage); Cycles on the CPU renders one image per seed with a 1-pi
 filter, no denoising, no adaptive sampling, no clamping and no light threshold, so the
 estimate is unbiased like Mitsuba's ``direct`` integrator. The Principled BSDF's
 microfacet distribution is left as the importer set it unless the job names one
-(``"GGX"`` or ``"MULTI_GGX"``). Outputs: ``render_<seed>.npy`` (H, W, 4) float32, scene
+(``"GGX"`` or ``"MULTI_GGX"``). With ``sphere_segments`` the imported meshes take the scene's
+sphere (:func:`use_scene_sphere`), their materials kept. Outputs: ``render_<seed>.npy`` (H, W, 4) float32, scene
 linear Rec.709, rows top to bottom, and ``report.json`` (Blender version, the objects and
 materials the import created and the Principled BSDF inputs of each material).
 """
@@ -107,6 +108,28 @@ def make_world(env):
     return world
 
 
+def use_scene_sphere(objects, segments):
+    """Give every imported mesh object the scene's sphere: a UV sphere of radius 1 with
+    ``segments`` = (around, along) faces, smooth shaded, its poles on +Z (the glTF file's +Y),
+    UVs kept; the imported materials stay in their slots."""
+    import bmesh
+
+    for obj in objects:
+        if obj.type != "MESH":
+            continue
+        mats = [slot.material for slot in obj.material_slots]
+        mesh = bpy.data.meshes.new(obj.data.name + "-scene-sphere")
+        bm = bmesh.new()
+        bmesh.ops.create_uvsphere(bm, u_segments=int(segments[0]), v_segments=int(segments[1]),
+                                  radius=1.0, calc_uvs=True)
+        bm.to_mesh(mesh)
+        bm.free()
+        mesh.shade_smooth()
+        for mat in mats:
+            mesh.materials.append(mat)
+        obj.data = mesh
+
+
 def build_scene(job):
     scene = bpy.context.scene
     cam = job["camera"]
@@ -185,6 +208,8 @@ def main(job_path):
         with open(os.path.join(job["out_dir"], "report.json"), "w", encoding="utf-8") as fh:
             json.dump(report, fh, indent=1)
         return 0
+    if job.get("sphere_segments"):
+        use_scene_sphere(objects, job["sphere_segments"])
     build_scene(job)
     scene = bpy.context.scene
     out_dir = job["out_dir"]
