@@ -111,9 +111,11 @@ def make_world(env):
 def use_scene_sphere(objects, segments):
     """Give every imported mesh object the scene's sphere: a UV sphere of radius 1 with
     ``segments`` = (around, along) faces, smooth shaded, its poles on +Z (the glTF file's +Y),
-    UVs kept; the imported materials stay in their slots."""
+    UVs kept; the imported materials stay in their slots. Returns the vertex count of each
+    replaced mesh."""
     import bmesh
 
+    counts = []
     for obj in objects:
         if obj.type != "MESH":
             continue
@@ -128,6 +130,8 @@ def use_scene_sphere(objects, segments):
         for mat in mats:
             mesh.materials.append(mat)
         obj.data = mesh
+        counts.append(len(mesh.vertices))
+    return counts
 
 
 def build_scene(job):
@@ -209,7 +213,8 @@ def main(job_path):
             json.dump(report, fh, indent=1)
         return 0
     if job.get("sphere_segments"):
-        use_scene_sphere(objects, job["sphere_segments"])
+        report["scene_sphere"] = {"segments": job["sphere_segments"],
+                                  "vertices": use_scene_sphere(objects, job["sphere_segments"])}
     build_scene(job)
     scene = bpy.context.scene
     out_dir = job["out_dir"]
