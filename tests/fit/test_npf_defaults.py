@@ -51,9 +51,9 @@ def test_window_rule_stops_when_the_decrease_over_the_window_is_small():
 
 
 def test_default_starts_and_the_continuation_window(data, monkeypatch):
-    """``starts=None`` screens :data:`DEFAULT_STARTS` (informed starts, no random ones) and
-    only the continuation of the best start runs with :data:`CONTINUATION_WINDOW`."""
-    assert npf.DEFAULT_STARTS == ("ones", "sgd", "slices")
+    """``starts=None`` screens :data:`DEFAULT_STARTS` (the paper's starts except the G-from-D
+    fit) and only the continuation of the best start runs with :data:`CONTINUATION_WINDOW`."""
+    assert npf.DEFAULT_STARTS == ("random", "ones", "sgd", "slices")
     assert set(npf.DEFAULT_STARTS) <= set(npf.ALL_STARTS)
     assert npf.CONTINUATION_WINDOW == (100, 5.0)
     windows = []
@@ -64,11 +64,13 @@ def test_default_starts_and_the_continuation_window(data, monkeypatch):
         return run(*args, **kw)
 
     monkeypatch.setattr(_solver, "run_independent_g", spy)
-    fit = npf.fit_npf(data=data, max_iter=6, start_max_iter=3, polish=0)
+    fit = npf.fit_npf(data=data, max_iter=6, start_max_iter=3, polish=0, n_random=1)
     info = fit.fit_info
-    assert [s["start"] for s in info["starts"]] == list(npf.DEFAULT_STARTS)
+    labels = ["random-0", "ones", "sgd", "slices"]
+    assert [s["start"] for s in info["starts"]] == labels
     assert fit.fit_options["starts"] == list(npf.DEFAULT_STARTS)
     assert all(s["status"] == "ok" for s in info["starts"])
-    assert windows == [None, None, None, npf.CONTINUATION_WINDOW]
-    assert "continuation" in info and info["iterations"] == 3 * 3 + 3
+    assert "g_from_d_start" not in info                  # no G-from-D fit by default
+    assert windows == [None] * 4 + [npf.CONTINUATION_WINDOW]
+    assert "continuation" in info and info["iterations"] == 4 * 3 + 3
     assert "over the last 100 iterations" in info["criterion"]

@@ -52,14 +52,16 @@ Deviations from the paper (deliberate, documented):
   ``ALL_STARTS``, ``n_random``). Here every start given is *screened* for ``start_max_iter``
   AWLS iterations, the best screened state **per channel** (the channels are independent
   problems) is continued, and the polish follows. ``starts=None`` screens
-  :data:`DEFAULT_STARTS` = all-ones, the SGD fit and the data slices (the informed starts;
-  no random ones, no G-from-D fit: on the MERL materials measured they did not give the
-  lowest final objective often enough to pay for their screening, docs/design/npf-fit.md);
-  ``starts=ALL_STARTS`` is the paper's set. The continuation stops by the AWLS rule of
-  :mod:`._solver` or, earlier, when its objective fell by less than ``W·k·tol`` over the
-  last ``W`` iterations (:data:`CONTINUATION_WINDOW`, ``W = 100, k = 5``): past that point
-  AWLS crawls along the near-ambiguity of F(θd) and G(θi)G(θo) and the bounded polish does
-  in ~10 Newton iterations what AWLS would in hundreds.
+  :data:`DEFAULT_STARTS`: all the paper's starts except the G-from-D fit (``n_random`` random,
+  all-ones, the SGD fit, the data slices). The G-from-D start was the best screened start
+  of no channel on the 14 MERL materials where this was recorded and cost 0.2-3.6 s CPU;
+  random starts were on 11 of them, and leaving them out raised the final objective by up
+  to 1.3 % (docs/design/npf-fit.md). ``starts=ALL_STARTS`` is the paper's set. The
+  continuation stops by the AWLS rule of :mod:`._solver` or, earlier, when its objective
+  fell by less than ``W·k·tol`` over the last ``W`` iterations (:data:`CONTINUATION_WINDOW`,
+  ``W = 100, k = 5``): past that point AWLS crawls along the near-ambiguity of F(θd) and
+  G(θi)G(θo), for another 200-1400 iterations on the slowest MERL materials measured, which
+  lowered the AWLS objective by 0.05-0.25 % there.
 * ``fit_info["starts"]`` has one record per screened start (objective per channel,
   iterations, stop reason); ``fit_info["best_start_per_channel"]`` the start each channel
   was continued from; ``fit_info["continuation"]`` the continuation's run;
@@ -110,8 +112,8 @@ __all__ = ["fit_npf", "fit_npf_independent_g", "fit_npf_g_from_d", "fit_npf_naiv
 
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
 ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
-#: the independent-G starts of ``starts=None``
-DEFAULT_STARTS = ("ones", "sgd", "slices")
+#: the independent-G starts of ``starts=None``: the paper's, except the G-from-D fit
+DEFAULT_STARTS = ("random", "ones", "sgd", "slices")
 DEFAULT_MAX_ITER = {"independent-g": 4000, "g-from-d": 300, "naive": 3000}
 #: Levenberg–Marquardt iterations after AWLS by default (``polish``; a cap: the polish stops
 #: earlier on its criterion, relative decrease < tol for 2 iterations; the cap is reported
@@ -142,7 +144,7 @@ G_FROM_D_EXTRAPOLATE_AFTER = 50
 #: by less than ``W · k · tol`` (relative) over the last ``W`` iterations, ``(W, k)`` =
 #: this: the mean decrease per iteration below ``k · tol``. Past that point AWLS crawls along
 #: the near-ambiguity of F(θd) and G(θi)G(θo) (1e-5-1e-6 per iteration for hundreds of
-#: iterations on MERL) and the polish takes the rest (docs/design/npf-fit.md).
+#: iterations on MERL) before the polish (docs/design/npf-fit.md).
 CONTINUATION_WINDOW = (100, 5.0)
 #: model names of the registry and CLI -> variants (one naming scheme across CLI and API)
 CLI_VARIANTS = {"npf": "independent-g", "npf-g-from-d": "g-from-d", "npf-naive": "naive",
@@ -291,7 +293,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
     starts:
         Independent-G starts, any of ``ALL_STARTS`` (``n_random`` random starts,
         all-ones, SGD fit, G-from-D fit, data slices: the paper's eight). Default
-        (``None``): :data:`DEFAULT_STARTS` (all-ones, SGD fit, data slices). The best
+        (``None``): :data:`DEFAULT_STARTS` (all except the G-from-D fit). The best
         screened state per channel is continued. Deterministic for a given ``seed``.
     start_max_iter:
         Independent-G: every start first runs this many AWLS iterations, then the per-channel
