@@ -81,6 +81,7 @@ CONFIGS = {
     "npf-bivariate": [("default", {})],
     "npf": [("default", {}),
             ("all-starts", {"starts": ("random", "ones", "sgd", "g-from-d", "slices")}),
+            ("informed-starts", {"starts": ("ones", "sgd", "slices")}),
             *[(f"random16-seed{s}", {"n_random": 16, "seed": s}) for s in (1, 2)],
             ("long", {"max_iter": 12000, "start_max_iter": None, "polish": 400})],
 }
