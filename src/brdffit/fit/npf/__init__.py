@@ -2,7 +2,7 @@
 
 :func:`fit_npf` fits, per colour channel, one of
 
-* ``"independent-g"`` – Eq. 3 with an independent tabulated G (§4.3), multiple starts;
+* ``"independent-g"`` – Eq. 3 with an independent tabulated G (§4.3), several starts;
 * ``"g-from-d"`` – Eq. 3 with G derived from D by Smith's integrals (Eq. 19 ff.);
 * ``"naive"`` – Eq. 4 (D(θh) F(θd) H(φd));
 * ``"bivariate"`` – Eq. 5 (B(θh, θd), one weighted-average step),
@@ -47,9 +47,28 @@ Deviations from the paper (deliberate, documented):
 * The start "from the SGD fit" uses :func:`brdffit.fit.sgd.fit_sgd` when that module exists
   (the paper used its authors' earlier Bagher et al. 2012 fits); otherwise it is skipped and
   ``fit_info["starts"]`` says so.
-* ``fit_info["start_basins"]`` (:func:`start_basins`) says how far apart the screened starts
-  ended per channel: distinct objectives (more than :data:`BASIN_TOLERANCE` apart) and the
-  spread (largest over smallest).
+* Independent-G's starts and how they are run. The paper ran eight starts to convergence
+  (four random, all-ones, the SGD fit, the G-from-D fit, D from the retro-reflective slice:
+  ``ALL_STARTS``, ``n_random``). Here every start given is *screened* for ``start_max_iter``
+  AWLS iterations, the best screened state **per channel** (the channels are independent
+  problems) is continued, and the polish follows. ``starts=None`` screens
+  :data:`DEFAULT_STARTS`: all the paper's starts except the G-from-D fit (``n_random`` random,
+  all-ones, the SGD fit, the data slices). The G-from-D start was the best screened start
+  of no channel on the 14 MERL materials where this was recorded and cost 0.2-3.6 s CPU;
+  random starts were on 11 of them, and leaving them out raised the final objective by up
+  to 1.3 % (docs/design/npf-fit.md). ``starts=ALL_STARTS`` is the paper's set. The
+  continuation stops by the AWLS rule of :mod:`._solver` or, earlier, when its objective
+  fell by less than ``W·k·tol`` over the last ``W`` iterations (:data:`CONTINUATION_WINDOW`,
+  ``W = 100, k = 5``): past that point AWLS crawls along the near-ambiguity of F(θd) and
+  G(θi)G(θo), for another 200-1400 iterations on the slowest MERL materials measured, which
+  lowered the AWLS objective by 0.05-0.25 % there.
+* ``fit_info["starts"]`` has one record per screened start (objective per channel,
+  iterations, stop reason); ``fit_info["best_start_per_channel"]`` the start each channel
+  was continued from; ``fit_info["continuation"]`` the continuation's run;
+  ``fit_info["start_basins"]`` (:func:`start_basins`) how far apart the screened starts
+  ended per channel: distinct objectives (more than :data:`BASIN_TOLERANCE` apart, counted
+  over the screened starts only, so at most their number) and the spread (largest over
+  smallest), as far as ``start_max_iter`` iterations tell.
 
 Stopping rule: see :mod:`._solver` (relative decrease below ``tol`` for 3 iterations, exact
 fit, or ``max_iter``; the polish: below ``tol`` for 2 iterations, no damped step lowering the
@@ -88,10 +107,13 @@ from ._solver import MFState, NaiveState, Samples
 from ...loading import load
 
 __all__ = ["fit_npf", "fit_npf_independent_g", "fit_npf_g_from_d", "fit_npf_naive",
-           "fit_npf_bivariate", "VARIANTS", "ALL_STARTS", "summary", "start_basins", "BASIN_TOLERANCE"]
+           "fit_npf_bivariate", "VARIANTS", "ALL_STARTS", "DEFAULT_STARTS", "summary",
+           "start_basins", "BASIN_TOLERANCE", "CONTINUATION_WINDOW"]
 
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
 ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
+#: the independent-G starts of ``starts=None``: the paper's, except the G-from-D fit
+DEFAULT_STARTS = ("random", "ones", "sgd", "slices")
 DEFAULT_MAX_ITER = {"independent-g": 4000, "g-from-d": 300, "naive": 3000}
 #: Levenberg–Marquardt iterations after AWLS by default (``polish``; a cap: the polish stops
 #: earlier on its criterion, relative decrease < tol for 2 iterations; the cap is reported
@@ -118,6 +140,12 @@ POLISH_BOUNDED = {"independent-g": None, "g-from-d": ("F",)}
 #: others (a third of MERL, which plain sweeps leave at the cap) converge in 100-200
 #: iterations
 G_FROM_D_EXTRAPOLATE_AFTER = 50
+#: Independent-G's continuation of the best screened start also stops when its objective fell
+#: by less than ``W · k · tol`` (relative) over the last ``W`` iterations, ``(W, k)`` =
+#: this: the mean decrease per iteration below ``k · tol``. Past that point AWLS crawls along
+#: the near-ambiguity of F(θd) and G(θi)G(θo) (1e-5-1e-6 per iteration for hundreds of
+#: iterations on MERL) before the polish (docs/design/npf-fit.md).
+CONTINUATION_WINDOW = (100, 5.0)
 #: model names of the registry and CLI -> variants (one naming scheme across CLI and API)
 CLI_VARIANTS = {"npf": "independent-g", "npf-g-from-d": "g-from-d", "npf-naive": "naive",
                 "npf-bivariate": "bivariate"}
@@ -263,12 +291,15 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         Stopping rule (see :mod:`._solver`); ``max_iter`` defaults per variant
         (independent-G 4000 in all, screening included; G-from-D 300; naive 3000).
     starts:
-        Independent-G starts, any of ``ALL_STARTS`` (default: all, as the paper:
-        ``n_random`` random starts, all-ones, SGD fit, G-from-D fit, data slices). The best
-        final objective is kept. Deterministic for a given ``seed``.
+        Independent-G starts, any of ``ALL_STARTS`` (``n_random`` random starts,
+        all-ones, SGD fit, G-from-D fit, data slices: the paper's eight). Default
+        (``None``): :data:`DEFAULT_STARTS` (all except the G-from-D fit). The best
+        screened state per channel is continued. Deterministic for a given ``seed``.
     start_max_iter:
         Independent-G: every start first runs this many AWLS iterations, then the per-channel
-        best continues up to ``max_iter`` (``None``: every start runs ``max_iter``, as the paper).
+        best continues up to ``max_iter`` or until the AWLS rule or
+        :data:`CONTINUATION_WINDOW` stops it (``None``: every start runs ``max_iter``
+        under the AWLS rule alone, as the paper).
     polish:
         Cap of the damped Newton (Levenberg–Marquardt) iterations after AWLS, all factors
         of a channel at once, accepted only where they lower the objective (module notes).
@@ -436,7 +467,7 @@ def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max
     """Eq. 3 with an independent G (§4.3): every start screened for ``start_max_iter`` AWLS
     iterations (:func:`_multi_start`), the per-channel best continued up to ``max_iter``
     (:func:`_continue_best`), then the polish."""
-    starts = tuple(ALL_STARTS if starts is None else starts)
+    starts = tuple(DEFAULT_STARTS if starts is None else starts)
     bad = [s for s in starts if s not in ALL_STARTS]
     if bad or not starts:
         raise ValueError(f"starts: expected a non-empty subset of {ALL_STARTS}, found {starts}")
@@ -448,10 +479,10 @@ def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max
     smp = Samples.from_objective(pb.obj)
     start_states = _start_states(pb, starts, n_random, smp)
 
-    def run(label, st, max_iter, what):
+    def run(label, st, max_iter, what, window=None):
         return _solver.run_independent_g(st, smp, eps=pb.eps, smoothing=g_smoothing,
                                          tol=pb.tol, max_iter=max_iter,
-                                         extrapolate=extrapolate,
+                                         extrapolate=extrapolate, window=window,
                                          callback=step_callback(pb.callback, what, max_iter))
 
     runs, (bst, bE, blab) = _multi_start(
@@ -460,7 +491,8 @@ def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max
     extra = {"starts": runs, "best_start_per_channel": blab,
              "start_basins": start_basins(runs)}
     bst, bE = _continue_best(runs, (bst, bE, blab), extra, screen, pb.max_iter,
-                             lambda st, n: run("best", st, n, "best start, continued"))
+                             lambda st, n: run("best", st, n, "best start, continued",
+                                               CONTINUATION_WINDOW))
     if pb.polish > 0:
         bst, bE = _polish(bst, bE, smp, extra, eps=pb.eps, polish=pb.polish, tol=pb.tol,
                           g_from_d=False, bound=pb.polish_bound, callback=pb.callback)
@@ -663,6 +695,11 @@ def _convergence(extra: dict, tol, max_iter, variant) -> dict:
         criterion = (f"relative decrease of the summed AWLS objective (E_prev - E) / E < tol "
                      f"= {tol:g} for 3 consecutive iterations (Monitor.patience), or an exact "
                      f"fit; safety cap max_iter = {max_iter}")
+        if variant == "independent-g":
+            n_win, factor = CONTINUATION_WINDOW
+            criterion += (f"; the continuation of the best start also stops when its relative "
+                          f"decrease over the last {n_win} iterations is < {n_win}·{factor:g}"
+                          f"·tol = {n_win * factor * tol:g} (CONTINUATION_WINDOW)")
     if polish is not None:
         cap, phase = int(polish["max_iterations"]), "Levenberg–Marquardt polish"
         nit += int(polish["iterations"])

@@ -12,7 +12,10 @@ over the 90 × 90 bins. G updates need a second pass (:func:`._kernels.g_normal_
 
 Stopping rule (all variants): stop after ``patience`` (3) consecutive iterations whose
 relative decrease of the total objective ``(E_prev − E)/E`` is below ``tol``, or when
-``E ≤ 1e-14 · Σ w ρ*²`` (exact fit), or after ``max_iter`` iterations. The
+``E ≤ 1e-14 · Σ w ρ*²`` (exact fit), or after ``max_iter`` iterations. Independent-G's
+continuation of the best start also stops when the relative decrease over the last ``W``
+iterations, ``(E_{k−W} − E_k)/E_k``, is below ``W · k · tol`` (``window = (W, k)``: the
+mean decrease per iteration has fallen below ``k · tol``; :class:`Monitor`). The
 Levenberg–Marquardt polish (:func:`polish_lm`) stops after 2 such iterations, when no damped
 step lowers the objective, or after its own cap.
 """
@@ -194,13 +197,15 @@ def cramer(sw, sx, sxx, sy, sxy):
 
 
 class Monitor:
-    """Objective history and the documented stopping rule."""
+    """Objective history and the documented stopping rule; ``window = (W, k)`` adds the
+    windowed rule (relative decrease over the last ``W`` iterations below ``W · k · tol``)."""
 
-    def __init__(self, ref_energy, tol, max_iter, patience=3):
+    def __init__(self, ref_energy, tol, max_iter, patience=3, window=None):
         self.ref = float(np.sum(ref_energy))
         self.tol = tol
         self.max_iter = max_iter
         self.patience = patience
+        self.window = window
         self.history: list[float] = []
         self.small = 0
         self.reason = "max_iter"
@@ -221,6 +226,13 @@ class Monitor:
             self.small = self.small + 1 if rel < self.tol else 0
             if self.small >= self.patience:
                 self.reason = f"relative decrease < {self.tol:g} for {self.patience} iterations"
+                return True
+        if self.window is not None and len(self.history) > self.window[0]:
+            n_win, factor = self.window
+            old = self.history[-1 - n_win]
+            limit = n_win * factor * self.tol
+            if (old - e) / max(e, 1e-300) < limit:
+                self.reason = f"relative decrease < {limit:g} over the last {n_win} iterations"
                 return True
         if len(self.history) > self.max_iter:         # history[0] is the start
             self.reason = "max_iter"
@@ -465,19 +477,21 @@ def _state_arrays(st: MFState):
 
 
 def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol=1e-6,
-                      max_iter=1000, g_step_cap=None, extrapolate=False,
+                      max_iter=1000, g_step_cap=None, extrapolate=False, window=None,
                       callback=None) -> RunResult:
     """Independent-G AWLS (§4.2-4.3): D, F (Eq. 14), G(θi) and G(θo) updates averaged and
     Gaussian-smoothed (σ = ``smoothing`` samples), taken with the exact, over-relaxed line
     search of :func:`line_search_g` (the paper searches along the step only when it increases
     the objective), ρd/ρs by Cramer's rule, max-normalisation and DR clamping at ``eps``.
     With ``extrapolate`` each sweep is followed by an accepted-if-better over-relaxation step (:func:`_extrapolate`), which shortens the long AWLS "swamps"
-    caused by the near-ambiguity between F(θd) and G(θi)G(θo)."""
+    caused by the near-ambiguity between F(θd) and G(θi)G(θo). ``window = (W, k)``: also
+    stop when the relative decrease over the last W iterations is below ``W · k · tol``
+    (:class:`Monitor`)."""
     t0 = time.perf_counter()
     _normalise_factors(st, eps, g_from_d=False)
     E, S = _stats(st, smp)
     _rho_update(st, smp, S)
-    mon = Monitor(smp.sum_wzz, tol, max_iter)
+    mon = Monitor(smp.sum_wzz, tol, max_iter, window=window)
     g_step_cap = G_STEP_CAP if g_step_cap is None else float(g_step_cap)
     over_relaxed = 0
     E = expanded_objective(st, smp, S)
