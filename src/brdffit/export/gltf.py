@@ -104,7 +104,7 @@ import numpy as np
 
 from .._atomic import atomic_write
 from ..errors import ExportError
-from ..evaluation.engines.threejs_brdf import from_gltf
+from ..evaluation.engines.threejs_brdf import SphereSamples, from_gltf
 from ..evaluation.metrics import brdf_metrics
 from ..microfacet import GGX
 from ..microfacet.coat import coat_alpha_weight, coat_parts
@@ -601,8 +601,6 @@ def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS,
     result replaces ``p`` only when it raises the objective's mean PSNR by ≥ 0.1 dB; the
     predicted PSNR per engine before and after is in the notes."""
     from scipy import optimize
-
-    from ..evaluation.engines.threejs_brdf import SphereSamples
 
     engines = tuple(engines)
     for e in engines:

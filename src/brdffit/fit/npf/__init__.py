@@ -291,10 +291,9 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         Stopping rule (see :mod:`._solver`); ``max_iter`` defaults per variant
         (independent-G 4000 in all, screening included; G-from-D 300; naive 3000).
     starts:
-        Independent-G starts, any of ``ALL_STARTS`` (``n_random`` random starts,
-        all-ones, SGD fit, G-from-D fit, data slices: the paper's eight). Default
-        (``None``): :data:`DEFAULT_STARTS` (all except the G-from-D fit). The best
-        screened state per channel is continued. Deterministic for a given ``seed``.
+        Independent-G starts, any of ``ALL_STARTS`` (the paper's eight: ``n_random`` random,
+        all-ones, SGD fit, G-from-D fit, data slices); ``None``: :data:`DEFAULT_STARTS` (all
+        but the G-from-D fit). The best screened state per channel is continued.
     start_max_iter:
         Independent-G: every start first runs this many AWLS iterations, then the per-channel
         best continues up to ``max_iter`` or until the AWLS rule or
@@ -315,14 +314,12 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
     g_smoothing, dr_epsilon:
         σ (in G samples) of the Gaussian smoothing of G in independent-G (0 disables); the
         dynamic-range clamp (default 1e-6 for independent-G, 0 for G-from-D and naive).
-    init:
-        Start of G-from-D / naive: ``"slices"`` (default), ``"ones"`` or ``"random"``.
-    n_random, seed, name:
-        Random independent-G starts, the seed of every random start, the model's name.
+    init, n_random, seed, name:
+        Start of G-from-D / naive (``"slices"``, ``"ones"``, ``"random"``); random
+        independent-G starts, the seed of every random start (deterministic), the model's name.
     callback, verbose:
-        ``callback(iteration, objective)`` after every AWLS / LM iteration (any variant but
-        bivariate; progress listeners, :mod:`brdffit.progress`, receive the same steps);
-        print one line per independent-G start.
+        ``callback(iteration, objective)`` after every AWLS / LM iteration (not bivariate;
+        progress listeners receive the same steps); print one line per independent-G start.
 
     Returns
     -------
