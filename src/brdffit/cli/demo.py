@@ -21,7 +21,7 @@ from ._commands import DEMO_MODELS
 from ._parsing import usage_error
 
 # The demo's independent-G NPF runs one start (from the G-from-D fit) for a bounded number of
-# AWLS iterations, to stay within a few minutes; `brdffit fit/compare` run all starts.
+# AWLS iterations, to stay within a few minutes; `brdffit fit/compare` run the default starts.
 DEMO_FIT_OPTIONS = {"npf": {"starts": ("g-from-d",), "max_iter": 60, "start_max_iter": 60}}
 # what the demo suggests next (brdffit arguments; tests/cli/test_demo.py runs them)
 NEXT_STEP = ("fit synthetic:plastic-beckmann -m ggx-diffuse -o plastic.npz",
