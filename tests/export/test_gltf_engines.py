@@ -57,10 +57,10 @@ def test_engine_aware_parameters_keep_sharp_lobes_and_are_checked(tmp_path):
                            specular=[0.6, 0.6, 0.6])
     rule = gltf_parameters(sharp)
     eng = optimize_for_engines(sharp, rule)
-    # the engine models are not trusted on sharp highlights: the rule's parameters are kept
+    # sharp highlights: the rule's parameters are kept
     assert {k: v for k, v in eng.items() if k != "notes"} == {
         k: v for k, v in rule.items() if k != "notes"}
-    assert "not trusted on sharp highlights" in eng["notes"][-1]
+    assert "sharp highlights: the rule's parameters are kept" in eng["notes"][-1]
     with pytest.raises(ValueError, match="optimize"):
         gltf_equivalent(sharp, optimize="nope")
     with pytest.raises(ValueError, match="engine"):

@@ -543,9 +543,10 @@ def engine_brdf(p: dict, engine: str = "specification", name: str = "gltf",
                                 multiscatter=multiscatter and engine == "blender")
 
 
-#: the engines' models are trusted on lobes at least this rough (glTF roughness): on sharper
-#: highlights Blender measures 2-5 % dimmer than :class:`CyclesPrincipledBRDF` (cause not found,
-#: docs/design/engines.md), so :func:`optimize_for_engines` keeps the rule's parameters there
+#: the parameters of lobes sharper than this (glTF roughness) are left to the rule by
+#: :func:`optimize_for_engines`: the engines' renders there were measured on Blender's 64 × 32
+#: preview mesh, whose facets moved sharp highlights by a few % (docs/design/engines.md);
+#: not yet measured with the option on the scene's sphere
 ENGINE_FIT_MIN_ROUGHNESS = 0.15
 #: the render :func:`optimize_for_engines` matches: ``sphere-distant``, this many pixels a side,
 #: ``ENGINE_FIT_SUPERSAMPLE``² samples per pixel on both sides
@@ -597,7 +598,7 @@ def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS,
     under a specular layer whose F90 is always 1; the rules follow the specification, these
     parameters follow the engines. Unchanged (with a note): anisotropic materials (the engine
     models do not cover ``KHR_materials_anisotropy``) and lobes sharper than
-    :data:`ENGINE_FIT_MIN_ROUGHNESS` (Blender's highlight is dimmer than its model there). The
+    :data:`ENGINE_FIT_MIN_ROUGHNESS` (not yet measured in the engines with the option). The
     result replaces ``p`` only when it raises the objective's mean PSNR by ≥ 0.1 dB; the
     predicted PSNR per engine before and after is in the notes."""
     from scipy import optimize
@@ -612,7 +613,7 @@ def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS,
     if p["roughnessFactor"] < ENGINE_FIT_MIN_ROUGHNESS:
         return dict(p, notes=p["notes"] + [
             f"engine-aware optimisation skipped: roughness {p['roughnessFactor']:.3g} < "
-            f"{ENGINE_FIT_MIN_ROUGHNESS} (the engine models are not trusted on sharp highlights)"])
+            f"{ENGINE_FIT_MIN_ROUGHNESS} (sharp highlights: the rule's parameters are kept)"])
     sphere = SphereSamples("sphere-distant", resolution, ENGINE_FIT_SUPERSAMPLE)
     ref, alpha = sphere.shade(model)
     mask = alpha >= 0.999
