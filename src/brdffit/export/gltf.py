@@ -588,8 +588,9 @@ def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS,
     counted up to c. The cap keeps one engine's figure from being raised far above the goal
     at the other's expense; the log keeps the worse engine from taking all of the parameters
     (a sum of MSEs traded a good engine's 70 dB for a bad one's +1 dB). Varied, bounded to
-    [0, 1]: the base colour (a channel the rule leaves at 0 stays 0), ``specularFactor`` of a dielectric with ``KHR_materials_specular``,
-    the roughness (L-BFGS-B from the rule's values). Kept: metallic, the index and
+    [0, 1]: the base colour (a channel the rule leaves at 0 stays 0), ``specularFactor`` of a
+    dielectric with ``KHR_materials_specular``, the roughness (L-BFGS-B from the rule's
+    values). Kept: metallic, the index and
     ``specularColorFactor`` (the ior rule of :func:`_specular_extension` holds), the coat.
 
     The engines add energy glTF's BRDF does not have (Blender's importer leaves Cycles on
@@ -622,22 +623,22 @@ def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS,
     floor = 10.0 ** (-ENGINE_FIT_CAP_DB / 10.0)
     q0, has_sp = _engine_fit_vector(p)
 
-    def psnr_each(q, cap: float = floor) -> np.ndarray:
+    def mse_each(q) -> np.ndarray:          # per engine, relative to the fit's peak²
         pp = _with_engine_fit_vector(p, q, has_sp)
-        mse = [np.mean((sphere.shade(engine_brdf(pp, e))[0][mask] - ref_px) ** 2)
-               for e in engines]
-        return -10.0 * np.log10(np.asarray(mse) / peak2 + cap)
+        return np.array([np.mean((sphere.shade(engine_brdf(pp, e))[0][mask] - ref_px) ** 2)
+                         for e in engines]) / peak2
 
-    def loss(q) -> float:
-        return -float(np.mean(psnr_each(q))) / 10.0
+    def loss(mse) -> float:                 # −(mean capped PSNR)/10
+        return float(np.mean(np.log10(mse + floor)))
 
     # a base channel the rule leaves black stays black (the fit has no diffuse there)
     bounds = [(0.0, 0.0) if i < 3 and q0[i] <= 0.0 else (0.0, 1.0) for i in range(len(q0))]
-    res = optimize.minimize(loss, q0, method="L-BFGS-B", bounds=bounds,
+    res = optimize.minimize(lambda q: loss(mse_each(q)), q0, method="L-BFGS-B", bounds=bounds,
                             options={"maxfun": 200, "maxiter": 40, "eps": 1e-4, "ftol": 1e-4})
-    before, after = psnr_each(q0, 0.0), psnr_each(res.x, 0.0)
-    figures = ", ".join(f"{e} {b:.1f} -> {a:.1f} dB" for e, b, a in zip(engines, before, after))
-    if not -loss(res.x) >= -loss(q0) + 0.01:
+    mse0, mse1 = mse_each(q0), mse_each(res.x)
+    figures = ", ".join(f"{e} {-10 * np.log10(b):.1f} -> {-10 * np.log10(a):.1f} dB"
+                        for e, b, a in zip(engines, mse0, mse1))
+    if not loss(mse1) <= loss(mse0) - 0.01:        # 0.1 dB
         return dict(p, notes=p["notes"] + ["engine-aware optimisation did not raise the engines' "
                                            f"mean PSNR in sphere-distant: rule kept ({figures})"])
     out = _with_engine_fit_vector(p, res.x, has_sp)

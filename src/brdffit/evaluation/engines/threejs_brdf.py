@@ -268,10 +268,12 @@ class SphereSamples:
     (``sphere-distant`` or ``sphere-point``, module docstring) at ``resolution``²: the
     directions ``wi``, ``wo`` (local frames) and the factor ``E (N·L)`` of every sample that
     sees the light, for :meth:`shade`; computed once, so that many BRDFs can be shaded
-    (:func:`shade_sphere`, :func:`brdffit.export.gltf.optimize_for_engines`)."""
+    (:func:`shade_sphere`, :func:`brdffit.export.gltf.optimize_for_engines`). With
+    ``geometry_roughness`` also three's per-pixel geometry roughness ``g`` of the
+    ``resolution × supersample`` render target (``None`` otherwise)."""
 
     def __init__(self, scene: str = "sphere-distant", resolution: int = 128,
-                 supersample: int = 4):
+                 supersample: int = 4, geometry_roughness: bool = False):
         if scene not in ("sphere-distant", "sphere-point"):
             raise ValueError(f"shade_sphere: expected sphere-distant or sphere-point, got {scene!r}")
         if int(resolution) < 1 or int(supersample) < 1:
@@ -312,8 +314,10 @@ class SphereSamples:
         self.lit, self.hit = m, hit
         self.wi, self.wo = wi[m], wo[m]
         self.weight = E[m] * self.wi[:, 2]
-        # ray differentials per pixel of the render target, for three's geometry roughness:
-        # d_x = ∂d/∂x = (2t/n, 0, 0)
+        self.g = None
+        if not geometry_roughness:
+            return
+        # ray differentials per pixel of the render target: d_x = ∂d/∂x = (2t/n, 0, 0)
         ndot = np.sum(N * d, -1)
         g = np.zeros(P.shape[:2])
         for dx in (np.array([2 * t / n, 0.0, 0.0]), np.array([0.0, -2 * t / n, 0.0])):
@@ -322,7 +326,10 @@ class SphereSamples:
         self.g = g[m]
 
     def shade(self, brdf, geometry_roughness: bool = False):
-        """``(image (H, W, 3), alpha (H, W))`` of ``brdf`` (box average of the samples)."""
+        """``(image (H, W, 3), alpha (H, W))`` of ``brdf`` (box average of the samples);
+        ``geometry_roughness`` passes ``g`` to ``brdf.eval_g`` (the samples must have it)."""
+        if geometry_roughness and self.g is None:
+            raise ValueError("SphereSamples.shade: built without geometry_roughness")
         f = brdf.eval_g(self.wi, self.wo, self.g) if geometry_roughness else \
             brdf.eval(self.wi, self.wo)
         img = np.zeros(self.lit.shape + (3,))
@@ -340,7 +347,8 @@ def shade_sphere(brdf, scene: str = "sphere-distant", resolution: int = 128,
     ``resolution × supersample`` render target to ``brdf.eval_g``."""
     if geometry_roughness is None:
         geometry_roughness = hasattr(brdf, "eval_g")
-    return SphereSamples(scene, resolution, supersample).shade(brdf, geometry_roughness)
+    return SphereSamples(scene, resolution, supersample,
+                         geometry_roughness).shade(brdf, geometry_roughness)
 
 
 def estimate(fit, gltf, scene: str = "sphere-distant", resolution: int = 128,
