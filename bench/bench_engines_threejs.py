@@ -34,9 +34,10 @@ make them), ``scenes[scene]``:
   Carlo) and its error, ``gltf_spec_vs_fit``, ``ablations`` (three's departures from the
   specification switched off one at a time); for MaterialX ``model_vs_engine``,
   ``vs_converged_fit`` and ``estimate`` from :class:`OpenPBRBRDF`;
-* in the environment scenes ``estimate`` is ``None``: :func:`shade_sphere` shades a
-  directional light only, and an estimate of an environment scene would need the map's
-  integral, i.e. a renderer. In its place, ``three_model_mitsuba`` and
+* in the environment scenes ``estimate``: the cheap estimate of three's PSNR there
+  (:func:`brdffit.evaluation.engines.threejs_ibl.estimate_env`: three's PMREM and split-sum
+  shading in NumPy, against the same Mitsuba renders of the fit) and its error; also
+  ``three_model_mitsuba`` and
   ``materialx.model_mitsuba``: the engine's model (:class:`ThreeJSBRDF` of the file,
   :class:`OpenPBRBRDF` of the fit) rendered by Mitsuba in the scene against the fit (same
   seeds, :func:`crn_psnr`): what the engine would score if it integrated the map exactly, so
@@ -129,10 +130,12 @@ def _model_in_mitsuba(T, model, scene, refs, mask, args) -> dict:
 def bench_scene(fit, files: dict, scene: str, args) -> dict:
     """One scene: three.js (and MaterialX) against K Mitsuba renders of the fit; in
     sphere-distant also the noise-free diagnostics of :func:`_distant_diagnostics`, in the
-    environment scenes the engines' models integrated by Mitsuba (the noise-free estimate
-    handles a directional light only: ``estimate`` is None there)."""
+    environment scenes the estimate of three's image-based lighting
+    (:func:`~brdffit.evaluation.engines.threejs_ibl.estimate_env`) and the engines' models
+    integrated by Mitsuba."""
     from brdffit.evaluation.engines import threejs as T
     from brdffit.evaluation.engines import threejs_brdf as TB
+    from brdffit.evaluation.engines import threejs_ibl as TI
 
     out = {"scene": scene, "timings": {}}
     t = time.perf_counter()
@@ -147,7 +150,8 @@ def bench_scene(fit, files: dict, scene: str, args) -> dict:
     if scene == "sphere-distant":
         out |= _distant_diagnostics(fit, files["gltf"], r, refs, mask, args)
     else:
-        out["estimate"] = None
+        e = TI.estimate_env(files["gltf"], refs, ra, scene, args.ss)
+        out["estimate"] = {k: e[k] for k in ("psnr", "psnr_se", "mean_ratio")} | {"error_db": None}
         out["three_model_mitsuba"] = _model_in_mitsuba(T, TB.from_gltf(files["gltf"]), scene,
                                                        refs, mask, args)
     if args.materialx:
@@ -266,9 +270,10 @@ def _row(material: str, r: dict) -> dict:
     if "three_model_mitsuba" in r:
         row["model_mitsuba"] = r["three_model_mitsuba"]["psnr"]
     if r.get("estimate") is not None:
+        row |= {"estimate": r["estimate"]["psnr"], "estimate_error": r["estimate"]["error_db"]}
+    if "three_vs_converged_fit" in r:
         row |= {"psnr_vs_converged": r["three_vs_converged_fit"],
                 "model_vs_three": r["model_vs_three"],
-                "estimate": r["estimate"]["psnr"], "estimate_error": r["estimate"]["error_db"],
                 "gltf_spec_vs_fit": r["gltf_spec_vs_fit"],
                 "no_multiscatter": r["ablations"]["no_multiscatter"]["psnr_vs_fit"],
                 "pow5_fresnel": r["ablations"]["pow5_fresnel"]["psnr_vs_fit"],
@@ -319,7 +324,13 @@ def _scene_engine(views: list[dict], engine: str) -> dict | None:
     model = [c.get("model_mitsuba") or v.get("three_model_mitsuba") if engine == "three"
              else c.get("model_mitsuba") for v, (_, c) in zip(views, rs)]
     model = [m["psnr"] for m in model if m]
-    return {"materials": len(rs), "psnr_mean": float(p.mean()), "psnr_min": float(p.min()),
+    est = [v["estimate"]["error_db"] for v in views if engine == "three" and v.get("three")
+           and (v.get("estimate") or {}).get("error_db") is not None]
+    return {"estimate_error_db": ({"mean": float(np.mean(est)),
+                                   "max_abs": float(np.max(np.abs(est))),
+                                   "within_2db": int(np.sum(np.abs(est) <= 2)),
+                                   "of": len(est)} if est else None),
+            "materials": len(rs), "psnr_mean": float(p.mean()), "psnr_min": float(p.min()),
             "lowest": rs[int(np.argmin(p))][0],
             "mean_ratio_range": [float(mr.min()), float(mr.max())],
             "rim_ratio_range": [float(rim.min()), float(rim.max())],

@@ -57,7 +57,7 @@ from ..metrics import rendered_psnr
 from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
 from .threejs import EngineUnavailable, sphere_geometry_px, three_dir
 
-__all__ = ["ThreeJSBRDF", "from_gltf", "dfg_lut", "SphereSamples", "shade_sphere", "estimate"]
+__all__ = ["ThreeJSBRDF", "from_gltf", "dfg_lut", "CameraSphere", "SphereSamples", "shade_sphere", "estimate"]
 
 _MIN_ROUGHNESS = 0.045
 
@@ -263,6 +263,43 @@ def _basis(n):
     return t, bt
 
 
+class CameraSphere:
+    """The unit sphere of our sphere scenes seen by their camera (``CAMERA``) at
+    ``resolution``² pixels of ``supersample``² pixel-centred samples: per sample of the
+    ``resolution × supersample`` grid (row 0 on top) whether it hits (``hit``), the hit point
+    ``P``, the normal ``N`` (= P) and the direction to the camera ``V``, world frame."""
+
+    def __init__(self, resolution: int, supersample: int):
+        n = int(resolution) * int(supersample)
+        t = math.tan(math.radians(CAMERA["fov_degrees"]) / 2.0)
+        c = (np.arange(n) + 0.5) / n * 2.0 - 1.0
+        X, Y = np.meshgrid(c * t, -c * t)                      # +x right, +y up, row 0 on top
+        d = np.stack([X, Y, -np.ones_like(X)], -1)             # unnormalised ray directions
+        o = np.array(CAMERA["origin"], dtype=float)
+        # |o + s d|² = 1
+        A = np.sum(d * d, -1)
+        B = 2.0 * (d @ o)
+        C = float(o @ o) - 1.0
+        disc = B * B - 4 * A * C
+        self.hit = disc > 0
+        self.s = np.where(self.hit, (-B - np.sqrt(np.maximum(disc, 0.0))) / (2 * A), 0.0)
+        self.P = o + self.s[..., None] * d
+        self.N = self.P / np.maximum(np.linalg.norm(self.P, axis=-1, keepdims=True), 1e-300)
+        self.V = -d / np.sqrt(A)[..., None]
+        self._d, self._step = d, 2 * t / n
+
+    def geometry_roughness(self) -> np.ndarray:
+        """three's ``geometryRoughness`` per sample (module docstring): the largest component
+        of ``|dN/dx|``, ``|dN/dy|`` from the ray differentials ``d_x = (2t/n, 0, 0)``."""
+        N, d, s = self.N, self._d, self.s
+        ndot = np.sum(N * d, -1)
+        g = np.zeros(N.shape[:2])
+        for dx in (np.array([self._step, 0.0, 0.0]), np.array([0.0, -self._step, 0.0])):
+            dP = s[..., None] * (dx - d * ((N @ dx) / np.where(ndot == 0, -1e-300, ndot))[..., None])
+            g = np.maximum(g, np.max(np.abs(dP), -1))
+        return g
+
+
 class SphereSamples:
     """The ``supersample``² pixel-centred samples per pixel of the unit sphere of ``scene``
     (``sphere-distant`` or ``sphere-point``, module docstring) at ``resolution``²: the
@@ -279,22 +316,8 @@ class SphereSamples:
         if int(resolution) < 1 or int(supersample) < 1:
             raise ValueError("shade_sphere: resolution and supersample must be ≥ 1")
         self.resolution, self.supersample = int(resolution), int(supersample)
-        n = self.resolution * self.supersample
-        t = math.tan(math.radians(CAMERA["fov_degrees"]) / 2.0)
-        c = (np.arange(n) + 0.5) / n * 2.0 - 1.0
-        X, Y = np.meshgrid(c * t, -c * t)                      # +x right, +y up, row 0 on top
-        d = np.stack([X, Y, -np.ones_like(X)], -1)             # unnormalised ray directions
-        o = np.array(CAMERA["origin"], dtype=float)
-        # |o + s d|² = 1
-        A = np.sum(d * d, -1)
-        B = 2.0 * (d @ o)
-        C = float(o @ o) - 1.0
-        disc = B * B - 4 * A * C
-        hit = disc > 0
-        s = np.where(hit, (-B - np.sqrt(np.maximum(disc, 0.0))) / (2 * A), 0.0)
-        P = o + s[..., None] * d
-        N = P / np.maximum(np.linalg.norm(P, axis=-1, keepdims=True), 1e-300)
-        Vw = -d / np.sqrt(A)[..., None]
+        cam = CameraSphere(self.resolution, self.supersample)
+        P, N, Vw, hit = cam.P, cam.N, cam.V, cam.hit
         if scene == "sphere-distant":
             Lw = -np.asarray(DISTANT_LIGHT["direction"], float)
             Lw = np.broadcast_to(Lw / np.linalg.norm(Lw), P.shape)
@@ -314,16 +337,7 @@ class SphereSamples:
         self.lit, self.hit = m, hit
         self.wi, self.wo = wi[m], wo[m]
         self.weight = E[m] * self.wi[:, 2]
-        self.g = None
-        if not geometry_roughness:
-            return
-        # ray differentials per pixel of the render target: d_x = ∂d/∂x = (2t/n, 0, 0)
-        ndot = np.sum(N * d, -1)
-        g = np.zeros(P.shape[:2])
-        for dx in (np.array([2 * t / n, 0.0, 0.0]), np.array([0.0, -2 * t / n, 0.0])):
-            dP = s[..., None] * (dx - d * ((N @ dx) / np.where(ndot == 0, -1e-300, ndot))[..., None])
-            g = np.maximum(g, np.max(np.abs(dP), -1))
-        self.g = g[m]
+        self.g = cam.geometry_roughness()[m] if geometry_roughness else None
 
     def shade(self, brdf, geometry_roughness: bool = False):
         """``(image (H, W, 3), alpha (H, W))`` of ``brdf`` (box average of the samples);
