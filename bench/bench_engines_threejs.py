@@ -26,7 +26,10 @@ make them), ``scenes[scene]``:
   ``rim_ratio`` (RGB, r > 0.85 R), ``flip`` (HDR-FLIP over the foreground), coverage and
   peak pixel;
 * ``materialx``: the same figures for the MaterialX export
-  (:mod:`brdffit.evaluation.engines.materialx_web`; ``--no-materialx`` skips it);
+  (:mod:`brdffit.evaluation.engines.materialx_web`; ``--no-materialx`` skips it); in the
+  environment scenes with ``estimate`` (:func:`brdffit.export.materialx_fis.estimate_fis`:
+  MaterialX's FIS of the exporter's :class:`OpenPBRBRDF` in NumPy) and its error, and
+  ``model_vs_engine`` (that image against MaterialX's);
 * in ``sphere-distant``, the noise-free diagnostics: ``model_vs_three`` (:class:`ThreeJSBRDF`,
   our model of three's shader, through :func:`shade_sphere`, against the three.js image),
   ``shader_vs_mitsuba_fit``, ``three_vs_converged_fit``, ``three_grid_vs_converged``,
@@ -37,7 +40,7 @@ make them), ``scenes[scene]``:
 * in the environment scenes ``estimate``: the cheap estimate of three's PSNR there
   (:func:`brdffit.evaluation.engines.threejs_ibl.estimate_env`: three's PMREM and split-sum
   shading in NumPy, against the same Mitsuba renders of the fit) and its error; also
-  ``three_model_mitsuba`` and
+  ``model_vs_three`` (the estimate's image against three's) and ``three_model_mitsuba`` and
   ``materialx.model_mitsuba``: the engine's model (:class:`ThreeJSBRDF` of the file,
   :class:`OpenPBRBRDF` of the fit) rendered by Mitsuba in the scene against the fit (same
   seeds, :func:`crn_psnr`): what the engine would score if it integrated the map exactly, so
@@ -81,7 +84,7 @@ RGL = DATA / "rgl"
 ISSUE_MERL = ["ss440", "gold-metallic-paint", "maroon-plastic", "white-paint"]
 FIELDS = ["material", "scene", "psnr", "psnr_se", "psnr_vs_converged", "mx_psnr", "mx_psnr_se",
           "mx_mean_r", "mx_mean_g", "mx_mean_b", "mx_rim_r", "mx_flip", "mx_model_vs_engine",
-          "mx_model_mitsuba", "mean_r", "mean_g", "mean_b", "rim_r", "rim_g", "rim_b",
+          "mx_model_mitsuba", "mx_estimate", "mx_estimate_error", "mean_r", "mean_g", "mean_b", "rim_r", "rim_g", "rim_b",
           "flip", "model_vs_three", "model_mitsuba", "estimate", "estimate_error",
           "gltf_spec_vs_fit", "no_multiscatter", "pow5_fresnel", "no_geometry_roughness",
           "three_s", "mx_s"]
@@ -136,6 +139,7 @@ def bench_scene(fit, files: dict, scene: str, args) -> dict:
     from brdffit.evaluation.engines import threejs as T
     from brdffit.evaluation.engines import threejs_brdf as TB
     from brdffit.evaluation.engines import threejs_ibl as TI
+    from brdffit.evaluation.metrics import rendered_psnr
 
     out = {"scene": scene, "timings": {}}
     t = time.perf_counter()
@@ -152,6 +156,7 @@ def bench_scene(fit, files: dict, scene: str, args) -> dict:
     else:
         e = TI.estimate_env(files["gltf"], refs, ra, scene, args.ss)
         out["estimate"] = {k: e[k] for k in ("psnr", "psnr_se", "mean_ratio")} | {"error_db": None}
+        out["model_vs_three"] = rendered_psnr(r.image, e["image"], mask & (e["alpha"] >= 0.999))
         out["three_model_mitsuba"] = _model_in_mitsuba(T, TB.from_gltf(files["gltf"]), scene,
                                                        refs, mask, args)
     if args.materialx:
@@ -168,6 +173,7 @@ def _bench_materialx(fit, mtlx: Path, scene: str, refs, ra, args, timings: dict)
     from brdffit.evaluation.engines import threejs as T
     from brdffit.evaluation.engines import threejs_brdf as TB
     from brdffit.evaluation.metrics import rendered_psnr
+    from brdffit.export import materialx_fis as FIS
     from brdffit.export.materialx import openpbr_equivalent
 
     t = time.perf_counter()
@@ -179,8 +185,15 @@ def _bench_materialx(fit, mtlx: Path, scene: str, refs, ra, args, timings: dict)
     mmask = rm.mask & (ra >= 0.999)
     out = cm | {"info": rm.info}
     if scene != "sphere-distant":
-        return out | {"estimate": None, "model_mitsuba": _model_in_mitsuba(
-            T, openpbr_equivalent(fit), scene, refs, mmask, args)}
+        e = FIS.estimate_fis(openpbr_equivalent(fit), refs, ra, scene, args.mx_ss,
+                             args.env_samples)
+        return out | {"estimate": {"psnr": e["psnr"], "psnr_se": e["psnr_se"],
+                                   "mean_ratio": e["mean_ratio"],
+                                   "error_db": e["psnr"] - cm["psnr"]},
+                      "model_vs_engine": rendered_psnr(rm.image, e["image"],
+                                                       mmask & (e["alpha"] >= 0.999)),
+                      "model_mitsuba": _model_in_mitsuba(T, openpbr_equivalent(fit), scene,
+                                                         refs, mmask, args)}
     kw = {"resolution": args.res, "supersample": args.mx_ss}
     fit_img, _ = TB.shade_sphere(fit, geometry_roughness=False, resolution=args.res,
                                  supersample=max(16, args.mx_ss))
@@ -271,9 +284,10 @@ def _row(material: str, r: dict) -> dict:
         row["model_mitsuba"] = r["three_model_mitsuba"]["psnr"]
     if r.get("estimate") is not None:
         row |= {"estimate": r["estimate"]["psnr"], "estimate_error": r["estimate"]["error_db"]}
+    if "model_vs_three" in r:
+        row["model_vs_three"] = r["model_vs_three"]
     if "three_vs_converged_fit" in r:
         row |= {"psnr_vs_converged": r["three_vs_converged_fit"],
-                "model_vs_three": r["model_vs_three"],
                 "gltf_spec_vs_fit": r["gltf_spec_vs_fit"],
                 "no_multiscatter": r["ablations"]["no_multiscatter"]["psnr_vs_fit"],
                 "pow5_fresnel": r["ablations"]["pow5_fresnel"]["psnr_vs_fit"],
@@ -286,6 +300,9 @@ def _row(material: str, r: dict) -> dict:
                 "mx_flip": m["flip"], "mx_s": r["timings"].get("materialx_s")}
         if "model_vs_engine" in m:
             row["mx_model_vs_engine"] = m["model_vs_engine"]
+        if m.get("estimate"):
+            row |= {"mx_estimate": m["estimate"]["psnr"],
+                    "mx_estimate_error": m["estimate"]["error_db"]}
         if m.get("model_mitsuba"):
             row["mx_model_mitsuba"] = m["model_mitsuba"]["psnr"]
     return row
@@ -324,8 +341,9 @@ def _scene_engine(views: list[dict], engine: str) -> dict | None:
     model = [c.get("model_mitsuba") or v.get("three_model_mitsuba") if engine == "three"
              else c.get("model_mitsuba") for v, (_, c) in zip(views, rs)]
     model = [m["psnr"] for m in model if m]
-    est = [v["estimate"]["error_db"] for v in views if engine == "three" and v.get("three")
-           and (v.get("estimate") or {}).get("error_db") is not None]
+    est = [e["error_db"] for e in ((v if engine == "three" else v[engine]).get("estimate")
+                                   for v in views if v.get(engine))
+           if e and e.get("error_db") is not None]
     return {"estimate_error_db": ({"mean": float(np.mean(est)),
                                    "max_abs": float(np.max(np.abs(est))),
                                    "within_2db": int(np.sum(np.abs(est) <= 2)),

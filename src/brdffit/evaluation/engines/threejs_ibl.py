@@ -342,7 +342,8 @@ def estimate_env(gltf, ref_stack, ref_alpha, scene: str = "sphere-env", supersam
     ``gltf``, compared with our render of the fit (``ref_stack`` (K, H, W, 3), ``ref_alpha``:
     :func:`~brdffit.evaluation.engines.threejs.reference_renders`) as the engine's render is
     (:func:`~brdffit.evaluation.engines.threejs.compare_render`). Returns ``psnr``,
-    ``psnr_se``, ``mean_ratio``, ``rim_ratio`` and the ``model``."""
+    ``psnr_se``, ``mean_ratio``, ``rim_ratio``, the ``model`` and its ``image`` and
+    ``alpha``."""
     base, envmap = resolve_scene(scene)
     if base != "sphere-env":
         raise ValueError(f"estimate_env: expected sphere-env or sphere-<map>, got {scene!r}")
@@ -350,4 +351,4 @@ def estimate_env(gltf, ref_stack, ref_alpha, scene: str = "sphere-env", supersam
     img, alpha = shade_sphere_env(model, envmap, np.shape(ref_alpha)[1], supersample)
     c = compare_render(img, alpha, ref_stack, ref_alpha, rim)
     return {k: c[k] for k in ("psnr", "psnr_se", "mean_ratio", "rim_ratio")} | {
-        "model": model.describe()}
+        "model": model.describe(), "image": img, "alpha": alpha}
