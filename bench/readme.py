@@ -92,10 +92,18 @@ def _render_safety(r: dict) -> str:
 def _threejs(r: dict) -> str:
     s = r["summary"]
     d, p = s["scenes"]["sphere-distant"], s["paper_suite"]
+    est = []
+    for engine, label in (("three", "three.js"), ("materialx", "MaterialX")):
+        e = [(sc.get(engine) or {}).get("estimate_error_db") for sc in s["scenes"].values()]
+        e = [x for x in e if x]
+        if e:
+            est.append(f"{label} {sum(x['within_2db'] for x in e)}/{sum(x['of'] for x in e)}")
     return (f"sphere-distant: three.js {_mean_min(d['three'])}, MaterialX "
             f"{_mean_min(d['materialx'])}; paper suite's spheres (per-material mean): three.js "
             f"{p['three']['mean']:.1f} dB mean, {p['three']['lowest_material_mean']:.1f} dB "
-            f"lowest, MaterialX {p['materialx']['mean']:.1f} dB mean ({s['materials']} materials)")
+            f"lowest, MaterialX {p['materialx']['mean']:.1f} dB mean ({s['materials']} materials)"
+            + (f"; cheap estimate within 2 dB of the engine: {', '.join(est)} (material × scene)"
+               if est else ""))
 
 
 BENCHMARKS = (
@@ -130,7 +138,7 @@ BENCHMARKS = (
           "bench/bench_export.py [--real]", ("export.json",), _export),
     Entry("engines", "glTF (and USD) exports rendered by Blender's importers and Cycles in "
           "`sphere-distant` and the paper suite's spheres vs our render of the fit: PSNR ± se, "
-          "ratios, FLIP, our Cycles model's prediction (≈ 15 min; `make blender`)", "bench/bench_engines.py [--label NAME]",
+          "ratios, FLIP, our Cycles model's prediction (≈ 30 min; `make blender`)", "bench/bench_engines.py [--label NAME]",
           ("engines_blender.json",),
           lambda r: "Blender, sphere-distant: "
                     + _mean_min(r["current"]["summary"]["sphere-distant"]["blender"])

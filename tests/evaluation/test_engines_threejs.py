@@ -127,11 +127,10 @@ def test_environment_scene_matches_our_render_of_the_export(roundtrip, scene):
     assert np.all(np.abs(np.array(c["mean_ratio"]) - 1) < 0.08), c["mean_ratio"]
     assert w["psnr"] < c["psnr"] - 3.0, (w["psnr"], c["psnr"])
     assert np.max(np.abs(np.array(w["mean_ratio"]) - 1)) > 0.1, w["mean_ratio"]
+    _matches_our_model_of_threes_ibl(r, export, scene)
 
 
-@pytest.mark.render
-@pytest.mark.parametrize("scene", ENV_SCENES)
-def test_environment_scene_matches_our_model_of_threes_ibl(roundtrip, scene):
+def _matches_our_model_of_threes_ibl(r, model, scene):
     """three's image under the map against our NumPy model of its PMREM and split-sum shading
     (:func:`~brdffit.evaluation.engines.threejs_ibl.shade_sphere_env`), pixel by pixel.
     Measured at 48², 4 × 4 samples: 60.6 / 55.5 dB (procedural / sunrise; studio 61.4),
@@ -139,62 +138,18 @@ def test_environment_scene_matches_our_model_of_threes_ibl(roundtrip, scene):
     model with the map turned half a turn must fall below 35 dB (a model that ignored the
     map's orientation or the PMREM's level choice would pass neither)."""
     from brdffit.evaluation.engines import threejs_ibl as TI
-    from brdffit.evaluation.render.scenes import envmap_names
 
-    if scene != "sphere-env" and scene[7:] not in envmap_names():
-        pytest.skip(f"needs the shared environment map {scene[7:]} (../shared/data/envmaps)")
-    _, path, _ = roundtrip
-    r = T.render_gltf(path, scene, resolution=48, supersample=4)
     envmap = None if scene == "sphere-env" else scene[7:]
-    model = TB.from_gltf(path)
     img, alpha = TI.shade_sphere_env(model, envmap, 48, 4)
     mask = r.mask & (alpha >= 0.999)
     assert rendered_psnr(r.image, img, mask) >= 50.0
     ratio = img[mask].sum(0) / r.image[mask].sum(0)
     assert np.all(np.abs(ratio - 1) < 0.005), ratio
-    env = TI.pmrem(envmap)
     cam = TB.CameraSphere(48, 4)
     turned = np.zeros(cam.hit.shape + (3,))
     flip = np.array([-1.0, 1.0, -1.0])                  # half a turn about +y
-    turned[cam.hit] = TI.shade_ibl(model, env, cam.N[cam.hit] * flip, cam.V[cam.hit] * flip,
-                                   cam.geometry_roughness()[cam.hit])
+    turned[cam.hit] = TI.shade_ibl(model, TI.pmrem(envmap), cam.N[cam.hit] * flip,
+                                   cam.V[cam.hit] * flip, cam.geometry_roughness()[cam.hit])
     turned = turned.reshape(48, 4, 48, 4, 3).mean(axis=(1, 3))
     assert rendered_psnr(r.image, turned, mask) < 35.0
 
-
-def test_environment_texture_is_the_map_in_threes_convention():
-    """The page's texels: three's equirectangular rows (nadir first) of the map at its own
-    resolution, half floats clamped at 0, alpha 1."""
-    from brdffit.evaluation.render.scenes import load_envmap
-    from brdffit.evaluation.report_viewer import three_equirect
-
-    data, w, h = T.environment_rgba(None, "three")
-    env = load_envmap(None)
-    assert (h, w) == env.shape[:2]
-    px = np.frombuffer(data, "<f2").reshape(h, w, 4)
-    assert np.all(px[..., 3] == 1.0)
-    np.testing.assert_allclose(px[..., :3], three_equirect(env), rtol=1e-3, atol=1e-4)
-    mitsuba = np.frombuffer(T.environment_rgba(None, "mitsuba")[0], "<f2").reshape(h, w, 4)
-    np.testing.assert_allclose(mitsuba[..., :3], env, rtol=1e-3, atol=1e-4)
-    assert np.frombuffer(T.rgba_half(-np.ones((2, 2, 3))), "<f2").reshape(2, 2, 4)[..., :3].max() == 0
-
-
-def test_inputs_are_validated(tmp_path):
-    with pytest.raises(ValueError, match="scene"):
-        T.scene_json("knot")
-    with pytest.raises(ValueError, match="scene"):
-        T.scene_json("sphere-no-such-map")
-    with pytest.raises(ValueError, match="scene"):
-        T.scene_json("sphere-/etc/passwd")
-    with pytest.raises(ValueError, match="environment width"):
-        T.scene_json("sphere-env", env_width=100 + 2)
-    assert T.scene_json("sphere-env")["light"] == {"type": "environment", "envmap": "procedural",
-                                                   "width": 512, "height": 256}
-    with pytest.raises(ValueError, match="resolution"):
-        T.scene_json("sphere-distant", resolution="128")
-    with pytest.raises(ValueError, match="gltf"):
-        T.render_gltf(tmp_path / "missing.gltf")
-    bad = tmp_path / "x.gltf"
-    bad.write_text('{"materials": [{"pbrMetallicRoughness": {"roughnessFactor": "0.5"}}]}')
-    with pytest.raises(ValueError, match="roughnessFactor"):
-        TB.from_gltf(bad)
