@@ -95,9 +95,13 @@ def _threejs(r: dict) -> str:
     est = []
     for engine, label in (("three", "three.js"), ("materialx", "MaterialX")):
         e = [(sc.get(engine) or {}).get("estimate_error_db") for sc in s["scenes"].values()]
-        e = [x for x in e if x]
+        e = [(x["within_2db"], x["of"]) for x in e if x]
+        dist = s.get("sphere-distant", {})
+        dist = dist if engine == "three" else dist.get(engine) or {}
+        if "estimate_within_2db_vs_converged" in dist:      # against the converged fit
+            e.append((dist["estimate_within_2db_vs_converged"], d["three"]["materials"]))
         if e:
-            est.append(f"{label} {sum(x['within_2db'] for x in e)}/{sum(x['of'] for x in e)}")
+            est.append(f"{label} {sum(x for x, _ in e)}/{sum(n for _, n in e)}")
     return (f"sphere-distant: three.js {_mean_min(d['three'])}, MaterialX "
             f"{_mean_min(d['materialx'])}; paper suite's spheres (per-material mean): three.js "
             f"{p['three']['mean']:.1f} dB mean, {p['three']['lowest_material_mean']:.1f} dB "
