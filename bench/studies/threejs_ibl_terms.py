@@ -102,7 +102,6 @@ def main(argv=None) -> int:
     from brdffit.evaluation.engines import threejs_ibl as TI
     from brdffit.evaluation.engines.materialx_web import irradiance_map
     from brdffit.export.gltf import write_gltf
-    from brdffit.export.materialx_fis import LatLongMips
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--material", default=str(DATA / "rgl" / "paper_white_rgb.bsdf"))
@@ -118,9 +117,7 @@ def main(argv=None) -> int:
     alpha = cam.hit.reshape(RES, SS, RES, SS).mean(axis=(1, 3))
     for envmap in MAPS:
         refs, ra = T.reference_renders(fit, "sphere-" + envmap, RES, 256, 4)
-        irr = LatLongMips._bilinear(irradiance_map(envmap).astype(float),
-                                    np.arctan2(N[:, 0], -N[:, 2]) / (2 * np.pi) % 1.0,
-                                    0.5 - np.arcsin(np.clip(N[:, 1], -1, 1)) / np.pi)
+        irr = TI.latlong_bilinear(irradiance_map(envmap).astype(float), *TI.latlong_uv(N))
         for name, exact, ms in (("three", False, True), ("exact irradiance", True, True),
                                 ("no multiscatter", False, False), ("both", True, False)):
             c = T.compare_render(_variant(model, TI.pmrem(envmap), cam, irr, exact, ms), alpha,

@@ -37,6 +37,7 @@ import numpy as np
 from ..evaluation.engines.materialx_web import ENV_SAMPLES, irradiance_map
 from ..evaluation.engines.threejs import compare_render, environment_rgba, resolve_scene
 from ..evaluation.engines.threejs_brdf import CameraSphere
+from ..evaluation.engines.threejs_ibl import latlong_bilinear, latlong_uv
 from .materialx import OpenPBRBRDF, _dir_albedo_ab, _fresnel_dielectric, _schlick_f82
 
 __all__ = ["LatLongMips", "latlong_mips", "shade_fis", "shade_sphere_fis", "estimate_fis"]
@@ -63,33 +64,18 @@ class LatLongMips:
                 c = 0.5 * (c[:, 0::2] + c[:, 1::2])
             self.levels.append(c)
 
-    @staticmethod
-    def _bilinear(img, u, v):
-        h, w = img.shape[:2]
-        x = u * w - 0.5
-        y = np.clip(v * h - 0.5, 0.0, h - 1.0)
-        x0 = np.floor(x).astype(np.intp)
-        y0 = np.minimum(y.astype(np.intp), max(h - 2, 0))
-        y1 = np.minimum(y0 + 1, h - 1)
-        fx, fy = (x - x0)[..., None], (y - y0)[..., None]
-        x0, x1 = x0 % w, (x0 + 1) % w
-        top = img[y0, x0] + (img[y0, x1] - img[y0, x0]) * fx
-        bottom = img[y1, x0] + (img[y1, x1] - img[y1, x0]) * fx
-        return top + (bottom - top) * fy
-
     def read(self, d: np.ndarray, lod) -> np.ndarray:
         """The map along unit directions ``d`` ``(K, 3)`` at mip level ``lod`` (per row)."""
-        u = np.arctan2(d[:, 0], -d[:, 2]) / (2 * np.pi) % 1.0
-        v = 0.5 - np.arcsin(np.clip(d[:, 1], -1.0, 1.0)) / np.pi
+        u, v = latlong_uv(d)
         lod = np.clip(np.broadcast_to(np.asarray(lod, float), u.shape), 0.0,
                       len(self.levels) - 1.0)
         lo = np.floor(lod).astype(int)
         out = np.empty(u.shape + (3,))
         for k in np.unique(lo):
             m = lo == k
-            c = self._bilinear(self.levels[k], u[m], v[m])
+            c = latlong_bilinear(self.levels[k], u[m], v[m])
             if k + 1 < len(self.levels):
-                c = c + (self._bilinear(self.levels[k + 1], u[m], v[m]) - c) * (lod[m] - k)[:, None]
+                c = c + (latlong_bilinear(self.levels[k + 1], u[m], v[m]) - c) * (lod[m] - k)[:, None]
             out[m] = c
         return out
 
@@ -181,8 +167,7 @@ def shade_fis(model: OpenPBRBRDF, mips: LatLongMips, irradiance: np.ndarray, N: 
     Y = np.cross(N, X)
     Vt = np.stack([np.sum(V * X, -1), np.sum(V * Y, -1), np.sum(V * N, -1)], -1)
     nv = np.clip(Vt[:, 2], _EPS, 1.0)
-    irr = LatLongMips._bilinear(irradiance, np.arctan2(N[:, 0], -N[:, 2]) / (2 * np.pi) % 1.0,
-                                0.5 - np.arcsin(np.clip(N[:, 1], -1, 1)) / np.pi)
+    irr = latlong_bilinear(irradiance, *latlong_uv(N))
     frame = (X, Y, N)
     alpha = float(np.sqrt(model.alpha[0] * model.alpha[1]))
     m = model.base_metalness

@@ -57,7 +57,8 @@ import numpy as np
 from .threejs import compare_render, environment_rgba, resolve_scene
 from .threejs_brdf import CameraSphere, ThreeJSBRDF, _f_schlick_sg, _lut_bilinear, from_gltf
 
-__all__ = ["PMREM", "pmrem", "shade_ibl", "shade_sphere_env", "estimate_env"]
+__all__ = ["PMREM", "pmrem", "shade_ibl", "shade_sphere_env", "estimate_env", "latlong_uv",
+           "latlong_bilinear"]
 
 MIN_SIZE = 256
 LOD_MIN = 3
@@ -136,20 +137,28 @@ def _trilinear(levels: list[np.ndarray], d: np.ndarray, lod) -> np.ndarray:
     return out
 
 
-def _equirect(img: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Bilinear read of a Mitsuba lat-long map (row 0 at +y, ``u = atan2(x, −z)/2π``;
-    wrapping in u, clamped in v) along unit directions ``d``."""
-    h, w = img.shape[:2]
+def latlong_uv(d: np.ndarray):
+    """``(u, v)`` of unit directions in Mitsuba's lat-long convention (row 0 at +y,
+    ``u = atan2(x, −z)/2π`` in [0, 1), ``v = ½ − asin(y)/π``)."""
     u = np.arctan2(d[..., 0], -d[..., 2]) / (2 * np.pi) % 1.0
-    v = np.arccos(np.clip(d[..., 1], -1.0, 1.0)) / np.pi
-    x = u * w - 0.5
-    y = np.clip(v * h - 0.5, 0.0, h - 1.0)
-    x0 = np.floor(x).astype(int)
-    y0 = np.minimum(y.astype(int), h - 2)
+    return u, 0.5 - np.arcsin(np.clip(d[..., 1], -1.0, 1.0)) / np.pi
+
+
+def latlong_bilinear(img: np.ndarray, u, v) -> np.ndarray:
+    """Bilinear read of a lat-long map ``(H, W, 3)`` at ``(u, v)`` (texel centres at
+    (i + ½)/n), repeating in u and clamped in v, as a WebGL texture with ``RepeatWrapping``
+    / ``ClampToEdgeWrapping`` and linear filtering reads it."""
+    h, w = img.shape[:2]
+    x = np.asarray(u) * w - 0.5
+    y = np.clip(np.asarray(v) * h - 0.5, 0.0, h - 1.0)
+    x0 = np.floor(x).astype(np.intp)
+    y0 = np.floor(y).astype(np.intp)
+    y1 = np.minimum(y0 + 1, h - 1)
     fx, fy = (x - x0)[..., None], (y - y0)[..., None]
     x0, x1 = x0 % w, (x0 + 1) % w
-    return ((img[y0, x0] * (1 - fx) + img[y0, x1] * fx) * (1 - fy)
-            + (img[y0 + 1, x0] * (1 - fx) + img[y0 + 1, x1] * fx) * fy)
+    top = img[y0, x0] + (img[y0, x1] - img[y0, x0]) * fx
+    bottom = img[y1, x0] + (img[y1, x1] - img[y1, x0]) * fx
+    return top + (bottom - top) * fy
 
 
 def _source_cube(img: np.ndarray, size: int) -> list[np.ndarray]:
@@ -164,7 +173,7 @@ def _source_cube(img: np.ndarray, size: int) -> list[np.ndarray]:
             a = f // 2
             d[f, ..., (a + 1) % 3] += du
             d[f, ..., (a + 2) % 3] += dv
-        acc += _equirect(img, d / np.linalg.norm(d, axis=-1, keepdims=True))
+        acc += latlong_bilinear(img, *latlong_uv(d / np.linalg.norm(d, axis=-1, keepdims=True)))
     chain = [acc / 4.0]
     while chain[-1].shape[1] > 1:
         c = chain[-1]
