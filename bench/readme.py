@@ -199,6 +199,23 @@ BENCHMARKS += (
 )
 
 STUDIES = (
+    Entry("threejs_ibl_terms", "which term of three.js's image-based lighting brightens a "
+          "diffuse material under the paper suite's maps (the NumPy model of three with one "
+          "term replaced at a time, vs Mitsuba's render of the fit)",
+          "bench/studies/threejs_ibl_terms.py", ("threejs_ibl_terms.json",),
+          lambda r: "courtyard: three " + f"{r['maps']['courtyard']['three']['psnr']:.1f} dB, "
+                    "with the punctual BRDF's diffuse factor "
+                    f"{r['maps']['courtyard']['punctual diffuse']['psnr']:.1f} dB"),
+    Entry("engines_default", "the glTF default across renderers: rules vs the optimiser for "
+          "Blender + three.js vs for the specification + Blender + three.js (their models, "
+          "sphere-distant, 15 materials)", "bench/studies/engines_default.py",
+          ("engines_default.json",),
+          lambda r: "; ".join(f"{k}: " + ", ".join(f"{e} {v['psnr_mean'][e]:.1f}"
+                                                    for e in ("specification", "blender",
+                                                              "threejs"))
+                              + f" dB mean, {v['cpu_seconds_mean']:.1f} s"
+                              for k, v in r["summary"].items() if k in ("rule", "engines48",
+                                                                        "all3_32"))),
     Entry("npf_defaults", "NPF with the product's defaults over MERL: convergence, time, "
           "objective vs the AWLS point and a reference run",
           "bench/studies/npf_defaults.py --reference runs/db20",

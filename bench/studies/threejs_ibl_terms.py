@@ -9,13 +9,15 @@ of ``1 − F(V·H)`` over cosine-distributed light directions.
 
     PYTHONPATH=src .venv/bin/python bench/studies/threejs_ibl_terms.py [--material SPEC]
 
-Prints a table (no results file: its figures are quoted in docs/design/engines.md). Default
-material: RGL paper_white (the lowest in three.js over the paper suite).
+Prints a table and writes ``bench/results/threejs_ibl_terms.json`` (PSNR ± se and mean ratio
+per map and variant, the diffuse factors, the load average). Default material: RGL
+paper_white (the lowest in three.js over the paper suite).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import tempfile
@@ -105,7 +107,11 @@ def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--material", default=str(DATA / "rgl" / "paper_white_rgb.bsdf"))
+    ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "threejs_ibl_terms.json")
     args = ap.parse_args(argv)
+    load0 = list(os.getloadavg())
+    doc = {"benchmark": "threejs_ibl_terms", "material": args.material, "maps": {},
+           "resolution": RES, "supersample": SS, "mitsuba": "4 × 256 spp"}
     fit = brdffit.fit(brdffit.load(args.material), model="ggx-diffuse")
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "m.gltf"
@@ -122,17 +128,27 @@ def main(argv=None) -> int:
                                 ("no multiscatter", False, False), ("both", True, False)):
             c = T.compare_render(_variant(model, TI.pmrem(envmap), cam, irr, exact, ms), alpha,
                                  refs, ra)
-            print(f"{envmap:10s} {name:17s} {c['psnr']:6.2f} dB  mean ratio "
-                  f"{np.round(c['mean_ratio'], 3).tolist()}")
+            _row(doc, envmap, name, c)
         img = _punctual_diffuse(model, TI.pmrem(envmap), cam,
                                 _variant(model, TI.pmrem(envmap), cam, irr, False, True))
-        c = T.compare_render(img, alpha, refs, ra)
-        print(f"{envmap:10s} {'punctual diffuse':17s} {c['psnr']:6.2f} dB  mean ratio "
-              f"{np.round(c['mean_ratio'], 3).tolist()}")
-    for row in diffuse_factors(model):
+        _row(doc, envmap, "punctual diffuse", T.compare_render(img, alpha, refs, ra))
+    doc["diffuse_factors"] = diffuse_factors(model)
+    for row in doc["diffuse_factors"]:
         print(f"N·V {row['cos_v']}: punctual 1 − F(V·H) {np.round(row['punctual'], 3).tolist()}"
               f", IBL 1 − ss − ms {np.round(row['ibl'], 3).tolist()}")
+    doc["load_average"] = [load0, list(os.getloadavg())]
+    from brdffit._atomic import atomic_write
+
+    with atomic_write(args.out, "w") as fh:
+        json.dump(doc, fh, indent=1, default=float)
     return 0
+
+
+def _row(doc: dict, envmap: str, name: str, c: dict) -> None:
+    doc["maps"].setdefault(envmap, {})[name] = {k: c[k] for k in ("psnr", "psnr_se",
+                                                                  "mean_ratio")}
+    print(f"{envmap:10s} {name:17s} {c['psnr']:6.2f} dB  mean ratio "
+          f"{np.round(c['mean_ratio'], 3).tolist()}")
 
 
 if __name__ == "__main__":
