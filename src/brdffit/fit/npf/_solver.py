@@ -527,26 +527,48 @@ def _g_sweep(st: MFState, smp: Samples, S, on, eps, smoothing, g_step_cap):
 
 
 class ChannelMonitors:
-    """The rule of :class:`Monitor` applied to each channel's objective on its own (the
-    channels are independent problems): a channel stops when its rule says so (the caller
-    caps the iterations). ``history`` is the summed objective (the channels not run held
-    at their last value)."""
+    """The stopping rule of an independent-G run, as :class:`Monitor` on the summed
+    objective (``total``: every channel stops when it fires), and with ``window = (W, k)``
+    also per channel (``channels``): a channel stops once its own relative decrease over
+    the last W iterations is below ``W · k · tol``, and then no longer costs. No channel so
+    runs longer than under the summed rule alone. The patience rule (``tol`` for 3
+    iterations) is not applied per channel: single channels stall for a few iterations and
+    go on (an all-ones start's channel after < 20 iterations, pink-plastic)."""
 
     def __init__(self, smp: Samples, tol, window=None, patience=3):
-        self.channels = [Monitor(smp.sum_wzz[c], tol, np.inf, patience, window)
+        self.total = Monitor(smp.sum_wzz, tol, np.inf, patience, window)
+        self.channels = [Monitor(smp.sum_wzz[c], tol, np.inf, np.inf, window)
                          for c in range(3)]
-        self.history: list[float] = []
+
+    @property
+    def history(self) -> list[float]:
+        """The summed objective per iteration (the channels not run held at their last
+        value)."""
+        return self.total.history
+
+    def start(self, E) -> None:
+        """Record the objective ``E`` (3,) of the starting point."""
+        self.total.history.append(float(np.sum(E)))
+        for c in range(3):
+            self.channels[c].history.append(float(E[c]))
 
     def push(self, E, on) -> np.ndarray:
         """Record ``E`` (3,); return the channels of ``on`` that stop now."""
-        self.history.append(float(np.sum(E)))
+        if self.total.push(E):
+            return np.array(on, bool)
         return np.array([bool(on[c]) and self.channels[c].push(E[c]) for c in range(3)])
 
     def reason(self) -> str:
-        """Why every channel stopped: the first channel's reason (the others' are in
-        ``stop_reason_per_channel``)."""
-        reasons = [m.reason for m in self.channels if len(m.history) > 1]
+        """Why every channel stopped: the summed rule's reason, else the first channel's."""
+        if self.total.reason != "max_iter":
+            return self.total.reason
+        reasons = [m.reason for m in self.channels if m.reason != "max_iter"]
         return reasons[0] if reasons else "max_iter"
+
+    def channel_reasons(self) -> list[str]:
+        """Per channel: why it stopped (the summed rule's reason where that stopped it)."""
+        return [m.reason if m.reason != "max_iter" else self.total.reason
+                for m in self.channels]
 
 
 def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol=1e-6,
@@ -578,9 +600,7 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
     g_step_cap = G_STEP_CAP if g_step_cap is None else float(g_step_cap)
     if carry is None:
         mon, beta = ChannelMonitors(smp, tol, window), np.ones(3)
-        mon.push(E, np.zeros(3, bool))
-        for c in range(3):
-            mon.channels[c].history.append(float(E[c]))
+        mon.start(E)
     else:
         mon, beta = carry["monitors"], carry["beta"].copy()
         E = np.where(on, E, carry["E"])
@@ -606,7 +626,7 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
     E = np.where(_chans(active), E_exact, E)
     return RunResult(st, E, n_it, mon.history, reason, n_it, n_it, time.perf_counter() - t0,
                      {"g_steps_over_relaxed": over_relaxed, "sweeps_extrapolated": n_extra,
-                      "stop_reason_per_channel": [m.reason for m in mon.channels]},
+                      "stop_reason_per_channel": mon.channel_reasons()},
                      carry={"beta": beta, "E": E, "monitors": mon})
 
 
@@ -619,12 +639,17 @@ def combine_channels(results) -> tuple[MFState, dict]:
     for c, res in enumerate(results):
         for nm in ("D", "F", "G", "rho_d", "rho_s"):
             getattr(st, nm)[c] = getattr(res.state, nm)[c]
-    mon = ChannelMonitors.__new__(ChannelMonitors)
+    mon = copy.deepcopy(results[0].carry["monitors"])
     mon.channels = [copy.deepcopy(res.carry["monitors"].channels[c])
                     for c, res in enumerate(results)]
     n = max(len(m.history) for m in mon.channels)
-    mon.history = [float(sum(m.history[min(k, len(m.history) - 1)] for m in mon.channels))
-                   for k in range(n)]
+    total = mon.total
+    total.history = [float(sum(m.history[min(k, len(m.history) - 1)] for m in mon.channels))
+                     for k in range(n)]
+    total.reason, total.small = "max_iter", 0       # the patience count of the sum, anew
+    for k in range(max(1, n - total.patience), n):
+        rel = (total.history[k - 1] - total.history[k]) / max(total.history[k], 1e-300)
+        total.small = total.small + 1 if rel < total.tol else 0
     carry = {"beta": np.array([res.carry["beta"][c] for c, res in enumerate(results)]),
              "E": np.array([res.E[c] for c, res in enumerate(results)]), "monitors": mon}
     return st, carry
