@@ -108,7 +108,7 @@ from ...loading import load
 
 __all__ = ["fit_npf", "fit_npf_independent_g", "fit_npf_g_from_d", "fit_npf_naive",
            "fit_npf_bivariate", "VARIANTS", "ALL_STARTS", "DEFAULT_STARTS", "summary",
-           "start_basins", "BASIN_TOLERANCE", "CONTINUATION_WINDOW", "SCREEN_ROUND"]
+           "start_basins", "BASIN_TOLERANCE", "CONTINUATION_WINDOW", "SCREEN_ROUND", "JUMP_EVERY"]
 
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
 ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
@@ -152,6 +152,11 @@ CONTINUATION_WINDOW = (100, 5.0)
 #: keep)`` = this: on the 19 MERL materials measured, the start best after 100 iterations
 #: was, in every channel, among the 2 best after 20 (docs/design/npf-fit.md).
 SCREEN_ROUND = (20, 1.05, 2)
+#: Independent-G's continuation of the best start also over-relaxes along the displacement
+#: of its last this-many sweeps, every this-many sweeps (``_solver.run_independent_g``'s
+#: ``jump_every``): the continuation crawls along the near-ambiguity of F(θd) and G(θi)G(θo)
+#: in small, steady steps (docs/design/npf-fit.md).
+JUMP_EVERY = 10
 #: model names of the registry and CLI -> variants (one naming scheme across CLI and API)
 CLI_VARIANTS = {"npf": "independent-g", "npf-g-from-d": "g-from-d", "npf-naive": "naive",
                 "npf-bivariate": "bivariate"}
@@ -487,6 +492,7 @@ def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max
         return _solver.run_independent_g(st, smp, eps=pb.eps, smoothing=g_smoothing,
                                          tol=pb.tol, max_iter=max_iter,
                                          extrapolate=extrapolate, window=window,
+                                         jump_every=JUMP_EVERY if window else None,
                                          active=active, carry=carry,
                                          callback=step_callback(pb.callback, what, max_iter))
 
@@ -729,7 +735,8 @@ def _arrays(st: MFState):
 
 
 #: Stop reasons of ``_solver.Monitor`` (and the closed-form bivariate fit) that mean converged.
-_CONVERGED_REASONS = ("relative decrease", "exact fit", "closed form", "damping limit")
+_CONVERGED_REASONS = ("relative decrease", "decrease over the last", "exact fit", "closed form",
+                      "damping limit")
 
 
 def _convergence(extra: dict, tol, max_iter, variant) -> dict:

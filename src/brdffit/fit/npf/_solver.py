@@ -526,19 +526,44 @@ def _g_sweep(st: MFState, smp: Samples, S, on, eps, smoothing, g_step_cap):
     return S, E, t
 
 
+def _jump(st: MFState, anchor: MFState, smp: Samples, eps, E, S, on, max_tries=8):
+    """The long-baseline over-relaxation of :func:`run_independent_g` (``jump_every``), in
+    place: ``θ + γ (θ − anchor)`` (:func:`_extrapolate`; ``anchor`` the state some sweeps
+    earlier) with γ = 1, then, while a channel accepts, again from the accepted point with
+    γ doubled (the direction is that of the last accepted step), at most ``max_tries``
+    passes. Returns ``(S, E, accepted)``: the bin statistics and objective, replaced in the
+    channels that accepted, and how many (channel, try) pairs did."""
+    gamma, todo, accepted = np.ones(3), np.array(on, bool), 0
+    for _ in range(max_tries):
+        if not todo.any():
+            break
+        before = MFState(*(np.array(x) for x in _state_arrays(st)))
+        acc, S_e, E = _extrapolate(st, anchor, gamma, smp, eps, E, chans=todo)
+        S = tuple(np.where(acc[:, None], a, b) for a, b in zip(S_e, S))
+        accepted += int(acc.sum())
+        _take(anchor, before, acc)
+        todo &= acc
+        gamma = gamma * 2.0
+    return S, E, accepted
+
+
 class ChannelMonitors:
-    """The stopping rule of an independent-G run, as :class:`Monitor` on the summed
-    objective (``total``: every channel stops when it fires), and with ``window = (W, k)``
-    also per channel (``channels``): a channel stops once its own relative decrease over
-    the last W iterations is below ``W · k · tol``, and then no longer costs. No channel so
-    runs longer than under the summed rule alone. The patience rule (``tol`` for 3
+    """The stopping rule of an independent-G run: :class:`Monitor` on the summed objective
+    (``total``: every channel stops when it fires), and with ``window = (W, k)`` a rule per
+    channel: a channel stops, and no longer costs, once its own decrease over the last W
+    iterations is below a third of the summed rule's limit, ``W · k · tol / 3`` times the
+    summed objective. No channel runs longer than under the summed rule alone, and when
+    every channel has stopped by its own rule the summed objective fell by less than the
+    summed rule's limit over their last W iterations (the same bound). A channel holding a
+    small part of Eq. 7 (a dark channel) stops early; per-channel *relative* windows would
+    run such channels longer than the summed rule does. The patience rule (``tol`` for 3
     iterations) is not applied per channel: single channels stall for a few iterations and
     go on (an all-ones start's channel after < 20 iterations, pink-plastic)."""
 
     def __init__(self, smp: Samples, tol, window=None, patience=3):
         self.total = Monitor(smp.sum_wzz, tol, np.inf, patience, window)
-        self.channels = [Monitor(smp.sum_wzz[c], tol, np.inf, np.inf, window)
-                         for c in range(3)]
+        self.channels = [Monitor(smp.sum_wzz[c], tol, np.inf, np.inf) for c in range(3)]
+        self.window = window
 
     @property
     def history(self) -> list[float]:
@@ -556,7 +581,18 @@ class ChannelMonitors:
         """Record ``E`` (3,); return the channels of ``on`` that stop now."""
         if self.total.push(E):
             return np.array(on, bool)
-        return np.array([bool(on[c]) and self.channels[c].push(E[c]) for c in range(3)])
+        stop = np.array([bool(on[c]) and self.channels[c].push(E[c]) for c in range(3)])
+        if self.window is None:
+            return stop
+        n_win, factor = self.window
+        limit = n_win * factor * self.total.tol / 3.0
+        for c in np.flatnonzero(on & ~stop):
+            h = self.channels[c].history
+            if len(h) > n_win and h[-1 - n_win] - h[-1] < limit * self.total.history[-1]:
+                self.channels[c].reason = (f"decrease over the last {n_win} iterations < "
+                                           f"{limit:g} of the summed objective")
+                stop[c] = True
+        return stop
 
     def reason(self) -> str:
         """Why every channel stopped: the summed rule's reason, else the first channel's."""
@@ -573,14 +609,19 @@ class ChannelMonitors:
 
 def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol=1e-6,
                       max_iter=1000, g_step_cap=None, extrapolate=False, window=None,
-                      active=None, carry=None, callback=None) -> RunResult:
+                      jump_every=None, active=None, carry=None,
+                      callback=None) -> RunResult:
     """Independent-G AWLS (§4.2-4.3): D, F (Eq. 14), G(θi) and G(θo) updates averaged and
     Gaussian-smoothed (σ = ``smoothing`` samples), taken with the exact, over-relaxed line
     search of :func:`line_search_g` (the paper searches along the step only when it increases
     the objective), ρd/ρs by Cramer's rule, max-normalisation and DR clamping at ``eps``
     (:func:`_g_sweep`). With ``extrapolate`` each sweep is followed by an accepted-if-better
     over-relaxation step (:func:`_extrapolate`), which shortens the long AWLS "swamps"
-    caused by the near-ambiguity between F(θd) and G(θi)G(θo).
+    caused by the near-ambiguity between F(θd) and G(θi)G(θo). With ``jump_every = M``
+    every M-th sweep is also followed by a long-baseline over-relaxation along the
+    displacement of the last M sweeps (:func:`_jump`, accepted only if better): along the
+    slow, steady crawl of that near-ambiguity one sweep's displacement zigzags, M sweeps'
+    points along the valley.
 
     Each channel stops by the rule of :class:`Monitor` on its own objective
     (:class:`ChannelMonitors`; ``window = (W, k)``: also when its relative decrease over the
@@ -604,7 +645,8 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
     else:
         mon, beta = carry["monitors"], carry["beta"].copy()
         E = np.where(on, E, carry["E"])
-    E_frozen, n_it, over_relaxed, n_extra = E.copy(), 0, 0, 0
+    E_frozen, n_it, over_relaxed, n_extra, n_jumps = E.copy(), 0, 0, 0, 0
+    anchor = MFState(*(np.array(x) for x in _state_arrays(st)))
     while np.any(on) and n_it < max_iter:
         prev = MFState(*(np.array(x) for x in _state_arrays(st)))
         S, E, t = _g_sweep(st, smp, S, on, eps, smoothing, g_step_cap)
@@ -614,6 +656,10 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
                                                        chans=on)
             n_extra += accepted
         n_it += 1
+        if jump_every and n_it % jump_every == 0:
+            S, E, accepted = _jump(st, anchor, smp, eps, E, S, on)
+            n_jumps += accepted
+            anchor = MFState(*(np.array(x) for x in _state_arrays(st)))
         _take(st, frozen, ~on)                       # the channels not run stay as they were
         E = np.where(on, E, E_frozen)
         if callback is not None:
@@ -626,6 +672,7 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
     E = np.where(_chans(active), E_exact, E)
     return RunResult(st, E, n_it, mon.history, reason, n_it, n_it, time.perf_counter() - t0,
                      {"g_steps_over_relaxed": over_relaxed, "sweeps_extrapolated": n_extra,
+                      "jumps_accepted": n_jumps,
                       "stop_reason_per_channel": mon.channel_reasons()},
                      carry={"beta": beta, "E": E, "monitors": mon})
 
