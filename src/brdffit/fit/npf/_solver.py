@@ -526,7 +526,7 @@ def _g_sweep(st: MFState, smp: Samples, S, on, eps, smoothing, g_step_cap):
     return S, E, t
 
 
-def _jump(st: MFState, anchor: MFState, smp: Samples, eps, E, S, on, max_tries=8):
+def _jump(st: MFState, anchor: MFState, smp: Samples, eps, E, S, on, max_tries=4):
     """The long-baseline over-relaxation of :func:`run_independent_g` (``jump_every``), in
     place: ``θ + γ (θ − anchor)`` (:func:`_extrapolate`; ``anchor`` the state some sweeps
     earlier) with γ = 1, then, while a channel accepts, again from the accepted point with
