@@ -49,26 +49,38 @@ Deviations from the paper (deliberate, documented):
   ``fit_info["starts"]`` says so.
 * Independent-G's starts and how they are run. The paper ran eight starts to convergence
   (four random, all-ones, the SGD fit, the G-from-D fit, D from the retro-reflective slice:
-  ``ALL_STARTS``, ``n_random``). Here every start given is *screened* for ``start_max_iter``
-  AWLS iterations, the best screened state **per channel** (the channels are independent
-  problems) is continued, and the polish follows. ``starts=None`` screens
+  ``ALL_STARTS``, ``n_random``). Here every start given is *screened* for up to
+  ``start_max_iter`` AWLS iterations, the best screened state **per channel** (the channels
+  are independent problems) is continued, and the polish follows. ``starts=None`` screens
   :data:`DEFAULT_STARTS`: all the paper's starts except the G-from-D fit (``n_random`` random,
   all-ones, the SGD fit, the data slices). The G-from-D start was the best screened start
   of no channel on the 14 MERL materials where this was recorded and cost 0.2-3.6 s CPU;
   random starts were on 11 of them, and leaving them out raised the final objective by up
-  to 1.3 % (docs/design/npf-fit.md). ``starts=ALL_STARTS`` is the paper's set. The
-  continuation stops by the AWLS rule of :mod:`._solver` or, earlier, when its objective
+  to 1.3 % (docs/design/npf-fit.md). ``starts=ALL_STARTS`` is the paper's set.
+* The screening runs in rounds per channel (successive halving, ``screen_rounds``,
+  :data:`SCREEN_ROUNDS`): after each round only the starts close to the channel's best
+  run on in that channel; the k-th best start of every channel runs as one combined run
+  (``_solver.combine_channels``), which goes on as each start's channel would alone, and
+  the passes over the samples skip the channels not run. ``screen_rounds=False``: every
+  start runs all ``start_max_iter`` iterations.
+* The continuation stops by the AWLS rule of :mod:`._solver` or, earlier, when its objective
   fell by less than ``W·k·tol`` over the last ``W`` iterations (:data:`CONTINUATION_WINDOW`,
-  ``W = 100, k = 5``): past that point AWLS crawls along the near-ambiguity of F(θd) and
-  G(θi)G(θo), for another 200-1400 iterations on the slowest MERL materials measured, which
-  lowered the AWLS objective by 0.05-0.25 % there.
-* ``fit_info["starts"]`` has one record per screened start (objective per channel,
-  iterations, stop reason); ``fit_info["best_start_per_channel"]`` the start each channel
-  was continued from; ``fit_info["continuation"]`` the continuation's run;
+  ``W = 100, k = 5``); a channel whose own decrease over the window is below a third of
+  that limit (of the summed objective) stops earlier and no longer costs
+  (``_solver.ChannelMonitors``). Past that point AWLS crawls along the near-ambiguity of
+  F(θd) and G(θi)G(θo). Every :data:`JUMP_EVERY` sweeps the continuation also over-relaxes
+  along the displacement of those sweeps (``_solver._jump``, accepted only where Eq. 7
+  decreases): along that crawl one sweep's displacement zigzags, twenty sweeps' points
+  along the valley; it reaches lower AWLS objectives in a fraction of the iterations.
+* ``fit_info["starts"]`` has one record per screened start (objective and iterations per
+  channel, at the round where the channel was left; stop reasons; the first round's
+  history); ``fit_info["best_start_per_channel"]`` the start each channel was continued
+  from; ``fit_info["continuation"]`` the continuation's run (``jumps_accepted``);
   ``fit_info["start_basins"]`` (:func:`start_basins`) how far apart the screened starts
   ended per channel: distinct objectives (more than :data:`BASIN_TOLERANCE` apart, counted
   over the screened starts only, so at most their number) and the spread (largest over
-  smallest), as far as ``start_max_iter`` iterations tell.
+  smallest), as far as the screening tells (the starts left after an early round count
+  with their objective there).
 
 Stopping rule: see :mod:`._solver` (relative decrease below ``tol`` for 3 iterations, exact
 fit, or ``max_iter``; the polish: below ``tol`` for 2 iterations, no damped step lowering the
@@ -310,10 +322,15 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         all-ones, SGD fit, G-from-D fit, data slices); ``None``: :data:`DEFAULT_STARTS` (all
         but the G-from-D fit). The best screened state per channel is continued.
     start_max_iter:
-        Independent-G: every start first runs this many AWLS iterations, then the per-channel
-        best continues up to ``max_iter`` or until the AWLS rule or
+        Independent-G: the starts are screened for up to this many AWLS iterations, then the
+        per-channel best continues up to ``max_iter`` or until the AWLS rule or
         :data:`CONTINUATION_WINDOW` stops it (``None``: every start runs ``max_iter``
         under the AWLS rule alone, as the paper).
+    screen_rounds:
+        Independent-G: the screening's rounds ``((iterations, ratio, keep), ...)``: at each
+        round's iterations only the starts within ``ratio`` of a channel's best (``keep`` at
+        most, ``None``: any number) run on in that channel. ``None``:
+        :data:`SCREEN_ROUNDS`; ``False``: every start runs all ``start_max_iter``.
     polish:
         Cap of the damped Newton (Levenberg–Marquardt) iterations after AWLS, all factors
         of a channel at once, accepted only where they lower the objective (module notes).
@@ -777,7 +794,9 @@ def _convergence(extra: dict, tol, max_iter, variant) -> dict:
             n_win, factor = CONTINUATION_WINDOW
             criterion += (f"; the continuation of the best start also stops when its relative "
                           f"decrease over the last {n_win} iterations is < {n_win}·{factor:g}"
-                          f"·tol = {n_win * factor * tol:g} (CONTINUATION_WINDOW)")
+                          f"·tol = {n_win * factor * tol:g} (CONTINUATION_WINDOW), and a "
+                          f"channel of it when its own decrease over them is < a third of "
+                          f"that of the summed objective")
     if polish is not None:
         cap, phase = int(polish["max_iterations"]), "Levenberg–Marquardt polish"
         nit += int(polish["iterations"])
