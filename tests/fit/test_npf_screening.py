@@ -142,15 +142,21 @@ def test_jump_never_raises_the_objective_and_leaves_other_channels(smp):
         assert np.array_equal(x[2], y[2])
 
 
-def test_screening_rounds_continue_only_the_close_starts():
+def test_screening_rounds_continue_only_the_close_starts(monkeypatch):
     """After a round only the starts within ``ratio`` of a channel's best (at most ``keep``)
-    run on, in that channel; ``screen_rounds=False`` runs every start all the way."""
+    run on, in that channel; ``SCREEN_ROUNDS = False`` runs every start all the way."""
     D = _d([0.25, 0.35, 0.5])
     G = (1 - 0.4 * (G_THETA / G_THETA[-1]) ** 2)[:, None] * np.array([1.0, 0.9, 0.95])
     table = tabulate_merl_grid(NPFMicrofacetBRDF(D, _f(), G, RHO_D, RHO_S))
     kw = dict(data=table, starts=("random", "ones"), n_random=2, max_iter=6,
               start_max_iter=5, polish=0)
-    fit = npf.fit_npf(screen_rounds=((2, 1.0, 1),), **kw)
+    assert npf.SCREEN_ROUNDS == ((15, 1.02, None), (50, 1.005, 2))
+
+    def run(rounds):
+        monkeypatch.setattr(npf, "SCREEN_ROUNDS", rounds)
+        return npf.fit_npf(**kw)
+
+    fit = run(((2, 1.0, 1),))
     info = fit.fit_info
     E2 = np.array([s["objective_per_channel"] for s in info["starts"]])
     its = np.array([s["iterations_per_channel"] for s in info["starts"]])
@@ -161,13 +167,25 @@ def test_screening_rounds_continue_only_the_close_starts():
                                               for c in range(3)]
     assert info["iterations"] == 3 * 2 + 3 + 1
     assert fit.fit_options["screen_rounds"] == [[2, 1.0, 1]]
-    full = npf.fit_npf(screen_rounds=False, **kw).fit_info
+    full = run(False).fit_info
     assert all(s["iterations_per_channel"] == [5, 5, 5] for s in full["starts"])
     assert np.all(E2.min(axis=0) >= np.array(full["objective_per_channel"]) * (1 - 1e-9))
     # two rounds: all within ×10 after 1 iteration go on to 3, then the best to 5
-    two = npf.fit_npf(screen_rounds=((1, 10.0, None), (3, 1.0, 1)), **kw).fit_info
+    two = run(((1, 10.0, None), (3, 1.0, 1))).fit_info
     its = np.array([s["iterations_per_channel"] for s in two["starts"]])
     assert np.all(np.isin(its, (1, 3, 5))) and np.all(np.sum(its == 5, axis=0) == 1)
     for bad in ((0, 1.0, 1),), ((3, 1.0, 1), (2, 1.0, 1)), ((2, 0.5, 1),):
         with pytest.raises(ValueError, match="screen_rounds"):
-            npf.fit_npf(screen_rounds=bad, **kw)
+            run(bad)
+
+
+def test_jump_cap_keeps_every_factor_sample_above_half_its_value():
+    a, b = _start(6), _start(7)
+    cap = _solver._jump_cap(a, b)
+    lowest = np.full(3, np.inf)
+    for nm in ("D", "F", "G"):
+        x, d = getattr(a, nm), getattr(a, nm) - getattr(b, nm)
+        ratio = (x + cap[:, None] * d) / x
+        assert np.all(ratio >= 0.5 - 1e-12)
+        lowest = np.minimum(lowest, ratio.min(axis=1))
+    np.testing.assert_allclose(lowest, 0.5)              # the cap is reached, not passed

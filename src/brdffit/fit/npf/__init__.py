@@ -57,11 +57,11 @@ Deviations from the paper (deliberate, documented):
   of no channel on the 14 MERL materials where this was recorded and cost 0.2-3.6 s CPU;
   random starts were on 11 of them, and leaving them out raised the final objective by up
   to 1.3 % (docs/design/npf-fit.md). ``starts=ALL_STARTS`` is the paper's set.
-* The screening runs in rounds per channel (successive halving, ``screen_rounds``,
-  :data:`SCREEN_ROUNDS`): after each round only the starts close to the channel's best
+* The screening runs in rounds per channel (successive halving, :data:`SCREEN_ROUNDS`;
+  not an option of :func:`fit_npf`, whose options mirror the registry's): after each round only the starts close to the channel's best
   run on in that channel; the k-th best start of every channel runs as one combined run
   (``_solver.combine_channels``), which goes on as each start's channel would alone, and
-  the passes over the samples skip the channels not run. ``screen_rounds=False``: every
+  the passes over the samples skip the channels not run. ``SCREEN_ROUNDS = False``: every
   start runs all ``start_max_iter`` iterations.
 * The continuation stops by the AWLS rule of :mod:`._solver` or, earlier, when its objective
   fell by less than ``W·k·tol`` over the last ``W`` iterations (:data:`CONTINUATION_WINDOW`,
@@ -158,7 +158,7 @@ G_FROM_D_EXTRAPOLATE_AFTER = 50
 #: the near-ambiguity of F(θd) and G(θi)G(θo) (1e-5-1e-6 per iteration for hundreds of
 #: iterations on MERL) before the polish (docs/design/npf-fit.md).
 CONTINUATION_WINDOW = (100, 5.0)
-#: Independent-G's screening in rounds (``screen_rounds``), per channel (successive halving):
+#: Independent-G's screening in rounds, per channel (successive halving; ``False``: one round):
 #: every start runs the first round's ``n`` AWLS iterations; at each round's ``n`` only the
 #: starts still run whose objective is within ``ratio`` of the channel's best, ``keep`` at
 #: most (``None``: any number); the survivors run on to the next round's ``n``, the last to
@@ -296,7 +296,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
             max_iter: int | None = None, tol: float = 1e-6,
             starts: Iterable[str] | None = None, n_random: int = 4, seed: int = 0,
             g_smoothing: float = 1.0, dr_epsilon: float | None = None,
-            start_max_iter: int | None = 100, screen_rounds=None, polish: int | None = None,
+            start_max_iter: int | None = 100, polish: int | None = None,
             polish_bound: float | None = None, extrapolate: bool = True,
             init: str = "slices",
             name: str | None = None, callback=None, verbose: bool = False) -> BRDF:
@@ -322,15 +322,10 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         all-ones, SGD fit, G-from-D fit, data slices); ``None``: :data:`DEFAULT_STARTS` (all
         but the G-from-D fit). The best screened state per channel is continued.
     start_max_iter:
-        Independent-G: the starts are screened for up to this many AWLS iterations, then the
-        per-channel best continues up to ``max_iter`` or until the AWLS rule or
+        Independent-G: the starts are screened for up to this many AWLS iterations, in the
+        rounds of :data:`SCREEN_ROUNDS` (module notes), then the per-channel best continues up to ``max_iter`` or until the AWLS rule or
         :data:`CONTINUATION_WINDOW` stops it (``None``: every start runs ``max_iter``
         under the AWLS rule alone, as the paper).
-    screen_rounds:
-        Independent-G: the screening's rounds ``((iterations, ratio, keep), ...)``: at each
-        round's iterations only the starts within ``ratio`` of a channel's best (``keep`` at
-        most, ``None``: any number) run on in that channel. ``None``:
-        :data:`SCREEN_ROUNDS`; ``False``: every start runs all ``start_max_iter``.
     polish:
         Cap of the damped Newton (Levenberg–Marquardt) iterations after AWLS, all factors
         of a channel at once, accepted only where they lower the objective (module notes).
@@ -373,7 +368,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
     if variant == "g-from-d":
         return _fit_g_from_d(pb, init, extrapolate)
     return _fit_independent_g(pb, starts, n_random=n_random, g_smoothing=g_smoothing,
-                              start_max_iter=start_max_iter, screen_rounds=screen_rounds,
+                              start_max_iter=start_max_iter,
                               extrapolate=extrapolate, verbose=verbose)
 
 
@@ -492,7 +487,7 @@ def _fit_g_from_d(pb: _Problem, init: str, extrapolate: bool):
 
 
 def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max_iter,
-                       screen_rounds, extrapolate, verbose):
+                       extrapolate, verbose):
     """Eq. 3 with an independent G (§4.3): every start screened for ``start_max_iter`` AWLS
     iterations (:func:`_multi_start`), the per-channel best continued up to ``max_iter``
     (:func:`_continue_best`), then the polish."""
@@ -502,7 +497,7 @@ def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max
         raise ValueError(f"starts: expected a non-empty subset of {ALL_STARTS}, found {starts}")
     screen = start_max_iter if start_max_iter is not None else pb.max_iter
     screen = min(screen, pb.max_iter)
-    rounds = _screen_rounds(screen_rounds, screen)
+    rounds = _screen_rounds(SCREEN_ROUNDS, screen)
     pb.options.update(starts=list(starts), n_random=n_random, g_smoothing=g_smoothing,
                       start_max_iter=screen, screen_rounds=[list(r) for r in rounds],
                       polish=pb.polish, polish_bound=pb.polish_bound, extrapolate=extrapolate)
@@ -534,7 +529,7 @@ def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max
 
 
 def _screen_rounds(value, screen: int) -> list[tuple[int, float, int | None]]:
-    """``screen_rounds`` checked: :data:`SCREEN_ROUNDS` for ``None``, ``False`` for one round
+    """The screening's rounds ``value`` (:data:`SCREEN_ROUNDS`) checked: :data:`SCREEN_ROUNDS` for ``None``, ``False`` for one round
     (every start runs all ``screen`` iterations); the rounds at or past ``screen`` dropped
     (the first is cut to ``screen``)."""
     value = SCREEN_ROUNDS if value is None else (((screen, 1.0, None),) if value is False

@@ -526,6 +526,19 @@ def _g_sweep(st: MFState, smp: Samples, S, on, eps, smoothing, g_step_cap):
     return S, E, t
 
 
+def _jump_cap(st: MFState, anchor: MFState, keep=0.5) -> np.ndarray:
+    """Per channel the largest γ for which every sample of D, F and G in
+    ``θ + γ (θ − anchor)`` stays at or above ``keep`` times its value."""
+    cap = np.full(3, np.inf)
+    for nm in ("D", "F", "G"):
+        x = getattr(st, nm)
+        d = x - getattr(anchor, nm)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            room = np.where(d < 0, (1.0 - keep) * x / -d, np.inf)
+        cap = np.minimum(cap, room.min(axis=1))
+    return cap
+
+
 def _jump(st: MFState, anchor: MFState, smp: Samples, eps, E, S, on, max_tries=4):
     """The long-baseline over-relaxation of :func:`run_independent_g` (``jump_every``), in
     place: ``θ + γ (θ − anchor)`` (:func:`_extrapolate`; ``anchor`` the state some sweeps
@@ -538,7 +551,8 @@ def _jump(st: MFState, anchor: MFState, smp: Samples, eps, E, S, on, max_tries=4
         if not todo.any():
             break
         before = MFState(*(np.array(x) for x in _state_arrays(st)))
-        acc, S_e, E = _extrapolate(st, anchor, gamma, smp, eps, E, chans=todo)
+        acc, S_e, E = _extrapolate(st, anchor, np.minimum(gamma, _jump_cap(st, anchor)), smp,
+                                   eps, E, chans=todo)
         S = tuple(np.where(acc[:, None], a, b) for a, b in zip(S_e, S))
         accepted += int(acc.sum())
         _take(anchor, before, acc)
@@ -640,7 +654,8 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
     _take(st, frozen, ~on)
     g_step_cap = G_STEP_CAP if g_step_cap is None else float(g_step_cap)
     if carry is None:
-        mon, beta = ChannelMonitors(smp, tol, window), np.ones(3)
+        mon = ChannelMonitors(smp, tol, window, patience=max(3, jump_every or 0))
+        beta = np.ones(3)
         mon.start(E)
     else:
         mon, beta = carry["monitors"], carry["beta"].copy()
