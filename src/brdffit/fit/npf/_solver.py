@@ -561,6 +561,11 @@ def _jump(st: MFState, anchor: MFState, smp: Samples, eps, E, S, on, max_tries=4
     return S, E, accepted
 
 
+#: :class:`ChannelMonitors`: a channel of a run with a window stops once its decrease over
+#: the window is below this share of the summed rule's limit (of the summed objective)
+CHANNEL_SHARE = 1.0 / 3.0
+
+
 class ChannelMonitors:
     """The stopping rule of an independent-G run: :class:`Monitor` on the summed objective
     (``total``: every channel stops when it fires), and with ``window = (W, k)`` a rule per
@@ -599,7 +604,7 @@ class ChannelMonitors:
         if self.window is None:
             return stop
         n_win, factor = self.window
-        limit = n_win * factor * self.total.tol / 3.0
+        limit = n_win * factor * self.total.tol * CHANNEL_SHARE
         for c in np.flatnonzero(on & ~stop):
             h = self.channels[c].history
             if len(h) > n_win and h[-1 - n_win] - h[-1] < limit * self.total.history[-1]:
