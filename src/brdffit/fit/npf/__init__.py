@@ -49,26 +49,38 @@ Deviations from the paper (deliberate, documented):
   ``fit_info["starts"]`` says so.
 * Independent-G's starts and how they are run. The paper ran eight starts to convergence
   (four random, all-ones, the SGD fit, the G-from-D fit, D from the retro-reflective slice:
-  ``ALL_STARTS``, ``n_random``). Here every start given is *screened* for ``start_max_iter``
-  AWLS iterations, the best screened state **per channel** (the channels are independent
-  problems) is continued, and the polish follows. ``starts=None`` screens
+  ``ALL_STARTS``, ``n_random``). Here every start given is *screened* for up to
+  ``start_max_iter`` AWLS iterations, the best screened state **per channel** (the channels
+  are independent problems) is continued, and the polish follows. ``starts=None`` screens
   :data:`DEFAULT_STARTS`: all the paper's starts except the G-from-D fit (``n_random`` random,
   all-ones, the SGD fit, the data slices). The G-from-D start was the best screened start
   of no channel on the 14 MERL materials where this was recorded and cost 0.2-3.6 s CPU;
   random starts were on 11 of them, and leaving them out raised the final objective by up
-  to 1.3 % (docs/design/npf-fit.md). ``starts=ALL_STARTS`` is the paper's set. The
-  continuation stops by the AWLS rule of :mod:`._solver` or, earlier, when its objective
+  to 1.3 % (docs/design/npf-fit.md). ``starts=ALL_STARTS`` is the paper's set.
+* The screening runs in rounds per channel (successive halving, :data:`SCREEN_ROUNDS`;
+  not an option of :func:`fit_npf`, whose options mirror the registry's): after each round only the starts close to the channel's best
+  run on in that channel; the k-th best start of every channel runs as one combined run
+  (``_solver.combine_channels``), which goes on as each start's channel would alone, and
+  the passes over the samples skip the channels not run. ``SCREEN_ROUNDS = False``: every
+  start runs all ``start_max_iter`` iterations.
+* The continuation stops by the AWLS rule of :mod:`._solver` or, earlier, when its objective
   fell by less than ``W·k·tol`` over the last ``W`` iterations (:data:`CONTINUATION_WINDOW`,
-  ``W = 100, k = 5``): past that point AWLS crawls along the near-ambiguity of F(θd) and
-  G(θi)G(θo), for another 200-1400 iterations on the slowest MERL materials measured, which
-  lowered the AWLS objective by 0.05-0.25 % there.
-* ``fit_info["starts"]`` has one record per screened start (objective per channel,
-  iterations, stop reason); ``fit_info["best_start_per_channel"]`` the start each channel
-  was continued from; ``fit_info["continuation"]`` the continuation's run;
+  ``W = 100, k = 5``); a channel whose own decrease over the window is below a third of
+  that limit (of the summed objective) stops earlier and no longer costs
+  (``_solver.ChannelMonitors``). Past that point AWLS crawls along the near-ambiguity of
+  F(θd) and G(θi)G(θo). Every :data:`JUMP_EVERY` sweeps the continuation also over-relaxes
+  along the displacement of those sweeps (``_solver._jump``, accepted only where Eq. 7
+  decreases): along that crawl one sweep's displacement zigzags, twenty sweeps' points
+  along the valley; it reaches lower AWLS objectives in a fraction of the iterations.
+* ``fit_info["starts"]`` has one record per screened start (objective and iterations per
+  channel, at the round where the channel was left; stop reasons; the first round's
+  history); ``fit_info["best_start_per_channel"]`` the start each channel was continued
+  from; ``fit_info["continuation"]`` the continuation's run (``jumps_accepted``);
   ``fit_info["start_basins"]`` (:func:`start_basins`) how far apart the screened starts
   ended per channel: distinct objectives (more than :data:`BASIN_TOLERANCE` apart, counted
   over the screened starts only, so at most their number) and the spread (largest over
-  smallest), as far as ``start_max_iter`` iterations tell.
+  smallest), as far as the screening tells (the starts left after an early round count
+  with their objective there).
 
 Stopping rule: see :mod:`._solver` (relative decrease below ``tol`` for 3 iterations, exact
 fit, or ``max_iter``; the polish: below ``tol`` for 2 iterations, no damped step lowering the
@@ -108,7 +120,7 @@ from ...loading import load
 
 __all__ = ["fit_npf", "fit_npf_independent_g", "fit_npf_g_from_d", "fit_npf_naive",
            "fit_npf_bivariate", "VARIANTS", "ALL_STARTS", "DEFAULT_STARTS", "summary",
-           "start_basins", "BASIN_TOLERANCE", "CONTINUATION_WINDOW"]
+           "start_basins", "BASIN_TOLERANCE", "CONTINUATION_WINDOW", "SCREEN_ROUNDS", "JUMP_EVERY"]
 
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
 ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
@@ -146,6 +158,21 @@ G_FROM_D_EXTRAPOLATE_AFTER = 50
 #: the near-ambiguity of F(θd) and G(θi)G(θo) (1e-5-1e-6 per iteration for hundreds of
 #: iterations on MERL) before the polish (docs/design/npf-fit.md).
 CONTINUATION_WINDOW = (100, 5.0)
+#: Independent-G's screening in rounds, per channel (successive halving; ``False``: one round):
+#: every start runs the first round's ``n`` AWLS iterations; at each round's ``n`` only the
+#: starts still run whose objective is within ``ratio`` of the channel's best, ``keep`` at
+#: most (``None``: any number); the survivors run on to the next round's ``n``, the last to
+#: ``start_max_iter``. On the 19 MERL materials whose screening histories were recorded
+#: (docs/design/npf-fit.md), this schedule kept in every channel a start whose objective
+#: after 100 iterations was within 0.02 % of the best start's, for about half the
+#: screening's cost; one round keeping the 2 best after 20 iterations missed by 0.36 %
+#: (white-paint, all starts within 1.5 % of each other).
+SCREEN_ROUNDS = ((15, 1.02, None), (50, 1.005, 2))
+#: Independent-G's continuation of the best start also over-relaxes along the displacement
+#: of its last this-many sweeps, every this-many sweeps (``_solver.run_independent_g``'s
+#: ``jump_every``): the continuation crawls along the near-ambiguity of F(θd) and G(θi)G(θo)
+#: in small, steady steps (docs/design/npf-fit.md).
+JUMP_EVERY = 20
 #: model names of the registry and CLI -> variants (one naming scheme across CLI and API)
 CLI_VARIANTS = {"npf": "independent-g", "npf-g-from-d": "g-from-d", "npf-naive": "naive",
                 "npf-bivariate": "bivariate"}
@@ -295,8 +322,8 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         all-ones, SGD fit, G-from-D fit, data slices); ``None``: :data:`DEFAULT_STARTS` (all
         but the G-from-D fit). The best screened state per channel is continued.
     start_max_iter:
-        Independent-G: every start first runs this many AWLS iterations, then the per-channel
-        best continues up to ``max_iter`` or until the AWLS rule or
+        Independent-G: the starts are screened for up to this many AWLS iterations, in the
+        rounds of :data:`SCREEN_ROUNDS` (module notes), then the per-channel best continues up to ``max_iter`` or until the AWLS rule or
         :data:`CONTINUATION_WINDOW` stops it (``None``: every start runs ``max_iter``
         under the AWLS rule alone, as the paper).
     polish:
@@ -341,8 +368,8 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
     if variant == "g-from-d":
         return _fit_g_from_d(pb, init, extrapolate)
     return _fit_independent_g(pb, starts, n_random=n_random, g_smoothing=g_smoothing,
-                              start_max_iter=start_max_iter, extrapolate=extrapolate,
-                              verbose=verbose)
+                              start_max_iter=start_max_iter,
+                              extrapolate=extrapolate, verbose=verbose)
 
 
 @dataclasses.dataclass
@@ -470,31 +497,59 @@ def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max
         raise ValueError(f"starts: expected a non-empty subset of {ALL_STARTS}, found {starts}")
     screen = start_max_iter if start_max_iter is not None else pb.max_iter
     screen = min(screen, pb.max_iter)
+    rounds = _screen_rounds(SCREEN_ROUNDS, screen)
     pb.options.update(starts=list(starts), n_random=n_random, g_smoothing=g_smoothing,
-                      start_max_iter=screen, polish=pb.polish, polish_bound=pb.polish_bound,
-                      extrapolate=extrapolate)
+                      start_max_iter=screen, screen_rounds=[list(r) for r in rounds],
+                      polish=pb.polish, polish_bound=pb.polish_bound, extrapolate=extrapolate)
     smp = Samples.from_objective(pb.obj)
     start_states = _start_states(pb, starts, n_random, smp)
 
-    def run(label, st, max_iter, what, window=None):
+    def run(st, max_iter, what, window=None, active=None, carry=None):
         return _solver.run_independent_g(st, smp, eps=pb.eps, smoothing=g_smoothing,
                                          tol=pb.tol, max_iter=max_iter,
                                          extrapolate=extrapolate, window=window,
+                                         jump_every=JUMP_EVERY if window else None,
+                                         active=active, carry=carry,
                                          callback=step_callback(pb.callback, what, max_iter))
 
-    runs, (bst, bE, blab) = _multi_start(
-        start_states, lambda label, st: run(label, st, screen, f"start {label}"), verbose,
-        f"{pb.source or pb.name}: independent-G fit")
-    extra = {"starts": runs, "best_start_per_channel": blab,
+    runs, results = _multi_start(
+        start_states, lambda label, st: run(st, rounds[0][0], f"start {label}"),
+        verbose, f"{pb.source or pb.name}: independent-G fit")
+    best, n_screened = _later_rounds(runs, results, rounds, screen, run)
+    extra = {"starts": runs, "best_start_per_channel": best[2],
              "start_basins": start_basins(runs)}
-    bst, bE = _continue_best(runs, (bst, bE, blab), extra, screen, pb.max_iter,
-                             lambda st, n: run("best", st, n, "best start, continued",
-                                               CONTINUATION_WINDOW))
+    bst, bE = _continue_best(best, extra, n_screened, screen, pb.max_iter,
+                             lambda st, n, on: run(st, n, "best start, continued",
+                                                   CONTINUATION_WINDOW, on))
     if pb.polish > 0:
         bst, bE = _polish(bst, bE, smp, extra, eps=pb.eps, polish=pb.polish, tol=pb.tol,
                           g_from_d=False, bound=pb.polish_bound, callback=pb.callback)
     _check_state(_arrays(bst), "independent-G fit")
     return pb.finish(_mf_model(bst, "independent-g", pb.name, pb.source), bE, extra)
+
+
+def _screen_rounds(value, screen: int) -> list[tuple[int, float, int | None]]:
+    """The screening's rounds ``value`` (:data:`SCREEN_ROUNDS`) checked: :data:`SCREEN_ROUNDS` for ``None``, ``False`` for one round
+    (every start runs all ``screen`` iterations); the rounds at or past ``screen`` dropped
+    (the first is cut to ``screen``)."""
+    value = SCREEN_ROUNDS if value is None else (((screen, 1.0, None),) if value is False
+                                                 else value)
+    rounds, last = [], 0
+    try:
+        for n, ratio, keep in value:
+            n, ratio, keep = int(n), float(ratio), None if keep is None else int(keep)
+            if n <= last or not ratio >= 1 or (keep is not None and keep < 1):
+                raise ValueError
+            rounds.append((n, ratio, keep))
+            last = n
+    except (TypeError, ValueError):
+        rounds = []
+    if not rounds:
+        raise ValueError(f"screen_rounds: expected rounds (iterations, ratio >= 1, keep >= 1 "
+                         f"or None) with increasing iterations >= 1, None or False, found "
+                         f"{value!r}")
+    return [(min(rounds[0][0], screen),) + rounds[0][1:]] + [r for r in rounds[1:]
+                                                             if r[0] < screen]
 
 
 def _start_states(pb: _Problem, starts, n_random, smp) -> list[tuple[str, MFState | None, str]]:
@@ -531,35 +586,93 @@ def _start_states(pb: _Problem, starts, n_random, smp) -> list[tuple[str, MFStat
 
 
 def _multi_start(start_states, run_start, verbose: bool, what: str):
-    """The multi-start driver: ``run_start(label, state)`` for every available start, on
-    parallel threads (the AWLS kernels release the GIL), merged in the fixed order of the
-    starts so that the fit is deterministic; the best objective is kept **per channel**
-    (the channels are independent problems). Returns ``(runs, (state, E, labels))``: a
-    record per start and the best state, its objective per channel and the start each
-    channel came from. Raises :class:`FitError` when no start gives finite factors."""
+    """The first round of the multi-start screening: ``run_start(label, state)`` for every
+    available start, on parallel threads (the AWLS kernels release the GIL), merged in the
+    fixed order of the starts so that the fit is deterministic. Returns ``(runs, results)``:
+    a record per start and ``(label, RunResult)`` of those with finite factors. Raises
+    :class:`FitError` when no start gives finite factors."""
     todo = [(label, st) for label, st, _ in start_states if st is not None]
     with ThreadPoolExecutor(max_workers=max(1, min(_n_threads(), len(todo)))) as pool:
-        results = iter(list(pool.map(lambda t: run_start(*t), todo)))
-    runs, best = [], None
+        done = iter(list(pool.map(lambda t: run_start(*t), todo)))
+    runs, results = [], []
     for label, st, note in start_states:
         if st is None:
             runs.append({"start": label, "status": note})
             continue
-        res = next(results)
+        res = next(done)
         ok = all(np.all(np.isfinite(a)) for a in _arrays(res.state))
+        info = _run_info(res)
         entry = {"start": label, "status": "ok" if ok else "non-finite", "note": note,
                  "objective": float(res.E.sum()), "objective_per_channel": res.E.tolist(),
-                 **_run_info(res)}
+                 **info, "iterations_per_channel": [res.iterations] * 3,
+                 "stop_reason_per_channel": list(res.extra["stop_reason_per_channel"])}
         runs.append(entry)
         if verbose:
             print(f"[npf] start {label}: E={entry['objective']:.6g} it={res.iterations} "
                   f"t={res.seconds:.1f}s ({res.reason})")
         if ok:
-            best = _keep_better(best, res, label)
-    if best is None:
+            results.append((label, res))
+    if not results:
         raise FitError(f"{what}: no start produced a valid model "
                        f"({[r.get('status') for r in runs]})")
-    return runs, best
+    return runs, results
+
+
+def _later_rounds(runs, results, rounds, screen: int, run):
+    """The screening's later rounds (:data:`SCREEN_ROUNDS`), per channel: after each round
+    the starts within ``ratio`` of the channel's best, ``keep`` at most, run on to the next
+    round's iterations (the last to ``screen``), the k-th best of every channel in one run
+    (:func:`_solver.combine_channels`: a channel not run costs nothing; one that stopped by
+    the AWLS rule is not run again). ``results``: ``(label, RunResult)`` of the first round.
+    Updates the records ``runs``; returns ``((state, E, labels, done, history),
+    iterations)``: per channel the best state, its objective, the start it came from and
+    whether its run stopped by the AWLS rule, the summed objective of those runs per
+    iteration; all the sweeps run."""
+    cands = [[(i, res) for i, (_, res) in enumerate(results)] for _ in range(3)]
+    by_label = {r["start"]: r for r in runs}
+    n_iter, done_at = sum(res.iterations for _, res in results), rounds[0][0]
+    for (_, ratio, keep), until in zip(rounds, [r[0] for r in rounds[1:]] + [screen]):
+        cands = [_survivors(cands[c], c, ratio, keep) for c in range(3)]
+        for k in range(max(len(x) for x in cands) if until > done_at else 0):
+            pick = [x[k] if k < len(x) else x[0] for x in cands]
+            on = np.array([k < len(x) and not _converged(x[k][1], c)
+                           for c, x in enumerate(cands)])
+            if not on.any():
+                continue
+            st, carry = _solver.combine_channels([res for _, res in pick])
+            res = run(st, until - done_at, "screening", active=on, carry=carry)
+            n_iter += res.iterations
+            for c in np.flatnonzero(on):
+                cands[c][k] = (pick[c][0], res)
+                rec = by_label[results[pick[c][0]][0]]
+                rec["objective_per_channel"][c] = float(res.E[c])
+                rec["iterations_per_channel"][c] += res.iterations
+                rec["stop_reason_per_channel"][c] = res.extra["stop_reason_per_channel"][c]
+        done_at = max(done_at, until)
+    for rec in runs:
+        if "objective_per_channel" in rec:
+            rec["objective"] = float(np.sum(rec["objective_per_channel"]))
+    best = [min(x, key=lambda ir: ir[1].E[c]) for c, x in enumerate(cands)]
+    bst, carry = _solver.combine_channels([res for _, res in best])
+    bE = np.array([res.E[c] for c, (_, res) in enumerate(best)], dtype=np.float64)
+    done = np.array([_converged(res, c) for c, (_, res) in enumerate(best)])
+    labels = [results[i][0] for i, _ in best]
+    return (bst, bE, labels, done, carry["monitors"].history), n_iter
+
+
+def _survivors(cands, c, ratio, keep):
+    """The candidates ``(start, RunResult)`` of channel ``c`` whose objective is within
+    ``ratio`` of the best, ``keep`` at most, best first."""
+    ranked = sorted(((i, res) for i, res in cands if np.isfinite(res.E[c])),
+                    key=lambda ir: ir[1].E[c]) or cands[:1]
+    best = ranked[0][1].E[c]
+    out = [(i, res) for i, res in ranked if res.E[c] <= ratio * best]
+    return out[:keep] if keep is not None else out
+
+
+def _converged(res, c) -> bool:
+    """Whether channel ``c`` of the run ``res`` stopped by the AWLS rule."""
+    return res.extra["stop_reason_per_channel"][c].startswith(_CONVERGED_REASONS)
 
 
 #: screened start objectives closer than this (relative) count as one basin
@@ -582,48 +695,27 @@ def start_basins(runs, tol: float = BASIN_TOLERANCE) -> dict:
             "spread": [float(x) for x in spread]}
 
 
-def _keep_better(best, res, label):
-    """``(state, E, labels)``: per channel, the better of ``best`` and the run ``res``."""
-    if best is None:
-        return (MFState(*(np.array(a) for a in _arrays(res.state))), res.E.copy(), [label] * 3)
-    bst, bE, blab = best
-    better = res.E < bE
-    for nm in ("D", "F", "G"):
-        setattr(bst, nm, np.where(better[:, None], getattr(res.state, nm), getattr(bst, nm)))
-    for nm in ("rho_d", "rho_s"):
-        setattr(bst, nm, np.where(better, getattr(res.state, nm), getattr(bst, nm)))
-    bE[:] = np.where(better, res.E, bE)
-    return bst, bE, [label if b else lab for b, lab in zip(better, blab)]
-
-
-def _continue_best(runs, best, extra: dict, screen: int, max_iter: int, run):
+def _continue_best(best, extra: dict, n_screened: int, screen: int, max_iter: int, run):
     """The per-channel best of the screened starts continued for the rest of ``max_iter``
-    (``run(state, iterations)``) unless the starts it came from converged; the result is
-    kept only where it does not raise the objective. Fills ``extra`` (``iterations``,
-    ``line_searches``, ``history``, ``stop_reason``, ``continuation``); returns
-    ``(state, E)``."""
-    bst, bE, blab = best
-    ok_runs = [r for r in runs if r.get("status") == "ok"]
-    history = next((r["history"] for r in ok_runs if r["start"] == blab[1]),
-                   ok_runs[0]["history"])
-    iters = sum(r["iterations"] for r in ok_runs)
-    line_searches = sum(r["line_searches"] for r in ok_runs)
-    if screen < max_iter and not all(r.get("stop_reason", "").startswith(("relative", "exact"))
-                                     for r in ok_runs if r["start"] in blab):
-        res = run(bst, max_iter - screen)
-        if np.all(np.isfinite(res.E)) and np.all(res.E <= bE * (1 + 1e-9)):
-            bst, bE = res.state, res.E
+    (``run(state, iterations, channels)``) in the channels whose screening did not stop by
+    the AWLS rule; the result is kept per channel where it does not raise the objective.
+    Fills ``extra`` (``iterations``: every sweep run, ``line_searches``, ``history``,
+    ``stop_reason``, ``continuation``); returns ``(state, E)``."""
+    bst, bE, _, done, history = best
+    iters = n_screened
+    history = [float(h) for h in history]
+    if screen < max_iter and not done.all():
+        res = run(bst, max_iter - screen, ~done)
+        keep = np.isfinite(res.E) & (res.E <= bE * (1 + 1e-9))
+        _solver._take(bst, res.state, keep)
+        bE = np.where(keep, res.E, bE)
         extra["continuation"] = _run_info(res)
         iters += res.iterations
-        line_searches += res.line_searches
-        history = history + [float(h) for h in res.history[1:]]
-    if "continuation" in extra:
-        reason = extra["continuation"]["stop_reason"]
+        history += [float(h) for h in res.history[1:]]
+        reason = res.reason
     else:
-        best_reasons = [r.get("stop_reason", "") for r in ok_runs if r["start"] in blab]
-        reason = next((r for r in best_reasons if not r.startswith(_CONVERGED_REASONS)),
-                      best_reasons[0] if best_reasons else "max_iter")
-    extra.update(iterations=int(iters), line_searches=int(line_searches), history=history,
+        reason = "relative decrease (every channel's screening)" if done.all() else "max_iter"
+    extra.update(iterations=int(iters), line_searches=int(iters), history=history,
                  stop_reason=reason)
     return bst, bE
 
@@ -669,7 +761,8 @@ def _arrays(st: MFState):
 
 
 #: Stop reasons of ``_solver.Monitor`` (and the closed-form bivariate fit) that mean converged.
-_CONVERGED_REASONS = ("relative decrease", "exact fit", "closed form", "damping limit")
+_CONVERGED_REASONS = ("relative decrease", "decrease over the last", "exact fit", "closed form",
+                      "damping limit")
 
 
 def _convergence(extra: dict, tol, max_iter, variant) -> dict:
@@ -696,7 +789,9 @@ def _convergence(extra: dict, tol, max_iter, variant) -> dict:
             n_win, factor = CONTINUATION_WINDOW
             criterion += (f"; the continuation of the best start also stops when its relative "
                           f"decrease over the last {n_win} iterations is < {n_win}·{factor:g}"
-                          f"·tol = {n_win * factor * tol:g} (CONTINUATION_WINDOW)")
+                          f"·tol = {n_win * factor * tol:g} (CONTINUATION_WINDOW), and a "
+                          f"channel of it when its own decrease over them is < a third of "
+                          f"that of the summed objective")
     if polish is not None:
         cap, phase = int(polish["max_iterations"]), "Levenberg–Marquardt polish"
         nit += int(polish["iterations"])

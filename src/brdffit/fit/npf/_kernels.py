@@ -120,27 +120,55 @@ def _add_tridiagonal(A_d, A_o, rhs, c, a, t, wj, y, r):  # pragma: no cover
     rhs[c, a + 1] += wyr * t
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _g_ne_terms(G, X, rho_d, w, z, c, j, k, a, t, b, s, ic,
+                Ai_d, Ai_o, bi, Ao_d, Ao_o, bo):  # pragma: no cover
+    """Sample ``j``'s terms of channel ``c`` added to the normal equations of
+    :func:`g_normal_equations`."""
+    g_i, g_o = _g_pair(G, c, a, t, b, s)
+    wj = w[c, j]
+    r = z[c, j] - rho_d[c]
+    xk = X[c, k] * ic
+    # G(θi) unknown: model = y_i · ((1-t) G_a + t G_{a+1}), y_i = X G(θo) / cc
+    _add_tridiagonal(Ai_d, Ai_o, bi, c, a, t, wj, xk * g_o, r)
+    # G(θo) unknown
+    _add_tridiagonal(Ao_d, Ao_o, bo, c, b, s, wj, xk * g_i, r)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _g_ne_pass(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
+               Ai_d, Ai_o, bi, Ao_d, Ao_o, bo, on0, on1, on2):  # pragma: no cover
+    """The pass of :func:`g_normal_equations` for the channels ``on0``, ``on1``, ``on2``."""
+    for j in range(hd.shape[0]):
+        k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
+        if on0:
+            _g_ne_terms(G, X, rho_d, w, z, 0, j, k, a, t, b, s, ic, Ai_d, Ai_o, bi,
+                        Ao_d, Ao_o, bo)
+        if on1:
+            _g_ne_terms(G, X, rho_d, w, z, 1, j, k, a, t, b, s, ic, Ai_d, Ai_o, bi,
+                        Ao_d, Ao_o, bo)
+        if on2:
+            _g_ne_terms(G, X, rho_d, w, z, 2, j, k, a, t, b, s, ic, Ai_d, Ai_o, bi,
+                        Ao_d, Ao_o, bo)
+
+
 @njit(cache=True, nogil=True)
 def g_normal_equations(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
-                       Ai_d, Ai_o, bi, Ao_d, Ao_o, bo):  # pragma: no cover
+                       Ai_d, Ai_o, bi, Ao_d, Ao_o, bo, chans):  # pragma: no cover
     """Tridiagonal weighted least-squares normal equations (Eq. 13-14 generalised to the
     linear interpolation of G) for G(θi) with G(θo) held fixed (``Ai_d`` diagonal, ``Ai_o``
     super-diagonal, ``bi`` right-hand side, each per channel) and for G(θo) with G(θi) fixed
-    (``Ao_*``, ``bo``)."""
-    n = hd.shape[0]
+    (``Ao_*``, ``bo``), for the channels where ``chans`` (3 bools) holds (the others' are 0:
+    a channel's sums do not depend on the others'). All three channels take a copy of the
+    pass without the channel tests."""
     _clear(Ai_d, Ai_o, bi)
     _clear(Ao_d, Ao_o, bo)
-    for j in range(n):
-        k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
-        for c in range(3):
-            g_i, g_o = _g_pair(G, c, a, t, b, s)
-            wj = w[c, j]
-            r = z[c, j] - rho_d[c]
-            xk = X[c, k] * ic
-            # G(θi) unknown: model = y_i · ((1-t) G_a + t G_{a+1}), y_i = X G(θo) / cc
-            _add_tridiagonal(Ai_d, Ai_o, bi, c, a, t, wj, xk * g_o, r)
-            # G(θo) unknown
-            _add_tridiagonal(Ao_d, Ao_o, bo, c, b, s, wj, xk * g_i, r)
+    if chans[0] and chans[1] and chans[2]:
+        _g_ne_pass(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
+                   Ai_d, Ai_o, bi, Ao_d, Ao_o, bo, True, True, True)
+    else:
+        _g_ne_pass(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
+                   Ai_d, Ai_o, bi, Ao_d, Ao_o, bo, chans[0], chans[1], chans[2])
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -281,35 +309,54 @@ def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_
         _mirror(HGG)
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _line_terms(G, dG, w, z, Q, c, j, k, a, t, b, s, ic):  # pragma: no cover
+    """Sample ``j``'s terms of channel ``c`` added to the polynomials of :func:`p_stats_line`."""
+    g_i, g_o = _g_pair(G, c, a, t, b, s)
+    d_i, d_o = _g_pair(dG, c, a, t, b, s)
+    wj = w[c, j] * ic
+    p0 = g_i * g_o
+    p1 = g_i * d_o + d_i * g_o
+    p2 = d_i * d_o
+    wz = wj * z[c, j]
+    w2 = wj * ic
+    q = Q[c, k]
+    q[0] += wj * p0
+    q[1] += wj * p1
+    q[2] += wj * p2
+    q[3] += w2 * p0 * p0
+    q[4] += w2 * 2.0 * p0 * p1
+    q[5] += w2 * (p1 * p1 + 2.0 * p0 * p2)
+    q[6] += w2 * 2.0 * p1 * p2
+    q[7] += w2 * p2 * p2
+    q[8] += wz * p0
+    q[9] += wz * p1
+    q[10] += wz * p2
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _line_pass(hd, gi0, gti, go0, gto, inv_cc, w, z, G, dG, Q, on0, on1, on2):  # pragma: no cover
+    """The pass of :func:`p_stats_line` for the channels ``on0``, ``on1``, ``on2``."""
+    for j in range(hd.shape[0]):
+        k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
+        if on0:
+            _line_terms(G, dG, w, z, Q, 0, j, k, a, t, b, s, ic)
+        if on1:
+            _line_terms(G, dG, w, z, Q, 1, j, k, a, t, b, s, ic)
+        if on2:
+            _line_terms(G, dG, w, z, Q, 2, j, k, a, t, b, s, ic)
+
+
 @njit(cache=True, nogil=True)
-def p_stats_line(hd, gi0, gti, go0, gto, inv_cc, w, z, G, dG, Q):  # pragma: no cover
+def p_stats_line(hd, gi0, gti, go0, gto, inv_cc, w, z, G, dG, Q, chans):  # pragma: no cover
     """Polynomial coefficients in ``t`` of the bin statistics along the G line
     ``G + t dG``: ``P(t) = p0 + p1 t + p2 t²`` per sample, and per (channel, bin) ``Q[..., 0:3]``
     = ``Σ w p_m`` (S1), ``Q[..., 3:8]`` = the quartic of ``Σ w P²`` (S2), ``Q[..., 8:11]`` =
-    ``Σ w z p_m`` (Spz). ``Q`` is (3, 8100, 11)."""
-    n = hd.shape[0]
+    ``Σ w z p_m`` (Spz). ``Q`` is (3, 8100, 11); channels where ``chans`` (3 bools) does not
+    hold are 0."""
     Q[:] = 0.0
-    for j in range(n):
-        k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
-        for c in range(3):
-            g_i, g_o = _g_pair(G, c, a, t, b, s)
-            d_i, d_o = _g_pair(dG, c, a, t, b, s)
-            wj = w[c, j] * ic
-            p0 = g_i * g_o
-            p1 = g_i * d_o + d_i * g_o
-            p2 = d_i * d_o
-            wz = wj * z[c, j]
-            w2 = wj * ic
-            q = Q[c, k]
-            q[0] += wj * p0
-            q[1] += wj * p1
-            q[2] += wj * p2
-            q[3] += w2 * p0 * p0
-            q[4] += w2 * 2.0 * p0 * p1
-            q[5] += w2 * (p1 * p1 + 2.0 * p0 * p2)
-            q[6] += w2 * 2.0 * p1 * p2
-            q[7] += w2 * p2 * p2
-            q[8] += wz * p0
-            q[9] += wz * p1
-            q[10] += wz * p2
-
+    if chans[0] and chans[1] and chans[2]:
+        _line_pass(hd, gi0, gti, go0, gto, inv_cc, w, z, G, dG, Q, True, True, True)
+    else:
+        _line_pass(hd, gi0, gti, go0, gto, inv_cc, w, z, G, dG, Q, chans[0], chans[1],
+                   chans[2])

@@ -22,6 +22,7 @@ step lowers the objective, or after its own cap.
 
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, field
 
@@ -139,24 +140,33 @@ class Samples:
                            + memo[c])[:STATS_MEMO]
         return E, (S1, S2, Spz)
 
-    def line_stats(self, G, dG):
+    def line_stats(self, G, dG, chans=None):
         """One pass: the bin statistics along ``G + t dG`` as polynomials in t, (3, 8100, 11)
-        (see :func:`._kernels.p_stats_line`)."""
+        (see :func:`._kernels.p_stats_line`), for the channels in ``chans`` (3 bools, default
+        all; the others' are 0)."""
         Q = np.empty((3, NH * ND, 11))
         _kernels.p_stats_line(self.hd, self.gi0, self.gti, self.go0, self.gto, self.inv_cc,
                               self.w, self.z, np.ascontiguousarray(G, dtype=np.float64),
-                              np.ascontiguousarray(dG, dtype=np.float64), Q)
+                              np.ascontiguousarray(dG, dtype=np.float64), Q, _chans(chans))
         return Q
 
-    def g_system(self, G, X, rho_d):
+    def g_system(self, G, X, rho_d, chans=None):
+        """One pass: the G normal equations of :func:`._kernels.g_normal_equations` for the
+        channels in ``chans`` (default all; the others' are 0)."""
         arrs = [np.empty((3, NG)), np.empty((3, NG)), np.empty((3, NG)),
                 np.empty((3, NG)), np.empty((3, NG)), np.empty((3, NG))]
         _kernels.g_normal_equations(self.hd, self.gi0, self.gti, self.go0, self.gto,
                                     self.inv_cc, self.w, self.z,
                                     np.ascontiguousarray(G, dtype=np.float64),
                                     np.ascontiguousarray(X, dtype=np.float64),
-                                    np.ascontiguousarray(rho_d, dtype=np.float64), *arrs)
+                                    np.ascontiguousarray(rho_d, dtype=np.float64), *arrs,
+                                    _chans(chans))
         return arrs
+
+
+def _chans(chans) -> np.ndarray:
+    """The channel mask of a pass: 3 bools, all for ``None``."""
+    return np.ones(3, bool) if chans is None else np.asarray(chans, bool)
 
 
 # -- shared algebra ---------------------------------------------------------------------------
@@ -367,7 +377,8 @@ def _poly_at(coef, t):
     return out
 
 
-def line_search_g(smp: Samples, g_old, g_new, X, rho_d, eps, t_cap, over_relax=1.0):
+def line_search_g(smp: Samples, g_old, g_new, X, rho_d, eps, t_cap, over_relax=1.0,
+                  chans=None):
     """Exact line search of the G step (an extension of §4.3, replacing a golden-section
     search of 6 passes over the samples): along ``G(t) = g_old + t (g_new − g_old)`` every
     sample's ``P = G(θi) G(θo)/cc`` is a quadratic in t, so the bin statistics are polynomials in t (one pass,
@@ -376,9 +387,10 @@ def line_search_g(smp: Samples, g_old, g_new, X, rho_d, eps, t_cap, over_relax=1
     ``t_max = max(1, min(t_cap, the largest t keeping G ≥ eps))``; with ``over_relax = ω``
     the step ``min(ω t*, t_max)`` is taken instead whenever it still lowers the quartic below
     ``E(0)`` (over-relaxation; for a parabola any ω < 2 does). Returns ``(t (3,), G, S)``,
-    S the bin statistics at t; a channel whose quartic does not decrease keeps ``t = 0``."""
+    S the bin statistics at t; a channel whose quartic does not decrease, or not in
+    ``chans`` (not passed over), keeps ``t = 0``."""
     dG = g_new - g_old
-    Q = smp.line_stats(g_old, dG)
+    Q = smp.line_stats(g_old, dG, chans)
     a = rho_d[:, None]
     s1 = np.einsum("ck,ckm->cm", X, Q[..., 0:3])
     s2 = np.einsum("ck,ckm->cm", X * X, Q[..., 3:8])
@@ -405,7 +417,7 @@ def line_search_g(smp: Samples, g_old, g_new, X, rho_d, eps, t_cap, over_relax=1
         t_over = np.minimum(over_relax * t_best, t_max)
         t_best = np.where(_poly_at(quartic, t_over) < e0, t_over, t_best)
     e_t = _poly_at(quartic, t_best)
-    t_best = np.where(e_t < e0, t_best, 0.0)
+    t_best = np.where((e_t < e0) & _chans(chans), t_best, 0.0)
     G = np.maximum(g_old + t_best[:, None] * dG, eps)
     S = (_poly_at(Q[..., 0:3], t_best), _poly_at(Q[..., 3:8], t_best),
          _poly_at(Q[..., 8:11], t_best))
@@ -423,14 +435,18 @@ class RunResult:
     line_search_evals: int
     seconds: float
     extra: dict = field(default_factory=dict)
+    #: what :func:`run_independent_g` needs to go on where the run stopped (``carry``)
+    carry: dict | None = None
 
 
-def _extrapolate(st: MFState, prev: MFState, beta, smp: Samples, eps, E, g_from_d=False):
+def _extrapolate(st: MFState, prev: MFState, beta, smp: Samples, eps, E, g_from_d=False,
+                 chans=None):
     """Over-relaxation of a whole AWLS sweep (an extension, not in the paper): try
     ``θ + β (θ − θ_prev)`` for the factors (D, F, G; with ``g_from_d`` D and F, G derived
     from the new D by Eq. 19), re-normalise, solve ρd/ρs (Cramer) and accept per channel
-    when the objective decreases (one pass over the samples). Returns
-    ``(accepted (3,), S or None, E)``; ``st`` is updated in place where accepted."""
+    when the objective decreases (one pass over the samples, for the channels in ``chans``,
+    default all; no other channel accepts). Returns ``(accepted (3,), S or None, E)``;
+    ``st`` is updated in place where accepted."""
     b = beta[:, None]
     cand = MFState(*(np.array(x) for x in _state_arrays(st)))
     for nm in ("D", "F") if g_from_d else ("D", "F", "G"):
@@ -440,10 +456,10 @@ def _extrapolate(st: MFState, prev: MFState, beta, smp: Samples, eps, E, g_from_
     _normalise_factors(cand, eps, g_from_d)
     if g_from_d:
         cand.G = smith_g_from_d(cand.D.T).T
-    _, S = _stats(cand, smp)
+    _, S = _stats(cand, smp, chans)
     _rho_update(cand, smp, S)
     Ec = expanded_objective(cand, smp, S)
-    acc = Ec < E
+    acc = (Ec < E) & _chans(chans)
     if np.any(acc):
         _take(st, cand, acc)
     return acc, S, np.where(acc, Ec, E)
@@ -459,16 +475,17 @@ def _take(st: MFState, cand: MFState, acc) -> None:
 
 
 def _extrapolation_step(st: MFState, prev: MFState, beta, smp: Samples, eps, E, S,
-                        g_from_d=False):
+                        g_from_d=False, chans=None):
     """One :func:`_extrapolate` after a sweep: returns ``(S, E, beta, accepted)``, the bin
     statistics and objective of the channels where it was accepted replaced, ``beta`` grown
     ×1.5 (at most 50) where accepted and halved (at least 0.5) elsewhere, and whether any
     channel accepted."""
-    acc, S_e, E = _extrapolate(st, prev, beta, smp, eps, E, g_from_d=g_from_d)
+    acc, S_e, E = _extrapolate(st, prev, beta, smp, eps, E, g_from_d=g_from_d, chans=chans)
     accepted = bool(np.any(acc))
     if accepted:
         S = tuple(np.where(acc[:, None], a, b) for a, b in zip(S_e, S))
-    beta = np.where(acc, np.minimum(beta * 1.5, 50.0), np.maximum(beta * 0.5, 0.5))
+    grown = np.where(acc, np.minimum(beta * 1.5, 50.0), np.maximum(beta * 0.5, 0.5))
+    beta = np.where(_chans(chans), grown, beta)
     return S, E, beta, accepted
 
 
@@ -476,66 +493,233 @@ def _state_arrays(st: MFState):
     return [st.D, st.F, st.G, st.rho_d, st.rho_s]
 
 
+def _g_sweep(st: MFState, smp: Samples, S, on, eps, smoothing, g_step_cap):
+    """One AWLS sweep of independent-G, in place, for the channels ``on`` (the others'
+    factors come out undefined: the caller restores them): D, F (Eq. 14), ρd/ρs, the G step
+    with its line search, G max-normalised, ρd/ρs again. Returns ``(S, E, t)``: the bin
+    statistics and objective (expanded form) after it and the G step's length."""
+    st.D, st.rho_s = normalise(_factor_update(st, S, "D"), st.rho_s, eps)
+    st.F, st.rho_s = normalise(_factor_update(st, S, "F"), st.rho_s, eps)
+    _rho_update(st, smp, S)
+    X = st.rho_s[:, None] * outer_df(st.D, st.F)
+    Ai_d, Ai_o, bi, Ao_d, Ao_o, bo = smp.g_system(st.G, X, st.rho_d, on)
+    # G(θi) (G(θo) fixed) and G(θo) (G(θi) fixed) updates: the paper averages the two
+    # solutions; we solve their summed normal equations. With reciprocal data the two
+    # systems coincide (so both are the same update), and the sum is what stays exact
+    # after folding φd ↔ π − φd (which swaps θi and θo within a pair).
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        g_new = _solve_tridiag(Ai_d + Ao_d, Ai_o + Ao_o, bi + bo, st.G)
+    if smoothing and smoothing > 0:
+        g_new = gaussian_filter1d(g_new, smoothing, axis=1, mode="nearest")
+    g_new = np.maximum(g_new, eps)
+    t, st.G, S = line_search_g(smp, st.G, g_new, X, st.rho_d, eps, g_step_cap,
+                               G_OVER_RELAX, on)
+    # max-normalise G: P scales by 1/m², S1, Spz by 1/m², S2 by 1/m⁴
+    m = st.G.max(axis=1)
+    m = np.where(m > 0, m, 1.0)
+    st.G = np.maximum(st.G / m[:, None], eps)
+    st.rho_s = st.rho_s * m**2
+    S = (S[0] / m[:, None] ** 2, S[1] / m[:, None] ** 4, S[2] / m[:, None] ** 2)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        _rho_update(st, smp, S)
+        E = expanded_objective(st, smp, S)
+    return S, E, t
+
+
+def _jump_cap(st: MFState, anchor: MFState, keep=0.5) -> np.ndarray:
+    """Per channel the largest γ for which every sample of D, F and G in
+    ``θ + γ (θ − anchor)`` stays at or above ``keep`` times its value."""
+    cap = np.full(3, np.inf)
+    for nm in ("D", "F", "G"):
+        x = getattr(st, nm)
+        d = x - getattr(anchor, nm)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            room = np.where(d < 0, (1.0 - keep) * x / -d, np.inf)
+        cap = np.minimum(cap, room.min(axis=1))
+    return cap
+
+
+def _jump(st: MFState, anchor: MFState, smp: Samples, eps, E, S, on, max_tries=4):
+    """The long-baseline over-relaxation of :func:`run_independent_g` (``jump_every``), in
+    place: ``θ + γ (θ − anchor)`` (:func:`_extrapolate`; ``anchor`` the state some sweeps
+    earlier) with γ = 1, then, while a channel accepts, again from the accepted point with
+    γ doubled (the direction is that of the last accepted step), at most ``max_tries``
+    passes. Returns ``(S, E, accepted)``: the bin statistics and objective, replaced in the
+    channels that accepted, and how many (channel, try) pairs did."""
+    gamma, todo, accepted = np.ones(3), np.array(on, bool), 0
+    for _ in range(max_tries):
+        if not todo.any():
+            break
+        before = MFState(*(np.array(x) for x in _state_arrays(st)))
+        acc, S_e, E = _extrapolate(st, anchor, np.minimum(gamma, _jump_cap(st, anchor)), smp,
+                                   eps, E, chans=todo)
+        S = tuple(np.where(acc[:, None], a, b) for a, b in zip(S_e, S))
+        accepted += int(acc.sum())
+        _take(anchor, before, acc)
+        todo &= acc
+        gamma = gamma * 2.0
+    return S, E, accepted
+
+
+#: :class:`ChannelMonitors`: a channel of a run with a window stops once its decrease over
+#: the window is below this share of the summed rule's limit (of the summed objective)
+CHANNEL_SHARE = 1.0 / 3.0
+
+
+class ChannelMonitors:
+    """The stopping rule of an independent-G run: :class:`Monitor` on the summed objective
+    (``total``: every channel stops when it fires), and with ``window = (W, k)`` a rule per
+    channel: a channel stops, and no longer costs, once its own decrease over the last W
+    iterations is below a third of the summed rule's limit, ``W · k · tol / 3`` times the
+    summed objective. No channel runs longer than under the summed rule alone, and when
+    every channel has stopped by its own rule the summed objective fell by less than the
+    summed rule's limit over their last W iterations (the same bound). A channel holding a
+    small part of Eq. 7 (a dark channel) stops early; per-channel *relative* windows would
+    run such channels longer than the summed rule does. The patience rule (``tol`` for 3
+    iterations) is not applied per channel: single channels stall for a few iterations and
+    go on (an all-ones start's channel after < 20 iterations, pink-plastic)."""
+
+    def __init__(self, smp: Samples, tol, window=None, patience=3):
+        self.total = Monitor(smp.sum_wzz, tol, np.inf, patience, window)
+        self.channels = [Monitor(smp.sum_wzz[c], tol, np.inf, np.inf) for c in range(3)]
+        self.window = window
+
+    @property
+    def history(self) -> list[float]:
+        """The summed objective per iteration (the channels not run held at their last
+        value)."""
+        return self.total.history
+
+    def start(self, E) -> None:
+        """Record the objective ``E`` (3,) of the starting point."""
+        self.total.history.append(float(np.sum(E)))
+        for c in range(3):
+            self.channels[c].history.append(float(E[c]))
+
+    def push(self, E, on) -> np.ndarray:
+        """Record ``E`` (3,); return the channels of ``on`` that stop now."""
+        if self.total.push(E):
+            return np.array(on, bool)
+        stop = np.array([bool(on[c]) and self.channels[c].push(E[c]) for c in range(3)])
+        if self.window is None:
+            return stop
+        n_win, factor = self.window
+        limit = n_win * factor * self.total.tol * CHANNEL_SHARE
+        for c in np.flatnonzero(on & ~stop):
+            h = self.channels[c].history
+            if len(h) > n_win and h[-1 - n_win] - h[-1] < limit * self.total.history[-1]:
+                self.channels[c].reason = (f"decrease over the last {n_win} iterations < "
+                                           f"{limit:g} of the summed objective")
+                stop[c] = True
+        return stop
+
+    def reason(self) -> str:
+        """Why every channel stopped: the summed rule's reason, else the first channel's."""
+        if self.total.reason != "max_iter":
+            return self.total.reason
+        reasons = [m.reason for m in self.channels if m.reason != "max_iter"]
+        return reasons[0] if reasons else "max_iter"
+
+    def channel_reasons(self) -> list[str]:
+        """Per channel: why it stopped (the summed rule's reason where that stopped it)."""
+        return [m.reason if m.reason != "max_iter" else self.total.reason
+                for m in self.channels]
+
+
 def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol=1e-6,
                       max_iter=1000, g_step_cap=None, extrapolate=False, window=None,
+                      jump_every=None, active=None, carry=None,
                       callback=None) -> RunResult:
     """Independent-G AWLS (§4.2-4.3): D, F (Eq. 14), G(θi) and G(θo) updates averaged and
     Gaussian-smoothed (σ = ``smoothing`` samples), taken with the exact, over-relaxed line
     search of :func:`line_search_g` (the paper searches along the step only when it increases
-    the objective), ρd/ρs by Cramer's rule, max-normalisation and DR clamping at ``eps``.
-    With ``extrapolate`` each sweep is followed by an accepted-if-better over-relaxation step (:func:`_extrapolate`), which shortens the long AWLS "swamps"
-    caused by the near-ambiguity between F(θd) and G(θi)G(θo). ``window = (W, k)``: also
-    stop when the relative decrease over the last W iterations is below ``W · k · tol``
-    (:class:`Monitor`)."""
+    the objective), ρd/ρs by Cramer's rule, max-normalisation and DR clamping at ``eps``
+    (:func:`_g_sweep`). With ``extrapolate`` each sweep is followed by an accepted-if-better
+    over-relaxation step (:func:`_extrapolate`), which shortens the long AWLS "swamps"
+    caused by the near-ambiguity between F(θd) and G(θi)G(θo). With ``jump_every = M``
+    every M-th sweep is also followed by a long-baseline over-relaxation along the
+    displacement of the last M sweeps (:func:`_jump`, accepted only if better): along the
+    slow, steady crawl of that near-ambiguity one sweep's displacement zigzags, M sweeps'
+    points along the valley.
+
+    Each channel stops by the rule of :class:`Monitor` on its own objective
+    (:class:`ChannelMonitors`; ``window = (W, k)``: also when its relative decrease over the
+    last W iterations is below ``W · k · tol``) and then no longer costs: the passes over
+    the samples skip it. ``active`` (3 bools, default all): the channels run at all; the
+    others are left as they are. ``carry``: an earlier run's ``RunResult.carry`` (the state
+    before its last sweep, the over-relaxation factors β, the objective and the monitors),
+    to go on where it stopped as one run would (a screening in rounds)."""
     t0 = time.perf_counter()
+    frozen = MFState(*(np.array(x) for x in _state_arrays(st)))
     _normalise_factors(st, eps, g_from_d=False)
-    E, S = _stats(st, smp)
+    on = _chans(active).copy()
+    E, S = _stats(st, smp, on if carry is not None else None)
     _rho_update(st, smp, S)
-    mon = Monitor(smp.sum_wzz, tol, max_iter, window=window)
-    g_step_cap = G_STEP_CAP if g_step_cap is None else float(g_step_cap)
-    over_relaxed = 0
     E = expanded_objective(st, smp, S)
-    mon.history.append(float(E.sum()))
-    beta = np.ones(3)
-    n_extra = 0
-    while True:
+    _take(st, frozen, ~on)
+    g_step_cap = G_STEP_CAP if g_step_cap is None else float(g_step_cap)
+    if carry is None:
+        mon = ChannelMonitors(smp, tol, window, patience=max(3, jump_every or 0))
+        beta = np.ones(3)
+        mon.start(E)
+    else:
+        mon, beta = carry["monitors"], carry["beta"].copy()
+        E = np.where(on, E, carry["E"])
+    E_frozen, n_it, over_relaxed, n_extra, n_jumps = E.copy(), 0, 0, 0, 0
+    anchor = MFState(*(np.array(x) for x in _state_arrays(st)))
+    while np.any(on) and n_it < max_iter:
         prev = MFState(*(np.array(x) for x in _state_arrays(st)))
-        st.D, st.rho_s = normalise(_factor_update(st, S, "D"), st.rho_s, eps)
-        st.F, st.rho_s = normalise(_factor_update(st, S, "F"), st.rho_s, eps)
-        _rho_update(st, smp, S)
-        X = st.rho_s[:, None] * outer_df(st.D, st.F)
-        Ai_d, Ai_o, bi, Ao_d, Ao_o, bo = smp.g_system(st.G, X, st.rho_d)
-        # G(θi) (G(θo) fixed) and G(θo) (G(θi) fixed) updates: the paper averages the two
-        # solutions; we solve their summed normal equations. With reciprocal data the two
-        # systems coincide (so both are the same update), and the sum is what stays exact
-        # after folding φd ↔ π − φd (which swaps θi and θo within a pair).
-        g_new = _solve_tridiag(Ai_d + Ao_d, Ai_o + Ao_o, bi + bo, st.G)
-        if smoothing and smoothing > 0:
-            g_new = gaussian_filter1d(g_new, smoothing, axis=1, mode="nearest")
-        g_new = np.maximum(g_new, eps)
-        t, st.G, S = line_search_g(smp, st.G, g_new, X, st.rho_d, eps, g_step_cap,
-                                   G_OVER_RELAX)
+        S, E, t = _g_sweep(st, smp, S, on, eps, smoothing, g_step_cap)
         over_relaxed += int(np.sum(t > 1.0))
-        # max-normalise G: P scales by 1/m², S1, Spz by 1/m², S2 by 1/m⁴
-        m = st.G.max(axis=1)
-        m = np.where(m > 0, m, 1.0)
-        st.G = np.maximum(st.G / m[:, None], eps)
-        st.rho_s = st.rho_s * m**2
-        S = (S[0] / m[:, None] ** 2, S[1] / m[:, None] ** 4, S[2] / m[:, None] ** 2)
-        _rho_update(st, smp, S)
-        E = expanded_objective(st, smp, S)
         if extrapolate and len(mon.history) > 1:
-            S, E, beta, accepted = _extrapolation_step(st, prev, beta, smp, eps, E, S)
+            S, E, beta, accepted = _extrapolation_step(st, prev, beta, smp, eps, E, S,
+                                                       chans=on)
             n_extra += accepted
+        n_it += 1
+        if jump_every and n_it % jump_every == 0:
+            S, E, accepted = _jump(st, anchor, smp, eps, E, S, on)
+            n_jumps += accepted
+            anchor = MFState(*(np.array(x) for x in _state_arrays(st)))
+        _take(st, frozen, ~on)                       # the channels not run stay as they were
+        E = np.where(on, E, E_frozen)
         if callback is not None:
             callback(len(mon.history), float(E.sum()))
-        if mon.push(E):
-            break
-    E, _ = _stats(st, smp)        # exact final objective
-    n_it = len(mon.history) - 1          # one G line search (one pass) per iteration
-    return RunResult(st, E, n_it, mon.history, mon.reason, n_it, n_it,
-                     time.perf_counter() - t0,
-                     {"g_steps_over_relaxed": over_relaxed, "sweeps_extrapolated": n_extra})
+        stop = mon.push(E, on)
+        _take(frozen, st, stop)
+        E_frozen, on = np.where(stop, E, E_frozen), on & ~stop
+    reason = "max_iter" if np.any(on) else mon.reason()
+    E_exact, _ = _stats(st, smp, _chans(active))       # exact final objective
+    E = np.where(_chans(active), E_exact, E)
+    return RunResult(st, E, n_it, mon.history, reason, n_it, n_it, time.perf_counter() - t0,
+                     {"g_steps_over_relaxed": over_relaxed, "sweeps_extrapolated": n_extra,
+                      "jumps_accepted": n_jumps,
+                      "stop_reason_per_channel": mon.channel_reasons()},
+                     carry={"beta": beta, "E": E, "monitors": mon})
+
+
+def combine_channels(results) -> tuple[MFState, dict]:
+    """``(state, carry)`` whose channel ``c`` is that of ``results[c]`` (3 :class:`RunResult`
+    of :func:`run_independent_g`, their carries included): the channels are independent
+    problems, so channels of different runs make one run that goes on (``carry``) as each
+    of them would have alone."""
+    st = MFState(*(np.array(x) for x in _state_arrays(results[0].state)))
+    for c, res in enumerate(results):
+        for nm in ("D", "F", "G", "rho_d", "rho_s"):
+            getattr(st, nm)[c] = getattr(res.state, nm)[c]
+    mon = copy.deepcopy(results[0].carry["monitors"])
+    mon.channels = [copy.deepcopy(res.carry["monitors"].channels[c])
+                    for c, res in enumerate(results)]
+    n = max(len(m.history) for m in mon.channels)
+    total = mon.total
+    total.history = [float(sum(m.history[min(k, len(m.history) - 1)] for m in mon.channels))
+                     for k in range(n)]
+    total.reason, total.small = "max_iter", 0       # the patience count of the sum, anew
+    for k in range(max(1, n - total.patience), n):
+        rel = (total.history[k - 1] - total.history[k]) / max(total.history[k], 1e-300)
+        total.small = total.small + 1 if rel < total.tol else 0
+    carry = {"beta": np.array([res.carry["beta"][c] for c, res in enumerate(results)]),
+             "E": np.array([res.E[c] for c, res in enumerate(results)]), "monitors": mon}
+    return st, carry
 
 
 def _g_from_d_d_step(st: MFState, smp: Samples, S, E, t_prev, eps, search_evals):
