@@ -115,3 +115,17 @@ def resumable_merl_study(doc: str, default_name: str, zip_path, results_dir, arg
     rows = read_rows(csv_path)
     done = {r["material"] for r in rows}
     return [n for n in merl_materials(zip_path, args.only) if n not in done], csv_path, rows
+
+
+def engine_render(p: dict, engine: str, resolution: int):
+    """``(image, alpha)`` of the glTF parameters ``p`` through ``engine``'s model
+    (:func:`brdffit.export.gltf.engine_brdf`) in ``sphere-distant``, noise-free, 8 × 8
+    samples per pixel: three.js with its own DFG table and per-pixel geometry roughness."""
+    from brdffit.evaluation.engines import threejs_brdf as TB
+    from brdffit.export.gltf import engine_brdf
+
+    model = engine_brdf(p, engine)
+    if engine == "threejs":
+        model.lut = TB.dfg_lut()                    # three's own table
+        return TB.shade_sphere(model, resolution=resolution, supersample=8)
+    return TB.shade_sphere(model, resolution=resolution, supersample=8, geometry_roughness=False)

@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _common import NBRDF, RGL_DIR, ROOT, use_project_sources  # bench/ is on sys.path
+from _common import NBRDF, RGL_DIR, ROOT, engine_render, use_project_sources  # bench/ is on sys.path
 
 use_project_sources()
 DEFAULT = ("ss440,gold-metallic-paint,maroon-plastic,white-paint,chrome-steel,blue-metallic-paint,"
@@ -49,7 +49,7 @@ def bench_material(name: str, res: int) -> dict:
     from brdffit.evaluation.engines import threejs_brdf as TB
     from brdffit.evaluation.engines.threejs import sphere_geometry_px
     from brdffit.evaluation.metrics import rendered_psnr
-    from brdffit.export.gltf import _refine, engine_brdf, gltf_parameters
+    from brdffit.export.gltf import _refine, gltf_parameters
 
     fit = brdffit.fit(brdffit.load(_spec(name)), model="ggx-diffuse")
     ref, ra = TB.shade_sphere(fit, resolution=res, supersample=16, geometry_roughness=False)
@@ -63,13 +63,7 @@ def bench_material(name: str, res: int) -> dict:
                "specular": p.get("specular"), "metallic": p["metallicFactor"],
                "roughness": p["roughnessFactor"], "notes": p["notes"][-1:]}
         for engine in ("specification", "blender", "threejs"):
-            model = engine_brdf(p, engine)
-            if engine == "threejs":
-                model.lut = TB.dfg_lut()                    # three's own table
-                img, a = TB.shade_sphere(model, resolution=res, supersample=8)
-            else:
-                img, a = TB.shade_sphere(model, resolution=res, supersample=8,
-                                         geometry_roughness=False)
+            img, a = engine_render(p, engine, res)
             m = (a >= 0.999) & (ra >= 0.999)
             rim = m & (np.hypot(xx - cx, yy - cy) > 0.85 * R)
             row[engine] = {"psnr": rendered_psnr(ref, img, m),

@@ -25,7 +25,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(ROOT / "bench"))  # _common
-from _common import NBRDF, RGL_DIR  # noqa: E402
+from _common import NBRDF, RGL_DIR, engine_render  # noqa: E402
 
 MATERIALS = ("ss440,gold-metallic-paint,maroon-plastic,white-paint,chrome-steel,"
              "blue-metallic-paint,red-plastic,alum-bronze,acrylic_felt_green,cc_ibiza_sunset,"
@@ -47,7 +47,7 @@ def bench_material(name: str) -> dict:
     import brdffit
     from brdffit.evaluation.engines import threejs_brdf as TB
     from brdffit.evaluation.metrics import rendered_psnr
-    from brdffit.export.gltf import engine_brdf, gltf_parameters, optimize_for_engines
+    from brdffit.export.gltf import gltf_parameters, optimize_for_engines
 
     fit = brdffit.fit(brdffit.load(_spec(name)), model="ggx-diffuse")
     ref, ra = TB.shade_sphere(fit, resolution=RES, supersample=16, geometry_roughness=False)
@@ -60,13 +60,7 @@ def bench_material(name: str) -> dict:
         cpu = time.process_time() - t
         psnr = []
         for e in RENDERERS:
-            model = engine_brdf(p, e)
-            if e == "threejs":
-                model.lut = TB.dfg_lut()                    # three's own table
-                img, a = TB.shade_sphere(model, resolution=RES, supersample=8)
-            else:
-                img, a = TB.shade_sphere(model, resolution=RES, supersample=8,
-                                         geometry_roughness=False)
+            img, a = engine_render(p, e, RES)
             psnr.append(rendered_psnr(ref, img, (a >= 0.999) & (ra >= 0.999)))
         row[label] = {"cpu_seconds": cpu, "psnr": dict(zip(RENDERERS, psnr))}
     return row
