@@ -51,11 +51,10 @@ def _variant(model, env, cam, irradiance, exact_irradiance: bool, multiscatter: 
     if not multiscatter:
         TI._multiscatter = lambda fab, f0, f90: (keep(fab, f0, f90)[0], 0.0)
     try:
-        out = np.zeros(hit.shape + (3,))
-        out[hit] = TI.shade_ibl(model, env, N, cam.V[hit], cam.geometry_roughness()[hit])
+        values = TI.shade_ibl(model, env, N, cam.V[hit], cam.geometry_roughness()[hit])
     finally:
         env.read, TI._multiscatter = read, keep
-    return out.reshape(RES, SS, RES, SS, 3).mean(axis=(1, 3))
+    return cam.average(values)[0]
 
 
 def _punctual_diffuse(model, env, cam, image):
@@ -68,9 +67,8 @@ def _punctual_diffuse(model, env, cam, image):
     rows = diffuse_factors(model, grid, n=100_000)
     d = np.array([np.array(r["punctual"]) - np.array(r["ibl"]) for r in rows])
     delta = np.stack([np.interp(nv, grid, d[:, c]) for c in range(3)], -1)
-    out = np.zeros(hit.shape + (3,))
-    out[hit] = model.base_color * (1 - model.metallic) * delta * env.read(N, env.max_lod)
-    return image + out.reshape(RES, SS, RES, SS, 3).mean(axis=(1, 3))
+    return image + cam.average(model.base_color * (1 - model.metallic) * delta
+                               * env.read(N, env.max_lod))[0]
 
 
 def diffuse_factors(model, cos_v=(0.9, 0.6, 0.3), n: int = 400_000) -> list[dict]:
@@ -120,7 +118,7 @@ def main(argv=None) -> int:
     print(model.describe())
     cam = TB.CameraSphere(RES, SS)
     N = cam.N[cam.hit]
-    alpha = cam.hit.reshape(RES, SS, RES, SS).mean(axis=(1, 3))
+    alpha = cam.average(np.zeros((int(cam.hit.sum()), 3)))[1]
     for envmap in MAPS:
         refs, ra = T.reference_renders(fit, "sphere-" + envmap, RES, 256, 4)
         irr = TI.latlong_bilinear(irradiance_map(envmap).astype(float), *TI.latlong_uv(N))

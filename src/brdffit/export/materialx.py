@@ -112,15 +112,21 @@ def _fresnel_dielectric(c, ior):
     return np.where(g2 < 0, 1.0, np.nan_to_num(F, nan=1.0))
 
 
+def _smith_g2(nl, nv, alpha):
+    """``mx_ggx_smith_G2``: the height-correlated Smith masking-shadowing of GGX ``alpha``."""
+    a2 = alpha * alpha
+    lam_l = np.sqrt(a2 + (1.0 - a2) * nl * nl)
+    lam_v = np.sqrt(a2 + (1.0 - a2) * nv * nv)
+    return 2.0 * nl * nv / (lam_l * nv + lam_v * nl)
+
+
 def _dielectric_layer(nl, nv, vh, alpha: float, ior: float):
     """The terms of a GGX dielectric layer as MaterialX's GLSL evaluates it
     (``mx_dielectric_bsdf`` in ``mx_layer``): the height-correlated G2 of ``alpha``, the
     directional albedo ``Ess`` of its rational fit, the exact Fresnel of ``ior`` at V·H, the
     energy compensation ``1 + F (1 − Ess)/Ess`` and the layer's directional albedo
     ``(f0 A + B)·comp`` that darkens what lies below."""
-    a2 = alpha * alpha
-    G = 2.0 * nl * nv / (np.sqrt(a2 + (1 - a2) * nl * nl) * nv
-                         + np.sqrt(a2 + (1 - a2) * nv * nv) * nl)
+    G = _smith_g2(nl, nv, alpha)
     A, B = _dir_albedo_ab(nv, alpha)
     Ess = (A + B)[..., None]
     F = _fresnel_dielectric(vh, ior)[..., None]

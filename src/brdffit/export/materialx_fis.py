@@ -35,10 +35,12 @@ from functools import lru_cache
 import numpy as np
 
 from ..evaluation.engines.materialx_web import ENV_SAMPLES, irradiance_map
-from ..evaluation.engines.threejs import compare_render, environment_rgba, resolve_scene
+from ..evaluation.engines.threejs import environment_rgba
 from ..evaluation.engines.threejs_brdf import CameraSphere
-from ..evaluation.engines.threejs_ibl import latlong_bilinear, latlong_uv
-from .materialx import OpenPBRBRDF, _dir_albedo_ab, _fresnel_dielectric, _schlick_f82
+from ..evaluation.engines.threejs_ibl import (estimate_figures, latlong_bilinear, latlong_uv,
+                                                map_of_scene)
+from .materialx import (OpenPBRBRDF, _dir_albedo_ab, _fresnel_dielectric, _schlick_f82,
+                        _smith_g2)
 
 __all__ = ["LatLongMips", "latlong_mips", "shade_fis", "shade_sphere_fis", "estimate_fis"]
 
@@ -94,14 +96,6 @@ def _smith_g1(nv, alpha):
     """``mx_ggx_smith_G1``."""
     c2 = nv * nv
     return 2.0 / (1.0 + np.sqrt(1.0 + alpha * alpha * (1.0 - c2) / c2))
-
-
-def _smith_g2(nl, nv, alpha):
-    """``mx_ggx_smith_G2`` (height-correlated)."""
-    a2 = alpha * alpha
-    lam_l = np.sqrt(a2 + (1.0 - a2) * nl * nl)
-    lam_v = np.sqrt(a2 + (1.0 - a2) * nv * nv)
-    return 2.0 * nl * nv / (lam_l * nv + lam_v * nl)
 
 
 def _fibonacci(n: int) -> np.ndarray:
@@ -172,13 +166,17 @@ def shade_fis(model: OpenPBRBRDF, mips: LatLongMips, irradiance: np.ndarray, N: 
     alpha = float(np.sqrt(model.alpha[0] * model.alpha[1]))
     m = model.base_metalness
     base = np.zeros(N.shape)
-    if m < 1.0:
-        ior = model._ior()
-        comp, A, B = _comp(nv, alpha, _fresnel_dielectric(nv, ior)[:, None])
+
+    def dielectric(a, ior):     # (response without tint, directional albedo) of the layer
+        comp, A, B = _comp(nv, a, _fresnel_dielectric(nv, ior)[:, None])
         f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
-        spec = fis_radiance(mips, frame, Vt, alpha, lambda c: _fresnel_dielectric(c, ior), samples)
-        base += (1.0 - m) * (spec * np.maximum(model.specular_color, 0.0) * comp
-                             + (1.0 - (f0 * A + B) * comp) * np.maximum(model.base_color, 0.0) * irr)
+        spec = fis_radiance(mips, frame, Vt, a, lambda c: _fresnel_dielectric(c, ior), samples)
+        return spec * comp, (f0 * A + B) * comp
+
+    if m < 1.0:
+        spec, albedo = dielectric(alpha, model._ior())
+        base += (1.0 - m) * (spec * np.maximum(model.specular_color, 0.0)
+                             + (1.0 - albedo) * np.maximum(model.base_color, 0.0) * irr)
     if m > 0.0:
         c0, tint = np.maximum(model.base_color, 0.0), np.maximum(model.specular_color, 0.0)
         comp = _comp(nv, alpha, _schlick_f82(nv, c0, tint))[0]
@@ -186,12 +184,9 @@ def shade_fis(model: OpenPBRBRDF, mips: LatLongMips, irradiance: np.ndarray, N: 
         base += m * model.specular_weight * spec * comp
     if model.coat_weight <= 0.0:
         return base
-    a_c = float(np.clip(model.coat_roughness ** 2, 1e-6, 1.0))
-    ior_c, w = model.coat_ior, model.coat_weight
-    comp, A, B = _comp(nv, a_c, _fresnel_dielectric(nv, ior_c)[:, None])
-    f0 = ((ior_c - 1.0) / (ior_c + 1.0)) ** 2
-    coat = fis_radiance(mips, frame, Vt, a_c, lambda c: _fresnel_dielectric(c, ior_c), samples)
-    return w * coat * comp + (1.0 - w * (f0 * A + B) * comp) * base
+    coat, albedo = dielectric(float(np.clip(model.coat_roughness ** 2, 1e-6, 1.0)),
+                              model.coat_ior)
+    return model.coat_weight * coat + (1.0 - model.coat_weight * albedo) * base
 
 
 def shade_sphere_fis(model: OpenPBRBRDF, envmap: str | None = None, resolution: int = 96,
@@ -200,13 +195,8 @@ def shade_sphere_fis(model: OpenPBRBRDF, envmap: str | None = None, resolution: 
     ``sphere-<envmap>`` (``None``: ``sphere-env``): ``(image (H, W, 3), alpha (H, W))``,
     ``supersample``² pixel-centred samples per pixel, box averaged."""
     cam = CameraSphere(resolution, supersample)
-    hit = cam.hit
     mips, irr = latlong_mips(envmap)
-    img = np.zeros(hit.shape + (3,))
-    img[hit] = shade_fis(model, mips, irr, cam.N[hit], cam.V[hit], samples)
-    r, k = int(resolution), int(supersample)
-    return (img.reshape(r, k, r, k, 3).mean(axis=(1, 3)),
-            hit.reshape(r, k, r, k).mean(axis=(1, 3)))
+    return cam.average(shade_fis(model, mips, irr, cam.N[cam.hit], cam.V[cam.hit], samples))
 
 
 def estimate_fis(model: OpenPBRBRDF, ref_stack, ref_alpha, scene: str = "sphere-env",
@@ -217,10 +207,6 @@ def estimate_fis(model: OpenPBRBRDF, ref_stack, ref_alpha, scene: str = "sphere-
     :func:`~brdffit.evaluation.engines.threejs.reference_renders`), compared as the engine's
     render is. Returns ``psnr``, ``psnr_se``, ``mean_ratio``, ``rim_ratio`` and the model's
     ``image`` and ``alpha``."""
-    base, envmap = resolve_scene(scene)
-    if base != "sphere-env":
-        raise ValueError(f"estimate_fis: expected sphere-env or sphere-<map>, got {scene!r}")
+    envmap = map_of_scene(scene, "estimate_fis")
     img, alpha = shade_sphere_fis(model, envmap, np.shape(ref_alpha)[1], supersample, samples)
-    c = compare_render(img, alpha, ref_stack, ref_alpha, rim)
-    return {k: c[k] for k in ("psnr", "psnr_se", "mean_ratio", "rim_ratio")} | {
-        "image": img, "alpha": alpha}
+    return estimate_figures(img, alpha, ref_stack, ref_alpha, rim)

@@ -287,6 +287,18 @@ class CameraSphere:
         self.N = self.P / np.maximum(np.linalg.norm(self.P, axis=-1, keepdims=True), 1e-300)
         self.V = -d / np.sqrt(A)[..., None]
         self._d, self._step = d, 2 * t / n
+        self.resolution, self.supersample = int(resolution), int(supersample)
+
+    def average(self, values: np.ndarray, where: np.ndarray | None = None):
+        """``(image (H, W, 3), alpha (H, W))``: ``values`` ``(K, 3)`` of the samples ``where``
+        (default: every sample that hits) box-averaged over each pixel's samples (the others
+        black); alpha the share of hits."""
+        where = self.hit if where is None else where
+        r, k = self.resolution, self.supersample
+        img = np.zeros(where.shape + (3,))
+        img[where] = values
+        return (img.reshape(r, k, r, k, 3).mean(axis=(1, 3)),
+                self.hit.reshape(r, k, r, k).mean(axis=(1, 3)))
 
     def geometry_roughness(self) -> np.ndarray:
         """three's ``geometryRoughness`` per sample (module docstring): the largest component
@@ -334,7 +346,7 @@ class SphereSamples:
 
         wi, wo = local(Lw), local(Vw)
         m = hit & (wi[..., 2] > 0) & (wo[..., 2] > 0)
-        self.lit, self.hit = m, hit
+        self.lit, self.hit, self._cam = m, hit, cam
         self.wi, self.wo = wi[m], wo[m]
         self.weight = E[m] * self.wi[:, 2]
         self.g = cam.geometry_roughness()[m] if geometry_roughness else None
@@ -346,11 +358,7 @@ class SphereSamples:
             raise ValueError("SphereSamples.shade: built without geometry_roughness")
         f = brdf.eval_g(self.wi, self.wo, self.g) if geometry_roughness else \
             brdf.eval(self.wi, self.wo)
-        img = np.zeros(self.lit.shape + (3,))
-        img[self.lit] = self.weight[:, None] * f
-        r, k = self.resolution, self.supersample
-        img = img.reshape(r, k, r, k, 3).mean(axis=(1, 3))
-        return img, self.hit.reshape(r, k, r, k).mean(axis=(1, 3))
+        return self._cam.average(self.weight[:, None] * f, self.lit)
 
 
 def shade_sphere(brdf, scene: str = "sphere-distant", resolution: int = 128,

@@ -55,10 +55,10 @@ from functools import lru_cache
 import numpy as np
 
 from .threejs import compare_render, environment_rgba, resolve_scene
-from .threejs_brdf import CameraSphere, ThreeJSBRDF, _f_schlick_sg, _lut_bilinear, from_gltf
+from .threejs_brdf import CameraSphere, ThreeJSBRDF, _lut_bilinear, from_gltf
 
 __all__ = ["PMREM", "pmrem", "shade_ibl", "shade_sphere_env", "estimate_env", "latlong_uv",
-           "latlong_bilinear"]
+           "latlong_bilinear", "map_of_scene", "estimate_figures"]
 
 MIN_SIZE = 256
 LOD_MIN = 3
@@ -308,7 +308,7 @@ def shade_ibl(model: ThreeJSBRDF, env: PMREM, N: np.ndarray, V: np.ndarray,
     """Radiance ``(K, 3)`` three shades at K surface samples (normals ``N``, directions to the
     camera ``V``, geometry roughness ``g``), world frame (module docstring)."""
     nv = np.clip(np.sum(N * V, -1), 0.0, 1.0)
-    r = np.minimum(np.maximum(model.roughness, 0.045) + g, 1.0)
+    r = np.broadcast_to(model._rough(model.roughness, g), nv.shape)
     fab = _lut_bilinear(model.lut, r, nv)
     m = model.metallic
     f0_d, f90_spec = model.dielectric_f0_f90()
@@ -320,9 +320,9 @@ def shade_ibl(model: ThreeJSBRDF, env: PMREM, N: np.ndarray, V: np.ndarray,
            + e_over_pi * (ms_d * (1 - m) + ms_m * m
                           + model.base_color * (1 - m) * (1.0 - ss_d - ms_d)))
     if model.clearcoat > 0.0:
-        rc = np.minimum(np.maximum(model.clearcoat_roughness, 0.045) + g, 1.0)
+        rc = np.broadcast_to(model._rough(model.clearcoat_roughness, g), nv.shape)
         fab_c = _lut_bilinear(model.lut, rc, nv)
-        f_cc = _f_schlick_sg(0.04, 1.0, nv)[:, None]
+        f_cc = model._fresnel(0.04, 1.0, nv)[:, None]
         coat = _radiance(env, N, V, nv, rc) * (0.04 * fab_c[:, 0:1] + fab_c[:, 1:2])
         out = out * (1.0 - model.clearcoat * f_cc) + model.clearcoat * coat
     return out
@@ -335,12 +335,8 @@ def shade_sphere_env(model: ThreeJSBRDF, envmap: str | None = None, resolution: 
     pixel-centred samples per pixel, box averaged, as the round trip renders it."""
     cam = CameraSphere(resolution, supersample)
     hit = cam.hit
-    g = cam.geometry_roughness()[hit]
-    img = np.zeros(hit.shape + (3,))
-    img[hit] = shade_ibl(model, pmrem(envmap), cam.N[hit], cam.V[hit], g)
-    r, k = int(resolution), int(supersample)
-    return (img.reshape(r, k, r, k, 3).mean(axis=(1, 3)),
-            hit.reshape(r, k, r, k).mean(axis=(1, 3)))
+    return cam.average(shade_ibl(model, pmrem(envmap), cam.N[hit], cam.V[hit],
+                                 cam.geometry_roughness()[hit]))
 
 
 def estimate_env(gltf, ref_stack, ref_alpha, scene: str = "sphere-env", supersample: int = 4,
@@ -353,11 +349,26 @@ def estimate_env(gltf, ref_stack, ref_alpha, scene: str = "sphere-env", supersam
     (:func:`~brdffit.evaluation.engines.threejs.compare_render`). Returns ``psnr``,
     ``psnr_se``, ``mean_ratio``, ``rim_ratio``, the ``model`` and its ``image`` and
     ``alpha``."""
-    base, envmap = resolve_scene(scene)
-    if base != "sphere-env":
-        raise ValueError(f"estimate_env: expected sphere-env or sphere-<map>, got {scene!r}")
+    envmap = map_of_scene(scene, "estimate_env")
     model = from_gltf(gltf, index)
     img, alpha = shade_sphere_env(model, envmap, np.shape(ref_alpha)[1], supersample)
+    return estimate_figures(img, alpha, ref_stack, ref_alpha, rim) | {
+        "model": model.describe()}
+
+
+def map_of_scene(scene: str, what: str) -> str | None:
+    """The map of a map scene (``None``: ``sphere-env``'s procedural one); ``what`` names the
+    caller in the error a scene without a map gives."""
+    base, envmap = resolve_scene(scene)
+    if base != "sphere-env":
+        raise ValueError(f"{what}: expected sphere-env or sphere-<map>, got {scene!r}")
+    return envmap
+
+
+def estimate_figures(img, alpha, ref_stack, ref_alpha, rim: float = 0.85) -> dict:
+    """An estimate's image against our render of the fit, as an engine's render is compared
+    (:func:`~brdffit.evaluation.engines.threejs.compare_render`): ``psnr``, ``psnr_se``,
+    ``mean_ratio``, ``rim_ratio``, and the ``image`` and ``alpha``."""
     c = compare_render(img, alpha, ref_stack, ref_alpha, rim)
     return {k: c[k] for k in ("psnr", "psnr_se", "mean_ratio", "rim_ratio")} | {
-        "model": model.describe(), "image": img, "alpha": alpha}
+        "image": img, "alpha": alpha}
