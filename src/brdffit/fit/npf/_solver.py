@@ -316,6 +316,10 @@ class MFState:
     rho_d: np.ndarray
     rho_s: np.ndarray
 
+    def copy(self) -> "MFState":
+        """A state with copies of the factor arrays."""
+        return MFState(*(np.array(x) for x in _state_arrays(self)))
+
 
 def _stats(st: MFState, smp: Samples, chans=None):
     """``(E, S)`` of :meth:`Samples.stats` for the model of ``st``, ``X = ρs D F`` per bin
@@ -448,7 +452,7 @@ def _extrapolate(st: MFState, prev: MFState, beta, smp: Samples, eps, E, g_from_
     default all; no other channel accepts). Returns ``(accepted (3,), S or None, E)``;
     ``st`` is updated in place where accepted."""
     b = beta[:, None]
-    cand = MFState(*(np.array(x) for x in _state_arrays(st)))
+    cand = st.copy()
     for nm in ("D", "F") if g_from_d else ("D", "F", "G"):
         x = getattr(st, nm) + b * (getattr(st, nm) - getattr(prev, nm))
         setattr(cand, nm, np.maximum(x, eps))
@@ -550,7 +554,7 @@ def _jump(st: MFState, anchor: MFState, smp: Samples, eps, E, S, on, max_tries=4
     for _ in range(max_tries):
         if not todo.any():
             break
-        before = MFState(*(np.array(x) for x in _state_arrays(st)))
+        before = st.copy()
         acc, S_e, E = _extrapolate(st, anchor, np.minimum(gamma, _jump_cap(st, anchor)), smp,
                                    eps, E, chans=todo)
         S = tuple(np.where(acc[:, None], a, b) for a, b in zip(S_e, S))
@@ -650,7 +654,7 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
     before its last sweep, the over-relaxation factors β, the objective and the monitors),
     to go on where it stopped as one run would (a screening in rounds)."""
     t0 = time.perf_counter()
-    frozen = MFState(*(np.array(x) for x in _state_arrays(st)))
+    frozen = st.copy()
     _normalise_factors(st, eps, g_from_d=False)
     on = _chans(active).copy()
     E, S = _stats(st, smp, on if carry is not None else None)
@@ -666,9 +670,9 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
         mon, beta = carry["monitors"], carry["beta"].copy()
         E = np.where(on, E, carry["E"])
     E_frozen, n_it, over_relaxed, n_extra, n_jumps = E.copy(), 0, 0, 0, 0
-    anchor = MFState(*(np.array(x) for x in _state_arrays(st)))
+    anchor = st.copy()
     while np.any(on) and n_it < max_iter:
-        prev = MFState(*(np.array(x) for x in _state_arrays(st)))
+        prev = st.copy()
         S, E, t = _g_sweep(st, smp, S, on, eps, smoothing, g_step_cap)
         over_relaxed += int(np.sum(t > 1.0))
         if extrapolate and len(mon.history) > 1:
@@ -679,7 +683,7 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
         if jump_every and n_it % jump_every == 0:
             S, E, accepted = _jump(st, anchor, smp, eps, E, S, on)
             n_jumps += accepted
-            anchor = MFState(*(np.array(x) for x in _state_arrays(st)))
+            anchor = st.copy()
         _take(st, frozen, ~on)                       # the channels not run stay as they were
         E = np.where(on, E, E_frozen)
         if callback is not None:
@@ -702,7 +706,7 @@ def combine_channels(results) -> tuple[MFState, dict]:
     of :func:`run_independent_g`, their carries included): the channels are independent
     problems, so channels of different runs make one run that goes on (``carry``) as each
     of them would have alone."""
-    st = MFState(*(np.array(x) for x in _state_arrays(results[0].state)))
+    st = results[0].state.copy()
     for c, res in enumerate(results):
         for nm in ("D", "F", "G", "rho_d", "rho_s"):
             getattr(st, nm)[c] = getattr(res.state, nm)[c]
@@ -794,7 +798,7 @@ def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
     beta = np.ones(3)
     n_extra = 0
     while True:
-        prev = MFState(*(np.array(x) for x in _state_arrays(st)))
+        prev = st.copy()
         S, t_prev, n = _g_from_d_d_step(st, smp, S, E, t_prev, eps, search_evals)
         line_searches += n > 0
         line_search_evals += n
