@@ -482,7 +482,7 @@ def _fit_g_from_d(pb: _Problem, init: str, extrapolate: bool):
     if pb.polish > 0:
         st, E = _polish(st, E, smp, extra, eps=pb.eps, polish=pb.polish, tol=pb.tol,
                         g_from_d=True, bound=pb.polish_bound, callback=pb.callback)
-    _check_state(_arrays(st), "G-from-D fit")
+    _check_state(_solver._state_arrays(st), "G-from-D fit")
     return pb.finish(_mf_model(st, "g-from-d", pb.name, pb.source), E, extra)
 
 
@@ -524,7 +524,7 @@ def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max
     if pb.polish > 0:
         bst, bE = _polish(bst, bE, smp, extra, eps=pb.eps, polish=pb.polish, tol=pb.tol,
                           g_from_d=False, bound=pb.polish_bound, callback=pb.callback)
-    _check_state(_arrays(bst), "independent-G fit")
+    _check_state(_solver._state_arrays(bst), "independent-G fit")
     return pb.finish(_mf_model(bst, "independent-g", pb.name, pb.source), bE, extra)
 
 
@@ -600,7 +600,7 @@ def _multi_start(start_states, run_start, verbose: bool, what: str):
             runs.append({"start": label, "status": note})
             continue
         res = next(done)
-        ok = all(np.all(np.isfinite(a)) for a in _arrays(res.state))
+        ok = all(np.all(np.isfinite(a)) for a in _solver._state_arrays(res.state))
         info = _run_info(res)
         entry = {"start": label, "status": "ok" if ok else "non-finite", "note": note,
                  "objective": float(res.E.sum()), "objective_per_channel": res.E.tolist(),
@@ -754,10 +754,6 @@ def _polish(st: MFState, E, smp: Samples, extra: dict, *, eps, polish, tol, g_fr
     extra["history"] = list(extra.get("history", [])) + [float(h) for h in pol.history[1:]]
     extra["awls_stop_reason"], extra["stop_reason"] = extra.get("stop_reason"), pol.reason
     return st, E
-
-
-def _arrays(st: MFState):
-    return [st.D, st.F, st.G, st.rho_d, st.rho_s]
 
 
 #: Stop reasons of ``_solver.Monitor`` (and the closed-form bivariate fit) that mean converged.
