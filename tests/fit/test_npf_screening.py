@@ -33,9 +33,6 @@ def _start(seed):
     return npf._random_start(np.random.default_rng(seed))
 
 
-def _copy(st):
-    return _solver.MFState(*(np.array(a) for a in npf._arrays(st)))
-
 
 @pytest.mark.parametrize("chans", [(True, False, True), (False, True, False)])
 def test_g_passes_of_the_channels_asked_are_those_of_all_channels(chans):
@@ -91,7 +88,7 @@ def test_a_run_cut_in_two_with_its_carry_is_the_same_run(smp):
     one = _solver.run_independent_g(_start(1), smp, max_iter=8, extrapolate=True)
     a = _solver.run_independent_g(_start(1), smp, max_iter=5, extrapolate=True)
     b = _solver.run_independent_g(a.state, smp, max_iter=3, extrapolate=True, carry=a.carry)
-    for x, y in zip(npf._arrays(one.state), npf._arrays(b.state)):
+    for x, y in zip(_solver._state_arrays(one.state), _solver._state_arrays(b.state)):
         np.testing.assert_allclose(x, y, rtol=1e-10)
     np.testing.assert_allclose(one.history, b.history, rtol=1e-12)
     assert b.iterations == 3 and len(b.history) == 9
@@ -102,20 +99,20 @@ def test_combined_channels_follow_their_own_runs(smp):
     would; a channel not ``active`` is left as it was and its objective kept."""
     runs = [_solver.run_independent_g(_start(s), smp, max_iter=3, extrapolate=True)
             for s in (1, 2, 3)]
-    alone = [_solver.run_independent_g(_copy(r.state), smp, max_iter=4, extrapolate=True,
+    alone = [_solver.run_independent_g(r.state.copy(), smp, max_iter=4, extrapolate=True,
                                        carry=r.carry) for r in runs]
     runs = [_solver.run_independent_g(_start(s), smp, max_iter=3, extrapolate=True)
             for s in (1, 2, 3)]                       # fresh carries (the above used them)
     st, carry = _solver.combine_channels(runs)
     on = np.array([True, False, True])
-    frozen = _copy(st)
+    frozen = st.copy()
     both = _solver.run_independent_g(st, smp, max_iter=4, extrapolate=True, active=on,
                                      carry=carry)
     for c in (0, 2):
-        for x, y in zip(npf._arrays(both.state), npf._arrays(alone[c].state)):
+        for x, y in zip(_solver._state_arrays(both.state), _solver._state_arrays(alone[c].state)):
             np.testing.assert_allclose(x[c], y[c], rtol=1e-10)
         assert both.E[c] == pytest.approx(alone[c].E[c], rel=1e-10)
-    for x, y in zip(npf._arrays(both.state), npf._arrays(frozen)):
+    for x, y in zip(_solver._state_arrays(both.state), _solver._state_arrays(frozen)):
         assert np.array_equal(x[1], y[1])
     assert both.E[1] == runs[1].E[1]
 
@@ -129,16 +126,16 @@ def test_jump_never_raises_the_objective_and_leaves_other_channels(smp):
     truth = _solver.MFState(D.T.copy(), _f().T.copy(), G.T.copy(), RHO_D.copy(),
                             RHO_S.copy())
     anchor = _start(4)
-    st = _solver.MFState(*(0.5 * (a + b) for a, b in zip(npf._arrays(truth),
-                                                          npf._arrays(anchor))))
+    st = _solver.MFState(*(0.5 * (a + b) for a, b in zip(_solver._state_arrays(truth),
+                                                          _solver._state_arrays(anchor))))
     E0, S0 = _solver._stats(st, smp)
-    before = _copy(st)
+    before = st.copy()
     on = np.array([True, True, False])
     S, E, accepted = _solver._jump(st, anchor, smp, 1e-6, E0, S0, on)
     assert accepted >= 2 and np.all(E[:2] < 0.5 * E0[:2]) and E[2] == E0[2]
     E_exact, _ = _solver._stats(st, smp)
     np.testing.assert_allclose(E, E_exact, rtol=1e-8, atol=1e-12 * smp.sum_wzz.max())
-    for x, y in zip(npf._arrays(st), npf._arrays(before)):
+    for x, y in zip(_solver._state_arrays(st), _solver._state_arrays(before)):
         assert np.array_equal(x[2], y[2])
 
 
