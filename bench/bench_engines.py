@@ -177,8 +177,9 @@ def main(argv=None) -> int:
     ap.add_argument("--materials", help="comma-separated subset of the material names")
     ap.add_argument("--model", default="ggx-diffuse")
     ap.add_argument("--res", type=int, default=128)
-    ap.add_argument("--optimize", default=False,
-                    help="the exporter's refinement (brdffit.export.gltf.OPTIMIZE), e.g. engines")
+    ap.add_argument("--optimize", default="engines",
+                    help="the exporter's refinement (brdffit.export.gltf.OPTIMIZE; default: "
+                         "the exporter's, engines), false: the rules alone")
     ap.add_argument("--spp", type=int, default=64, help="per batch")
     ap.add_argument("--batches", type=int, default=4)
     ap.add_argument("--scenes", default=",".join(SCENES),

@@ -14,8 +14,8 @@ three.js), ``--mx-ss`` (in MaterialX: its FIS loop is what SwiftShader spends th
 ``--env-samples`` (MaterialX's FIS samples per lobe), ``--spp`` and ``--batches`` (Mitsuba).
 Needs ``make npmdeps`` (three), Chromium and ``../shared/data``. Writes
 ``bench/results/engines_threejs.json`` (atomically, after every material) and
-``engines_threejs.csv`` (one row per material and scene); ``--optimize engines --label
-engines`` stores a run of the exporter's option under ``labelled["engines"]`` of the same JSON.
+``engines_threejs.csv`` (one row per material and scene); ``--optimize false --label
+rules`` stores a run of the rule-based parameters under ``labelled["rules"]`` of the same JSON.
 
 Per material (``fit`` = ``brdffit.fit(material, model="ggx-diffuse")``, the files =
 ``write_gltf(fit)`` and ``write_materialx(fit)``, as ``brdffit fit`` + ``brdffit export``
@@ -464,8 +464,9 @@ def _arguments(argv):
                          "sphere-env, sphere-<map> (default: sphere-distant and the paper "
                          "suite's spheres)")
     ap.add_argument("--res", type=int, default=96)
-    ap.add_argument("--optimize", default=False,
-                    help="the exporter's refinement (brdffit.export.gltf.OPTIMIZE), e.g. engines")
+    ap.add_argument("--optimize", default="engines",
+                    help="the exporter's refinement (brdffit.export.gltf.OPTIMIZE; default: "
+                         "the exporter's, engines), false: the rules alone")
     ap.add_argument("--ss", type=int, default=4, help="three.js samples per pixel side")
     ap.add_argument("--mx-ss", type=int, default=2,
                     help="MaterialX samples per pixel side (its FIS loop is SwiftShader's cost)")
@@ -481,6 +482,8 @@ def _arguments(argv):
                     help="recompute the summary of the results already in --out (no rendering)")
     args = ap.parse_args(argv)
     args.scenes = [x.strip() for x in args.scenes.split(",") if x.strip()]
+    if str(args.optimize).lower() in ("false", "none", "0", ""):
+        args.optimize = False
     return args
 
 

@@ -183,8 +183,9 @@ def export(commands) -> None:
     cmd.add_argument("-o", "--out", type=path, required=True, help="Output file.")
     cmd.add_argument("--option", action="append",
                      help="Target option key=value (JSON values), e.g. --option "
-                          "optimize=engines with --to gltf: parameters chosen for what Blender "
-                          "and three.js render; an unknown key lists the target's options.")
+                          "optimize=false with --to gltf: the rule-based parameters instead of "
+                          "those fitted to what the specification, Blender and three.js "
+                          "render; an unknown key lists the target's options.")
     cmd.add_argument("--json", dest="as_json", action="store_true",
                      help="Print the summary as JSON.")
 

@@ -77,7 +77,9 @@ def check_options(to: str, options: dict) -> None:
                              f"{', '.join(known) or '(none)'}")
         d = known[key]
         if key in choices:
-            ok, want = val in choices[key], "one of " + ", ".join(map(repr, choices[key]))
+            ok = any(type(val) is type(c) and val == c for c in choices[key])  # 1 is not True
+            want = "one of " + ", ".join(repr(c) if isinstance(c, str) else json.dumps(c)
+                                         for c in choices[key])
         elif isinstance(d, bool):
             ok, want = isinstance(val, bool), "true or false"
         elif isinstance(d, int):
