@@ -290,3 +290,30 @@ def test_error_regions_name_the_missing_peak_and_the_angle_dependent_colour():
     assert any("colour changes with the angle of incidence" in f for f in c["findings"])
     bm = M.BRDFMetrics(peaky, n_samples=1 << 14)
     assert bm.evaluate(diffuse)["error_regions"]["worst"] == "specular peak"
+
+
+def test_grid_metrics_share_one_evaluation_and_match_the_direct_ones():
+    """normalized_l2 and the compressive objective read the fit at the union of their MERL
+    nodes, evaluated once: the same figures as each metric alone (L2Reference.error,
+    the objective of the fit's own evaluation), and fewer evaluations."""
+    from brdffit.losses.l2 import L2Reference
+    from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel
+
+    ref = MicrofacetBRDF(GGX(0.2), SchlickFresnel(0.05), diffuse=[0.3, 0.2, 0.1])
+    fit = MicrofacetBRDF(GGX(0.25), SchlickFresnel(0.04), diffuse=[0.28, 0.21, 0.12])
+    bm = M.BRDFMetrics(ref, 1 << 10, metrics=("normalized_l2", "compressive_objective"))
+    calls = []
+
+    class Counted(MicrofacetBRDF):
+        def eval_hd(self, th, td, pd):
+            calls.append(np.size(th))
+            return super().eval_hd(th, td, pd)
+
+    counted = Counted(GGX(0.25), SchlickFresnel(0.04), diffuse=[0.28, 0.21, 0.12])
+    out = bm.evaluate(counted)
+    assert out["normalized_l2"] == pytest.approx(L2Reference(ref).error(fit).value, rel=1e-12)
+    fv = np.nan_to_num(np.asarray(fit.eval_hd(*bm._obj_coords))).T
+    direct = bm._obj.value(fv).sum() / bm._obj_ref_energy.sum()
+    assert out["compressive_objective"] == pytest.approx(direct, rel=1e-12)
+    separate = 90 * 90 * 90 + bm._obj.index.size          # L2's φd planes + the objective's
+    assert sum(calls) < 0.8 * separate, (sum(calls), separate)

@@ -596,6 +596,7 @@ class BRDFMetrics:
         self._ref_vals = np.nan_to_num(np.asarray(reference.eval(self._wi, self._wo), float))
         self._regions = region_of(self._wi, self._wo)
         self._last: tuple = (None, None)       # (fit, its values on the pairs)
+        self._grid_nodes = None                 # the nodes both grid metrics read
         self.timings["cos_rel_error_setup"] = time.perf_counter() - t0
         self._l2 = None
         if "normalized_l2" in self.metrics:
@@ -623,6 +624,32 @@ class BRDFMetrics:
                 self.errors["compressive_objective"] = f"{type(exc).__name__}: {exc}"
             self.timings["compressive_objective_setup"] = time.perf_counter() - t0
 
+    def _grid_metric_values(self, test):
+        """``(values at the L2 grid's nodes, values at the objective's samples)`` of ``test``
+        from one ``eval_hd`` over the union of both node sets (the objective's samples and
+        every ``phi_stride``-th φd plane), or ``None`` where that does not apply (either metric
+        off, a Monte Carlo L2, a table read as stored)."""
+        l2, obj = self._l2, self._obj
+        if (l2 is None or obj is None or l2.method != "grid" or not hasattr(test, "eval_hd")
+                or getattr(test, "merl_table", None) is not None):
+            return None
+        shape = obj.mask.shape
+        if self._grid_nodes is None:
+            need = np.zeros(shape, dtype=bool)
+            need[:, :, ::l2.phi_stride] = True
+            need.ravel()[obj.index] = True
+            nodes = np.flatnonzero(need)
+            th, td, pd = np.meshgrid(merl_theta_h(), merl_theta_d(), merl_phi_d(),
+                                     indexing="ij")
+            self._grid_nodes = (nodes, th.ravel()[nodes], td.ravel()[nodes], pd.ravel()[nodes])
+        nodes, th, td, pd = self._grid_nodes
+        full = np.full((int(np.prod(shape)), 3), np.nan)
+        chunk = 1 << 18
+        for s in range(0, nodes.size, chunk):
+            sl = slice(s, s + chunk)
+            full[nodes[sl]] = test.eval_hd(th[sl], td[sl], pd[sl])
+        return full.reshape(shape + (3,))[:, :, ::l2.phi_stride], full[obj.index]
+
     def _test_values(self, test) -> np.ndarray:
         if self._last[0] is not test:          # one evaluation per fit for every metric
             self._last = (test, np.nan_to_num(np.asarray(test.eval(self._wi, self._wo), float)))
@@ -649,6 +676,14 @@ class BRDFMetrics:
         out: dict = {}
         errors = dict(self.errors)
         timings = {}
+        shared = None
+        if "normalized_l2" in self.metrics and "compressive_objective" in self.metrics:
+            t0 = time.perf_counter()
+            try:
+                shared = self._grid_metric_values(test)
+            except Exception:  # noqa: BLE001 – each metric then evaluates (and reports) alone
+                shared = None
+            timings["grid_evaluation"] = time.perf_counter() - t0
         for key in self.metrics:
             t0 = time.perf_counter()
             out[key] = None
@@ -658,9 +693,11 @@ class BRDFMetrics:
                 elif key == "error_regions":
                     out[key] = self.error_regions(test)
                 elif key == "normalized_l2" and self._l2 is not None:
-                    out[key] = float(self._l2.error(test).value)
+                    grid = None if shared is None else shared[0]
+                    out[key] = float(self._l2.errors(test, grid_values=grid)[0].value)
                 elif key == "compressive_objective" and self._obj is not None:
-                    fv = np.asarray(test.eval_hd(*self._obj_coords), dtype=np.float64)
+                    fv = (np.asarray(test.eval_hd(*self._obj_coords), dtype=np.float64)
+                          if shared is None else shared[1])
                     fv = np.nan_to_num(fv).T
                     out[key] = float(self._obj.value(fv).sum() / self._obj_ref_energy.sum())
             except Exception as exc:  # noqa: BLE001 – optional metrics must not break a report

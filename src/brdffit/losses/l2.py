@@ -149,11 +149,13 @@ class L2Reference:
         """Normalised L2 error of ``fit`` against the reference."""
         return self.errors(fit)[0]
 
-    def errors(self, fit, theta_max=()) -> list[L2Result]:
+    def errors(self, fit, theta_max=(), grid_values=None) -> list[L2Result]:
         """``[error over the reference's domain] + [error over θi, θo ≤ t for t in theta_max]``
-        with one evaluation of ``fit`` (grid method only for ``theta_max``)."""
+        with one evaluation of ``fit`` (grid method only for ``theta_max``);
+        ``grid_values``: ``fit`` at this reference's grid nodes (``(90, 90, 180/phi_stride,
+        3)``), when already evaluated."""
         if self.method == "grid":
-            fv, fvalid = _grid_values(fit, self.phi_stride)
+            fv = _grid_values(fit, self.phi_stride)[0] if grid_values is None else grid_values
             ok = self.valid & np.all(np.isfinite(fv), axis=-1)
             diff2 = np.where(ok[..., None], (np.where(ok[..., None], self.values, 0.0)
                                               - np.where(ok[..., None], fv, 0.0)) ** 2, 0.0)

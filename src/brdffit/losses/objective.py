@@ -173,15 +173,41 @@ class ObjectiveData:
         return np.einsum("cn,cn->c", self.w, self.z * self.z)
 
 
+#: the objectives prepared for read-only tables, ``(values, valid, options, data)``, newest
+#: last (:func:`prepare_objective`)
+_PREPARED: list[tuple] = []
+_PREPARED_KEPT = 2
+
+
 def prepare_objective(values, valid=None, options: ObjectiveOptions | None = None,
                       source: str | None = None) -> ObjectiveData:
     """Select the samples and compute the weights of Eq. 8 for a MERL-grid table.
 
     ``values`` ``(90, 90, 180, 3)`` (``ρ*``), ``valid`` ``(90, 90, 180)`` bool (default:
     finite and non-negative). Raises :class:`FitError` when no sample remains.
+
+    A read-only table (a memoised tabulation, :func:`brdffit.grid.tabulate_merl_grid`: the
+    fits and metrics of one material share it) is prepared once per options and returned
+    read-only to later callers; the last :data:`_PREPARED_KEPT` are kept.
     """
     opts = options or ObjectiveOptions()
     values = np.asarray(values, dtype=np.float64)
+    valid = None if valid is None else np.asarray(valid, dtype=bool)
+    if values.flags.writeable or (valid is not None and valid.flags.writeable):
+        return _prepare_objective(values, valid, opts, source)
+    for v, m, o, data in _PREPARED:
+        if v is values and m is valid and o == opts:
+            return data
+    data = _prepare_objective(values, valid, opts, source)
+    for a in (data.mask, data.index, data.w, data.z, data.rho_bar, data.cos_i, data.cos_o):
+        a.setflags(write=False)
+    _PREPARED.append((values, valid, opts, data))
+    del _PREPARED[:-_PREPARED_KEPT]
+    return data
+
+
+def _prepare_objective(values: np.ndarray, valid, opts: ObjectiveOptions,
+                       source: str | None) -> ObjectiveData:
     if values.shape != (N_THETA_H, N_THETA_D, N_PHI_D, 3):
         raise FitError(f"{source or 'input'}: expected a MERL-grid table of shape "
                        f"(90, 90, 180, 3), found {values.shape}")
