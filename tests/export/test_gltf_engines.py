@@ -88,13 +88,16 @@ def test_engine_aware_parameters_keep_sharp_lobes_and_are_checked(tmp_path):
         gltf_equivalent(sharp, optimize="nope")
     with pytest.raises(ValueError, match="engine"):
         optimize_for_engines(sharp, rule, engines=("unreal",))
-    # the command line's option: a boolean or a name (its type comes from write_gltf's default)
+    # the command line's option: a boolean, null or a name (write_gltf's Literal annotation)
     from brdffit.cli.export import check_options
     from brdffit.errors import ExportError
     from brdffit.export.gltf import write_gltf
 
-    for value in (True, False, "engines", "blender"):
+    for value in (True, False, None, "engines", "blender"):
         check_options("gltf", {"optimize": value})
+    for value in (1, 0, "nope", 2.5):                  # 1 == True, but not a boolean
+        with pytest.raises(ValueError, match="optimize"):
+            check_options("gltf", {"optimize": value})
     with pytest.raises(ExportError, match="optimize"):
         write_gltf(sharp, tmp_path / "m.gltf", fidelity=False, optimize="nope")
 
