@@ -31,6 +31,10 @@ beat ours; ``--materials all`` runs the 100::
     nice .venv/bin/python bench/bench_best_known.py --models sgd,npf-g-from-d --materials all
     nice .venv/bin/python bench/bench_best_known.py --models npf --configs default \
         --retire-default previous-default
+    nice .venv/bin/python bench/bench_best_known.py --merge /tmp/a.csv,/tmp/b.csv
+
+(the last adds the rows of runs with their own ``--out``, e.g. two processes over disjoint
+materials, and summarises).
 
 Writes ``bench/results/best_known.csv`` (one row per material × model × configuration) and
 ``bench/results/best_known.json`` (the summary), atomically after every material.
@@ -183,6 +187,25 @@ def summarise(rows: list[dict]) -> dict:
     return out
 
 
+def merge(out: str, paths: list[str]) -> int:
+    """Add to ``out`` the rows of ``paths`` it does not hold (by material, model and
+    configuration), and write the summary of them all."""
+    rows = _read(out)
+    seen = {(r["material"], r["model"], r["config"]) for r in rows}
+    for path in paths:
+        for r in _read(path):
+            key = (r["material"], r["model"], r["config"])
+            if key not in seen:
+                seen.add(key)
+                rows.append(r)
+    summary = {"benchmark": "best_known", "command": " ".join(sys.argv),
+               "date": time.strftime("%Y-%m-%dT%H:%M:%S"), "merged": paths,
+               "configs": {m: [c for c, _ in CONFIGS[m]] for m in CONFIGS},
+               "per_model": summarise(rows)}
+    write_rows(out, FIELDS, rows, summary)
+    return 0
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--models", default=",".join(CONFIGS),
@@ -195,7 +218,12 @@ def main(argv=None) -> int:
     ap.add_argument("--retire-default", default="", metavar="LABEL",
                     help="rename the existing 'default' rows of --models to LABEL first "
                          "(after a change of the defaults; the rows stay as found objectives)")
+    ap.add_argument("--merge", default="", metavar="A.csv,B.csv",
+                    help="only add the rows of these CSVs (runs with their own --out, e.g. "
+                         "two processes over disjoint materials) to --out and summarise")
     args = ap.parse_args(argv)
+    if args.merge:
+        return merge(args.out, [p for p in args.merge.split(",") if p])
     models = [m for m in args.models.split(",") if m]
     unknown = [m for m in models if m not in CONFIGS]
     if unknown:
