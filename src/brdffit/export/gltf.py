@@ -123,7 +123,8 @@ from .gltf_cycles import CyclesPrincipledBRDF, _Lobe
 __all__ = ["GLTFBRDF", "gltf_parameters", "optimize_parameters", "gltf_material",
            "gltf_equivalent", "gltf_fidelity", "write_gltf", "MATERIAL_METAL_F0",
            "METAL_MIN_F90", "IOR_MAX", "MESHES", "ENGINES", "ENGINE_TARGETS", "OPTIMIZE",
-           "DEFAULT_OPTIMIZE", "engine_brdf", "optimize_for_engines", "threejs_dfg_table", "uv_sphere"]
+           "DEFAULT_OPTIMIZE", "engine_brdf", "optimize_for_engines", "threejs_dfg_table",
+           "uv_sphere"]
 
 MATERIAL_METAL_F0 = 0.08
 #: the largest glTF ``ior`` exported (F0 = 0.25): common dielectrics lie in 1.3-2.5; a
