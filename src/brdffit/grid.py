@@ -89,13 +89,20 @@ def _evaluate_nodes(brdf, ih, jd, kp, chunk: int) -> tuple[np.ndarray, np.ndarra
                              indexing="ij")
     shape = th.shape
     th, td, pd = th.ravel(), td.ravel(), pd.ravel()
-    out = np.empty((th.size, 3))
-    for s in range(0, th.size, chunk):
-        sl = slice(s, s + chunk)
-        out[sl] = brdf.eval_hd(th[sl], td[sl], pd[sl])
+    out = eval_hd_chunked(brdf, th, td, pd, chunk)
     if getattr(brdf, "measured_domain", None) is None:
         return out.reshape(shape + (3,)), np.ones(shape, dtype=bool)
     return out.reshape(shape + (3,)), _measured_hd(brdf, th, td, pd).reshape(shape)
+
+
+def eval_hd_chunked(brdf, th, td, pd, chunk: int = 1 << 18) -> np.ndarray:
+    """``brdf.eval_hd`` at the flat angle arrays ``th``, ``td``, ``pd``, ``chunk`` samples at
+    a time (bounded temporaries), as one ``(n, 3)`` array."""
+    out = np.empty((np.size(th), 3))
+    for s in range(0, np.size(th), chunk):
+        sl = slice(s, s + chunk)
+        out[sl] = brdf.eval_hd(th[sl], td[sl], pd[sl])
+    return out
 
 
 def _stored_table(brdf):

@@ -44,9 +44,9 @@ import numpy as np
 
 from ..brdf import measured_mask
 from .tonemap import tonemap
-from ..grid import merl_phi_d, merl_theta_d, merl_theta_h, tabulate_merl_grid
+from ..grid import eval_hd_chunked, tabulate_merl_grid
 from ..losses.l2 import L2Reference
-from ..losses.objective import prepare_objective
+from ..losses.objective import merl_grid_geometry, prepare_objective
 
 __all__ = [
     "DELTA_E_VMAX", "DELTA_E_CMAP", "npf_tonemap", "foreground_mask", "rendered_psnr",
@@ -562,6 +562,12 @@ def error_regions(reference, test, n_samples: int = 1 << 16, seed: int = 0) -> d
     return BRDFMetrics(reference, n_samples, seed, ("error_regions",)).error_regions(test)
 
 
+def _merl_coords(flat_index) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(θh, θd, φd)`` of the MERL grid's samples at ``flat_index`` (of the 90×90×180 grid)."""
+    geo = merl_grid_geometry()
+    return tuple(geo[k].ravel()[flat_index] for k in ("theta_h", "theta_d", "phi_d"))
+
+
 class BRDFMetrics:
     """BRDF-space metrics of several fits against one reference, the reference prepared once.
 
@@ -615,10 +621,7 @@ class BRDFMetrics:
                     raise ValueError("the compressive objective needs an isotropic reference")
                 vals, valid = tabulate_merl_grid(reference)
                 self._obj = prepare_objective(vals, valid, source=getattr(reference, "name", None))
-                th, td, pd = np.meshgrid(merl_theta_h(), merl_theta_d(), merl_phi_d(),
-                                         indexing="ij")
-                idx = self._obj.index
-                self._obj_coords = (th.ravel()[idx], td.ravel()[idx], pd.ravel()[idx])
+                self._obj_coords = _merl_coords(self._obj.index)
                 self._obj_ref_energy = self._obj.reference_energy()
             except Exception as exc:  # noqa: BLE001
                 self.errors["compressive_objective"] = f"{type(exc).__name__}: {exc}"
@@ -639,15 +642,10 @@ class BRDFMetrics:
             need[:, :, ::l2.phi_stride] = True
             need.ravel()[obj.index] = True
             nodes = np.flatnonzero(need)
-            th, td, pd = np.meshgrid(merl_theta_h(), merl_theta_d(), merl_phi_d(),
-                                     indexing="ij")
-            self._grid_nodes = (nodes, th.ravel()[nodes], td.ravel()[nodes], pd.ravel()[nodes])
-        nodes, th, td, pd = self._grid_nodes
+            self._grid_nodes = (nodes, _merl_coords(nodes))
+        nodes, coords = self._grid_nodes
         full = np.full((int(np.prod(shape)), 3), np.nan)
-        chunk = 1 << 18
-        for s in range(0, nodes.size, chunk):
-            sl = slice(s, s + chunk)
-            full[nodes[sl]] = test.eval_hd(th[sl], td[sl], pd[sl])
+        full[nodes] = eval_hd_chunked(test, *coords)
         return full.reshape(shape + (3,))[:, :, ::l2.phi_stride], full[obj.index]
 
     def _test_values(self, test) -> np.ndarray:
