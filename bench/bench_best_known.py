@@ -198,12 +198,16 @@ def merge(out: str, paths: list[str]) -> int:
             if key not in seen:
                 seen.add(key)
                 rows.append(r)
-    summary = {"benchmark": "best_known", "command": " ".join(sys.argv),
-               "date": time.strftime("%Y-%m-%dT%H:%M:%S"), "merged": paths,
-               "configs": {m: [c for c, _ in CONFIGS[m]] for m in CONFIGS},
-               "per_model": summarise(rows)}
-    write_rows(out, FIELDS, rows, summary)
+    write_rows(out, FIELDS, rows, _summary(rows, merged=paths))
     return 0
+
+
+def _summary(rows: list[dict], **extra) -> dict:
+    """The JSON written next to the CSV: the run, the configurations and :func:`summarise`."""
+    return {"benchmark": "best_known", "command": " ".join(sys.argv),
+            "date": time.strftime("%Y-%m-%dT%H:%M:%S"), **extra,
+            "configs": {m: [c for c, _ in CONFIGS[m]] for m in CONFIGS},
+            "per_model": summarise(rows)}
 
 
 def main(argv=None) -> int:
@@ -244,12 +248,8 @@ def main(argv=None) -> int:
     load0 = os.getloadavg()
     for name in names:
         rows += run_material(name, models, done, [c for c in args.configs.split(",") if c])
-        summary = {"benchmark": "best_known", "command": " ".join(sys.argv),
-                   "date": time.strftime("%Y-%m-%dT%H:%M:%S"), "load_average_start": load0,
-                   "load_average_now": os.getloadavg(), "configs": {
-                       m: [c for c, _ in CONFIGS[m]] for m in CONFIGS},
-                   "per_model": summarise(rows)}
-        write_rows(args.out, FIELDS, rows, summary)
+        write_rows(args.out, FIELDS, rows, _summary(rows, load_average_start=load0,
+                                                    load_average_now=os.getloadavg()))
     return 0
 
 

@@ -661,8 +661,8 @@ def _engine_fit_result(p: dict, engines: tuple, q, has_sp: bool, mse0, mse1,
     if not gain >= 0.01:
         return dict(p, notes=p["notes"] + ["engine-aware optimisation did not raise the engines' "
                                            f"mean PSNR in sphere-distant: rule kept ({figures})"])
-    if "specification" in engines and mse1[engines.index("specification")] > \
-            mse0[engines.index("specification")]:
+    spec = engines.index("specification") if "specification" in engines else None
+    if spec is not None and mse1[spec] > mse0[spec]:
         return dict(p, notes=p["notes"] + [
             "engine-aware optimisation would render the specification's BRDF further from "
             f"the fit than the rules in sphere-distant: rule kept ({figures})"])

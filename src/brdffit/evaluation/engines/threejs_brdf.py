@@ -57,7 +57,8 @@ from ..metrics import rendered_psnr
 from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
 from .threejs import EngineUnavailable, sphere_geometry_px, three_dir
 
-__all__ = ["ThreeJSBRDF", "from_gltf", "dfg_lut", "CameraSphere", "SphereSamples", "shade_sphere", "estimate"]
+__all__ = ["ThreeJSBRDF", "from_gltf", "dfg_lut", "CameraSphere", "SphereSamples",
+           "shade_sphere", "estimate"]
 
 _MIN_ROUGHNESS = 0.045
 
