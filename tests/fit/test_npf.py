@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from brdffit.errors import FitError
-from brdffit.fit.npf import fit_npf, summary
+from brdffit.fit.npf import G_FROM_D_STARTS, fit_npf, summary
 from brdffit.fit.npf import _solver
 from brdffit.losses.objective import prepare_objective
 from brdffit.grid import tabulate_merl_grid
@@ -179,8 +179,35 @@ def test_g_from_d_public_fit(gfromd_truth):
     assert h[-1] < 1e-2 * h[0]
     assert np.all(np.diff(h) <= 1e-9 * h[0])
     assert info["iterations"] <= 15 and "line_searches" in info
+    assert info["sweeps_all_starts"] <= 15 * len(G_FROM_D_STARTS)
     np.testing.assert_allclose(fit.G.T, smith_g_from_d(fit.D).T, rtol=1e-12)
     assert np.all(fit.D >= 0) and fit.variant == "g-from-d"
+
+
+def test_g_from_d_polishes_the_better_start_per_channel(indep_truth):
+    """By default G-from-D runs AWLS from each of its starts and polishes, per channel, the
+    one with the lower objective: the fit is that of the single start where that start
+    wins every channel, and never above either single start's AWLS."""
+    _, data = indep_truth
+    kw = {"data": data, "variant": "g-from-d", "max_iter": 40}
+    single = {s: fit_npf(init=s, polish=0, **kw) for s in G_FROM_D_STARTS}
+    both = fit_npf(polish=0, **kw)
+    info = both.fit_info
+    assert [r["start"] for r in info["starts"]] == list(G_FROM_D_STARTS)
+    per_start = np.array([single[s].fit_info["objective_per_channel"]
+                          for s in G_FROM_D_STARTS])
+    for r, e in zip(info["starts"], per_start):
+        np.testing.assert_allclose(r["objective_per_channel"], e, rtol=1e-12)
+    kept = [G_FROM_D_STARTS[k] for k in np.argmin(per_start, axis=0)]
+    assert info["best_start_per_channel"] == kept
+    np.testing.assert_allclose(info["objective_per_channel"], per_start.min(axis=0),
+                               rtol=1e-9)
+    for c, s in enumerate(kept):                 # the channel's factors are its start's
+        np.testing.assert_allclose(both.D[:, c], single[s].D[:, c], rtol=1e-12)
+        np.testing.assert_allclose(both.F[:, c], single[s].F[:, c], rtol=1e-12)
+    assert info["start_basins"]["starts"] == len(G_FROM_D_STARTS)
+    assert both.fit_options["starts"] == list(G_FROM_D_STARTS)
+    assert single["ones"].fit_options["starts"] == ["ones"]
 
 
 def test_g_from_d_polish_continues_where_the_awls_stops(indep_truth):

@@ -176,7 +176,7 @@ class NPFOptions:
     polish: int | None = None
     polish_bound: float | None = None
     extrapolate: bool = True
-    init: str = "slices"
+    init: str | None = None
     name: str | None = None
     callback: Any = _python()
     verbose: bool = _python(False)
