@@ -112,3 +112,27 @@ def test_quadrature_dfg_table_is_threes():
     e3, em = three[..., 0] + three[..., 1], mine[..., 0] + mine[..., 1]
     assert np.max(np.abs(e3 - em)[1:]) < 0.012                   # N·V ≥ 3/32
     assert np.max(np.abs(e3 - em)) < 0.03                        # the grazing row
+
+
+def test_the_same_fit_is_optimised_once_per_process(monkeypatch):
+    """A report writes a material's glTF file and its fidelity from the same fit: the second
+    call returns the kept result (a copy), a changed fit or rule runs the optimiser again."""
+    import brdffit.export.gltf as G
+
+    calls = []
+    run = G._fit_to_engines
+    monkeypatch.setattr(G, "_fit_to_engines", lambda *a: calls.append(1) or run(*a))
+    monkeypatch.setattr(G, "_ENGINE_FITS", type(G._ENGINE_FITS)())
+    fit = _rough_paint()
+    rule = gltf_parameters(fit)
+    first = optimize_for_engines(fit, rule, engines=("threejs",))
+    first["notes"].append("changed by the caller")
+    again = optimize_for_engines(fit, gltf_parameters(fit), engines=("threejs",))
+    assert len(calls) == 1 and "changed by the caller" not in again["notes"]
+    assert again == {**first, "notes": first["notes"][:-1]}
+    optimize_for_engines(fit, dict(rule, roughnessFactor=0.6), engines=("threejs",))
+    other = MicrofacetBRDF(GGX(0.27), SchlickFresnel(0.8), diffuse=0.0,
+                           specular=[0.33, 0.23, 0.09])
+    optimize_for_engines(other, rule, engines=("threejs",))
+    optimize_for_engines(fit, rule, engines=("blender",))
+    assert len(calls) == 4

@@ -99,7 +99,10 @@ Colours are the fit's linear RGB, written unchanged (glTF factors are linear).
 
 from __future__ import annotations
 
+import copy
+import hashlib
 import json
+from collections import OrderedDict
 from functools import lru_cache
 from typing import Literal
 
@@ -612,9 +615,8 @@ def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS,
     models do not cover ``KHR_materials_anisotropy``) and lobes sharper than
     :data:`ENGINE_FIT_MIN_ROUGHNESS` (not yet measured in the engines with the option). The
     result replaces ``p`` only when it raises the objective's mean PSNR by ≥ 0.1 dB; the
-    predicted PSNR per engine before and after is in the notes."""
-    from scipy import optimize
-
+    predicted PSNR per engine before and after is in the notes. Results are kept per process
+    (the last 32, by the fit's render and ``p``): the same fit is optimised once."""
     engines = tuple(engines)
     for e in engines:
         if e not in ENGINES:
@@ -628,6 +630,38 @@ def optimize_for_engines(model, p: dict, engines=ENGINE_TARGETS,
             f"{ENGINE_FIT_MIN_ROUGHNESS} (sharp highlights: the rule's parameters are kept)"])
     sphere = SphereSamples("sphere-distant", resolution, ENGINE_FIT_SUPERSAMPLE)
     ref, alpha = sphere.shade(model)
+    key = _engine_fit_key(ref, alpha, p, engines, resolution)
+    if key in _ENGINE_FITS:
+        _ENGINE_FITS.move_to_end(key)
+        return copy.deepcopy(_ENGINE_FITS[key])
+    out = _fit_to_engines(p, sphere, ref, alpha, engines)
+    _ENGINE_FITS[key] = copy.deepcopy(out)
+    while len(_ENGINE_FITS) > _ENGINE_FITS_KEPT:
+        _ENGINE_FITS.popitem(last=False)
+    return out
+
+
+#: results of :func:`optimize_for_engines` kept per process, by the fit's render and the
+#: rules' parameters (a report writes a material's glTF file and its fidelity from the same
+#: fit); the objective is deterministic, so a kept result is the one a new run would give
+_ENGINE_FITS: OrderedDict = OrderedDict()
+_ENGINE_FITS_KEPT = 32
+
+
+def _engine_fit_key(ref, alpha, p: dict, engines: tuple, resolution: int) -> str:
+    h = hashlib.sha256()
+    for a in (ref, alpha):
+        h.update(np.ascontiguousarray(a, dtype=np.float64).tobytes())
+    h.update(json.dumps([p, list(engines), resolution], sort_keys=True,
+                        default=lambda o: o.tolist() if hasattr(o, "tolist") else repr(o))
+             .encode())
+    return h.hexdigest()
+
+
+def _fit_to_engines(p: dict, sphere, ref, alpha, engines: tuple) -> dict:
+    """:func:`optimize_for_engines` given the fit's render ``ref`` (and coverage ``alpha``)."""
+    from scipy import optimize
+
     mask = alpha >= 0.999
     ref_px = ref[mask]
     peak2 = float(np.max(ref_px)) ** 2
