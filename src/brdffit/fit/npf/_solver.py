@@ -1012,14 +1012,20 @@ def _chain_g_from_d(A, g, J):
     """JᵀWJ and JᵀWr of :func:`_normal_matrix` in the G-from-D parameters (D, F, ρd, ρs):
     with ``dG = ∂G/∂D dD`` (``J`` (3, 90, 90), :func:`smith_g_jacobian`) the parameter map is
     ``P = [[I, 0], [0, I], [J, 0], [0, I₂]]`` and the system becomes ``Pᵀ A P``, ``Pᵀ g``
-    (``g`` may be None: the residual curvature is chained the same way)."""
-    n = NH + ND + 2
-    P = np.zeros((3, A.shape[1], n))
-    P[:, :NH + ND, :NH + ND] = np.eye(NH + ND)
-    P[:, NH + ND:NH + ND + NG, :NH] = J
-    P[:, -2:, -2:] = np.eye(2)
-    Pt = np.swapaxes(P, 1, 2)
-    return Pt @ A @ P, (None if g is None else (Pt @ g[:, :, None])[:, :, 0])
+    (``g`` may be None: the residual curvature is chained the same way). ``P`` is applied by
+    its blocks: the G rows and columns folded into D's through ``J``."""
+    iG = slice(NH + ND, NH + ND + NG)
+    keep = np.r_[0:NH + ND, A.shape[1] - 2:A.shape[1]]
+    Jt = np.swapaxes(J, 1, 2)
+    AP = A[:, :, keep]                                         # A P, column by column
+    AP[:, :, :NH] += A[:, :, iG] @ J
+    M = AP[:, keep, :]                                         # Pᵀ (A P), row by row
+    M[:, :NH, :] += Jt @ AP[:, iG, :]
+    if g is None:
+        return M, None
+    h = g[:, keep]
+    h[:, :NH] += (Jt @ g[:, iG, None])[:, :, 0]
+    return M, h
 
 
 def _g_from_d_curvature(st: MFState, curvature, g, J):
