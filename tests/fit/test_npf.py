@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from brdffit.errors import FitError
-from brdffit.fit.npf import G_FROM_D_STARTS, fit_npf, summary
+from brdffit.fit.npf import G_FROM_D_SCREEN_POLISH, G_FROM_D_STARTS, fit_npf, summary
 from brdffit.fit.npf import _solver
 from brdffit.losses.objective import prepare_objective
 from brdffit.grid import tabulate_merl_grid
@@ -208,6 +208,34 @@ def test_g_from_d_polishes_the_better_start_per_channel(indep_truth):
     assert info["start_basins"]["starts"] == len(G_FROM_D_STARTS)
     assert both.fit_options["starts"] == list(G_FROM_D_STARTS)
     assert single["ones"].fit_options["starts"] == ["ones"]
+    assert "screen_polish" not in info                    # without a polish: by the AWLS
+
+
+def test_g_from_d_starts_are_told_apart_after_the_first_polish_iterations(indep_truth):
+    """With the polish, each start runs G_FROM_D_SCREEN_POLISH polish iterations; per channel
+    the lower one goes on, as the single start's polish would have (same steps, same trust
+    region), and those iterations count towards the cap."""
+    _, data = indep_truth
+    kw = {"data": data, "variant": "g-from-d", "max_iter": 40, "polish": 7}
+    both = fit_npf(**kw)
+    info = both.fit_info
+    after = np.array([r["objective_after_screen"] for r in info["starts"]])
+    awls = np.array([r["objective_per_channel"] for r in info["starts"]])
+    assert np.all(after <= awls)
+    pick = np.argmin(after, axis=0)
+    assert info["best_start_per_channel"] == [G_FROM_D_STARTS[k] for k in pick]
+    screen = info["screen_polish"]
+    assert screen["iterations"] == G_FROM_D_SCREEN_POLISH
+    np.testing.assert_allclose(screen["awls_objective_per_channel"], awls[pick, range(3)])
+    assert info["polish"]["iterations"] <= 7
+    assert np.all(np.array(info["objective_per_channel"]) <= after[pick, range(3)] * (1 + 1e-12))
+    h = np.array(info["history"])
+    assert np.all(np.diff(h) <= 1e-12 * h[0])
+    for c, k in enumerate(pick):                  # the kept channel goes on as it would alone
+        alone = fit_npf(init=G_FROM_D_STARTS[k], **kw).fit_info
+        if alone["polish"]["iterations"] == info["polish"]["iterations"] == 7:
+            np.testing.assert_allclose(info["objective_per_channel"][c],
+                                       alone["objective_per_channel"][c], rtol=1e-9)
 
 
 def test_g_from_d_polish_continues_where_the_awls_stops(indep_truth):
@@ -216,8 +244,8 @@ def test_g_from_d_polish_continues_where_the_awls_stops(indep_truth):
     points of Eq. 7); the Newton polish in (D, F, ρd, ρs), G following D, goes on
     lowering the objective, never raising it, and G stays the Smith G of D."""
     _, data = indep_truth
-    awls = fit_npf(data=data, variant="g-from-d", polish=0)
-    polished = fit_npf(data=data, variant="g-from-d", polish=8)
+    awls = fit_npf(data=data, variant="g-from-d", init="slices", polish=0)
+    polished = fit_npf(data=data, variant="g-from-d", init="slices", polish=8)
     e0, e1 = awls.fit_info["objective"], polished.fit_info["objective"]
     assert awls.fit_info["converged"]                        # the AWLS criterion is met...
     assert e1 < (1 - 1e-3) * e0                              # ...yet the objective goes down

@@ -124,7 +124,8 @@ from ...loading import load
 
 __all__ = ["fit_npf", "fit_npf_independent_g", "fit_npf_g_from_d", "fit_npf_naive",
            "fit_npf_bivariate", "VARIANTS", "ALL_STARTS", "DEFAULT_STARTS", "summary",
-           "start_basins", "BASIN_TOLERANCE", "G_FROM_D_STARTS", "CONTINUATION_WINDOW",
+           "start_basins", "BASIN_TOLERANCE", "G_FROM_D_STARTS", "G_FROM_D_SCREEN_POLISH",
+           "CONTINUATION_WINDOW",
            "SCREEN_ROUNDS", "JUMP_EVERY"]
 
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
@@ -163,6 +164,11 @@ G_FROM_D_EXTRAPOLATE_AFTER = 50
 #: reaches it; the AWLS objective picked the start that also ends lower after the polish
 #: (docs/design/npf-fit.md), and all-ones' sweeps are few
 G_FROM_D_STARTS = ("slices", "ones")
+#: G-from-D's starts are told apart after this many polish iterations each (the polish's
+#: cap, ``polish``, counts them): after the AWLS alone the lower start ended higher after
+#: the polish on violet-acrylic (5 % in one channel); after 4 iterations no material of
+#: MERL-100 kept a start more than 1 % above the other's end (docs/design/npf-fit.md)
+G_FROM_D_SCREEN_POLISH = 4
 #: Independent-G's continuation of the best screened start also stops when its objective fell
 #: by less than ``W · k · tol`` (relative) over the last ``W`` iterations, ``(W, k)`` =
 #: this: the mean decrease per iteration below ``k · tol``. Past that point AWLS crawls along
@@ -481,7 +487,8 @@ def _fit_naive(pb: _Problem, init: str):
 
 def _fit_g_from_d(pb: _Problem, init: str | None, extrapolate: bool):
     """Eq. 3 with G derived from D (Smith): AWLS from each start (:data:`G_FROM_D_STARTS`,
-    or ``init`` alone), per channel the lower AWLS objective kept, then the polish."""
+    or ``init`` alone), per channel the start that is lower after
+    :data:`G_FROM_D_SCREEN_POLISH` polish iterations kept, then the rest of the polish."""
     starts = G_FROM_D_STARTS if init is None else (init,)
     pb.options.update(init=init, starts=list(starts), extrapolate=extrapolate,
                       polish=pb.polish, polish_bound=pb.polish_bound)
@@ -495,40 +502,57 @@ def _fit_g_from_d(pb: _Problem, init: str | None, extrapolate: bool):
                                                            f"G-from-D AWLS ({label})",
                                                            pb.max_iter))
                for label in starts]
-    st, E, extra = _best_start_per_channel(starts, results)
+    polish = dict(eps=pb.eps, tol=pb.tol, g_from_d=True, bound=pb.polish_bound)
+    screen = max(0, min(G_FROM_D_SCREEN_POLISH, pb.polish - 1)) if len(starts) > 1 else 0
+    screened = [_solver.polish_lm(r.state.copy(), smp, max_iter=screen, finish=False,
+                                  bounded=POLISH_BOUNDED["g-from-d"], **polish)
+                if _finite(r) else r for r in results] if screen else None
+    st, E, extra, carry = _best_start_per_channel(starts, results, screened)
     if pb.polish > 0:
-        st, E = _polish(st, E, smp, extra, eps=pb.eps, polish=pb.polish, tol=pb.tol,
-                        g_from_d=True, bound=pb.polish_bound, callback=pb.callback)
+        st, E = _polish(st, E, smp, extra, polish=pb.polish, callback=pb.callback,
+                        carry=carry, **polish)
     _check_state(_solver._state_arrays(st), "G-from-D fit")
     return pb.finish(_mf_model(st, "g-from-d", pb.name, pb.source), E, extra)
 
 
-def _best_start_per_channel(starts, results):
-    """``(state, E, extra)``: per channel the AWLS run (of ``results``, one per start of
-    ``starts``) with the lowest objective (the channels are independent problems), and the
+def _finite(res) -> bool:
+    return all(np.all(np.isfinite(a)) for a in _solver._state_arrays(res.state))
+
+
+def _best_start_per_channel(starts, results, screened=None):
+    """``(state, E, extra, carry)``: per channel the run of ``results`` (AWLS, one per start
+    of ``starts``) with the lowest objective, or, with ``screened`` (their first polish
+    iterations, ``finish=False``), the lowest after those, and ``carry`` to continue the
+    polish (None without); the channels are independent problems. ``extra``: the
     ``fit_info`` fields of the runs: ``starts`` (one record per start), ``start_basins``,
     ``best_start_per_channel``; ``iterations``, ``history`` and the AWLS ``stop_reason``
-    those of the start kept in most channels (the first on a tie), ``sweeps_all_starts`` the
-    sweeps of all of them."""
-    finite = [all(np.all(np.isfinite(a)) for a in _solver._state_arrays(r.state))
-              for r in results]
+    those of the start kept in most channels (the first on a tie), ``sweeps_all_starts``
+    the sweeps of all of them, ``screen_polish`` the iterations of the screen."""
+    runs = screened or results
+    finite = [_finite(r) for r in runs]
     if not any(finite):
         raise FitError("G-from-D fit: no start produced finite factors")
-    E = np.array([r.E if ok else np.full(3, np.inf) for r, ok in zip(results, finite)])
+    E = np.array([r.E if ok else np.full(3, np.inf) for r, ok in zip(runs, finite)])
     pick = np.argmin(E, axis=0)
-    st = results[pick[0]].state.copy()
-    for c, k in enumerate(pick):
-        for nm in ("D", "F", "G", "rho_d", "rho_s"):
-            getattr(st, nm)[c] = getattr(results[k].state, nm)[c]
-    runs = [{"start": label, "status": "ok" if ok else "non-finite",
-             "objective": float(r.E.sum()), "objective_per_channel": r.E.tolist(),
-             **_run_info(r)} for label, r, ok in zip(starts, results, finite)]
+    records = [{"start": label, "status": "ok" if ok else "non-finite",
+                "objective": float(r.E.sum()), "objective_per_channel": r.E.tolist(),
+                **_run_info(r)} for label, r, ok in zip(starts, results, finite)]
     main = int(np.bincount(pick, minlength=len(results)).argmax())
     extra = {**_run_info(results[main]),
              "sweeps_all_starts": int(sum(r.iterations for r in results)),
-             "starts": runs, "best_start_per_channel": [starts[k] for k in pick],
-             "start_basins": start_basins(runs)}
-    return st, E[pick, np.arange(3)], extra
+             "starts": records, "best_start_per_channel": [starts[k] for k in pick]}
+    if screened is None:
+        st, E, carry = _solver.combine_polish(results, pick)
+    else:
+        for rec, r in zip(records, screened):
+            rec["objective_after_screen"] = r.E.tolist()
+        st, E, carry = _solver.combine_polish(screened, pick)
+        extra["screen_polish"] = {"iterations": screened[main].iterations,
+                                  "history": [float(h) for h in screened[main].history],
+                                  "awls_objective_per_channel": [
+                                      float(results[k].E[c]) for c, k in enumerate(pick)]}
+    extra["start_basins"] = start_basins(records)
+    return st, E, extra, carry
 
 
 def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max_iter,
@@ -782,21 +806,28 @@ def _polish_bound(value, variant) -> float | None:
 
 
 def _polish(st: MFState, E, smp: Samples, extra: dict, *, eps, polish, tol, g_from_d, bound,
-            callback):
+            callback, carry=None):
     """The Levenberg–Marquardt polish after AWLS (``_solver.polish_lm``): returns the state
     and objective, records ``extra["polish"]``, appends to ``extra["history"]``; the polish's
-    stop becomes the fit's ``stop_reason`` (the AWLS's is kept in ``awls_stop_reason``)."""
+    stop becomes the fit's ``stop_reason`` (the AWLS's is kept in ``awls_stop_reason``).
+    With ``carry`` it continues the screen's polish (``extra["screen_polish"]``), whose
+    iterations count towards ``polish``."""
     bounded = POLISH_BOUNDED["g-from-d" if g_from_d else "independent-g"]
-    pol = _solver.polish_lm(st, smp, eps=eps, max_iter=polish, tol=tol, g_from_d=g_from_d,
-                            bound=bound, newton=True, bounded=bounded,
-                            callback=step_callback(callback, "LM polish", polish))
-    awls_objective = float(np.sum(E))
+    screen = extra.get("screen_polish") if carry is not None else None
+    done = screen["iterations"] if screen else 0
+    pol = _solver.polish_lm(st, smp, eps=eps, max_iter=polish - done, tol=tol,
+                            g_from_d=g_from_d, bound=bound, newton=True, bounded=bounded,
+                            callback=step_callback(callback, "LM polish", polish - done),
+                            carry=carry)
+    awls_objective = float(np.sum(screen["awls_objective_per_channel"] if screen else E))
     st, E = pol.state, np.minimum(pol.E, E)              # only decreasing steps are taken
-    extra["polish"] = {"iterations": pol.iterations, "max_iterations": polish,
+    extra["polish"] = {"iterations": done + pol.iterations, "max_iterations": polish,
                        "awls_objective": awls_objective, "method": "Newton", "bound": bound,
                        "bounded": list(bounded or ("D", "F", "G", "rho_s")),
                        "stop_reason": pol.reason, "run_time_s": pol.seconds}
-    extra["history"] = list(extra.get("history", [])) + [float(h) for h in pol.history[1:]]
+    extra["history"] = (list(extra.get("history", []))
+                        + (screen["history"][1:] if screen else [])
+                        + [float(h) for h in pol.history[1:]])
     extra["awls_stop_reason"], extra["stop_reason"] = extra.get("stop_reason"), pol.reason
     return st, E
 

@@ -1052,7 +1052,8 @@ LAM_MAX = 1e30
 
 def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
               g_from_d=False, bound: float | None = None, newton: bool | None = None,
-              bounded: tuple[str, ...] | None = None, callback=None) -> RunResult:
+              bounded: tuple[str, ...] | None = None, callback=None, carry=None,
+              finish: bool = True) -> RunResult:
     """Levenberg–Marquardt refinement of an AWLS solution (an extension, not in the paper):
     (Gauss–)Newton steps on all parameters of a channel at once, which crosses the long,
     nearly flat valleys of Eq. 7 (the near-ambiguity between F(θd), G(θi)G(θo) and D(θh)
@@ -1087,19 +1088,27 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
     :func:`smith_g_curvature`). Unbounded, G-from-D's polish drifts like independent-G's
     (F's grazing samples rise against the rest with ρs); bounding every factor stops it on
     the box's faces; bounding F alone (``bounded=("F",)``) is G-from-D's default. Measured
-    figures: docs/design/npf-fit.md."""
+    figures: docs/design/npf-fit.md.
+
+    ``finish=False`` stops without the final max-normalisation and returns in ``carry`` what
+    a later call needs to go on as this one would have (the trust region's centre, the
+    damping, the gauge; per channel, so channels of different runs combine,
+    :func:`combine_polish`); ``carry`` continues such a run (the stopping rule's patience
+    starts anew)."""
     t0 = time.perf_counter()
     newton = True if newton is None else bool(newton)
-    start = np.log(np.maximum(_log_params(st, g_from_d), 1e-300))
+    n = NH + ND + (0 if g_from_d else NG) + 2
+    if carry is None:
+        start = np.log(np.maximum(_log_params(st, g_from_d), 1e-300))
+        lam, gauge_free = np.full(3, 1e-12), _gauge_free(st, n, g_from_d)
+    else:
+        start, lam, gauge_free = carry["start"], carry["lam"].copy(), carry["gauge_free"]
     if g_from_d:
         st.G = smith_g_from_d(st.D.T).T
     E, S = _stats(st, smp)
     mon = Monitor(smp.sum_wzz, tol, max_iter, patience=2)
     mon.history.append(float(E.sum()))
-    lam = np.full(3, 1e-12)
-    n = NH + ND + (0 if g_from_d else NG) + 2
     log_bound = None if bound is None else _polish_log_bound(n, g_from_d, bound, bounded)
-    gauge_free = _gauge_free(st, n, g_from_d)
     while True:
         A, g, A_newton, sc = _polish_system(st, smp, S, g_from_d, newton)
         free, room_down, room_up = _polish_box(st, sc, g, gauge_free, start, log_bound, eps,
@@ -1124,10 +1133,30 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
         if np.all(lam >= 1e3):
             mon.reason = "damping limit (no further decrease)"
             break
+    if not finish:
+        return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, 0, 0,
+                         time.perf_counter() - t0,
+                         carry={"start": start, "lam": lam, "gauge_free": gauge_free})
     _normalise_factors(st, 0.0, g_from_d)    # a change of gauge: the model is unchanged
     E, _ = _stats(st, smp)
     return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, 0, 0,
                      time.perf_counter() - t0)
+
+
+def combine_polish(results, pick) -> tuple[MFState, np.ndarray, dict]:
+    """``(state, E, carry)`` whose channel ``c`` is that of ``results[pick[c]]``: the channels
+    are independent problems, so for runs of :func:`polish_lm` with ``finish=False`` the
+    combined run goes on (``carry``) as each channel's own would; for others (AWLS runs)
+    ``carry`` is None."""
+    st = results[pick[0]].state.copy()
+    first = results[pick[0]].carry
+    carry = None if first is None else {k: np.array(v) for k, v in first.items()}
+    for c, k in enumerate(pick):
+        for nm in ("D", "F", "G", "rho_d", "rho_s"):
+            getattr(st, nm)[c] = getattr(results[k].state, nm)[c]
+        for name, v in (results[k].carry or {}).items() if carry is not None else ():
+            carry[name][c] = v[c]
+    return st, np.array([results[k].E[c] for c, k in enumerate(pick)]), carry
 
 
 def _polish_log_bound(n, g_from_d, bound, bounded) -> np.ndarray:
