@@ -222,6 +222,13 @@ STUDIES = (
           ("npf_defaults.json", "npf_defaults_materials.csv"),
           lambda r: f"{len(r['converged'])} / {r['materials']} converged"
           if isinstance(r["converged"], list) else f"converged: {r['converged']}"),
+    Entry("gfd_starts", "G-from-D from the data slices and from all ones: after how many "
+          "polish iterations the start that ends lower can be told (G_FROM_D_SCREEN_POLISH)",
+          "bench/studies/gfd_starts.py --part 0/2 & --part 1/2, then --summarise",
+          ("gfd_starts.json", "gfd_starts_materials.jsonl"),
+          lambda r: "after {k} iterations: {w} / {n} within 1 % of the best-known".format(
+              k=4, w=r["per_screen"]["4"]["within_1pc_of_best_known"],
+              n=r["per_screen"]["4"]["with_best_known"])),
     Entry("npf_polish", "the NPF polish per configuration, from stored AWLS fits",
           "bench/studies/npf_polish.py --start runs/db100v4",
           ("npf_polish.json", "npf_polish_materials.csv"),
