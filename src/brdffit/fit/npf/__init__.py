@@ -501,8 +501,7 @@ def _fit_g_from_d(pb: _Problem, init: str | None, extrapolate: bool):
     results = [_solver.run_g_from_d(_start_state(label, pb.values, pb.valid, rng), smp,
                                     eps=pb.eps, tol=pb.tol, max_iter=pb.max_iter,
                                     extrapolate_after=after,
-                                    callback=step_callback(pb.callback,
-                                                           f"G-from-D AWLS ({label})",
+                                    callback=step_callback(pb.callback, "G-from-D AWLS",
                                                            pb.max_iter))
                for label in starts]
     polish = dict(eps=pb.eps, tol=pb.tol, g_from_d=True, bound=pb.polish_bound)
