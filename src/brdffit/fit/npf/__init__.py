@@ -318,8 +318,8 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
             g_smoothing: float = 1.0, dr_epsilon: float | None = None,
             start_max_iter: int | None = 100, polish: int | None = None,
             polish_bound: float | None = None, extrapolate: bool = True,
-            init: str | None = None,
-            name: str | None = None, callback=None, verbose: bool = False) -> BRDF:
+            init: str | None = None, name: str | None = None, callback=None,
+            verbose: bool = False) -> BRDF:
     """Fit a non-parametric factor model (Bagher, Snyder & Nowrouzezahrai 2016).
 
     Parameters
@@ -343,13 +343,12 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         but the G-from-D fit). The best screened state per channel is continued.
     start_max_iter:
         Independent-G: the starts are screened for up to this many AWLS iterations, in the
-        rounds of :data:`SCREEN_ROUNDS` (module notes), then the per-channel best continues up to ``max_iter`` or until the AWLS rule or
-        :data:`CONTINUATION_WINDOW` stops it (``None``: every start runs ``max_iter``
-        under the AWLS rule alone, as the paper).
+        rounds of :data:`SCREEN_ROUNDS`, then the per-channel best continues up to
+        ``max_iter`` or until the AWLS rule or :data:`CONTINUATION_WINDOW` stops it
+        (``None``: every start runs ``max_iter`` under the AWLS rule alone, as the paper).
     polish:
-        Cap of the damped Newton (Levenberg–Marquardt) iterations after AWLS, all factors
-        of a channel at once, accepted only where they lower the objective (module notes).
-        Default per variant, :data:`DEFAULT_POLISH`; ``0``: the paper's AWLS only.
+        Cap of the damped Newton (Levenberg–Marquardt) iterations after AWLS (module notes;
+        default per variant, :data:`DEFAULT_POLISH`; ``0``: the paper's AWLS only).
     polish_bound:
         Trust region of the polish: the bounded factors (:data:`POLISH_BOUNDED`) stay
         within this factor of their AWLS values; ``0``: unbounded. Default per variant,
@@ -359,16 +358,15 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
         objective (extension, default on; off = the paper's sweeps). Independent-G: from the
         first sweep; G-from-D: from sweep :data:`G_FROM_D_EXTRAPOLATE_AFTER` (50) on.
     g_smoothing, dr_epsilon:
-        σ (in G samples) of the Gaussian smoothing of G in independent-G (0 disables); the
-        dynamic-range clamp (default 1e-6 for independent-G, 0 for G-from-D and naive).
+        σ (in G samples) of independent-G's Gaussian smoothing of G (0: none); the
+        dynamic-range clamp (default 1e-6 for independent-G, 0 for the others).
     init, n_random, seed, name:
         Start of G-from-D / naive (``"slices"``, ``"ones"``, ``"random"``; ``None``: naive
-        from the slices, G-from-D from each of :data:`G_FROM_D_STARTS`, per channel the
-        lower AWLS objective polished); random independent-G starts, the seed of every
-        random start (deterministic), the model's name.
+        from the slices, G-from-D from :data:`G_FROM_D_STARTS`, module notes); random
+        independent-G starts, the seed of random starts (deterministic), the model's name.
     callback, verbose:
         ``callback(iteration, objective)`` after every AWLS / LM iteration (not bivariate;
-        progress listeners receive the same steps); print one line per independent-G start.
+        also to progress listeners); print one line per independent-G start.
 
     Returns
     -------
@@ -390,8 +388,8 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
     if variant == "g-from-d":
         return _fit_g_from_d(pb, init, extrapolate)
     return _fit_independent_g(pb, starts, n_random=n_random, g_smoothing=g_smoothing,
-                              start_max_iter=start_max_iter,
-                              extrapolate=extrapolate, verbose=verbose)
+                              start_max_iter=start_max_iter, extrapolate=extrapolate,
+                              verbose=verbose)
 
 
 @dataclasses.dataclass

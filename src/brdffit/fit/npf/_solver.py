@@ -1083,26 +1083,17 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
     problem for most materials (the model cannot fit them), where Gauss–Newton converges
     linearly and slowly; Newton's steps converge in ≈ 10-20 iterations.
     ``bounded``: the factor groups the trust region applies to (``"D"``, ``"F"``, ``"G"``,
-    ``"rho_s"``; default all). G-from-D's Newton matrix adds, G being a function of D, the
-    gradient in G times Smith's second derivative (:func:`_g_from_d_curvature`,
-    :func:`smith_g_curvature`). Unbounded, G-from-D's polish drifts like independent-G's
+    ``"rho_s"``; default all). G-from-D's Newton matrix adds the gradient in G times Smith's
+    second derivative (:func:`_g_from_d_curvature`). Unbounded, G-from-D's polish drifts like independent-G's
     (F's grazing samples rise against the rest with ρs); bounding every factor stops it on
     the box's faces; bounding F alone (``bounded=("F",)``) is G-from-D's default. Measured
-    figures: docs/design/npf-fit.md.
-
-    ``finish=False`` stops without the final max-normalisation and returns in ``carry`` what
-    a later call needs to go on as this one would have (the trust region's centre, the
-    damping, the gauge; per channel, so channels of different runs combine,
-    :func:`combine_polish`); ``carry`` continues such a run (the stopping rule's patience
-    starts anew)."""
+    figures: docs/design/npf-fit.md. ``finish=False``: no final max-normalisation, and the
+    result's ``carry`` lets a later call (``carry=``) go on as this run would (per channel:
+    :func:`combine_polish`; the stopping rule's patience starts anew)."""
     t0 = time.perf_counter()
     newton = True if newton is None else bool(newton)
     n = NH + ND + (0 if g_from_d else NG) + 2
-    if carry is None:
-        start = np.log(np.maximum(_log_params(st, g_from_d), 1e-300))
-        lam, gauge_free = np.full(3, 1e-12), _gauge_free(st, n, g_from_d)
-    else:
-        start, lam, gauge_free = carry["start"], carry["lam"].copy(), carry["gauge_free"]
+    start, lam, gauge_free = _polish_carry(st, n, g_from_d, carry)
     if g_from_d:
         st.G = smith_g_from_d(st.D.T).T
     E, S = _stats(st, smp)
@@ -1133,14 +1124,21 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
         if np.all(lam >= 1e3):
             mon.reason = "damping limit (no further decrease)"
             break
-    if not finish:
-        return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, 0, 0,
-                         time.perf_counter() - t0,
-                         carry={"start": start, "lam": lam, "gauge_free": gauge_free})
-    _normalise_factors(st, 0.0, g_from_d)    # a change of gauge: the model is unchanged
-    E, _ = _stats(st, smp)
+    out = {"start": start, "lam": lam, "gauge_free": gauge_free} if not finish else None
+    if finish:
+        _normalise_factors(st, 0.0, g_from_d)    # a change of gauge: the model is unchanged
+        E, _ = _stats(st, smp)
     return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, 0, 0,
-                     time.perf_counter() - t0)
+                     time.perf_counter() - t0, carry=out)
+
+
+def _polish_carry(st: MFState, n, g_from_d, carry):
+    """``(start, lam, gauge_free)`` of :func:`polish_lm`: from ``carry`` when it continues a
+    run, else the trust region centred on ``st``, the least damping, ``st``'s gauge."""
+    if carry is not None:
+        return carry["start"], carry["lam"].copy(), carry["gauge_free"]
+    return (np.log(np.maximum(_log_params(st, g_from_d), 1e-300)), np.full(3, 1e-12),
+            _gauge_free(st, n, g_from_d))
 
 
 def combine_polish(results, pick) -> tuple[MFState, np.ndarray, dict]:
