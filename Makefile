@@ -30,8 +30,11 @@ BPY_VERSION := 5.0.1
 demo: $(STAMP)
 	$(VENV)/bin/brdffit demo
 
+# the suite on 2 processes (pytest-xdist): most tests are single-threaded Python; 1.46x
+# faster than one process on the 2-core machine (docs/design/testing.md)
+TEST_WORKERS ?= 2
 test: $(STAMP) npmdeps blender
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS)
 
 bench: $(STAMP) blender
 	$(PY) bench/run_all.py
