@@ -128,8 +128,7 @@ from ...loading import load
 __all__ = ["fit_npf", "fit_npf_independent_g", "fit_npf_g_from_d", "fit_npf_naive",
            "fit_npf_bivariate", "VARIANTS", "ALL_STARTS", "DEFAULT_STARTS", "summary",
            "start_basins", "BASIN_TOLERANCE", "G_FROM_D_STARTS", "G_FROM_D_SCREEN_POLISH",
-           "CONTINUATION_WINDOW",
-           "SCREEN_ROUNDS", "JUMP_EVERY"]
+           "CONTINUATION_WINDOW", "SCREEN_ROUNDS", "JUMP_EVERY"]
 
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
 ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
@@ -161,11 +160,10 @@ POLISH_BOUNDED = {"independent-g": None, "g-from-d": ("F",)}
 #: others (a third of MERL, which plain sweeps leave at the cap) converge in 100-200
 #: iterations
 G_FROM_D_EXTRAPOLATE_AFTER = 50
-#: G-from-D's starts by default (``init=None``): AWLS runs from each, and per channel the
-#: lower AWLS objective is polished. Over MERL-100 the data slices alone ended more than 1 %
+#: G-from-D's starts by default (``init=None``): AWLS from each, then the per-channel pick
+#: of :data:`G_FROM_D_SCREEN_POLISH`. Over MERL-100 the data slices alone ended more than 1 %
 #: above the best-known objective on 6 materials (up to 4.4 %), on 4 of them where all-ones
-#: reaches it; the AWLS objective picked the start that also ends lower after the polish
-#: (docs/design/npf-fit.md), and all-ones' sweeps are few
+#: reaches it (docs/design/npf-fit.md)
 G_FROM_D_STARTS = ("slices", "ones")
 #: G-from-D's starts are told apart after this many polish iterations each (the polish's
 #: cap, ``polish``, counts them): after the AWLS alone the lower start ended higher after

@@ -701,15 +701,21 @@ def run_independent_g(st: MFState, smp: Samples, *, eps=1e-6, smoothing=1.0, tol
                      carry={"beta": beta, "E": E, "monitors": mon})
 
 
+def _state_of_channels(states) -> MFState:
+    """A state whose channel ``c`` is that of ``states[c]`` (copies)."""
+    st = states[0].copy()
+    for c, other in enumerate(states):
+        for nm in ("D", "F", "G", "rho_d", "rho_s"):
+            getattr(st, nm)[c] = getattr(other, nm)[c]
+    return st
+
+
 def combine_channels(results) -> tuple[MFState, dict]:
     """``(state, carry)`` whose channel ``c`` is that of ``results[c]`` (3 :class:`RunResult`
     of :func:`run_independent_g`, their carries included): the channels are independent
     problems, so channels of different runs make one run that goes on (``carry``) as each
     of them would have alone."""
-    st = results[0].state.copy()
-    for c, res in enumerate(results):
-        for nm in ("D", "F", "G", "rho_d", "rho_s"):
-            getattr(st, nm)[c] = getattr(res.state, nm)[c]
+    st = _state_of_channels([res.state for res in results])
     mon = copy.deepcopy(results[0].carry["monitors"])
     mon.channels = [copy.deepcopy(res.carry["monitors"].channels[c])
                     for c, res in enumerate(results)]
@@ -1146,12 +1152,10 @@ def combine_polish(results, pick) -> tuple[MFState, np.ndarray, dict]:
     are independent problems, so for runs of :func:`polish_lm` with ``finish=False`` the
     combined run goes on (``carry``) as each channel's own would; for others (AWLS runs)
     ``carry`` is None."""
-    st = results[pick[0]].state.copy()
+    st = _state_of_channels([results[k].state for k in pick])
     first = results[pick[0]].carry
     carry = None if first is None else {k: np.array(v) for k, v in first.items()}
     for c, k in enumerate(pick):
-        for nm in ("D", "F", "G", "rho_d", "rho_s"):
-            getattr(st, nm)[c] = getattr(results[k].state, nm)[c]
         for name, v in (results[k].carry or {}).items() if carry is not None else ():
             carry[name][c] = v[c]
     return st, np.array([results[k].E[c] for c, k in enumerate(pick)]), carry
