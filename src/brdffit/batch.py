@@ -719,6 +719,9 @@ def _client(scheduler: str | None, workers: int, memory_limit: str | None,
     The local scheduler gives up on a task after ``retries + 1`` worker deaths
     (``allowed-failures``) and sends each worker one task at a time (``worker-saturation``
     1.0), so that a worker killed by one task does not take queued innocent tasks with it.
+    Dask's own log lines below CRITICAL are silenced: the batch reports every task's
+    failure itself, and on a loaded machine a worker's heartbeat can race the local
+    cluster's shutdown and log a traceback that means nothing to the user.
     """
     import dask
     from dask.distributed import Client, LocalCluster
@@ -731,7 +734,8 @@ def _client(scheduler: str | None, workers: int, memory_limit: str | None,
                           "distributed.scheduler.worker-saturation": 1.0}):
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                host="127.0.0.1", dashboard_address=":0",
-                               memory_limit=memory_limit or "auto", silence_logs=40)
+                               memory_limit=memory_limit or "auto",
+                               silence_logs=logging.CRITICAL)
     return Client(cluster), cluster
 
 
