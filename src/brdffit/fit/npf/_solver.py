@@ -1090,12 +1090,12 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
     linearly and slowly; Newton's steps converge in ≈ 10-20 iterations.
     ``bounded``: the factor groups the trust region applies to (``"D"``, ``"F"``, ``"G"``,
     ``"rho_s"``; default all). G-from-D's Newton matrix adds the gradient in G times Smith's
-    second derivative (:func:`_g_from_d_curvature`). Unbounded, G-from-D's polish drifts like independent-G's
-    (F's grazing samples rise against the rest with ρs); bounding every factor stops it on
-    the box's faces; bounding F alone (``bounded=("F",)``) is G-from-D's default. Measured
-    figures: docs/design/npf-fit.md. ``finish=False``: no final max-normalisation, and the
-    result's ``carry`` lets a later call (``carry=``) go on as this run would (per channel:
-    :func:`combine_polish`; the stopping rule's patience starts anew)."""
+    second derivative (:func:`_g_from_d_curvature`). Unbounded, G-from-D's polish drifts
+    like independent-G's (F's grazing samples rise against the rest with ρs); bounding every
+    factor stops it on the box's faces; bounding F alone (``bounded=("F",)``) is G-from-D's
+    default. Measured figures: docs/design/npf-fit.md. ``finish=False``: no final
+    max-normalisation, and the result's ``carry`` lets a later call (``carry=``) go on as this
+    run would (per channel: :func:`combine_polish`; the stopping rule's patience starts anew)."""
     t0 = time.perf_counter()
     newton = True if newton is None else bool(newton)
     n = NH + ND + (0 if g_from_d else NG) + 2
@@ -1130,12 +1130,12 @@ def polish_lm(st: MFState, smp: Samples, *, eps=1e-6, max_iter=30, tol=1e-9,
         if np.all(lam >= 1e3):
             mon.reason = "damping limit (no further decrease)"
             break
-    out = {"start": start, "lam": lam, "gauge_free": gauge_free} if not finish else None
     if finish:
         _normalise_factors(st, 0.0, g_from_d)    # a change of gauge: the model is unchanged
         E, _ = _stats(st, smp)
     return RunResult(st, E, len(mon.history) - 1, mon.history, mon.reason, 0, 0,
-                     time.perf_counter() - t0, carry=out)
+                     time.perf_counter() - t0, carry=None if finish else
+                     dict(start=start, lam=lam, gauge_free=gauge_free))
 
 
 def _polish_carry(st: MFState, n, g_from_d, carry):
@@ -1153,11 +1153,9 @@ def combine_polish(results, pick) -> tuple[MFState, np.ndarray, dict]:
     combined run goes on (``carry``) as each channel's own would; for others (AWLS runs)
     ``carry`` is None."""
     st = _state_of_channels([results[k].state for k in pick])
-    first = results[pick[0]].carry
-    carry = None if first is None else {k: np.array(v) for k, v in first.items()}
-    for c, k in enumerate(pick):
-        for name, v in (results[k].carry or {}).items() if carry is not None else ():
-            carry[name][c] = v[c]
+    names = results[pick[0]].carry or {}
+    carry = {name: np.array([results[k].carry[name][c] for c, k in enumerate(pick)])
+             for name in names} or None
     return st, np.array([results[k].E[c] for c, k in enumerate(pick)]), carry
 
 
