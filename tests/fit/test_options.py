@@ -11,6 +11,7 @@ from brdffit.cli import main
 from brdffit.fit import registry
 import dataclasses
 import inspect
+import typing
 
 from brdffit.fit import options as fit_options
 from brdffit.fit.options import RANGES, OptionError, option_table, signature_options
@@ -33,6 +34,17 @@ from brdffit.fit.registry import check_options
     ("tabulated", {"anisotropic": "yes"}, "anisotropic: expected true or false"),
     ("sgd", {"grid": [0, 8]}, "grid: expected two integers in [1, 10000]"),
     ("ggx-diffuse", {"bogus": 1}, "model 'ggx-diffuse' has no option 'bogus'; accepted:"),
+    # the string options: their choices, before any work
+    ("tabulated", {"rule": "nope"}, "rule: expected 'auto', 'merl' or 'gauss', found 'nope'"),
+    ("ggx", {"hotspot": "G3"}, "hotspot: expected 'G1' or 'G2', found 'G3'"),
+    ("ggx-diffuse", {"fresnel": "schlik"}, "fresnel: expected 'auto', 'schlick', 'dielectric'"),
+    ("beckmann-diffuse", {"f90": 1}, "f90: expected 'one' or 'free', found 1"),
+    ("ggx-diffuse", {"coat": "yes"}, "coat: expected 'auto', 'off' or 'on', found 'yes'"),
+    ("sgd", {"weighting": "uniform"}, "weighting: expected 'relative' or 'cosine'"),
+    ("ggx-2s", {"selection": "all"}, "selection: expected 'full' or 'slice', found 'all'"),
+    ("beckmann-2s", {"linear": ""}, "linear: expected 'full' or 'slice', found ''"),
+    ("npf-g-from-d", {"init": "nope"}, "init: expected 'slices', 'ones' or 'random'"),
+    ("npf", {"starts": ["ones", "best"]}, "starts: expected names among 'random', 'ones', "),
 ])
 def test_bad_values_are_refused_naming_the_option(model, options, message):
     with pytest.raises(OptionError) as info:
@@ -48,6 +60,22 @@ def test_good_values_pass_and_command_line_numbers_are_converted():
     with pytest.raises(OptionError, match="has no option 'callback'"):
         check_options("npf", {"callback": print}, command_line=True)
     assert check_options("npf", {"callback": print})["callback"] is print  # the Python API
+
+
+def test_string_options_with_choices_are_listed_and_their_fitters_check_the_same_choices():
+    """A ``Literal`` option's choices are what ``brdffit models --options`` lists, and the
+    fitting function refuses the same values when called directly (no second list)."""
+    from brdffit.fit import npf, sgd, tabulated
+
+    table = option_table(fit_options.NPFOptions)
+    assert table["starts"].choices == npf.ALL_STARTS
+    assert "one of 'slices', 'ones', 'random'" in fit_options.describe_option(table["init"])
+    with pytest.raises(OptionError, match="hotspot: expected 'G1' or 'G2', found 'G9'"):
+        tabulated.solve_slope_pdf([1.0, 0.5], hotspot="G9")
+    with pytest.raises(OptionError, match="selection: expected 'full' or 'slice'"):
+        sgd.fit_two_slice("synthetic:gold-ggx", selection="both")
+    with pytest.raises(OptionError, match="starts: expected 'random', 'ones', 'sgd'"):
+        npf.fit_npf("synthetic:gold-ggx", starts=["ones", "best"])
 
 
 def test_every_numeric_option_of_every_model_has_a_range():
@@ -82,8 +110,12 @@ def test_options_classes_are_the_fitting_functions_signatures(cls_name):
     params = list(inspect.signature(fn).parameters.values())[skip:]
     fields = dataclasses.fields(getattr(fit_options, cls_name))
     assert [p.name for p in params] == [f.name for f in fields]
+    hints = typing.get_type_hints(fn)
     for p, f in zip(params, fields):
         assert p.default == f.default, (p.name, p.default, f.default)
+        choices = option_table(getattr(fit_options, cls_name))[f.name].choices
+        if choices:   # a string option's choices: the function is annotated with the same
+            assert p.name in hints and choices[0] in str(hints[p.name]), p.name
     assert dataclasses.is_dataclass(getattr(fit_options, cls_name))
     with pytest.raises(dataclasses.FrozenInstanceError):
         getattr(fit_options, cls_name)().name = "x"
@@ -126,3 +158,9 @@ def test_the_cli_the_python_api_and_compare_all_check(tmp_path, capsys):
                  '{"ggx-diffuse": {"starts": 0}}', "--out", str(tmp_path / "c")]) == 2
     assert "starts: expected an integer in [1, 100], found 0" in capsys.readouterr().err
     assert not (tmp_path / "c").exists()
+    # a string option's value is checked before the input is read: the usage error, not
+    # the missing file
+    assert main(["fit", str(tmp_path / "missing.binary"), "-m", "npf-g-from-d", "-O",
+                 "init=nope"]) == 2
+    assert "init: expected 'slices', 'ones' or 'random', found 'nope'" in \
+        capsys.readouterr().err

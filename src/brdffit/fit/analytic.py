@@ -135,6 +135,7 @@ from ..grid import (N_PHI_D, N_THETA_D, N_THETA_H, merl_node_values, merl_phi_d,
 from ..microfacet.coat import COAT_F0
 from ..microfacet.shadowing import EllipticalSlopeDistribution
 from ..schema import ALBEDO_MAX, INDEX_MAX
+from .options import F90, Coat, FresnelChoice, check_choice
 from .result import record
 from ..losses.objective import (
     ObjectiveOptions, compressive_weight, volume_form_weight, weighted_median,
@@ -1057,10 +1058,10 @@ def _moment_start(brdf, kind: str, anisotropic: bool):
 
 @with_single_blas_thread
 def fit_analytic_diffuse(brdf, distribution: str = "ggx", *, anisotropic: bool | None = None,
-                         fresnel: str = "auto", f90: str = "free", starts: int = 3,
+                         fresnel: FresnelChoice = "auto", f90: F90 = "free", starts: int = 3,
                          moments: bool = True, theta_d_stride: int | None = None,
                          phi_d_stride: int | None = None, theta_h_stride: int = 3,
-                         n_phi_h: int = 12, objective=None, coat: str = "auto",
+                         n_phi_h: int = 12, objective=None, coat: Coat = "auto",
                          name: str | None = None) -> MicrofacetBRDF | SumBRDF:
     """Fit ``ρd/π + ks F D G/(4 cos θi cos θo)`` to ``brdf`` (see the module docstring).
 
@@ -1138,13 +1139,9 @@ def _check_choices(distribution, fresnel, f90, coat) -> str:
     kind = str(distribution).lower()
     if kind not in ("ggx", "beckmann"):
         raise ValueError(f"distribution must be 'ggx' or 'beckmann', found {distribution!r}")
-    if fresnel not in ("auto", "schlick", "dielectric", "conductor"):
-        raise ValueError(f"fresnel must be 'auto', 'schlick', 'dielectric' or 'conductor', "
-                         f"found {fresnel!r}")
-    if f90 not in ("one", "free"):
-        raise ValueError(f"f90 must be 'one' or 'free', found {f90!r}")
-    if coat not in ("auto", "off", "on"):
-        raise ValueError(f"coat must be 'auto', 'off' or 'on', found {coat!r}")
+    check_choice("fresnel", fresnel, FresnelChoice)
+    check_choice("f90", f90, F90)
+    check_choice("coat", coat, Coat)
     return kind
 
 

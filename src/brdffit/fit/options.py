@@ -3,7 +3,9 @@
 Each declared model of :data:`brdffit.fit.registry.MODELS` names its options class
 (``options="options:TabulatedOptions"``, resolved on first use). A class's fields are the
 keyword options of the fitting function, with its **types** (``int``, ``float``, ``bool``,
-``str``, ``tuple[int, int]``, ``tuple[str, ...]``; ``| None`` accepts ``None``, which
+``str``, ``tuple[int, int]``, ``tuple[str, ...]``; a ``Literal`` of strings such as
+:data:`RadialRule` lists a string option's **choices**, which the fitting function's
+signature and its own check (:func:`check_choice`) share; ``| None`` accepts ``None``, which
 means the function's own default) and its **defaults**, exactly those of the function's
 signature (tests/fit/test_options.py checks them against it). Models fitted by the same
 function share its class (``ggx`` and ``beckmann`` are the tabulated fit converted; the
@@ -35,11 +37,13 @@ import math
 import types
 import typing
 from collections.abc import Mapping
-from typing import Any, Union
+from typing import Any, Literal, Union
 
 __all__ = ["OptionError", "RANGES", "PYTHON_ONLY", "Option", "TabulatedOptions",
            "DiffuseOptions", "TwoSliceOptions", "CookTorranceOptions", "NPFOptions",
-           "option_table", "signature_options", "check_values", "describe_option"]
+           "option_table", "signature_options", "check_values", "check_choice",
+           "describe_option", "RadialRule", "Hotspot", "FresnelChoice", "F90", "Coat",
+           "Weighting", "SliceOrFull", "NPFStart", "NPFInit"]
 
 
 class OptionError(ValueError):
@@ -75,6 +79,27 @@ SPECIAL = {"polish_bound": (lambda v: v == 0 or 1 < v <= 1e6,
 #: no compression).
 LOW_OPEN = {"tol", "p_floor", "dr_epsilon", "fresnel_max", "max_theta_io_deg",
             "restrict_deg", "p", "fresnel_max_theta_deg"}
+# -- the string options' choices: one ``Literal`` each, read by the checks below, the options
+# classes, the fitting functions' signatures and their own checks (:func:`check_choice`)
+#: radial rule of the tabulated fit (``"auto"``: MERL nodes for isotropic MERL-grid input)
+RadialRule = Literal["auto", "merl", "gauss"]
+#: the tabulated fit's hotspot term (G1 or G2 in the backscattering kernel)
+Hotspot = Literal["G1", "G2"]
+#: Fresnel term of the analytic fits
+FresnelChoice = Literal["auto", "schlick", "dielectric", "conductor"]
+#: the analytic fits' grazing reflectance: 1 or fitted
+F90 = Literal["one", "free"]
+#: the analytic fits' clear coat
+Coat = Literal["auto", "off", "on"]
+#: the weights of the two-slice fits' slice fit
+Weighting = Literal["relative", "cosine"]
+#: the two-slice fits' selection and linear solve: on the full data or the slices
+SliceOrFull = Literal["full", "slice"]
+#: the starts of the NPF fits (independent-G's ``starts``)
+NPFStart = Literal["random", "ones", "sgd", "g-from-d", "slices"]
+#: a single start of the NPF fits (``init``)
+NPFInit = Literal["slices", "ones", "random"]
+
 #: Field metadata of an option that takes a Python object (or only makes sense from
 #: Python): accepted by :func:`brdffit.fit.fit`, an unknown name on a command line.
 PYTHON_ONLY = {"python_only": True}
@@ -96,8 +121,8 @@ class TabulatedOptions:
     anisotropic: bool | None = None
     per_channel: bool = False
     n_phi: int = 90
-    rule: str = "auto"
-    hotspot: str = "G2"
+    rule: RadialRule = "auto"
+    hotspot: Hotspot = "G2"
     max_iterations: int = 1000
     fresnel_max: float = 1.0
     p_floor: float = 1e-6
@@ -111,8 +136,8 @@ class DiffuseOptions:
     ``ggx-diffuse``, ``beckmann-diffuse``; the distribution is the model's)."""
 
     anisotropic: bool | None = None
-    fresnel: str = "auto"
-    f90: str = "free"
+    fresnel: FresnelChoice = "auto"
+    f90: F90 = "free"
     starts: int = 3
     moments: bool = True
     theta_d_stride: int | None = None
@@ -120,7 +145,7 @@ class DiffuseOptions:
     theta_h_stride: int = 3
     n_phi_h: int = 12
     objective: Any = _python()
-    coat: str = "auto"
+    coat: Coat = "auto"
     name: str | None = None
 
 
@@ -129,12 +154,12 @@ class TwoSliceOptions:
     """Options of :func:`brdffit.fit.sgd.fit_two_slice` (models ``sgd``, ``beckmann-2s``,
     ``ggx-2s``; the distribution is the model's)."""
 
-    weighting: str = "cosine"
+    weighting: Weighting = "cosine"
     starts: int = 3
     grid: tuple[int, int] = (18, 8)
     g1_approximation: bool = True
-    selection: str = "full"
-    linear: str = "full"
+    selection: SliceOrFull = "full"
+    linear: SliceOrFull = "full"
     bounded: bool = True
     selection_strides: tuple[int, int] = (4, 15)
     scan_grid: bool = True
@@ -167,7 +192,7 @@ class NPFOptions:
     max_theta_io_deg: float = 89.0
     max_iter: int | None = None
     tol: float = 1e-6
-    starts: tuple[str, ...] | None = None
+    starts: tuple[NPFStart, ...] | None = None
     n_random: int = 4
     seed: int = 0
     g_smoothing: float = 1.0
@@ -176,7 +201,7 @@ class NPFOptions:
     polish: int | None = None
     polish_bound: float | None = None
     extrapolate: bool = True
-    init: str | None = None
+    init: NPFInit | None = None
     name: str | None = None
     callback: Any = _python()
     verbose: bool = _python(False)
@@ -189,7 +214,9 @@ class Option:
 
     ``kind``: ``"bool"``, ``"int"``, ``"float"``, ``"str"``, ``"int-pair"``, ``"names"`` (a
     sequence of strings) or ``"any"``; ``none_ok``: ``None`` is accepted (the function's
-    default); ``python_only``: not an option of a command line.
+    default); ``python_only``: not an option of a command line; ``choices``: the values a
+    ``"str"`` option or each name of a ``"names"`` option may take (its ``Literal``; empty:
+    any string).
     """
 
     name: str
@@ -197,13 +224,24 @@ class Option:
     none_ok: bool
     default: Any
     python_only: bool = False
+    choices: tuple[str, ...] = ()
 
 
 _SCALARS = ((bool, "bool"), (int, "int"), (float, "float"), (str, "str"))
 
 
-def _kind_of(annotation, default) -> tuple[str, bool]:
-    """``(kind, none_ok)`` of a type (a union with ``None`` accepts ``None``)."""
+def _choices(annotation) -> tuple[str, ...] | None:
+    """The values of a ``Literal`` of strings, or ``None`` for any other type."""
+    if typing.get_origin(annotation) is Literal:
+        values = typing.get_args(annotation)
+        if values and all(isinstance(v, str) for v in values):
+            return values
+    return None
+
+
+def _kind_of(annotation, default) -> tuple[str, bool, tuple[str, ...]]:
+    """``(kind, none_ok, choices)`` of a type (a union with ``None`` accepts ``None``; a
+    ``Literal`` of strings is a ``"str"`` with those choices)."""
     args = typing.get_args(annotation)
     none_ok = default is None
     if typing.get_origin(annotation) in (Union, types.UnionType):
@@ -211,16 +249,21 @@ def _kind_of(annotation, default) -> tuple[str, bool]:
         args = [a for a in args if a is not type(None)]
         annotation = args[0] if len(args) == 1 else Any
         args = typing.get_args(annotation)
+    if (choices := _choices(annotation)) is not None:
+        return "str", none_ok, choices
     if typing.get_origin(annotation) in (tuple, list, typing.get_origin(typing.Sequence[str])):
-        if args and all(a is str for a in args if a is not Ellipsis):
-            return "names", none_ok
+        names = [a for a in args if a is not Ellipsis]
+        if names and all(a is str for a in names):
+            return "names", none_ok, ()
+        if len(names) == 1 and (choices := _choices(names[0])) is not None:
+            return "names", none_ok, choices
         if args == (int, int):
-            return "int-pair", none_ok
-        return "any", True
+            return "int-pair", none_ok, ()
+        return "any", True, ()
     for typ, kind in _SCALARS:
         if annotation is typ:
-            return kind, none_ok
-    return "any", True
+            return kind, none_ok, ()
+    return "any", True, ()
 
 
 def option_table(cls) -> dict[str, Option]:
@@ -228,9 +271,9 @@ def option_table(cls) -> dict[str, Option]:
     hints = typing.get_type_hints(cls)
     out = {}
     for f in dataclasses.fields(cls):
-        kind, none_ok = _kind_of(hints[f.name], f.default)
+        kind, none_ok, choices = _kind_of(hints[f.name], f.default)
         out[f.name] = Option(f.name, kind, none_ok, f.default,
-                             bool(f.metadata.get("python_only")))
+                             bool(f.metadata.get("python_only")), choices)
     return out
 
 
@@ -263,7 +306,10 @@ def describe_option(option: Option) -> str:
     parts = [kind + (" or null" if option.none_ok and option.default is not None else "")]
     parts.append(f"default {option.default!r}" if option.default is not None
                  else "default: the fitter's")
-    if option.name in SPECIAL:
+    if option.choices:
+        parts.append(("each " if option.kind == "names" else "") + "one of "
+                     + ", ".join(map(repr, option.choices)))
+    elif option.name in SPECIAL:
         parts.append(SPECIAL[option.name][1])
     elif option.name in RANGES and option.kind in ("int", "float"):
         parts.append(f"in {_range_text(option.name)}")
@@ -331,18 +377,39 @@ def _check_pair(name: str, value) -> tuple:
     return tuple(value)
 
 
-def _check_names(name: str, value) -> tuple:
+def _one_of(choices) -> str:
+    """``'a', 'b' or 'c'``."""
+    quoted = [repr(c) for c in choices]
+    return quoted[0] if len(quoted) == 1 else ", ".join(quoted[:-1]) + " or " + quoted[-1]
+
+
+def check_choice(name: str, value, choices) -> str:
+    """``value`` if it is one of ``choices`` (a ``Literal`` of strings or a sequence), else
+    :class:`OptionError` naming the option, the choices and the value. The one check of the
+    string options, before any work (:func:`check_values`) and in the fitting functions."""
+    allowed = _choices(choices) or tuple(choices)
+    if not isinstance(value, str) or value not in allowed:
+        raise OptionError(f"{name}: expected {_one_of(allowed)}, found {value!r}")
+    return value
+
+
+def _check_names(name: str, value, choices=()) -> tuple:
     if isinstance(value, str):
         value = [value]
     if not (isinstance(value, (list, tuple)) and value and len(value) <= 100
             and all(isinstance(v, str) and len(v) <= 200 for v in value)):
-        raise OptionError(f"{name}: expected a list of names, e.g. [\"ones\"], found "
+        example = choices[0] if choices else "ones"
+        raise OptionError(f"{name}: expected a list of names, e.g. [\"{example}\"], found "
                           f"{value!r}")
+    bad = [v for v in value if choices and v not in choices]
+    if bad:
+        raise OptionError(f"{name}: expected names among {_one_of(choices)}, found "
+                          f"{bad[0]!r}")
     return tuple(value)
 
 
 def check_value(option: Option, value):
-    """``value`` of ``option`` checked (type, range) and converted (``"1e-6"`` → 1e-6,
+    """``value`` of ``option`` checked (type, range, choices) and converted (``"1e-6"`` → 1e-6,
     ``5.0`` → 5 for an integer, lists → tuples)."""
     name, kind = option.name, option.kind
     if value is None:
@@ -355,15 +422,17 @@ def check_value(option: Option, value):
         if not isinstance(value, bool):
             raise OptionError(f"{name}: expected true or false, found {value!r}")
         return value
+    if kind == "str" and option.choices:
+        return check_choice(name, value, option.choices)
     if kind == "str":
         if not isinstance(value, str) or len(value) > 200:
-            raise OptionError(f"{name}: expected a string (the fitter's choices), found "
+            raise OptionError(f"{name}: expected a string of at most 200 characters, found "
                               f"{value!r}")
         return value
     if kind == "int-pair":
         return _check_pair(name, value)
     if kind == "names":
-        return _check_names(name, value)
+        return _check_names(name, value, option.choices)
     return value
 
 

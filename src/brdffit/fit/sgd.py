@@ -129,6 +129,7 @@ from ..microfacet.gamma import upper_gamma
 from ..microfacet.ggx import GGX
 from ..microfacet.sgd import SGD, sgd_log_p22, sgd_mu_lambda
 from ..microfacet.sgd_model import PerChannelMicrofacetBRDF
+from .options import SliceOrFull, Weighting, check_choice
 from .result import record
 from ..losses.l2 import merl_grid_weights
 from ..losses.objective import compressive_weight, volume_form_weight, weighted_median
@@ -374,17 +375,16 @@ def _fresnel_nnls(c: np.ndarray, y: np.ndarray, rho_d: float | None = None,
 # ------------------------------------------------------------------------------------------
 def _weights(kind_w: str, theta: np.ndarray, m: np.ndarray, valid: np.ndarray) -> np.ndarray:
     """Per-sample weights (n, 3) of Eq. 12 (square roots of w_i, applied to residuals)."""
+    check_choice("weighting", kind_w, Weighting)
     if kind_w == "relative":
         eps = 1e-3 * np.maximum(np.max(np.where(valid, m, 0.0), axis=0), 1e-12)
         w = 1.0 / (m + eps[None, :])
-    elif kind_w == "cosine":
+    else:
         # §6.3-like: cos θi cos θo = cos²θh at θd = 0, solid angle of the θh cell
         u = np.sqrt(theta / (np.pi / 2))
         du = 1.0 / len(theta)
         w = np.sqrt(np.cos(theta) ** 2 * np.sin(np.maximum(theta, 1e-6)) * np.pi * u * du)
         w = np.repeat(w[:, None], m.shape[1], axis=1)
-    else:
-        raise ValueError(f"weighting must be 'relative' or 'cosine', found {kind_w!r}")
     return np.where(valid, w, 0.0)
 
 
@@ -907,9 +907,9 @@ def _refine_full(kind: str, data: dict, c: int, cand: dict, max_nfev: int = 40) 
 
 
 @with_single_blas_thread
-def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
+def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: Weighting = "cosine",
                   starts: int = 3, grid: tuple[int, int] = (18, 8), g1_approximation: bool = True,
-                  selection: str = "full", linear: str = "full", bounded: bool = True,
+                  selection: SliceOrFull = "full", linear: SliceOrFull = "full", bounded: bool = True,
                   selection_strides: tuple[int, int] = SELECTION_STRIDES,
                   scan_grid: bool = True, refine: int = 1,
                   name: str | None = None) -> PerChannelMicrofacetBRDF:
@@ -976,10 +976,8 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: str = "cosine",
 
 
 def _check_two_slice_choices(distribution, selection, linear) -> None:
-    if selection not in ("full", "slice"):
-        raise ValueError(f"selection must be 'full' or 'slice', found {selection!r}")
-    if linear not in ("full", "slice"):
-        raise ValueError(f"linear must be 'full' or 'slice', found {linear!r}")
+    check_choice("selection", selection, SliceOrFull)
+    check_choice("linear", linear, SliceOrFull)
     if linear == "full" and selection != "full":
         raise ValueError("linear='full' needs selection='full'")
     if distribution not in ALPHA_BOUNDS:
@@ -1156,7 +1154,7 @@ def _check_finite(model: PerChannelMicrofacetBRDF, label: str) -> None:
             raise FitError(f"{label}: fit produced non-finite parameters {row}")
 
 
-def fit_sgd(brdf, *, weighting: str = "cosine", starts: int = 3,
+def fit_sgd(brdf, *, weighting: Weighting = "cosine", starts: int = 3,
             g1_approximation: bool = True, **kwargs) -> PerChannelMicrofacetBRDF:
     """Fit the SGD Cook-Torrance model of Bagher, Soler, Holzschuch 2012 (§5) per channel.
 
@@ -1197,13 +1195,13 @@ def fit_sgd(brdf, *, weighting: str = "cosine", starts: int = 3,
                          g1_approximation=g1_approximation, **kwargs)
 
 
-def fit_beckmann_two_slice(brdf, *, weighting: str = "cosine", starts: int = 3,
+def fit_beckmann_two_slice(brdf, *, weighting: Weighting = "cosine", starts: int = 3,
                            **kwargs) -> PerChannelMicrofacetBRDF:
     """The two-slice procedure of Bagher 2012 §5 with a Beckmann distribution (§6.3)."""
     return fit_two_slice(brdf, "beckmann", weighting=weighting, starts=starts, **kwargs)
 
 
-def fit_ggx_two_slice(brdf, *, weighting: str = "cosine", starts: int = 3,
+def fit_ggx_two_slice(brdf, *, weighting: Weighting = "cosine", starts: int = 3,
                       **kwargs) -> PerChannelMicrofacetBRDF:
     """The two-slice procedure of Bagher 2012 §5 with a GGX (Trowbridge-Reitz) distribution."""
     return fit_two_slice(brdf, "ggx", weighting=weighting, starts=starts, **kwargs)

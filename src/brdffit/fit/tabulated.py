@@ -67,6 +67,7 @@ from ..microfacet.conversions import to_beckmann, to_ggx
 from ..microfacet.per_channel import PerChannelBRDF
 from ..microfacet.tabulated import (FittedFresnel, TabulatedSlopeDistribution,
                                     azimuthal_clamped_cosine_integral, radial_rule)
+from .options import Hotspot, RadialRule, check_choice
 from .result import record
 from ..microfacet import MicrofacetBRDF
 
@@ -249,7 +250,7 @@ def _kernel(b, r, w_r, row, g2: bool):
 
 def solve_slope_pdf(b, rule: str = "merl", iterations: int | None = None,
                     tol: float | None = None, max_iterations: int = DEFAULT_MAX_ITERATIONS,
-                    hotspot: str = "G2"):
+                    hotspot: Hotspot = "G2"):
     """Power iteration for the slope PDF from backscattering ``b`` (Eq. 14-18, Alg. 1/3).
 
     Parameters
@@ -278,8 +279,7 @@ def solve_slope_pdf(b, rule: str = "merl", iterations: int | None = None,
     _, theta, r, w_r = radial_rule(n_theta, rule)
     c = np.cos(theta)
     row = 4.0 * b * (c**6 if b.ndim == 1 else c[:, None] ** 6)
-    if hotspot not in ("G1", "G2"):
-        raise ValueError(f"hotspot must be 'G1' or 'G2', got {hotspot!r}")
+    check_choice("hotspot", hotspot, Hotspot)
     n_iter, tol = iteration_plan(iterations, tol, max_iterations)
     apply, integral = _kernel(b, r, w_r, row, hotspot == "G2")
     p = np.ones_like(b)
@@ -685,8 +685,8 @@ def _split_diffuse(brdf: BRDF, model, info: dict, refit, merl=None):
 @with_single_blas_thread
 def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
                   tol: float | None = None, anisotropic: bool | None = None,
-                  per_channel: bool = False, n_phi: int = 90, rule: str = "auto",
-                  hotspot: str = "G2", max_iterations: int = DEFAULT_MAX_ITERATIONS,
+                  per_channel: bool = False, n_phi: int = 90, rule: RadialRule = "auto",
+                  hotspot: Hotspot = "G2", max_iterations: int = DEFAULT_MAX_ITERATIONS,
                   fresnel_max: float = 1.0, p_floor: float = 1e-6,
                   fresnel_max_theta_deg: float | None = 89.0, diffuse: bool = True) -> BRDF:
     """Fit the tabulated microfacet model of Dupuy et al. 2015 to ``brdf``.
@@ -745,6 +745,8 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
         the errors of :func:`_split_diffuse`). The sampling tables are built on first use.
     """
     t0 = time.perf_counter()
+    check_choice("rule", rule, RadialRule)
+    check_choice("hotspot", hotspot, Hotspot)
     anisotropic = not bool(getattr(brdf, "isotropic", False)) if anisotropic is None else anisotropic
     rule, merl = _rule_and_grid(brdf, n, anisotropic, rule)
     _, tol_eff = iteration_plan(iterations, tol, max_iterations)  # validates early

@@ -106,6 +106,7 @@ from __future__ import annotations
 import dataclasses
 import os
 import time
+import typing
 import warnings
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Iterable
@@ -120,6 +121,7 @@ from ...grid import phi_d_to_index, tabulate_merl_grid, theta_d_to_index, theta_
 from ...progress import step_callback
 from ...microfacet.npf_model import (D_THETA_H, F_THETA_D, G_THETA, NPFBivariateBRDF,
                                      NPFMicrofacetBRDF, NPFNaiveBRDF)
+from ..options import NPFInit, NPFStart, check_choice
 from ..result import fit_result, record
 from . import _solver
 from ._solver import MFState, NaiveState, Samples
@@ -131,7 +133,7 @@ __all__ = ["fit_npf", "fit_npf_independent_g", "fit_npf_g_from_d", "fit_npf_naiv
            "CONTINUATION_WINDOW", "SCREEN_ROUNDS", "JUMP_EVERY"]
 
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
-ALL_STARTS = ("random", "ones", "sgd", "g-from-d", "slices")
+ALL_STARTS: tuple[str, ...] = typing.get_args(NPFStart)
 #: the independent-G starts of ``starts=None``: the paper's, except the G-from-D fit
 DEFAULT_STARTS = ("random", "ones", "sgd", "slices")
 DEFAULT_MAX_ITER = {"independent-g": 4000, "g-from-d": 300, "naive": 3000}
@@ -312,11 +314,11 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
             compressive: bool = True, restrict_deg: float | None = None,
             p: float = 1.4, max_theta_io_deg: float = 89.0,
             max_iter: int | None = None, tol: float = 1e-6,
-            starts: Iterable[str] | None = None, n_random: int = 4, seed: int = 0,
+            starts: Iterable[NPFStart] | None = None, n_random: int = 4, seed: int = 0,
             g_smoothing: float = 1.0, dr_epsilon: float | None = None,
             start_max_iter: int | None = 100, polish: int | None = None,
             polish_bound: float | None = None, extrapolate: bool = True,
-            init: str | None = None, name: str | None = None, callback=None,
+            init: NPFInit | None = None, name: str | None = None, callback=None,
             verbose: bool = False) -> BRDF:
     """Fit a non-parametric factor model (Bagher, Snyder & Nowrouzezahrai 2016).
 
@@ -374,6 +376,14 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
     if variant not in VARIANTS:
         raise ValueError(f"variant: expected one of {VARIANTS} or the model names "
                          f"{tuple(CLI_VARIANTS)}, found {variant!r}")
+    if init is not None:
+        check_choice("init", init, NPFInit)
+    if starts is not None:
+        starts = tuple(starts)
+        if not starts:
+            raise ValueError("starts: expected a non-empty list of names, found ()")
+        for s in starts:
+            check_choice("starts", s, NPFStart)
     objective = ObjectiveOptions(p=p, compressive=compressive, restrict_deg=restrict_deg,
                                  max_theta_io_deg=max_theta_io_deg)
     pb = _problem(brdf, data, variant, name=name, seed=seed, callback=callback, eps=dr_epsilon,
@@ -558,10 +568,7 @@ def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max
     """Eq. 3 with an independent G (§4.3): every start screened for ``start_max_iter`` AWLS
     iterations (:func:`_multi_start`), the per-channel best continued up to ``max_iter``
     (:func:`_continue_best`), then the polish."""
-    starts = tuple(DEFAULT_STARTS if starts is None else starts)
-    bad = [s for s in starts if s not in ALL_STARTS]
-    if bad or not starts:
-        raise ValueError(f"starts: expected a non-empty subset of {ALL_STARTS}, found {starts}")
+    starts = DEFAULT_STARTS if starts is None else starts
     screen = start_max_iter if start_max_iter is not None else pb.max_iter
     screen = min(screen, pb.max_iter)
     rounds = _screen_rounds(SCREEN_ROUNDS, screen)
@@ -896,13 +903,13 @@ def _run_info(res) -> dict:
 
 
 def _start_state(init, values, valid, rng) -> MFState:
+    """The start ``init`` (one of :data:`~brdffit.fit.options.NPFInit`, checked by
+    :func:`fit_npf`)."""
     if init == "slices":
         return _slice_start(values, valid)
     if init == "ones":
         return _ones_start()
-    if init == "random":
-        return _random_start(rng)
-    raise ValueError(f"init: expected 'slices', 'ones' or 'random', found {init!r}")
+    return _random_start(rng)
 
 
 def summary(model) -> dict:
