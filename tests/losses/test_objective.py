@@ -33,3 +33,37 @@ def test_a_read_only_table_is_prepared_once_per_options():
     np.testing.assert_array_equal(shared.w, first.w)
     other = prepare_objective(values, options=ObjectiveOptions(compressive=False))
     assert other is not shared and not np.array_equal(other.w, shared.w)
+
+
+def _median_by_sort(v, w):
+    """The definition: the smallest value whose cumulative weight (sorted) reaches half."""
+    order = np.argsort(v, kind="stable")
+    cw = np.cumsum(w[order])
+    return v[order][min(int(np.searchsorted(cw, 0.5 * cw[-1])), v.size - 1)]
+
+
+def test_the_weighted_median_by_selection_is_the_sorted_definition():
+    """Selection (O(n)) against the sort, with ties, zero weights and sizes on both sides
+    of the size where the selection hands over to a sort."""
+    from brdffit.losses.objective import weighted_median
+
+    rng = np.random.default_rng(7)
+    for trial in range(60):
+        n = int(rng.integers(1, 40_000))
+        v = rng.random(n) if trial % 2 else rng.integers(0, 30, n).astype(float)
+        w = rng.random(n) * (rng.random(n) < 0.6)
+        w[int(rng.integers(n))] = 1.0
+        assert weighted_median(v, w) == _median_by_sort(v, w), trial
+    v = np.arange(10_000.0)
+    assert weighted_median(v, (v == 1234.0).astype(float)) == 1234.0   # one weighted value
+
+
+def test_the_compressive_weight_keeps_its_input_shape_and_its_series_near_zero():
+    from brdffit.losses.objective import compressive_weight
+
+    x = np.array([[-1.0, 0.0, 1e-14, 0.5, 2.0]])
+    w = compressive_weight(x, np.array([[1.0]]))
+    assert w.shape == (1, 5) and np.all(w[0, :2] == 1.0)
+    assert w[0, 2] == (1.0 - 0.5 * (1e-14 * np.log(2))) ** 1.4
+    assert np.isscalar(compressive_weight(2.0, 1.0))
+    assert compressive_weight(2.0, 1.0) == pytest.approx(((1 - 0.25) / np.log(2) / 2) ** 1.4)

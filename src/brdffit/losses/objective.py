@@ -83,7 +83,9 @@ def merl_grid_geometry() -> dict[str, np.ndarray]:
 @functools.lru_cache(maxsize=1)
 def _merl_grid_geometry() -> dict[str, np.ndarray]:
     th, td, pd = np.meshgrid(merl_theta_h(), merl_theta_d(), merl_phi_d(), indexing="ij")
-    ch, sh, cd, sd, cp = np.cos(th), np.sin(th), np.cos(td), np.sin(td), np.cos(pd)
+    # the sines and cosines per axis, broadcast (the same values as on the full grid)
+    h, d, p = merl_theta_h()[:, None, None], merl_theta_d()[None, :, None], merl_phi_d()
+    ch, sh, cd, sd, cp = np.cos(h), np.sin(h), np.cos(d), np.sin(d), np.cos(p)
     cos_i = ch * cd - sh * sd * cp
     cos_o = ch * cd + sh * sd * cp
     geo = {"theta_h": th, "theta_d": td, "phi_d": pd, "cos_i": cos_i, "cos_o": cos_o,
@@ -114,25 +116,53 @@ def compressive_weight(rho, rho_bar, p: float = 1.4, alpha: float = math.log(2.0
 
     Equals 1 at ``x = 0`` and decreases monotonically to 0; negative ``ρ*`` are treated as 0.
     """
-    x = np.maximum(np.asarray(rho, dtype=np.float64), 0.0) / rho_bar
-    ax = alpha * x
-    safe = np.where(ax > 0, ax, 1.0)
-    ratio = np.where(ax > 1e-12, -np.expm1(-safe) / safe, 1.0 - 0.5 * ax)
-    return ratio ** p
+    ax = np.atleast_1d(np.maximum(np.asarray(rho, dtype=np.float64), 0.0) / rho_bar)
+    ax *= alpha
+    small = ax <= 1e-12                        # f(x)/x → 1 − αx/2 (its series) near 0
+    ratio = np.negative(ax)                    # in place from here: a table's (3, 1.2 M)
+    np.expm1(ratio, out=ratio)                 # temporaries cost more than the arithmetic
+    np.negative(ratio, out=ratio)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio /= ax
+    ratio[small] = 1.0 - 0.5 * ax[small]
+    np.power(ratio, p, out=ratio)
+    return ratio if np.ndim(rho) or np.ndim(rho_bar) else ratio[0]
+
+
+#: below this many values :func:`weighted_median` sorts what is left
+_MEDIAN_SORT_BELOW = 1 << 12
 
 
 def weighted_median(values, weights) -> float:
-    """Weighted median: the smallest value whose cumulative weight reaches half the total.
+    """Weighted median: the smallest value ``x`` whose cumulative weight ``Σ_{v ≤ x} w``
+    reaches half the total (weights ≥ 0).
 
-    The sort need not be stable: the order among equal values does not change which value
-    is returned (only the rounding of the cumulative weight inside a run of equal values)."""
+    By selection, in O(n) (a MERL table's 1.2 M samples in ≈ 30 ms, where a sort takes
+    ≈ 170 ms): the median of what is left (``np.partition``) splits the values into those
+    below, equal to and above it, and the half whose weight holds the target is kept.
+    Sums of different orders round differently: where the cumulative weight lands within
+    rounding of half the total, the value returned may be the neighbouring one."""
     v = np.asarray(values, dtype=np.float64).ravel()
     w = np.asarray(weights, dtype=np.float64).ravel()
     if v.size == 0 or not np.any(w > 0):
         raise FitError("weighted median of an empty set (no sample with positive weight)")
+    target = 0.5 * w.sum()
+    while v.size > _MEDIAN_SORT_BELOW:
+        pivot = np.partition(v, v.size // 2)[v.size // 2]
+        below = v < pivot
+        w_below = w[below].sum()
+        if w_below >= target:
+            v, w = v[below], w[below]
+            continue
+        above = v > pivot
+        w_at = w.sum() - w_below - w[above].sum()
+        if w_below + w_at >= target:
+            return float(pivot)
+        target -= w_below + w_at
+        v, w = v[above], w[above]
     order = np.argsort(v, kind="quicksort")
     cw = np.cumsum(w[order])
-    k = int(np.searchsorted(cw, 0.5 * cw[-1]))
+    k = int(np.searchsorted(cw, target))
     return float(v[order][min(k, v.size - 1)])
 
 
@@ -236,7 +266,8 @@ def _prepare_objective(values: np.ndarray, valid, opts: ObjectiveOptions,
         # a channel whose median is 0 (e.g. black): fall back to its weighted mean
         mean = (z * wvi).sum(axis=1) / wvi.sum()
         rho_bar = np.where(rho_bar > 0, rho_bar, np.where(mean > 0, mean, 1.0))
-        w = wvi[None, :] * compressive_weight(z, rho_bar[:, None], opts.p, opts.alpha)
+        w = compressive_weight(z, rho_bar[:, None], opts.p, opts.alpha)
+        w *= wvi
     else:
         w = np.broadcast_to(wvi, z.shape).copy()
     return ObjectiveData(mask=mask, index=index, w=w, z=z, rho_bar=rho_bar,

@@ -172,6 +172,7 @@ G_FROM_D_STARTS = ("slices", "ones")
 #: the polish on violet-acrylic (5 % in one channel); after 4 iterations no material of
 #: MERL-100 kept a start more than 1 % above the other's end (docs/design/npf-fit.md)
 G_FROM_D_SCREEN_POLISH = 4
+G_FROM_D_WINDOW = None
 #: Independent-G's continuation of the best screened start also stops when its objective fell
 #: by less than ``W · k · tol`` (relative) over the last ``W`` iterations, ``(W, k)`` =
 #: this: the mean decrease per iteration below ``k · tol``. Past that point AWLS crawls along
@@ -506,7 +507,7 @@ def _fit_g_from_d(pb: _Problem, init: str | None, extrapolate: bool):
     after = G_FROM_D_EXTRAPOLATE_AFTER if extrapolate else None
     results = [_solver.run_g_from_d(_start_state(label, pb.values, pb.valid, rng), smp,
                                     eps=pb.eps, tol=pb.tol, max_iter=pb.max_iter,
-                                    extrapolate_after=after,
+                                    extrapolate_after=after, window=G_FROM_D_WINDOW,
                                     callback=step_callback(pb.callback, "G-from-D AWLS",
                                                            pb.max_iter))
                for label in starts]

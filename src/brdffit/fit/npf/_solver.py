@@ -80,8 +80,12 @@ class Samples:
         if fold:
             ih, idd, ip = np.unravel_index(index, (NH, ND, NP))
             ipc = np.where(ip > NP // 2, NP - ip, ip)            # φd → min(φd, π − φd)
-            key = (ih * ND + idd) * NP + ipc
-            uniq, inv = np.unique(key, return_inverse=True)
+            key = (ih * ND + idd) * (NP // 2 + 1) + ipc
+            # np.unique without its sort: the keys index a table of every (θh, θd, φd ≤ π/2)
+            present = np.zeros(NH * ND * (NP // 2 + 1), dtype=bool)
+            present[key] = True
+            uniq = np.flatnonzero(present)
+            inv = (np.cumsum(present) - 1)[key]
             W = np.stack([np.bincount(inv, weights=w[c], minlength=uniq.size) for c in range(3)])
             WZ = np.stack([np.bincount(inv, weights=w[c] * z[c], minlength=uniq.size)
                            for c in range(3)])
@@ -777,7 +781,7 @@ def _g_from_d_d_step(st: MFState, smp: Samples, S, E, t_prev, eps, search_evals)
 
 def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
                  search_evals=2, extrapolate_after: int | None = None,
-                 callback=None) -> RunResult:
+                 window=None, callback=None) -> RunResult:
     """G-from-D AWLS (§4.3): D by Eq. 14, G from D (Eq. 19 + Smith Λ), objective check and a
     line search along D's step when it increases (:func:`parabolic_search`, ``search_evals``
     evaluations, its first trial the channel's previous accepted step: the accepted steps
@@ -797,7 +801,7 @@ def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
     _, S = _stats(st, smp)
     _rho_update(st, smp, S)
     E = expanded_objective(st, smp, S)
-    mon = Monitor(smp.sum_wzz, tol, max_iter)
+    mon = Monitor(smp.sum_wzz, tol, max_iter, window=window)
     mon.history.append(float(E.sum()))
     t_prev = np.full(3, 0.5)
     line_searches = line_search_evals = 0
