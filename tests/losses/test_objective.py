@@ -64,6 +64,6 @@ def test_the_compressive_weight_keeps_its_input_shape_and_its_series_near_zero()
     x = np.array([[-1.0, 0.0, 1e-14, 0.5, 2.0]])
     w = compressive_weight(x, np.array([[1.0]]))
     assert w.shape == (1, 5) and np.all(w[0, :2] == 1.0)
-    assert w[0, 2] == (1.0 - 0.5 * (1e-14 * np.log(2))) ** 1.4
+    assert w[0, 2] == pytest.approx((1.0 - 0.5 * (1e-14 * np.log(2))) ** 1.4, rel=1e-15)
     assert np.isscalar(compressive_weight(2.0, 1.0))
     assert compressive_weight(2.0, 1.0) == pytest.approx(((1 - 0.25) / np.log(2) / 2) ** 1.4)
