@@ -745,8 +745,7 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
         the errors of :func:`_split_diffuse`). The sampling tables are built on first use.
     """
     t0 = time.perf_counter()
-    check_choice("rule", rule, RadialRule)
-    check_choice("hotspot", hotspot, Hotspot)
+    check_choice("rule", rule, RadialRule), check_choice("hotspot", hotspot, Hotspot)
     anisotropic = not bool(getattr(brdf, "isotropic", False)) if anisotropic is None else anisotropic
     rule, merl = _rule_and_grid(brdf, n, anisotropic, rule)
     _, tol_eff = iteration_plan(iterations, tol, max_iterations)  # validates early

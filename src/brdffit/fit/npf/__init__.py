@@ -373,18 +373,7 @@ def fit_npf(brdf=None, variant: str = "independent-g", *, data=None,
     -------
     NPFMicrofacetBRDF, NPFNaiveBRDF or NPFBivariateBRDF, with ``fit_info`` and ``fit_options``.
     """
-    variant = CLI_VARIANTS.get(variant, variant)       # the model names work too
-    if variant not in VARIANTS:
-        raise ValueError(f"variant: expected one of {VARIANTS} or the model names "
-                         f"{tuple(CLI_VARIANTS)}, found {variant!r}")
-    if init is not None:
-        check_choice("init", init, NPFInit)
-    if starts is not None:
-        starts = tuple(starts)
-        if not starts:
-            raise ValueError("starts: expected a non-empty list of names, found ()")
-        for s in starts:
-            check_choice("starts", s, NPFStart)
+    variant, starts = _checked_choices(variant, init, starts)
     objective = ObjectiveOptions(p=p, compressive=compressive, restrict_deg=restrict_deg,
                                  max_theta_io_deg=max_theta_io_deg)
     pb = _problem(brdf, data, variant, name=name, seed=seed, callback=callback, eps=dr_epsilon,
@@ -901,6 +890,26 @@ def _run_info(res) -> dict:
             "line_search_evals": res.line_search_evals, "stop_reason": res.reason,
             "run_time_s": res.seconds, **res.extra,
             "history": [float(h) for h in res.history]}
+
+
+def _checked_choices(variant, init, starts) -> tuple[str, tuple[str, ...] | None]:
+    """``(variant, starts)``: the variant (a model name such as ``"npf"`` works too) and
+    ``starts`` as a tuple (``None`` kept), ``init`` and each start checked against their
+    choices (:data:`~brdffit.fit.options.NPFInit`, :data:`~brdffit.fit.options.NPFStart`)."""
+    variant = CLI_VARIANTS.get(variant, variant)
+    if variant not in VARIANTS:
+        raise ValueError(f"variant: expected one of {VARIANTS} or the model names "
+                         f"{tuple(CLI_VARIANTS)}, found {variant!r}")
+    if init is not None:
+        check_choice("init", init, NPFInit)
+    if starts is None:
+        return variant, None
+    starts = tuple(starts)
+    if not starts:
+        raise ValueError("starts: expected a non-empty list of names, found ()")
+    for name in starts:
+        check_choice("starts", name, NPFStart)
+    return variant, starts
 
 
 def _start_state(init, values, valid, rng) -> MFState:
