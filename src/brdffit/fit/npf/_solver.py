@@ -793,7 +793,8 @@ def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
     an accepted-if-better over-relaxation of D, F, ρ (:func:`_extrapolate`; ``None``:
     never). Plain AWLS crawls on about a third of the MERL materials (300 iterations leave
     a relative decrease of 1e-3 to 1e-6); starting the over-relaxation after the first
-    iterations keeps (to 0.1 %) the point the plain sweeps reach where they converge."""
+    iterations keeps (to 0.1 %) the point the plain sweeps reach where they converge.
+    ``window = (W, k)`` adds :class:`Monitor`'s windowed stopping rule."""
     t0 = time.perf_counter()
     st.D, st.rho_s = normalise(np.maximum(st.D, eps), st.rho_s, eps)
     st.F, st.rho_s = normalise(np.maximum(st.F, eps), st.rho_s, eps)
