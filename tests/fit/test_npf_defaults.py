@@ -51,9 +51,9 @@ def test_window_rule_stops_when_the_decrease_over_the_window_is_small():
 
 
 def test_default_starts_and_the_continuation_window(data, monkeypatch):
-    """``starts=None`` screens :data:`DEFAULT_STARTS` (the paper's starts except the G-from-D
-    fit) and only the continuation of the best start runs with :data:`CONTINUATION_WINDOW`."""
-    assert npf.DEFAULT_STARTS == ("random", "ones", "sgd", "slices")
+    """``starts=None`` screens :data:`DEFAULT_STARTS` (the paper's eight starts) and only the
+    continuation of the best start runs with :data:`CONTINUATION_WINDOW`."""
+    assert npf.DEFAULT_STARTS == ("random", "ones", "sgd", "slices", "g-from-d")
     assert set(npf.DEFAULT_STARTS) <= set(npf.ALL_STARTS)
     assert npf.CONTINUATION_WINDOW == (100, 5.0)
     windows = []
@@ -66,11 +66,29 @@ def test_default_starts_and_the_continuation_window(data, monkeypatch):
     monkeypatch.setattr(_solver, "run_independent_g", spy)
     fit = npf.fit_npf(data=data, max_iter=6, start_max_iter=3, polish=0, n_random=1)
     info = fit.fit_info
-    labels = ["random-0", "ones", "sgd", "slices"]
+    labels = ["random-0", "ones", "sgd", "slices", "g-from-d"]
     assert [s["start"] for s in info["starts"]] == labels
     assert fit.fit_options["starts"] == list(npf.DEFAULT_STARTS)
     assert all(s["status"] == "ok" for s in info["starts"])
-    assert "g_from_d_start" not in info                  # no G-from-D fit by default
-    assert windows == [None] * 4 + [npf.CONTINUATION_WINDOW]
-    assert "continuation" in info and info["iterations"] == 4 * 3 + 3
+    assert info["g_from_d_start"]["iterations"] > 0       # the G-from-D fit of that start
+    assert windows == [None] * 5 + [npf.CONTINUATION_WINDOW]
+    assert "continuation" in info and info["iterations"] == 5 * 3 + 3
     assert "over the last 100 iterations" in info["criterion"]
+
+
+def test_a_protected_start_is_neither_ranked_nor_dropped_by_the_screening():
+    """:data:`PROTECTED_STARTS` (the G-from-D fit): the other starts' survivors are those
+    they would be without it, and it survives every round, however far behind."""
+    from types import SimpleNamespace
+
+    def cand(i, e):
+        return i, SimpleNamespace(E=np.array([e, e, e]))
+
+    free = [cand(0, 1.0), cand(1, 1.01), cand(2, 1.5)]
+    ahead, behind = cand(3, 0.5), cand(3, 9.0)
+    assert [i for i, _ in npf._survivors(free, 0, 1.02, None)] == [0, 1]
+    for informed in (ahead, behind):
+        kept = npf._survivors(free + [informed], 0, 1.02, None, protected={3})
+        assert [i for i, _ in kept] == [0, 1, 3]
+    assert [i for i, _ in npf._survivors([free[2], ahead], 0, 1.005, 1, {3})] == [2, 3]
+    assert [i for i, _ in npf._survivors([behind], 0, 1.005, 1, {3})] == [3]
