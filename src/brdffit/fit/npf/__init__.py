@@ -131,9 +131,8 @@ from ...loading import load
 __all__ = ["fit_npf", "fit_npf_independent_g", "fit_npf_g_from_d", "fit_npf_naive",
            "fit_npf_bivariate", "VARIANTS", "ALL_STARTS", "DEFAULT_STARTS", "summary",
            "start_basins", "BASIN_TOLERANCE", "PROTECTED_STARTS", "G_FROM_D_START_MAX_ITER",
-           "G_FROM_D_STARTS",
-           "G_FROM_D_SCREEN_POLISH", "G_FROM_D_WINDOW", "CONTINUATION_WINDOW", "SCREEN_ROUNDS",
-           "JUMP_EVERY"]
+           "G_FROM_D_STARTS", "G_FROM_D_SCREEN_POLISH", "G_FROM_D_WINDOW",
+           "CONTINUATION_WINDOW", "SCREEN_ROUNDS", "JUMP_EVERY"]
 
 VARIANTS = ("independent-g", "g-from-d", "naive", "bivariate")
 ALL_STARTS: tuple[str, ...] = typing.get_args(NPFStart)
