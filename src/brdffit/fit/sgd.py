@@ -374,8 +374,8 @@ def _fresnel_nnls(c: np.ndarray, y: np.ndarray, rho_d: float | None = None,
 # two-slice fit
 # ------------------------------------------------------------------------------------------
 def _weights(kind_w: str, theta: np.ndarray, m: np.ndarray, valid: np.ndarray) -> np.ndarray:
-    """Per-sample weights (n, 3) of Eq. 12 (square roots of w_i, applied to residuals)."""
-    check_choice("weighting", kind_w, Weighting)
+    """Per-sample weights (n, 3) of Eq. 12 (square roots of w_i, applied to residuals);
+    ``kind_w`` checked by :func:`_check_two_slice_choices`."""
     if kind_w == "relative":
         eps = 1e-3 * np.maximum(np.max(np.where(valid, m, 0.0), axis=0), 1e-12)
         w = 1.0 / (m + eps[None, :])
@@ -909,8 +909,8 @@ def _refine_full(kind: str, data: dict, c: int, cand: dict, max_nfev: int = 40) 
 @with_single_blas_thread
 def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: Weighting = "cosine",
                   starts: int = 3, grid: tuple[int, int] = (18, 8), g1_approximation: bool = True,
-                  selection: SliceOrFull = "full", linear: SliceOrFull = "full", bounded: bool = True,
-                  selection_strides: tuple[int, int] = SELECTION_STRIDES,
+                  selection: SliceOrFull = "full", linear: SliceOrFull = "full",
+                  bounded: bool = True, selection_strides: tuple[int, int] = SELECTION_STRIDES,
                   scan_grid: bool = True, refine: int = 1,
                   name: str | None = None) -> PerChannelMicrofacetBRDF:
     """Two-slice fit of Bagher 2012 §5 with an SGD, Beckmann or GGX distribution, per channel.
@@ -923,7 +923,7 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: Weighting = "co
     cost). Raises :class:`FitError` when the slices hold no valid data.
     """
     t0 = time.perf_counter()
-    _check_two_slice_choices(distribution, selection, linear)
+    _check_two_slice_choices(distribution, weighting, selection, linear)
     sl = two_slices(brdf)
     label = getattr(brdf, "name", "brdf")
     m_h, valid_h = _theta_d0_slice(sl, label)
@@ -975,7 +975,8 @@ def fit_two_slice(brdf, distribution: str = "sgd", *, weighting: Weighting = "co
     return model
 
 
-def _check_two_slice_choices(distribution, selection, linear) -> None:
+def _check_two_slice_choices(distribution, weighting, selection, linear) -> None:
+    check_choice("weighting", weighting, Weighting)
     check_choice("selection", selection, SliceOrFull)
     check_choice("linear", linear, SliceOrFull)
     if linear == "full" and selection != "full":

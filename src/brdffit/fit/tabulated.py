@@ -745,7 +745,7 @@ def fit_tabulated(brdf: BRDF, n: int = 90, iterations: int | None = None,
         the errors of :func:`_split_diffuse`). The sampling tables are built on first use.
     """
     t0 = time.perf_counter()
-    check_choice("rule", rule, RadialRule), check_choice("hotspot", hotspot, Hotspot)
+    check_choice("hotspot", hotspot, Hotspot)
     anisotropic = not bool(getattr(brdf, "isotropic", False)) if anisotropic is None else anisotropic
     rule, merl = _rule_and_grid(brdf, n, anisotropic, rule)
     _, tol_eff = iteration_plan(iterations, tol, max_iterations)  # validates early
@@ -769,6 +769,7 @@ def _rule_and_grid(brdf: BRDF, n: int, anisotropic: bool, rule: str):
     """``(rule, merl)``: ``"auto"`` resolved (``"merl"`` for isotropic fits of MERL-grid input
     with ``n = 90``, else ``"gauss"``) and the MERL-grid table of an isotropic input of an
     isotropic fit (:func:`~brdffit.grid.tabulate_merl_grid`; else ``None``)."""
+    check_choice("rule", rule, RadialRule)
     if rule == "auto":
         has_merl = getattr(brdf, "merl_table", None) is not None
         rule = "merl" if (has_merl and n == N_THETA_H and not anisotropic) else "gauss"
