@@ -148,21 +148,21 @@ def test_g_from_d_recovers_factors(gfromd_truth):
 
 
 def test_g_from_d_over_relaxation_reaches_the_exact_fit_in_fewer_sweeps(gfromd_truth):
-    """From an all-ones start plain G-from-D sweeps crawl (measured: normalised objective
-    1.4e-12 after 200); over-relaxed from sweep 5 on they reach the exact fit in ~60, never
-    increasing the objective and keeping G the Smith G of D."""
+    """From an all-ones start plain G-from-D sweeps reach the exact fit slowly (measured:
+    179 sweeps); over-relaxed from sweep 5 on in fewer (111), never increasing the objective
+    and keeping G the Smith G of D."""
     _, data = gfromd_truth
     smp = _solver.Samples.from_objective(prepare_objective(*data))
 
     def run(after):
         st = _solver.MFState(D=np.ones((3, 90)), F=np.ones((3, 90)), G=np.ones((3, 90)),
                              rho_d=np.zeros(3), rho_s=np.ones(3))
-        return _solver.run_g_from_d(st, smp, tol=1e-13, max_iter=100, extrapolate_after=after)
+        return _solver.run_g_from_d(st, smp, tol=1e-13, max_iter=300, extrapolate_after=after)
 
     plain, fast = run(None), run(5)
-    assert plain.reason == "max_iter" and plain.extra["sweeps_extrapolated"] == 0
-    assert plain.E.sum() > 1e-11 * smp.sum_wzz.sum()
-    assert fast.reason == "exact fit" and fast.iterations < 80
+    assert plain.reason == fast.reason == "exact fit"
+    assert plain.extra["sweeps_extrapolated"] == 0
+    assert fast.iterations < 0.75 * plain.iterations
     assert fast.extra["sweeps_extrapolated"] > 0
     h = np.array(fast.history)
     assert np.all(np.diff(h) <= 1e-9 * h[0])
@@ -257,7 +257,8 @@ def test_g_from_d_polish_continues_where_the_awls_stops(indep_truth):
         assert not info["converged"] and info["cap_reached"]
         assert "polish cap of 8 iterations" in info["message"]
     h = np.array(polished.fit_info["history"])
-    assert np.all(np.diff(h) <= 1e-12 * h[0])
+    # the AWLS's history is Eq. 7 in expanded form, exact to ≈ 1e-15 Σ w z²
+    assert np.all(np.diff(h) <= 1e-12 * prepare_objective(*data).reference_energy().sum())
     n_awls = len(awls.fit_info["history"])
     np.testing.assert_allclose(h[:n_awls], awls.fit_info["history"], rtol=1e-12)
     assert polished.fit_info["polish"]["iterations"] >= 1

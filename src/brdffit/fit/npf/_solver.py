@@ -44,6 +44,9 @@ G_STEP_CAP = 4.0
 G_OVER_RELAX = 1.9
 #: results kept per channel by :meth:`Samples.stats` (an exact re-use: the same inputs)
 STATS_MEMO = 2
+#: G-from-D's D step: growth of the fraction of the step tried next after an accepted trial
+#: (:func:`_g_from_d_d_step`; 1.1-1.5 measured alike, docs/design/npf-fit.md)
+D_STEP_GROWTH = 1.25
 
 
 @dataclass
@@ -737,16 +740,19 @@ def combine_channels(results) -> tuple[MFState, dict]:
 
 
 def _g_from_d_d_step(st: MFState, smp: Samples, S, E, t_prev, eps, search_evals):
-    """G-from-D's D step, in place: D by Eq. 14, ρs·D max-normalised, G from D (Eq. 19), and
-    where the objective increases over ``E`` a :func:`parabolic_search` along the step from
-    ``t_prev`` (a channel whose search finds no decrease keeps D, G, ρs). Returns the bin
-    statistics, the updated ``t_prev`` and the search's evaluations (0: no search)."""
+    """G-from-D's D step, in place: D by Eq. 14, ρs·D max-normalised, G from D (Eq. 19),
+    taken per channel at the fraction ``t_prev`` of its length: G's response makes the full
+    step overshoot (the accepted fractions are 0.01-0.5 and change slowly), so the trial at
+    the previous fraction is the one pass most sweeps need. Where it does not increase the
+    objective over ``E`` the step is taken and the next fraction is :data:`D_STEP_GROWTH`
+    times larger (at most 1); elsewhere a :func:`parabolic_search` below it (a channel whose
+    search finds no decrease keeps D, G, ρs and halves its fraction). Returns the bin
+    statistics, the next fractions and the search's evaluations (0: no search)."""
     A_old = st.rho_s[:, None] * st.D                      # ρs·D, the scale-free quantity
-    d_raw = np.maximum(_factor_update(st, S, "D"), eps)
-    A_new = st.rho_s[:, None] * d_raw
-    e_before = E
+    A_step = np.maximum(_factor_update(st, S, "D"), eps) * st.rho_s[:, None] - A_old
 
-    def make(A, chans=None):
+    def make(t, chans=None):
+        A = A_old + t[:, None] * A_step
         m = A.max(axis=1)
         m = np.where(m > 0, m, 1.0)
         D = np.maximum(A / m[:, None], eps)
@@ -754,40 +760,41 @@ def _g_from_d_d_step(st: MFState, smp: Samples, S, E, t_prev, eps, search_evals)
         e, s = smp.stats(G, m[:, None] * outer_df(D, st.F), st.rho_d, chans)
         return e, (D, G, m) + s
 
-    e_new, aux = make(A_new)
-    # e_before comes from the expanded form: allow for its rounding (≈1e-15 Σwz²)
-    need = e_new > e_before + 1e-12 * smp.sum_wzz
-    n = 0
+    t_trial = np.asarray(t_prev, dtype=np.float64)
+    e_trial, aux = make(t_trial)
+    # E comes from the expanded form: allow for its rounding (≈1e-15 Σwz²)
+    need = ~(e_trial <= E + 1e-12 * smp.sum_wzz)
+    t_taken, n = np.where(need, 0.0, t_trial), 0
     if np.any(need):
 
-        def fun(t, active):
-            return make(A_old + t[:, None] * (A_new - A_old), active)
+        def fun(u, active):
+            return make(u * t_trial, active)
 
-        t, _, aux_g, n = parabolic_search(fun, need, e_before, e_new, aux, search_evals,
-                                          t_prev)
-        t_prev = np.where(need & (t > 0), t, t_prev)
+        u, _, aux_s, n = parabolic_search(fun, need, E, e_trial, aux, search_evals)
+        t_taken = np.where(need, u * t_trial, t_taken)
         aux = tuple(np.where(need[:, None] if np.ndim(a) == 2 else need, a, b)
-                    for a, b in zip(aux_g, aux))
-        keep = need & (t == 0.0)
-    else:
-        keep = np.zeros(3, bool)
+                    for a, b in zip(aux_s, aux))
+    keep = t_taken == 0.0
+    t_next = np.where(need, np.where(keep, 0.5 * t_trial, t_taken),
+                      np.minimum(D_STEP_GROWTH * t_trial, 1.0))
     D, G, m = aux[0], aux[1], aux[2]
     S_new = aux[3:]
     st.D = np.where(keep[:, None], st.D, D)
     st.G = np.where(keep[:, None], st.G, G)
     st.rho_s = np.where(keep, st.rho_s, m)
-    return tuple(np.where(keep[:, None], a, b) for a, b in zip(S, S_new)), t_prev, n
+    return tuple(np.where(keep[:, None], a, b) for a, b in zip(S, S_new)), t_next, n
 
 
 def run_g_from_d(st: MFState, smp: Samples, *, eps=0.0, tol=1e-6, max_iter=300,
                  search_evals=2, extrapolate_after: int | None = None,
                  window=None, callback=None) -> RunResult:
-    """G-from-D AWLS (§4.3): D by Eq. 14, G from D (Eq. 19 + Smith Λ), objective check and a
-    line search along D's step when it increases (:func:`parabolic_search`, ``search_evals``
-    evaluations, its first trial the channel's previous accepted step: the accepted steps
-    are small, 0.03-0.6, and change slowly); F by Eq. 14; ρd/ρs by Cramer; negative
-    components clamped to 0 (``eps``). The paper does not say which search; a golden-section
-    search reaches the same objectives at several times the cost (docs/design/npf-fit.md).
+    """G-from-D AWLS (§4.3): D by Eq. 14, G from D (Eq. 19 + Smith Λ), taken at a fraction
+    of its length that does not increase the objective (:func:`_g_from_d_d_step`: one trial
+    at the fraction accepted last, a :func:`parabolic_search` of ``search_evals``
+    evaluations below it when that increases); F by Eq. 14; ρd/ρs by Cramer; negative
+    components clamped to 0 (``eps``). The paper does not say how the D step is safeguarded;
+    a golden-section search reaches the same objectives at several times the cost
+    (docs/design/npf-fit.md).
 
     ``extrapolate_after`` (an extension): from that iteration on, each sweep is followed by
     an accepted-if-better over-relaxation of D, F, ρ (:func:`_extrapolate`; ``None``:
