@@ -179,58 +179,65 @@ def _bin_factors(D, F, rho_s, h, d, q):  # pragma: no cover
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _flush_bin(D, F, rho_s, h, d, lo, hi, T, U, V, DG, FG, Grd, Grs, gG,
+def _flush_bin(D, F, rho_s, h, d, lo, hi, UTV, DG, FG, Grd, Grs, gG,
                curvature, HDG, HFG, HsG):  # pragma: no cover
-    """Add the partial sums of one bin (h, d) over its G cells ``lo..hi`` (``T = Σ w P ∂P/∂G``,
-    ``U = Σ w ∂P/∂G``, ``V = Σ w r ∂P/∂G``) times the bin's factors to the blocks, and clear
-    them: every G block but GG and HGG is such a sum times a factor constant over the bin."""
+    """Add the partial sums of one bin (h, d) over its G cells ``lo..hi`` (``UTV[c, cell]`` =
+    ``U = Σ w ∂P/∂G``, ``T = Σ w P ∂P/∂G``, ``V = Σ w r ∂P/∂G``) times the bin's factors to the
+    blocks, and clear them: every G block but GG and HGG is such a sum times a factor
+    constant over the bin."""
     for c in range(3):
         rs, Dh, Fd = rho_s[c], D[c, h], F[c, d]
         q = rs * Dh * Fd
         cd, cf, cs = q * rs * Fd, q * rs * Dh, q * Dh * Fd
         for i in range(lo, hi + 1):
-            tt, v = T[c, i], V[c, i]
+            u, tt, v = UTV[c, i, 0], UTV[c, i, 1], UTV[c, i, 2]
             DG[c, h, i] += cd * tt
             FG[c, d, i] += cf * tt
             Grs[c, i] += cs * tt
-            Grd[c, i] += q * U[c, i]
+            Grd[c, i] += q * u
             gG[c, i] += q * v
             if curvature:
                 HDG[c, h, i] += rs * Fd * v
                 HFG[c, d, i] += rs * Dh * v
                 HsG[c, i] += Dh * Fd * v
-            T[c, i] = 0.0
-            U[c, i] = 0.0
-            V[c, i] = 0.0
+            UTV[c, i, 0] = 0.0
+            UTV[c, i, 1] = 0.0
+            UTV[c, i, 2] = 0.0
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _add_cells(A, c, a, t, b, s, x, y):  # pragma: no cover
-    """``A[c, ·] +=`` ``x`` times the interpolation weights ``1 - t``, ``t`` of the θi cells
-    ``a``, ``a + 1`` and ``y`` times those (``1 - s``, ``s``) of the θo cells ``b``, ``b + 1``."""
-    A[c, a] += x * (1.0 - t)
-    A[c, a + 1] += x * t
-    A[c, b] += y * (1.0 - s)
-    A[c, b + 1] += y * s
+def _add_cells(A, c, a, t, x, y, v):  # pragma: no cover
+    """``A[c, ·] +=`` (``x``, ``y``, ``v``) times the interpolation weights ``1 - t``, ``t`` of
+    the cells ``a``, ``a + 1`` (the three sums of a cell are adjacent)."""
+    A[c, a, 0] += x * (1.0 - t)
+    A[c, a, 1] += y * (1.0 - t)
+    A[c, a, 2] += v * (1.0 - t)
+    A[c, a + 1, 0] += x * t
+    A[c, a + 1, 1] += y * t
+    A[c, a + 1, 2] += v * t
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _add_cross(M, c, a, t, b, s, e):  # pragma: no cover
-    """``M[c, θi cell, θo cell] += e × weights``: the 2 × 2 block between cells a, a+1 and b, b+1
-    (one order; :func:`_mirror` adds the other)."""
-    M[c, a, b] += e * (1.0 - t) * (1.0 - s)
-    M[c, a, b + 1] += e * (1.0 - t) * s
-    M[c, a + 1, b] += e * t * (1.0 - s)
-    M[c, a + 1, b + 1] += e * t * s
+def _add_cross(M, c, a, t, b, s, e, f):  # pragma: no cover
+    """``M[c, θi cell, θo cell] += (e, f) × weights``: the 2 × 2 block between cells a, a+1 and
+    b, b+1 of the two interleaved matrices (one order; :func:`_mirror` adds the other)."""
+    M[c, a, b, 0] += e * (1.0 - t) * (1.0 - s)
+    M[c, a, b, 1] += f * (1.0 - t) * (1.0 - s)
+    M[c, a, b + 1, 0] += e * (1.0 - t) * s
+    M[c, a, b + 1, 1] += f * (1.0 - t) * s
+    M[c, a + 1, b, 0] += e * t * (1.0 - s)
+    M[c, a + 1, b, 1] += f * t * (1.0 - s)
+    M[c, a + 1, b + 1, 0] += e * t * s
+    M[c, a + 1, b + 1, 1] += f * t * s
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _add_pair(M, c, a, t, e):  # pragma: no cover
-    """``M[c] += e (1 - t, t)ᵀ(1 - t, t)`` on cells a, a+1, upper triangle with the diagonal
-    halved (:func:`_mirror` restores the whole)."""
-    M[c, a, a] += 0.5 * e * (1.0 - t) * (1.0 - t)
-    M[c, a, a + 1] += e * (1.0 - t) * t
-    M[c, a + 1, a + 1] += 0.5 * e * t * t
+    """``M[c, ·, ·, 0] += e (1 - t, t)ᵀ(1 - t, t)`` on cells a, a+1, upper triangle with the
+    diagonal halved (:func:`_mirror` restores the whole)."""
+    M[c, a, a, 0] += 0.5 * e * (1.0 - t) * (1.0 - t)
+    M[c, a, a + 1, 0] += e * (1.0 - t) * t
+    M[c, a + 1, a + 1, 0] += 0.5 * e * t * t
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -266,20 +273,21 @@ def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_
 
     Samples come in MERL order, so a bin (h, d) is a run of samples: the factors constant over
     a bin are applied once per run (:func:`_flush_bin`); GG and HGG are accumulated as one
-    triangle (one order of the θi–θo block) and mirrored at the end."""
+    triangle (one order of the θi–θo block), interleaved (a sample adds to the same cells of
+    both), and mirrored at the end."""
     n, ng, nd = hd.shape[0], G.shape[1], F.shape[1]
     _clear(GG, DG, FG)
     _clear(Grd, Grs, gG)
     if curvature:
         _clear(HGG, HDG, HFG)
         HsG[:] = 0.0
-    T, U, V, q = np.zeros((3, ng)), np.zeros((3, ng)), np.zeros((3, ng)), np.zeros(3)
+    UTV, GH, q = np.zeros((3, ng, 3)), np.zeros((3, ng, ng, 2)), np.zeros(3)
     k0, lo, hi = -1, ng, 0
     for j in range(n):
         k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
         if k != k0:
             if k0 >= 0:
-                _flush_bin(D, F, rho_s, k0 // nd, k0 % nd, lo, hi, T, U, V, DG, FG, Grd, Grs,
+                _flush_bin(D, F, rho_s, k0 // nd, k0 % nd, lo, hi, UTV, DG, FG, Grd, Grs,
                            gG, curvature, HDG, HFG, HsG)
             k0, lo, hi = k, ng, 0
             _bin_factors(D, F, rho_s, k // nd, k % nd, q)
@@ -292,20 +300,20 @@ def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_
             wj = w[c, j]
             r = rho_d[c] + q[c] * P - z[c, j]
             wx_i, wx_o = wj * x_i, wj * x_o
-            _add_cells(U, c, a, t, b, s, wx_i, wx_o)
-            _add_cells(T, c, a, t, b, s, wx_i * P, wx_o * P)
-            _add_cells(V, c, a, t, b, s, wx_i * r, wx_o * r)
+            _add_cells(UTV, c, a, t, wx_i, wx_i * P, wx_i * r)
+            _add_cells(UTV, c, b, s, wx_o, wx_o * P, wx_o * r)
             wq2 = wj * q[c] * q[c]
-            _add_pair(GG, c, a, t, wq2 * x_i * x_i)
-            _add_pair(GG, c, b, s, wq2 * x_o * x_o)
-            _add_cross(GG, c, a, t, b, s, wq2 * x_i * x_o)
-            if curvature:
-                _add_cross(HGG, c, a, t, b, s, wj * r * q[c] * ic)
+            _add_pair(GH, c, a, t, wq2 * x_i * x_i)
+            _add_pair(GH, c, b, s, wq2 * x_o * x_o)
+            _add_cross(GH, c, a, t, b, s, wq2 * x_i * x_o,
+                       wj * r * q[c] * ic if curvature else 0.0)
     if k0 >= 0:
-        _flush_bin(D, F, rho_s, k0 // nd, k0 % nd, lo, hi, T, U, V, DG, FG, Grd, Grs, gG,
+        _flush_bin(D, F, rho_s, k0 // nd, k0 % nd, lo, hi, UTV, DG, FG, Grd, Grs, gG,
                    curvature, HDG, HFG, HsG)
+    GG[:] = GH[..., 0]
     _mirror(GG)
     if curvature:
+        HGG[:] = GH[..., 1]
         _mirror(HGG)
 
 
