@@ -58,6 +58,28 @@ def test_the_weighted_median_by_selection_is_the_sorted_definition():
     assert weighted_median(v, (v == 1234.0).astype(float)) == 1234.0   # one weighted value
 
 
+def test_the_weighted_median_of_many_values_is_the_sorted_definition_where_its_bracket_holds_it_and_where_not():
+    """Above 65,536 values a bracket read off every 64th value narrows the search first; it
+    is checked, so values whose subsample says nothing (no weight there) or misleads (the
+    weight sits between its members) give the sorted definition too."""
+    from brdffit.losses.objective import weighted_median
+
+    rng = np.random.default_rng(11)
+    for trial in range(12):
+        n = int(rng.integers(70_000, 300_000))
+        v = rng.lognormal(0.0, 3.0, n) if trial % 3 else rng.integers(0, 50, n).astype(float)
+        w = rng.random(n) * (rng.random(n) < 0.7)
+        assert weighted_median(v, w) == _median_by_sort(v, w), trial
+    n = 100_000
+    v = rng.random(n)
+    off_subsample = np.ones(n)
+    off_subsample[::64] = 0.0                                 # the subsample has no weight
+    assert weighted_median(v, off_subsample) == _median_by_sort(v, off_subsample)
+    heavy = np.ones(n)
+    heavy[1] = 10.0 * n                                       # not in the subsample
+    assert weighted_median(v, heavy) == v[1]
+
+
 def test_the_compressive_weight_keeps_its_input_shape_and_its_series_near_zero():
     from brdffit.losses.objective import compressive_weight
 

@@ -131,15 +131,21 @@ def compressive_weight(rho, rho_bar, p: float = 1.4, alpha: float = math.log(2.0
 
 #: below this many values :func:`weighted_median` sorts what is left
 _MEDIAN_SORT_BELOW = 1 << 12
+#: :func:`weighted_median`'s bracket: from every this-many-th value, the values at these
+#: shares of the subsample's weight
+_MEDIAN_STRIDE = 64
+_MEDIAN_BRACKET = (0.4, 0.6)
 
 
 def weighted_median(values, weights) -> float:
     """Weighted median: the smallest value ``x`` whose cumulative weight ``Σ_{v ≤ x} w``
     reaches half the total (weights ≥ 0).
 
-    By selection, in O(n) (a MERL table's 1.2 M samples in ≈ 30 ms, where a sort takes
-    ≈ 170 ms): the median of what is left (``np.partition``) splits the values into those
-    below, equal to and above it, and the half whose weight holds the target is kept.
+    By selection, in O(n) (a MERL table's 1.2 M samples in ≈ 10 ms, where a sort takes
+    ≈ 170 ms): a bracket read off a strided subsample usually holds the answer (it is
+    checked: one pass over the values), and then only the values within it are searched;
+    there, the median of what is left (``np.partition``) splits the values into those
+    below, equal to and above it, and the part whose weight holds the target is kept.
     Sums of different orders round differently: where the cumulative weight lands within
     rounding of half the total, the value returned may be the neighbouring one."""
     v = np.asarray(values, dtype=np.float64).ravel()
@@ -147,6 +153,8 @@ def weighted_median(values, weights) -> float:
     if v.size == 0 or not np.any(w > 0):
         raise FitError("weighted median of an empty set (no sample with positive weight)")
     target = 0.5 * w.sum()
+    if v.size > 16 * _MEDIAN_SORT_BELOW:
+        v, w, target = _within_bracket(v, w, target)
     while v.size > _MEDIAN_SORT_BELOW:
         pivot = np.partition(v, v.size // 2)[v.size // 2]
         below = v < pivot
@@ -164,6 +172,26 @@ def weighted_median(values, weights) -> float:
     cw = np.cumsum(w[order])
     k = int(np.searchsorted(cw, target))
     return float(v[order][min(k, v.size - 1)])
+
+
+def _within_bracket(v, w, target):
+    """``(v, w, target)`` of :func:`weighted_median` narrowed to the values in ``[lo, hi]``,
+    the subsample's values at :data:`_MEDIAN_BRACKET` of its weight, when the weight below
+    ``lo`` is under ``target`` and the weight up to ``hi`` reaches it (the answer is then in
+    the bracket, at the target less the weight below); else unchanged."""
+    sv, sw = v[::_MEDIAN_STRIDE], w[::_MEDIAN_STRIDE]
+    order = np.argsort(sv, kind="quicksort")
+    cw = np.cumsum(sw[order])
+    if cw[-1] <= 0:
+        return v, w, target
+    at = np.searchsorted(cw, np.array(_MEDIAN_BRACKET) * cw[-1])
+    lo, hi = sv[order][np.minimum(at, sv.size - 1)]
+    below = v < lo
+    inside = ~below & (v <= hi)
+    w_below = np.sum(w, where=below)
+    if w_below < target <= w_below + np.sum(w, where=inside):
+        return v[inside], w[inside], target - w_below
+    return v, w, target
 
 
 @dataclass
@@ -241,7 +269,8 @@ def _prepare_objective(values: np.ndarray, valid, opts: ObjectiveOptions,
     if values.shape != (N_THETA_H, N_THETA_D, N_PHI_D, 3):
         raise FitError(f"{source or 'input'}: expected a MERL-grid table of shape "
                        f"(90, 90, 180, 3), found {values.shape}")
-    finite = np.all(np.isfinite(values), axis=-1)
+    finite = np.isfinite(values)
+    finite = True if finite.all() else finite.all(axis=-1)     # the reduction only when needed
     if valid is None:
         valid = finite & np.all(values >= 0, axis=-1)
     valid = np.asarray(valid, dtype=bool) & finite
