@@ -188,10 +188,11 @@ G_FROM_D_SCREEN_POLISH = 4
 #: G-from-D's AWLS also stops when its objective fell by less than ``W · k · tol`` (relative)
 #: over the last ``W`` sweeps, ``(W, k)`` = this (``None``: the 3-sweep rule alone). Plain
 #: and over-relaxed sweeps crawl on a fifth of MERL (3e-5-1e-4 per sweep for 100-200 sweeps)
-#: where the Newton polish after them goes faster. On 50 MERL materials (the 8 slowest or
-#: closest to a miss among them) no fit ended more than 0.01 % higher, orange-paint 1.5 %
-#: lower, and the 8 took 22 % less CPU (docs/design/npf-fit.md)
-G_FROM_D_WINDOW = (20, 50.0)
+#: where the Newton polish after them goes faster. On the 36 MERL materials slowest or
+#: closest to a miss, (20, 100) against (20, 50): no fit more than 0.02 % higher, five
+#: 0.06-0.2 % lower, 7 % less CPU; (20, 200) ended colonial-maple-223 0.35 % higher
+#: (docs/design/npf-fit.md)
+G_FROM_D_WINDOW = (20, 100.0)
 #: Independent-G's continuation of the best screened start also stops when its objective fell
 #: by less than ``W · k · tol`` (relative) over the last ``W`` iterations, ``(W, k)`` =
 #: this: the mean decrease per iteration below ``k · tol``. Past that point AWLS crawls along
