@@ -45,7 +45,7 @@ G_OVER_RELAX = 1.9
 #: results kept per channel by :meth:`Samples.stats` (an exact re-use: the same inputs)
 STATS_MEMO = 2
 #: G-from-D's D step: growth of the fraction of the step tried next after an accepted trial
-#: (:func:`_g_from_d_d_step`; 1.1-1.5 measured alike, docs/design/npf-fit.md)
+#: (:func:`_g_from_d_d_step`; docs/design/npf-fit.md)
 D_STEP_GROWTH = 1.25
 
 
