@@ -58,7 +58,7 @@ def test_the_weighted_median_by_selection_is_the_sorted_definition():
     assert weighted_median(v, (v == 1234.0).astype(float)) == 1234.0   # one weighted value
 
 
-def test_the_weighted_median_of_many_values_is_the_sorted_definition_where_its_bracket_holds_it_and_where_not():
+def test_the_weighted_median_narrowed_by_its_bracket_is_the_sorted_definition():
     """Above 65,536 values a bracket read off every 64th value narrows the search first; it
     is checked, so values whose subsample says nothing (no weight there) or misleads (the
     weight sits between its members) give the sorted definition too."""
