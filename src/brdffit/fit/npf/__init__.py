@@ -67,10 +67,11 @@ Deviations from the paper (deliberate, documented):
   13 % lower than without it) and, on the 46 other MERL materials measured, changes no fit
   by more than 0.02 %, for 1.11× the CPU (docs/design/npf-fit.md).
 * The screening runs in rounds per channel (successive halving, :data:`SCREEN_ROUNDS`;
-  not an option of :func:`fit_npf`, whose options mirror the registry's): after each round only the starts close to the channel's best
-  run on in that channel; the k-th best start of every channel runs as one combined run
-  (``_solver.combine_channels``), which goes on as each start's channel would alone, and
-  the passes over the samples skip the channels not run. ``SCREEN_ROUNDS = False``: every
+  not an option of :func:`fit_npf`, whose options mirror the registry's): after each round
+  only the starts close to the channel's best run on in that channel; the k-th best start
+  of every channel runs as one combined run (``_solver.combine_channels``), which goes on
+  as each start's channel would alone, and the passes over the samples skip the channels
+  not run. ``SCREEN_ROUNDS = False``: every
   start runs all ``start_max_iter`` iterations.
 * The continuation stops by the AWLS rule of :mod:`._solver` or, earlier, when its objective
   fell by less than ``W·k·tol`` over the last ``W`` iterations (:data:`CONTINUATION_WINDOW`,
@@ -614,9 +615,9 @@ def _fit_independent_g(pb: _Problem, starts, *, n_random, g_smoothing, start_max
 
 
 def _screen_rounds(value, screen: int) -> list[tuple[int, float, int | None]]:
-    """The screening's rounds ``value`` (:data:`SCREEN_ROUNDS`) checked: :data:`SCREEN_ROUNDS` for ``None``, ``False`` for one round
-    (every start runs all ``screen`` iterations); the rounds at or past ``screen`` dropped
-    (the first is cut to ``screen``)."""
+    """The screening's rounds ``value`` (:data:`SCREEN_ROUNDS`) checked: :data:`SCREEN_ROUNDS`
+    for ``None``, ``False`` for one round (every start runs all ``screen`` iterations); the
+    rounds at or past ``screen`` dropped (the first is cut to ``screen``)."""
     value = SCREEN_ROUNDS if value is None else (((screen, 1.0, None),) if value is False
                                                  else value)
     rounds, last = [], 0

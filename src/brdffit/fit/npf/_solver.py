@@ -392,8 +392,9 @@ def line_search_g(smp: Samples, g_old, g_new, X, rho_d, eps, t_cap, over_relax=1
                   chans=None):
     """Exact line search of the G step (an extension of §4.3, replacing a golden-section
     search of 6 passes over the samples): along ``G(t) = g_old + t (g_new − g_old)`` every
-    sample's ``P = G(θi) G(θo)/cc`` is a quadratic in t, so the bin statistics are polynomials in t (one pass,
-    :meth:`Samples.line_stats`) and Eq. 7 at fixed ρd and ``X = ρs D F`` is a quartic in t.
+    sample's ``P = G(θi) G(θo)/cc`` is a quadratic in t, so the bin statistics are
+    polynomials in t (one pass, :meth:`Samples.line_stats`) and Eq. 7 at fixed ρd and
+    ``X = ρs D F`` is a quartic in t.
     Its minimiser ``t*`` over ``[0, t_max]`` is found (roots of the cubic derivative),
     ``t_max = max(1, min(t_cap, the largest t keeping G ≥ eps))``; with ``over_relax = ω``
     the step ``min(ω t*, t_max)`` is taken instead whenever it still lowers the quartic below
@@ -969,9 +970,11 @@ def _normal_matrix(st: MFState, smp: Samples, S, curvature: bool = False):
     n = NH + ND + NG + 2
     A = np.zeros((3, n, n))
     g = np.zeros((3, n))
-    iD, iF, iG, ia, ib = slice(0, NH), slice(NH, NH + ND), slice(NH + ND, NH + ND + NG), n - 2, n - 1
+    iD, iF, iG = slice(0, NH), slice(NH, NH + ND), slice(NH + ND, NH + ND + NG)
+    ia, ib = n - 2, n - 1
     ci = np.arange(3)[:, None]
-    A[ci, np.arange(NH)[None], np.arange(NH)[None]] = b2[:, :, 0] * np.einsum("chd,cd->ch", S2, F * F)
+    A[ci, np.arange(NH)[None], np.arange(NH)[None]] = \
+        b2[:, :, 0] * np.einsum("chd,cd->ch", S2, F * F)
     A[ci, NH + np.arange(ND)[None], NH + np.arange(ND)[None]] = \
         b2[:, :, 0] * np.einsum("chd,ch->cd", S2, D * D)
     # D–F: Σ w (b F_d P)(b D_h P) plus the second-order term of the residual (exact Hessian
@@ -1229,11 +1232,12 @@ def _polish_system(st: MFState, smp: Samples, S, g_from_d, newton):
 
 
 def _polish_box(st: MFState, sc, g, gauge_free, start, log_bound, eps, g_from_d):
-    """``(free, room_down, room_up)`` (3, n): the parameters free to move, and the room left to each face of :func:`polish_lm`'s
-    feasible box in log parameters (≥ 0; a parameter pushed out by the clamp may only move
-    back in): the factors' floor ``eps`` (the gauge samples stay 1, so the floor is the
-    AWLS's dynamic-range clamp) and, with ``log_bound``, the trust region around the start;
-    ρd ≥ 0 (Eq. 18; its step is additive, and unbounded above). A parameter at a face whose
+    """``(free, room_down, room_up)`` (3, n): the parameters free to move, and the room left
+    to each face of :func:`polish_lm`'s feasible box in log parameters (≥ 0; a parameter
+    pushed out by the clamp may only move back in): the factors' floor ``eps`` (the gauge
+    samples stay 1, so the floor is the AWLS's dynamic-range clamp) and, with
+    ``log_bound``, the trust region around the start; ρd ≥ 0 (Eq. 18; its step is
+    additive, and unbounded above). A parameter at a face whose
     descent direction (−g) leaves the box is held: steps into the clamp are cut by it, and
     the quadratic model then promises decreases the step cannot give (aluminium: a
     predicted 1.5e-3 for an actual 5e-5, every iteration)."""
