@@ -71,8 +71,7 @@ Deviations from the paper (deliberate, documented):
   only the starts close to the channel's best run on in that channel; the k-th best start
   of every channel runs as one combined run (``_solver.combine_channels``), which goes on
   as each start's channel would alone, and the passes over the samples skip the channels
-  not run. ``SCREEN_ROUNDS = False``: every
-  start runs all ``start_max_iter`` iterations.
+  not run. ``SCREEN_ROUNDS = False``: every start runs all ``start_max_iter`` iterations.
 * The continuation stops by the AWLS rule of :mod:`._solver` or, earlier, when its objective
   fell by less than ``W·k·tol`` over the last ``W`` iterations (:data:`CONTINUATION_WINDOW`,
   ``W = 100, k = 5``); a channel whose own decrease over the window is below a third of

@@ -1237,10 +1237,10 @@ def _polish_box(st: MFState, sc, g, gauge_free, start, log_bound, eps, g_from_d)
     pushed out by the clamp may only move back in): the factors' floor ``eps`` (the gauge
     samples stay 1, so the floor is the AWLS's dynamic-range clamp) and, with
     ``log_bound``, the trust region around the start; ρd ≥ 0 (Eq. 18; its step is
-    additive, and unbounded above). A parameter at a face whose
-    descent direction (−g) leaves the box is held: steps into the clamp are cut by it, and
-    the quadratic model then promises decreases the step cannot give (aluminium: a
-    predicted 1.5e-3 for an actual 5e-5, every iteration)."""
+    additive, and unbounded above). A parameter at a face whose descent direction (−g)
+    leaves the box is held: steps into the clamp are cut by it, and the quadratic model
+    then promises decreases the step cannot give (aluminium: a predicted 1.5e-3 for an
+    actual 5e-5, every iteration)."""
     n_f = NH + ND + (0 if g_from_d else NG)
     log_p = np.log(sc)
     room_down = np.full(sc.shape, np.inf)
