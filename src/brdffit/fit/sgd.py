@@ -115,6 +115,7 @@ Design notes (the diagnosis behind the safeguards, measured figures): docs/desig
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
@@ -147,6 +148,12 @@ THETA_D_MAX = np.radians(70.0)          # §4.4: Fresnel data beyond 70° are di
 # 1D microfacet terms (isotropic, as functions of θ) for the fits
 # ------------------------------------------------------------------------------------------
 def _sgd_log_norm(alpha: float, p: float) -> float:
+    """``ln(α Γ(1−p, α))`` (memoised: a shape and its G1 nodes need the same one)."""
+    return _log_norm_of(float(alpha), float(p))
+
+
+@functools.lru_cache(maxsize=64)
+def _log_norm_of(alpha: float, p: float) -> float:
     return float(np.log(alpha) + np.log(upper_gamma(1.0 - p, alpha)))
 
 
@@ -726,9 +733,9 @@ def _selection_data(brdf, theta_d_stride: int, phi_stride: int) -> dict:
 
 
 def _interp_cells(g: np.ndarray, cell: np.ndarray, frac: np.ndarray) -> np.ndarray:
-    """Linear interpolation of the node values ``g`` at precomputed cells (= ``np.interp``)."""
-    g0 = g[cell]
-    return g0 + (g[cell + 1] - g0) * frac
+    """Linear interpolation of the node values ``g`` at precomputed cells (= ``np.interp``):
+    ``g[j] + (g[j+1] − g[j]) · frac``, the differences taken once per node."""
+    return g[cell] + np.diff(g)[cell] * frac
 
 
 def _spec_shape(kind: str, alpha: float, p: float | None, data: dict,
@@ -759,7 +766,7 @@ _PAIRS = ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 def _gram_data(data: dict) -> dict:
     """Sample sums that give the normal equations of :func:`_linear_full` for any shape ``s``
-    with two matrix-vector products (``s @ lin``, ``s² @ quad``), all channels at once.
+    with two matrix-vector products per channel (``s @ lin[c]``, ``s² @ quad[c]``).
 
     With ``X = (1/π, s f0, s f1, s f2)`` (f the Eq. 11 columns) and ``W = sw²``:
     ``XᵀWX``, ``XᵀW m`` and ``mᵀW m`` per channel.
@@ -769,41 +776,45 @@ def _gram_data(data: dict) -> dict:
     W = data["sw"] ** 2                                   # (n, C)
     m, f = data["m"], data["fres"]
     C = m.shape[1]
-    lin = np.concatenate([W[:, c:c + 1] * f for c in range(C)]
-                         + [(W[:, c] * m[:, c])[:, None] * f for c in range(C)], 1)
-    quad = np.concatenate([np.stack([W[:, c] * f[:, k] * f[:, l] for k, l in _PAIRS], 1)
-                           for c in range(C)], 1)
-    g = {"lin": np.ascontiguousarray(lin.T), "quad": np.ascontiguousarray(quad.T),
-         "sW": W.sum(0), "sWm": (W * m).sum(0), "sWmm": (W * m * m).sum(0), "C": C}
+    lin = [np.ascontiguousarray(np.concatenate([W[:, c:c + 1] * f,
+                                                (W[:, c] * m[:, c])[:, None] * f], 1).T)
+           for c in range(C)]
+    quad = [np.ascontiguousarray(np.stack([W[:, c] * f[:, k] * f[:, l] for k, l in _PAIRS]))
+            for c in range(C)]
+    g = {"lin": lin, "quad": quad, "sW": W.sum(0), "sWm": (W * m).sum(0),
+         "sWmm": (W * m * m).sum(0), "C": C}
     data["gram"] = g
     return g
 
 
-def _scan_linear(data: dict, shapes: np.ndarray, solutions: bool = False):
+def _scan_linear(data: dict, shapes: np.ndarray, solutions: bool = False,
+                 channels: tuple[int, ...] | None = None):
     """Costs ``(N, C)`` of the unbounded non-negative least squares of :func:`_linear_full`
     (same minimiser) for ``N`` shapes at once — the weighted squared error :func:`_score` of
     its solution — from the normal equations of :func:`_gram_data` (two matrix products over
-    the samples for all shapes and channels). Each 4 × 4 problem is solved by NNLS on the
-    square root of its column-scaled Gram matrix. ``solutions=True``: also the minimisers
-    ``(N, C, 4)`` (ρd, A, B, E).
+    the samples per channel for all shapes). Each 4 × 4 problem is solved by NNLS on the
+    square root of its column-scaled Gram matrix. ``channels``: those only (``C`` = their
+    number; all by default). ``solutions=True``: also the minimisers ``(N, C, 4)``
+    (ρd, A, B, E).
     """
     g = _gram_data(data)
-    C = g["C"]
+    channels = tuple(range(g["C"])) if channels is None else tuple(channels)
+    C = len(channels)
     shapes = np.atleast_2d(shapes)
+    squares = shapes * shapes
     N = shapes.shape[0]
-    v1 = shapes @ g["lin"].T                               # (N, 6 C)
-    v2 = (shapes * shapes) @ g["quad"].T                   # (N, 6 C)
     G = np.empty((N, C, 4, 4))
     b = np.empty((N, C, 4))
-    for c in range(C):
-        wf = v1[:, 3 * c:3 * c + 3]
-        G[:, c, 0, 0] = g["sW"][c] / np.pi**2
-        G[:, c, 0, 1:] = G[:, c, 1:, 0] = wf / np.pi
-        for (k, l), j in zip(_PAIRS, range(6 * c, 6 * c + 6)):
-            G[:, c, 1 + k, 1 + l] = G[:, c, 1 + l, 1 + k] = v2[:, j]
-        b[:, c, 0] = g["sWm"][c] / np.pi
-        b[:, c, 1:] = v1[:, 3 * C + 3 * c:3 * C + 3 * c + 3]
-    yy = np.asarray(g["sWmm"], dtype=np.float64)
+    for i, c in enumerate(channels):
+        v1 = shapes @ g["lin"][c].T                        # (N, 6): W s f, W m s f
+        v2 = squares @ g["quad"][c].T                      # (N, 6): W s² f_k f_l
+        G[:, i, 0, 0] = g["sW"][c] / np.pi**2
+        G[:, i, 0, 1:] = G[:, i, 1:, 0] = v1[:, :3] / np.pi
+        for j, (k, l) in enumerate(_PAIRS):
+            G[:, i, 1 + k, 1 + l] = G[:, i, 1 + l, 1 + k] = v2[:, j]
+        b[:, i, 0] = g["sWm"][c] / np.pi
+        b[:, i, 1:] = v1[:, 3:]
+    yy = np.asarray(g["sWmm"], dtype=np.float64)[list(channels)]
     finite = np.all(np.isfinite(G), axis=(2, 3)) & np.all(np.isfinite(b), axis=2)
     G = np.where(finite[..., None, None], G, 0.0)
     b = np.where(finite[..., None], b, 0.0)
@@ -890,7 +901,7 @@ def _refine_full(kind: str, data: dict, c: int, cand: dict, max_nfev: int = 40) 
     def resid(q):
         shape = _spec_shape(kind, float(np.exp(q[0])), float(q[1]) if sgd else None, data,
                             scan=True, grid_node=False)
-        x = _scan_linear(data, shape, solutions=True)[1][0, c]
+        x = _scan_linear(data, shape, solutions=True, channels=(c,))[1][0, 0]
         r = (x[0] / np.pi + shape * (data["fres"] @ x[1:]) - m) * sw
         return np.where(np.isfinite(r), r, 1e6)
 

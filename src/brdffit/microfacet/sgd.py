@@ -87,22 +87,18 @@ def sgd_log_p22(x, alpha, p, log_norm=None) -> np.ndarray:
     return -p * np.log(t) - t - (_log_norm(alpha, p) if log_norm is None else log_norm)
 
 
-def _z_minus_arctan(z):
-    """``z − arctan z`` without cancellation for small ``z`` (≥ 0)."""
-    z = np.asarray(z, dtype=np.float64)
-    small = z < 0.1
-    zs = np.where(small, z, 0.0)
-    z2 = zs * zs
-    ser = zs * z2 * (1 / 3 - z2 * (1 / 5 - z2 * (1 / 7 - z2 * (1 / 9 - z2 * (1 / 11 - z2 / 13)))))
-    return np.where(small, ser, z - np.arctan(z))
-
-
 def sgd_mu_lambda(mu, alpha, p, h: float = _H_LOG, log_norm=None) -> np.ndarray:
     """``μ Λ(μ)`` of the SGD for ``μ = cot θ ≥ 0`` by quadrature of Eq. 6 (see module doc).
 
     Vectorised over ``mu`` (1D/any shape; ``alpha``, ``p`` scalars). At ``μ = 0`` the value
     is ``E[|slope|]/π`` (so ``Λ ~ E|x̃| / (2μ)`` at grazing angles). ``log_norm``: see
     :func:`sgd_log_p22`.
+
+    The integrand ``P(μ² + y) μ (z − arctan z)``, ``z = √y/μ``, is evaluated directly: where
+    ``z − arctan z`` cancels (``z ≪ 1``, rounding ≈ 3e-16/z² relative) it is ≈ ``z³/3``, and
+    such nodes weigh little in the sum, except where ``P`` makes the whole value
+    ``e^{−μ²/α}``-small; even there (``μ² ≤ 745 α``, beyond it ``P`` underflows) the integrand
+    peaks at ``z ≥ 0.058``, so ``μΛ`` keeps ≈ 1e-13 relative accuracy.
     """
     alpha, p = _check(alpha, p)
     mu = np.asarray(mu, dtype=np.float64)
@@ -112,18 +108,33 @@ def sgd_mu_lambda(mu, alpha, p, h: float = _H_LOG, log_norm=None) -> np.ndarray:
     y_lo = 1e-13 * np.minimum(alpha, alpha * alpha + mu2)
     y_hi = alpha * (62.0 + 4.0 * abs(p))
     n = int(np.ceil(np.log(y_hi / y_lo.min()) / h)) + 1
-    k = np.arange(n)[None, :]
-    u = np.log(y_lo) + k * h
+    u = np.log(y_lo) + np.arange(n) * h
+    u[u > np.log(y_hi * 1.0000001)] = -np.inf        # nodes past the cut-off: y = 0, no weight
     y = np.exp(u)
-    y = np.where(y <= y_hi * 1.0000001, y, np.nan)     # nodes past the cut-off contribute 0
-    x = mu2 + y
-    logp = sgd_log_p22(x, alpha, p, log_norm) - np.log(np.pi)    # slope pdf (∫_R² = 1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        z = np.sqrt(y) / np.where(mu > 0, mu, 1.0)
-        g = np.where(mu > 0, mu * _z_minus_arctan(z), np.sqrt(y))
-    f = np.exp(logp) * g * y
-    f = np.where(np.isfinite(f), f, 0.0)
-    return (h * f.sum(axis=1)).reshape(shape)
+    # the slope pdf P22(x)/π (∫_R² = 1) at x = μ² + y, in the form of sgd_log_p22
+    t = alpha + (mu2 + y) / alpha
+    f = np.log(t)
+    f *= -p
+    f -= t
+    f -= (_log_norm(alpha, p) if log_norm is None else log_norm) + np.log(np.pi)
+    np.exp(f, out=f)
+    f *= y
+    root_y = np.sqrt(y)
+    if np.all(mu > 0):
+        z = root_y / mu
+        z -= np.arctan(z)
+        z *= mu
+        f *= z
+    else:                                             # μ = 0: the integrand's limit √y
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = root_y / np.where(mu > 0, mu, 1.0)
+            f *= np.where(mu > 0, mu * (z - np.arctan(z)), root_y)
+    total = f.sum(axis=1)
+    bad = ~np.isfinite(total)
+    if bad.any():                                     # e.g. overflow at extreme (α, p)
+        rows = f[bad]
+        total[bad] = np.where(np.isfinite(rows), rows, 0.0).sum(axis=1)
+    return (h * total).reshape(shape)
 
 
 #: largest Eq. 9 ``c`` a fit produces or a fit file may hold: any finite c gives G1 in [0, 1]
@@ -143,6 +154,29 @@ def g1_eq9(theta, lam: float, c: float, k: float) -> np.ndarray:
     g = 1.0 + lam * (1.0 - np.exp(c * d**k))
     g = np.where(theta > theta0, g, 1.0)
     return np.where(theta < np.pi / 2, np.clip(g, 0.0, 1.0), 0.0)
+
+
+def _g1_eq9_jacobian(theta: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """``∂ G1≈ / ∂q`` of :func:`g1_eq9` in the parameters ``q = (ln λ, ln w, ln k)`` of
+    :meth:`SGD.g1_approximation` (``w = π/2 − θ0``, ``c = ln(1 + 1/λ)/w^k``), ``(n, 3)``.
+
+    With ``L = ln(1 + 1/λ)``, ``r = (θ − θ0)/w`` and ``E = exp(L r^k)`` (``= exp(c (θ−θ0)^k)``):
+    ``∂/∂ln λ = λ(1 − E) + λ E L r^k / ((λ + 1) L)``,
+    ``∂/∂ln w = −λ E k L r^k (1 − r)/r``, ``∂/∂ln k = −λ E k L r^k ln r``;
+    0 where Eq. 9 is constant (θ ≤ θ0, θ ≥ π/2) or clipped to [0, 1].
+    """
+    lam, w, k = np.exp(q)
+    log_term = np.log1p(1.0 / lam)
+    d = theta - (np.pi / 2 - w)
+    inside = (d > 0) & (theta < np.pi / 2)
+    r = np.where(inside, d, w) / w
+    c_dk = log_term * r**k
+    e = np.exp(c_dk)
+    g = 1.0 + lam * (1.0 - e)
+    jac = np.stack([lam * (1.0 - e) + lam * e * c_dk / ((lam + 1.0) * log_term),
+                    -lam * e * k * c_dk * (1.0 - r) / r,
+                    -lam * e * k * c_dk * np.log(r)], axis=-1)
+    return np.where((inside & (g > 0.0) & (g < 1.0))[:, None], jac, 0.0)
 
 
 def _refit_over_cap(solve, c_of, best, over):
@@ -380,7 +414,8 @@ class SGD(SlopeDistribution):
         def solve(q0, k_max):
             try:
                 return optimize.least_squares(
-                    lambda q: model(q) - g, q0, method="trf",
+                    lambda q: model(q) - g, q0, jac=lambda q: _g1_eq9_jacobian(theta, q),
+                    method="trf",
                     bounds=(np.log([1e-6, 1e-7, 0.05]), np.log([1e6, np.pi / 2, k_max])),
                     xtol=1e-12, ftol=1e-14, gtol=1e-14, max_nfev=150)
             except (ValueError, FloatingPointError):
