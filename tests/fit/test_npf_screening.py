@@ -147,7 +147,7 @@ def test_screening_rounds_continue_only_the_close_starts(monkeypatch):
     table = tabulate_merl_grid(NPFMicrofacetBRDF(D, _f(), G, RHO_D, RHO_S))
     kw = dict(data=table, starts=("random", "ones"), n_random=2, max_iter=6,
               start_max_iter=5, polish=0)
-    assert npf.SCREEN_ROUNDS == ((15, 1.02, None), (50, 1.005, 2))
+    assert npf.SCREEN_ROUNDS == ((15, 1.005, None), (50, 1.005, 2))
 
     def run(rounds):
         monkeypatch.setattr(npf, "SCREEN_ROUNDS", rounds)
