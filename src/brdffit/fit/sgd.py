@@ -185,7 +185,8 @@ def _G1_theta(kind: str, theta, alpha: float, p: float | None = None,
         need = ok & (mu * mu < alpha * (62.0 + 4.0 * abs(p)))
         f = np.zeros_like(mu)
         if need.any():
-            f[need] = sgd_mu_lambda(mu[need], alpha, p, h=0.3, log_norm=log_norm)
+            f[need] = sgd_mu_lambda(mu[need], alpha, p, h=0.3, log_norm=log_norm,
+                                    small_z_series=False)
         with np.errstate(invalid="ignore"):
             g = np.where(need, mu / (mu + f), 1.0)
     else:
