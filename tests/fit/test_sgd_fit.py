@@ -339,6 +339,20 @@ def test_scan_normal_equations_match_the_direct_least_squares():
             assert fast[i, c] == pytest.approx(direct, rel=1e-6, abs=1e-9 * data["gram"]["sWmm"][c])
 
 
+def test_scan_of_one_channel_is_that_channel_of_the_full_scan():
+    """The refinement's normal equations of its own channel (``channels=(c,)``) give the
+    cost and minimiser of that channel in the scan of all channels."""
+    from brdffit.fit import sgd as S
+
+    data = _selection_data_of(_truth(MATERIALS["glossy-paint"]))
+    shapes = np.stack([S._spec_shape("sgd", a, p, data) for a, p in ((0.06, 1.3), (0.4, -0.5))])
+    cost, X = S._scan_linear(data, shapes, solutions=True)
+    for c in range(3):
+        one, Xc = S._scan_linear(data, shapes, solutions=True, channels=(c,))
+        np.testing.assert_allclose(one[:, 0], cost[:, c], rtol=1e-12)
+        np.testing.assert_allclose(Xc[:, 0], X[:, c], rtol=1e-10, atol=1e-14)
+
+
 def test_vectorised_step1_grid_costs_match_nnls2():
     from brdffit.fit import sgd as S
 

@@ -75,14 +75,17 @@ the full data; the slices still drive step 1.
 
 Computation: the grid scan solves every node's non-negative linear least squares from its
 4 × 4 normal equations, built for all 144 nodes with two matrix products over the samples
-per channel (:func:`_scan_linear`; the refinement builds its own channel's only), with G1 interpolated from every 4th G1 node (≤ 4e-5
-absolute; the scan only ranks nodes, the candidates are then evaluated with the full table);
+per channel (:func:`_scan_linear`; the refinement builds its own channel's only), with G1
+interpolated from every 4th G1 node (≤ 4e-5 absolute; the scan only ranks nodes, the
+candidates are then evaluated with the full table);
 D is evaluated on the 90 θh nodes and the G1 interpolation cells are precomputed; the G1
 tables of the fixed grid nodes are memoised for the process (:func:`clear_caches`); the
 bounded candidate evaluations (albedo rows, QP) are pruned exactly — a candidate whose
 unbounded cost (a lower bound of its bounded cost) exceeds the k-th best bounded cost found
 (k = max(``refine``, 1)) cannot be among the k best; shapes and G1 tables are shared by the
-channels; the Eq. 9 approximation is fitted with its analytic Jacobian.
+channels; the G1 of the search evaluate Eq. 6's integrand directly
+(``sgd_mu_lambda(small_z_series=False)``, ≈ 1e-13 relative); the Eq. 9 approximation is
+fitted with its analytic Jacobian.
 
 Convergence report (``fit_info``, fields as the tabulated fit's): the iterative parts are
 the step-1 local least-squares runs; ``converged`` says every run stopped on its tolerance
