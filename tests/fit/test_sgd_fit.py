@@ -349,7 +349,9 @@ def test_scan_of_one_channel_is_that_channel_of_the_full_scan():
     cost, X = S._scan_linear(data, shapes, solutions=True)
     for c in range(3):
         one, Xc = S._scan_linear(data, shapes, solutions=True, channels=(c,))
-        np.testing.assert_allclose(one[:, 0], cost[:, c], rtol=1e-12)
+        # the costs cancel to rounding where the fit is exact (synthetic data)
+        np.testing.assert_allclose(one[:, 0], cost[:, c], rtol=1e-10,
+                                   atol=1e-12 * data["gram"]["sWmm"][c])
         np.testing.assert_allclose(Xc[:, 0], X[:, c], rtol=1e-10, atol=1e-14)
 
 
