@@ -117,15 +117,8 @@ def sgd_mu_lambda(mu, alpha, p, h: float = _H_LOG, log_norm=None,
     if not small_z_series:
         return _mu_lambda_direct(mu, alpha, p, h, log_norm)
     alpha, p = _check(alpha, p)
-    mu = np.asarray(mu, dtype=np.float64)
-    shape = mu.shape
-    mu = mu.ravel()[:, None]
-    mu2 = mu * mu
-    y_lo = 1e-13 * np.minimum(alpha, alpha * alpha + mu2)
-    y_hi = alpha * (62.0 + 4.0 * abs(p))
-    n = int(np.ceil(np.log(y_hi / y_lo.min()) / h)) + 1
-    k = np.arange(n)[None, :]
-    u = np.log(y_lo) + k * h
+    shape = np.shape(mu)
+    mu, mu2, u, y_hi = _log_nodes(mu, alpha, p, h)
     y = np.exp(u)
     y = np.where(y <= y_hi * 1.0000001, y, np.nan)     # nodes past the cut-off contribute 0
     x = mu2 + y
@@ -138,17 +131,23 @@ def sgd_mu_lambda(mu, alpha, p, h: float = _H_LOG, log_norm=None,
     return (h * f.sum(axis=1)).reshape(shape)
 
 
-def _mu_lambda_direct(mu, alpha, p, h, log_norm) -> np.ndarray:
-    """:func:`sgd_mu_lambda` with ``z − arctan z`` evaluated directly, the passes in place."""
-    alpha, p = _check(alpha, p)
-    mu = np.asarray(mu, dtype=np.float64)
-    shape = mu.shape
-    mu = mu.ravel()[:, None]
+def _log_nodes(mu, alpha: float, p: float, h: float):
+    """``(μ as a column, μ², u, y_hi)``: the trapezoid nodes ``u = ln y`` of Eq. 6 per μ (a
+    row each, from ``y_lo = 1e-13 min(α, α² + μ²)`` in steps ``h``, up to past the cut-off
+    ``y_hi = α (62 + 4|p|)`` where ``P`` is below e^−62 of its peak)."""
+    mu = np.asarray(mu, dtype=np.float64).ravel()[:, None]
     mu2 = mu * mu
     y_lo = 1e-13 * np.minimum(alpha, alpha * alpha + mu2)
     y_hi = alpha * (62.0 + 4.0 * abs(p))
     n = int(np.ceil(np.log(y_hi / y_lo.min()) / h)) + 1
-    u = np.log(y_lo) + np.arange(n) * h
+    return mu, mu2, np.log(y_lo) + np.arange(n)[None, :] * h, y_hi
+
+
+def _mu_lambda_direct(mu, alpha, p, h, log_norm) -> np.ndarray:
+    """:func:`sgd_mu_lambda` with ``z − arctan z`` evaluated directly, the passes in place."""
+    alpha, p = _check(alpha, p)
+    shape = np.shape(mu)
+    mu, mu2, u, y_hi = _log_nodes(mu, alpha, p, h)
     u[u > np.log(y_hi * 1.0000001)] = -np.inf        # nodes past the cut-off: y = 0, no weight
     y = np.exp(u)
     # the slope pdf P22(x)/π (∫_R² = 1) at x = μ² + y, in the form of sgd_log_p22
