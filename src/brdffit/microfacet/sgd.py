@@ -111,8 +111,8 @@ def sgd_mu_lambda(mu, alpha, p, h: float = _H_LOG, log_norm=None,
     ≈ 3e-16/z² relative) it is ≈ ``z³/3`` and weighs little in the sum, except where ``P``
     makes ``μΛ`` itself ``e^{−μ²/α}``-small; even there (``μ² ≤ 745 α``, beyond it ``P``
     underflows) the integrand peaks at ``z ≥ 0.058``, so ``μΛ`` keeps ≈ 1e-13 relative
-    accuracy (2e-13 at most against the series over 1,200 random (α, p, μ) sets). The
-    SGD's own table of ``ln μΛ`` keeps the series.
+    accuracy (2e-13 at most against the series over 1,200 random (α, p, h) sets of up to
+    400 μ). The SGD's own table of ``ln μΛ`` keeps the series.
     """
     if not small_z_series:
         return _mu_lambda_direct(mu, alpha, p, h, log_norm)
