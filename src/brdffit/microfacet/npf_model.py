@@ -41,6 +41,7 @@ from ..geometry import io_to_half_diff
 from ..grid import N_PHI_D, N_THETA_D, N_THETA_H
 from ..schema import FACTOR_MAX, Array, Opt, Schema, Text
 from ..serialization import SerializableModel
+from . import _npf_kernels
 
 def _factor(n: int) -> Array:
     """A fit-file factor table: (n, 3) (or (n,)), finite, in [0, FACTOR_MAX]."""
@@ -68,9 +69,10 @@ H_PHI_D = np.arange(N_PHI_D) * (np.pi / N_PHI_D)
 
 # -- table look-ups ---------------------------------------------------------------------------
 def _lerp(table: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Linear interpolation of ``table`` (n, C) at continuous indices ``u`` (clamped)."""
+    """Linear interpolation of ``table`` (n, C) at continuous indices ``u`` (clamped; NaN
+    reads row 0: callers mask those samples)."""
     n = table.shape[0]
-    u = np.clip(u, 0.0, n - 1.0)
+    u = np.clip(np.nan_to_num(u, nan=0.0), 0.0, n - 1.0)
     i0 = np.minimum(u.astype(np.int64), n - 2)
     t = (u - i0)[..., None]
     return table[i0] * (1.0 - t) + table[i0 + 1] * t
@@ -84,10 +86,14 @@ def _u_theta_d(theta_d):
     return np.clip(theta_d, 0.0, np.pi / 2) / (np.pi / 2 / N_THETA_D)
 
 
+def _g_with_90(G: np.ndarray) -> np.ndarray:
+    """G's samples and the knot at 90°, where G is 0 (the taper beyond the last sample)."""
+    return np.concatenate([G, np.zeros((1,) + G.shape[1:])], axis=0)
+
+
 def _lerp_g(G: np.ndarray, theta) -> np.ndarray:
     """G at θ (radians), linear in θ, tapered to 0 at 90° beyond the last sample."""
-    ext = np.concatenate([G, np.zeros((1,) + G.shape[1:])], axis=0)     # knot 90° = 0
-    return _lerp(ext, np.clip(theta, 0.0, np.pi / 2) * (180.0 / np.pi))
+    return _lerp(_g_with_90(G), np.clip(theta, 0.0, np.pi / 2) * (180.0 / np.pi))
 
 
 def _lerp_periodic(table: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -430,6 +436,11 @@ class NPFMicrofacetBRDF(_DiffuseFigures, _HalfVectorSampling, SerializableModel,
         return np.where(((ci > 0) & (co > 0))[..., None], f, 0.0)
 
     def eval_hd(self, theta_h, theta_d, phi_d):
+        out = _npf_kernels.run(_npf_kernels.microfacet_hd,
+                               (self.D, self.F, _g_with_90(self.G), self.rho_d, self.rho_s),
+                               theta_h, theta_d, phi_d)
+        if out is not None:
+            return out
         th, td, pd, ci, co = _hd_cosines(theta_h, theta_d, phi_d)
         ti, to = np.arccos(np.clip(ci, -1, 1)), np.arccos(np.clip(co, -1, 1))
         f = self.rho_d + self.rho_s * self._spec(th, td, ti, to, ci, co)
@@ -483,6 +494,11 @@ class NPFNaiveBRDF(_DiffuseFigures, _HalfVectorSampling, SerializableModel, Isot
         self._identify("naive", name, source)
 
     def eval_hd(self, theta_h, theta_d, phi_d):
+        out = _npf_kernels.run(_npf_kernels.naive_hd,
+                               (self.D, self.F, self.H, self.rho_d, self.rho_s),
+                               theta_h, theta_d, phi_d)
+        if out is not None:
+            return out
         th, td, pd, ci, co = _hd_cosines(theta_h, theta_d, phi_d)
         spec = (_lerp(self.D, _u_theta_h(th)) * _lerp(self.F, _u_theta_d(td))
                 * _lerp_periodic(self.H, np.mod(pd, np.pi) / (np.pi / N_PHI_D)))
@@ -525,9 +541,12 @@ class NPFBivariateBRDF(_HalfVectorSampling, SerializableModel, IsotropicBRDF):
         self._identify("bivariate", name, source)
 
     def eval_hd(self, theta_h, theta_d, phi_d):
+        out = _npf_kernels.run(_npf_kernels.bivariate_hd, (self.B,), theta_h, theta_d, phi_d)
+        if out is not None:
+            return out
         th, td, pd, ci, co = _hd_cosines(theta_h, theta_d, phi_d)
-        uh = np.clip(_u_theta_h(th), 0.0, N_THETA_H - 1.0)
-        ud = np.clip(_u_theta_d(td), 0.0, N_THETA_D - 1.0)
+        uh = np.clip(np.nan_to_num(_u_theta_h(th), nan=0.0), 0.0, N_THETA_H - 1.0)
+        ud = np.clip(np.nan_to_num(_u_theta_d(td), nan=0.0), 0.0, N_THETA_D - 1.0)
         i0 = np.minimum(uh.astype(np.int64), N_THETA_H - 2)
         j0 = np.minimum(ud.astype(np.int64), N_THETA_D - 2)
         s = (uh - i0)[..., None]
