@@ -12,7 +12,7 @@ import numpy as np
 __all__ = [
     "N_THETA_H", "N_THETA_D", "N_PHI_D", "merl_theta_h", "merl_theta_d", "merl_phi_d",
     "theta_h_to_index", "theta_d_to_index", "phi_d_to_index", "tabulate_merl_grid",
-    "merl_node_values",
+    "merl_node_values", "usable", "eval_hd_chunked", "eval_chunked",
 ]
 
 N_THETA_H, N_THETA_D, N_PHI_D = 90, 90, 180
@@ -79,7 +79,13 @@ def tabulate_merl_grid(brdf, chunk: int = 1 << 18) -> tuple[np.ndarray, np.ndarr
 
 def _evaluate(brdf, chunk: int) -> tuple[np.ndarray, np.ndarray]:
     values, measured = _evaluate_nodes(brdf, slice(None), slice(None), slice(None), chunk)
-    return values, measured & np.all(np.isfinite(values), axis=-1) & np.all(values >= 0, axis=-1)
+    return values, usable(values, measured)
+
+
+def usable(values, measured) -> np.ndarray:
+    """Where ``values (…, 3)`` are measured, finite and non-negative in every channel: the
+    ``valid`` mask of :func:`tabulate_merl_grid`."""
+    return measured & np.all(np.isfinite(values), axis=-1) & np.all(values >= 0, axis=-1)
 
 
 def _evaluate_nodes(brdf, ih, jd, kp, chunk: int) -> tuple[np.ndarray, np.ndarray]:
@@ -102,6 +108,16 @@ def eval_hd_chunked(brdf, th, td, pd, chunk: int = 1 << 18) -> np.ndarray:
     for s in range(0, np.size(th), chunk):
         sl = slice(s, s + chunk)
         out[sl] = brdf.eval_hd(th[sl], td[sl], pd[sl])
+    return out
+
+
+def eval_chunked(brdf, wi, wo, chunk: int = 1 << 18) -> np.ndarray:
+    """``brdf.eval`` at the direction pairs ``wi``, ``wo`` ``(n, 3)``, ``chunk`` pairs at a
+    time, as one ``(n, 3)`` array: with ``wi, wo = half_diff_to_io(th, 0, td, pd)``, the values
+    of :func:`eval_hd_chunked` for a BRDF whose ``eval_hd`` converts to directions."""
+    out = np.empty((len(wi), 3))
+    for s in range(0, len(wi), chunk):
+        out[s:s + chunk] = brdf.eval(wi[s:s + chunk], wo[s:s + chunk])
     return out
 
 

@@ -119,7 +119,8 @@ from ..._blas import with_single_blas_thread
 from ...brdf import BRDF, IsotropicBRDF
 from ...errors import FitError
 from ...losses.objective import ObjectiveOptions, prepare_objective
-from ...grid import phi_d_to_index, tabulate_merl_grid, theta_d_to_index, theta_h_to_index
+from ...grid import (merl_node_values, phi_d_to_index, tabulate_merl_grid, theta_d_to_index,
+                     theta_h_to_index, usable)
 from ...progress import step_callback
 from ...microfacet.npf_model import (D_THETA_H, F_THETA_D, G_THETA, NPFBivariateBRDF,
                                      NPFMicrofacetBRDF, NPFNaiveBRDF)
@@ -231,11 +232,23 @@ def _resolve_input(brdf, data):
 
 def _slice_start(values, valid):
     """D from the θd = 0 slice, F from the θh = 0 slice (mean over φd), G = 1 (channel-first)."""
-    v = np.where(valid[..., None], np.maximum(values, 0.0), np.nan)
+    return _start_from_slices(values[:, 0], valid[:, 0], values[0], valid[0])
+
+
+def _model_slice_start(model):
+    """:func:`_slice_start` of ``model`` tabulated on the MERL grid, from the two slices it
+    reads only (2 × 16,200 nodes of the 1.46 M)."""
+    (dv, dm), (fv, fm) = merl_node_values(model, jd=[0]), merl_node_values(model, ih=[0])
+    return _start_from_slices(dv[:, 0], usable(dv, dm)[:, 0], fv[0], usable(fv, fm)[0])
+
+
+def _start_from_slices(d_values, d_valid, f_values, f_valid):
+    """:func:`_slice_start` from the θd = 0 slice ``(90 θh, 180 φd, 3)`` and the θh = 0 slice
+    ``(90 θd, 180 φd, 3)`` of the tabulation and their valid masks."""
     with np.errstate(invalid="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)    # rows without data: NaN, then 0
-        D = np.nanmean(v[:, 0, :, :], axis=1).T            # (3, 90)
-        F = np.nanmean(v[0, :, :, :], axis=1).T
+        D, F = (np.nanmean(np.where(ok[..., None], np.maximum(v, 0.0), np.nan), axis=1).T
+                for v, ok in ((d_values, d_valid), (f_values, f_valid)))   # (3, 90)
     D = np.where(np.isfinite(D), D, 0.0)
     F = np.where(np.isfinite(F), F, 0.0)
     D = np.maximum(D - 0.9 * D.min(axis=1, keepdims=True), 1e-3 * D.max(axis=1, keepdims=True))
@@ -297,8 +310,7 @@ def _sgd_start(brdf, values, valid):
                          rho_s=np.ones(3))
             note = "from fit_sgd factors"
         else:
-            vals, ok = tabulate_merl_grid(model)
-            st = _slice_start(vals, ok)
+            st = _model_slice_start(model)
             note = "from slices of the fit_sgd model (no distribution/fresnel attributes)"
     except Exception as exc:  # noqa: BLE001
         return None, f"skipped: could not read factors of the SGD fit ({exc})"
