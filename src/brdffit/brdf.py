@@ -27,7 +27,7 @@ from .geometry import half_diff_to_io, io_to_half_diff
 
 __all__ = ["BRDF", "IsotropicBRDF", "cosine_hemisphere_sample", "cosine_hemisphere_pdf",
            "cosine_pairs", "jittered_grid", "stratified_square", "measured_mask",
-           "sample_arguments"]
+           "sample_arguments", "eval_hd_through_directions", "hd_through_directions"]
 
 
 def _as_dirs(wi, wo) -> tuple[np.ndarray, np.ndarray]:
@@ -195,5 +195,19 @@ class IsotropicBRDF(BRDF):
         """BRDF value at Rusinkiewicz coordinates (φh irrelevant by isotropy), ``(..., 3)``."""
         if type(self).eval is IsotropicBRDF.eval:
             raise NotImplementedError(f"{type(self).__name__} must override eval or eval_hd")
-        wi, wo = half_diff_to_io(theta_h, 0.0, theta_d, phi_d)
-        return self.eval(wi, wo)
+        return eval_hd_through_directions(self, theta_h, theta_d, phi_d)
+
+
+def eval_hd_through_directions(brdf, theta_h, theta_d, phi_d) -> np.ndarray:
+    """``brdf.eval`` at the directions of Rusinkiewicz coordinates with φh = 0, ``(..., 3)``:
+    the ``eval_hd`` of BRDFs without a form of their own in those coordinates."""
+    wi, wo = half_diff_to_io(theta_h, 0.0, theta_d, phi_d)
+    return brdf.eval(wi, wo)
+
+
+def hd_through_directions(brdf) -> bool:
+    """Whether ``brdf.eval_hd`` is :func:`eval_hd_through_directions`: a caller evaluating
+    several such BRDFs at the same angles may convert the angles to directions once and call
+    ``eval`` (the same values)."""
+    return getattr(type(brdf), "eval_hd", None) in (eval_hd_through_directions,
+                                                    IsotropicBRDF.eval_hd)

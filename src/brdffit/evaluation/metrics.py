@@ -42,9 +42,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..brdf import measured_mask
+from ..brdf import hd_through_directions, measured_mask
 from .tonemap import tonemap
-from ..grid import eval_hd_chunked, tabulate_merl_grid
+from ..geometry import half_diff_to_io
+from ..grid import eval_chunked, eval_hd_chunked, tabulate_merl_grid
 from ..losses.l2 import L2Reference
 from ..losses.objective import merl_grid_geometry, prepare_objective
 
@@ -603,6 +604,7 @@ class BRDFMetrics:
         self._regions = region_of(self._wi, self._wo)
         self._last: tuple = (None, None)       # (fit, its values on the pairs)
         self._grid_nodes = None                 # the nodes both grid metrics read
+        self._grid_directions = None            # and their (wi, wo)
         self.timings["cos_rel_error_setup"] = time.perf_counter() - t0
         self._l2 = None
         if "normalized_l2" in self.metrics:
@@ -645,7 +647,12 @@ class BRDFMetrics:
             self._grid_nodes = (nodes, _merl_coords(nodes))
         nodes, coords = self._grid_nodes
         full = np.full((int(np.prod(shape)), 3), np.nan)
-        full[nodes] = eval_hd_chunked(test, *coords)
+        if hd_through_directions(test):        # convert the nodes once for every such fit
+            if self._grid_directions is None:
+                self._grid_directions = half_diff_to_io(coords[0], 0.0, coords[1], coords[2])
+            full[nodes] = eval_chunked(test, *self._grid_directions)
+        else:
+            full[nodes] = eval_hd_chunked(test, *coords)
         return full.reshape(shape + (3,))[:, :, ::l2.phi_stride], full[obj.index]
 
     def _test_values(self, test) -> np.ndarray:

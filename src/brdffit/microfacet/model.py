@@ -53,8 +53,8 @@ from typing import Any
 import numpy as np
 
 from ..brdf import (BRDF, IsotropicBRDF, _as_dirs, cosine_hemisphere_pdf, cosine_hemisphere_sample,
-                    sample_arguments)
-from ..geometry import half_diff_to_io, slope_to_normal
+                    eval_hd_through_directions, sample_arguments)
+from ..geometry import slope_to_normal
 from ..schema import (ALBEDO_MAX, ALPHA_MAX, ALPHA_MIN, SPECULAR_MAX, RGB, Bool, Component,
                       ListOf, Number, Opt, Schema, StateError, Text)
 from ..serialization import SerializableModel, resolve_kind
@@ -351,10 +351,8 @@ class MicrofacetBRDF(BRDF, SerializableModel):
             f += np.where(ok, 1.0, 0.0)[..., None] * (self.diffuse / np.pi)
         return f
 
-    def eval_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
-        """Value at Rusinkiewicz coordinates (isotropic distributions; φh = 0 otherwise)."""
-        wi, wo = half_diff_to_io(theta_h, 0.0, theta_d, phi_d)
-        return self.eval(wi, wo)
+    #: value at Rusinkiewicz coordinates (φh = 0 for anisotropic distributions)
+    eval_hd = eval_hd_through_directions
 
     # -- sampling ----------------------------------------------------------------------------
     def lobe_weights(self, wi) -> tuple[np.ndarray, np.ndarray]:
@@ -542,9 +540,8 @@ class SumBRDF(BRDF, SerializableModel):
         wi, wo = _as_dirs(wi, wo)
         return sum(c.eval(wi, wo) for c in self.components)
 
-    def eval_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
-        wi, wo = half_diff_to_io(theta_h, 0.0, theta_d, phi_d)
-        return self.eval(wi, wo)
+    #: value at Rusinkiewicz coordinates (φh = 0 for anisotropic distributions)
+    eval_hd = eval_hd_through_directions
 
     def lobe_weights(self, wi) -> tuple[np.ndarray, np.ndarray]:
         tot = [c.lobe_weights(wi) if hasattr(c, "lobe_weights") else

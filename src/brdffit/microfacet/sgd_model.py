@@ -19,7 +19,7 @@ import numpy as np
 
 from ..brdf import (IsotropicBRDF, _as_dirs, cosine_hemisphere_pdf, cosine_hemisphere_sample,
                     sample_arguments)
-from ..geometry import half_diff_to_io, slope_to_normal
+from ..geometry import slope_to_normal
 from ..schema import (ALBEDO_MAX, F1_MAX, SPECULAR_MAX, Choice, Component, ListOf, Nested, Number,
                       Opt, Schema, Text)
 from ..serialization import SerializableModel
@@ -105,10 +105,6 @@ class PerChannelMicrofacetBRDF(IsotropicBRDF, SerializableModel):
         """``f_c`` of Eq. 1 for each channel c (RGB), 0 below the horizon."""
         wi, wo = _as_dirs(wi, wo)
         return np.stack([self.lobes[c].eval(wi, wo)[..., c] for c in range(3)], -1)
-
-    def eval_hd(self, theta_h, theta_d, phi_d) -> np.ndarray:
-        wi, wo = half_diff_to_io(theta_h, 0.0, theta_d, phi_d)
-        return self.eval(wi, wo)
 
     # -- importance sampling (§4.5) ------------------------------------------------------------
     def _proposals(self):
