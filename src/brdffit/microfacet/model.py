@@ -66,7 +66,7 @@ from .ggx import GGX
 
 __all__ = ["MicrofacetBRDF", "SumBRDF", "register_distribution", "register_fresnel",
            "distribution_to_state", "distribution_from_state", "fresnel_to_state",
-           "fresnel_from_state"]
+           "fresnel_from_state", "half_vectors"]
 
 # ----------------------------------------------------------------------------------------
 # component registry
@@ -264,6 +264,16 @@ def channel_figures(lobes) -> dict[str, Any]:
     return out
 
 
+def half_vectors(wi, wo) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(h, cos θd = wi·h, both above the horizon)`` of unit direction pairs ``(..., 3)``:
+    the normalised half vector of Dupuy 2015 Eq. 1 (``(0, 0, 0)`` where ``wi = −wo``)."""
+    ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
+    h = wi + wo
+    hn = np.sqrt(np.einsum("...k,...k->...", h, h))
+    h /= np.where(hn > 0, hn, 1.0)[..., None]
+    return h, np.einsum("...k,...k->...", wi, h), ok
+
+
 class MicrofacetBRDF(BRDF, SerializableModel):
     """Microfacet BRDF of Dupuy 2015 Eq. 1 with an optional Lambertian term.
 
@@ -330,12 +340,25 @@ class MicrofacetBRDF(BRDF, SerializableModel):
     def eval(self, wi, wo) -> np.ndarray:
         """``f_r(wi, wo)`` (Dupuy 2015 Eq. 1 + ρd/π), RGB, 0 below the horizon."""
         wi, wo = _as_dirs(wi, wo)
+        h, cos_d, ok = half_vectors(wi, wo)
+        f = self._fresnel(cos_d) * self._specular(wi, wo, h, cos_d, ok)[..., None]
+        if self.diffuse is not None:                      # (user Fresnels may be read-only)
+            f += np.where(ok, 1.0, 0.0)[..., None] * (self.diffuse / np.pi)
+        return f
+
+    def eval_channel(self, c: int, wi, wo, h, cos_d, ok) -> np.ndarray:
+        """Channel ``c`` of :meth:`eval` (the same numbers) at unit directions ``wi``, ``wo``
+        with their :func:`half_vectors` ``h, cos_d, ok``: for models made of one lobe per
+        channel, which share the half vectors."""
+        f = self._fresnel(cos_d)[..., c] * self._specular(wi, wo, h, cos_d, ok)
+        if self.diffuse is not None:
+            f += np.where(ok, 1.0, 0.0) * (self.diffuse[c] / np.pi)
+        return f
+
+    def _specular(self, wi, wo, h, cos_d, ok) -> np.ndarray:
+        """``D(h) G / (4 cos θi cos θo)`` (Dupuy 2015 Eq. 1 without F), 0 where a direction
+        is below the horizon or ``cos θd ≤ 0``."""
         ci, co = wi[..., 2], wo[..., 2]
-        ok = (ci > 0) & (co > 0)
-        h = wi + wo
-        hn = np.sqrt(np.einsum("...k,...k->...", h, h))
-        h /= np.where(hn > 0, hn, 1.0)[..., None]
-        cos_d = np.einsum("...k,...k->...", wi, h)
         dist = self.distribution
         D = dist.D(h)
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
@@ -345,11 +368,7 @@ class MicrofacetBRDF(BRDF, SerializableModel):
             else:
                 G = dist.G1(wi) * dist.G1(wo)
             spec = D * G / (4.0 * np.where(ok, ci * co, 1.0))
-        spec = np.where(ok & (cos_d > 0), spec, 0.0)
-        f = self._fresnel(cos_d) * spec[..., None]        # (user Fresnels may be read-only)
-        if self.diffuse is not None:
-            f += np.where(ok, 1.0, 0.0)[..., None] * (self.diffuse / np.pi)
-        return f
+        return np.where(ok & (cos_d > 0), spec, 0.0)
 
     #: value at Rusinkiewicz coordinates (φh = 0 for anisotropic distributions)
     eval_hd = eval_hd_through_directions

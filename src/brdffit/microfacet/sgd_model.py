@@ -25,7 +25,7 @@ from ..schema import (ALBEDO_MAX, F1_MAX, SPECULAR_MAX, Choice, Component, ListO
 from ..serialization import SerializableModel
 from .fresnel import GeneralizedSchlickFresnel
 from .ggx import GGX
-from .model import (MicrofacetBRDF, _lookup_distribution, channel_figures,
+from .model import (MicrofacetBRDF, _lookup_distribution, channel_figures, half_vectors,
                     distribution_from_state, distribution_to_state)
 from .sgd import EQ9_C_MAX, SGD, SGDApproxG1
 
@@ -104,7 +104,9 @@ class PerChannelMicrofacetBRDF(IsotropicBRDF, SerializableModel):
     def eval(self, wi, wo) -> np.ndarray:
         """``f_c`` of Eq. 1 for each channel c (RGB), 0 below the horizon."""
         wi, wo = _as_dirs(wi, wo)
-        return np.stack([self.lobes[c].eval(wi, wo)[..., c] for c in range(3)], -1)
+        geometry = half_vectors(wi, wo)
+        return np.stack([lobe.eval_channel(c, wi, wo, *geometry)
+                         for c, lobe in enumerate(self.lobes)], -1)
 
     # -- importance sampling (§4.5) ------------------------------------------------------------
     def _proposals(self):
