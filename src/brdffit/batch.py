@@ -3,7 +3,9 @@
 One task per (material, model). A task loads the material *on the worker* (only its load spec
 travels through the scheduler), fits the model, saves the fit and computes BRDF-space metrics,
 then writes its record; everything is written atomically, the record last, so a record on disk
-means the task's outputs are complete. Output layout (``<material>`` and ``<model>`` are
+means the task's outputs are complete. The fit tasks are fed to the workers one per thread at
+a time, the next task of a material to the thread that ran its previous one, so that a worker
+loads and prepares a material once (:class:`_FitFeeder`). Output layout (``<material>`` and ``<model>`` are
 :func:`brdffit.paths.slug` of the names; records and the report keep the readable names)::
 
     OUT/fits/<material>/<model>.npz       the fitted model (brdffit fit file)
@@ -58,6 +60,7 @@ Workers that join after the probe are not checked.
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import dataclasses
 import functools
@@ -909,12 +912,49 @@ def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
             "wall_time_s": time.perf_counter() - t0, "records": records}
 
 
+class _FitFeeder:
+    """The fit task to send when one ends: the next task of the same material, else the
+    first task of the next material not begun, else (at the end) one of the material with
+    the most tasks left. With one task in flight per worker thread, the thread that just
+    became free gets it: a material's tasks run one after the other on one worker, which
+    loads, tabulates and prepares it once (≈ 1.5 s of CPU for a Neural-BRDF material that
+    two workers would both prepare); only the last materials are shared."""
+
+    def __init__(self, fits: Sequence[Task]):
+        self.left: dict[str, collections.deque] = {}     # material → tasks not yet sent
+        for t in fits:
+            self.left.setdefault(t.material, collections.deque()).append(t)
+        self.begun: set[str] = set()
+
+    def next(self, after: str | None = None) -> Task | None:
+        m = after if after in self.left else next(
+            (k for k in self.left if k not in self.begun),
+            max(self.left, key=lambda k: len(self.left[k]), default=None))
+        if m is None:
+            return None
+        self.begun.add(m)
+        t = self.left[m].popleft()
+        if not self.left[m]:
+            del self.left[m]
+        return t
+
+
+def _threads(client) -> int:
+    """Worker threads of the cluster (at least 1)."""
+    workers = client.scheduler_info().get("workers", {})
+    return max(1, sum(int(w.get("nthreads", 1)) for w in workers.values()))
+
+
 def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed, log=None,
               on_event=None) -> list[dict]:
-    """Submit the fit tasks, and each render task once its material's fits are over."""
+    """Send the fit tasks one per worker thread at a time (:class:`_FitFeeder`), and each
+    render task once its material's fits are over."""
     fits = [t for t in todo if isinstance(t, Task)]
     renders = {t.material: t for t in todo if isinstance(t, RenderTask)}
     pending = {m: 0 for m in renders}
+    for t in fits:
+        if t.material in pending:
+            pending[t.material] += 1
     tasks_of: dict = {}
     started: dict = {}
 
@@ -924,20 +964,29 @@ def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed, lo
 
     def submit(fn, t, *args):
         kind = t.model if isinstance(t, Task) else "render"
-        # materials in order, the models of one material together: a worker then finds the
-        # material it just loaded in its cache (_load_reference); renders before new fits
-        prio = -order[t.material] + (len(order) if kind == "render" else 0)
+        prio = -order[t.material] + (len(order) if kind == "render" else 0)  # renders first
         fut = client.submit(fn, t, str(out), *args, pure=False, priority=prio,
                             key=f"brdffit-{slug(t.material)}-{slug(kind)}-{t.key()}")
         tasks_of[fut.key] = t
         started[fut.key] = time.perf_counter()
         return fut
 
-    futures = []
-    for t in fits:
-        futures.append(submit(run_task, t, metrics))
-        if t.material in pending:
-            pending[t.material] += 1
+    feeder, in_flight = _FitFeeder(fits), [0]
+
+    def feed(after: str | None = None) -> list:
+        """Fit tasks for the threads without one (``after``: the material of the task that
+        just ended, whose thread is free; new workers' threads get new materials)."""
+        sent = []
+        while in_flight[0] < _threads(client):
+            t = feeder.next(after)
+            if t is None:
+                break
+            after = None
+            in_flight[0] += 1
+            sent.append(submit(run_task, t, metrics))
+        return sent
+
+    futures = feed()
     futures += [submit(run_render_task, r) for m, r in renders.items() if pending[m] == 0]
     done: list[dict] = []
     with _Progress(todo, enabled=progress is True) as bar, \
@@ -950,6 +999,10 @@ def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed, lo
             except Exception as exc:  # noqa: BLE001 – KilledWorker, lost connection, ...
                 rec = _lost_record(t, exc, out, started[fut.key])
             fut.release()
+            if isinstance(t, Task):
+                in_flight[0] -= 1
+                for nxt in feed(t.material):
+                    queue.add(nxt)
             done.append(rec)
             bar.advance(rec)
             if log is not None:

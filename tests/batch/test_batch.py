@@ -194,3 +194,23 @@ def test_tasks_of_one_material_share_its_prepared_metrics(tmp_path, monkeypatch)
             else:
                 assert rec["metrics"][key] == pytest.approx(fresh[key], rel=1e-12), key
     batch._reference_metrics.cache_clear()
+
+
+def test_fit_feeder_sends_a_material_after_itself_and_shares_only_the_last():
+    """After a task of a material, the next task of that material; then the first material
+    not begun; when none is left, the material with the most tasks left."""
+    from brdffit.batch import _FitFeeder
+
+    tasks = make_tasks([("a", "synthetic:a"), ("b", "synthetic:b"), ("c", "synthetic:c")],
+                       ["ggx", "beckmann", "tabulated"])
+    feeder = _FitFeeder(tasks)
+    sent = [feeder.next(), feeder.next()]                # two threads: two materials
+    assert [(t.material, t.model) for t in sent] == [("a", "ggx"), ("b", "ggx")]
+    got = []
+    for after in ("a", "b", "a", "a", "a", "b", "b"):     # a's thread is the faster
+        t = feeder.next(after)
+        got.append((after, t.material, t.model))
+    assert got == [("a", "a", "beckmann"), ("b", "b", "beckmann"), ("a", "a", "tabulated"),
+                   ("a", "c", "ggx"), ("a", "c", "beckmann"), ("b", "b", "tabulated"),
+                   ("b", "c", "tabulated")]
+    assert feeder.next("c") is None and feeder.next() is None
