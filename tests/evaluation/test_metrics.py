@@ -317,3 +317,28 @@ def test_grid_metrics_share_one_evaluation_and_match_the_direct_ones():
     assert out["compressive_objective"] == pytest.approx(direct, rel=1e-12)
     separate = 90 * 90 * 90 + bm._obj.index.size          # L2's φd planes + the objective's
     assert sum(calls) < 0.8 * separate, (sum(calls), separate)
+
+
+def test_grid_values_of_fits_evaluated_through_directions_equal_their_eval_hd(monkeypatch):
+    """The grid nodes' directions, computed once for every fit whose ``eval_hd`` is ``eval``
+    at those directions, give bitwise the values of that ``eval_hd``."""
+    from brdffit.brdf import hd_through_directions
+    from brdffit.loading import load
+    from brdffit.microfacet.npf_model import NPFBivariateBRDF
+    from brdffit.microfacet.sgd import SGD
+    from brdffit.microfacet.sgd_model import PerChannelMicrofacetBRDF
+
+    bm = M.BRDFMetrics(load("synthetic:plastic-beckmann"))
+    sgd = PerChannelMicrofacetBRDF([dict(distribution=SGD(0.1 + 0.1 * c, 1.3), rho_d=0.1,
+                                         rho_s=0.5, F0=0.2, F1=0.05) for c in range(3)])
+    fits = [load("synthetic:gold-ggx"), sgd]
+    assert all(hd_through_directions(f) for f in fits)
+    assert not hd_through_directions(NPFBivariateBRDF(np.ones((90, 90, 3))))
+    cached = [bm._grid_metric_values(f) for f in fits]
+    assert bm._grid_directions is not None
+    monkeypatch.setattr(M, "hd_through_directions", lambda brdf: False)
+    for f, (grid, samples) in zip(fits, cached):
+        grid_hd, samples_hd = bm._grid_metric_values(f)
+        assert np.array_equal(grid, grid_hd, equal_nan=True)
+        assert np.array_equal(samples, samples_hd, equal_nan=True)
+        assert np.isfinite(samples).all() and samples.max() > 0
