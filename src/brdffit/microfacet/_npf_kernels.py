@@ -39,6 +39,15 @@ def _cosines(th, td, pd):  # pragma: no cover  (compiled by numba)
     return a - b, a + b
 
 
+def _cosines_or_zero(th, td, pd, out, s):  # pragma: no cover  (compiled by numba)
+    """``(visible, cos θi, cos θo)`` of sample ``s``; ``out[s]`` = 0 where not visible."""
+    ci, co = _cosines(th, td, pd)
+    visible = ci > 0.0 and co > 0.0
+    if not visible:
+        out[s, 0] = out[s, 1] = out[s, 2] = 0.0
+    return visible, ci, co
+
+
 def _u_h(th):  # pragma: no cover  (compiled by numba)
     return np.sqrt(min(max(th, 0.0), _HALF_PI) / _HALF_PI) * 90
 
@@ -51,9 +60,8 @@ def microfacet_hd(D, F, G_ext, rho_d, rho_s, th, td, pd, out):  # pragma: no cov
     """Eq. 3: ``ρd + ρs D(θh) F(θd) G(θi) G(θo) / (cos θi cos θo)``; ``G_ext`` is G with
     the 90° knot (0) appended."""
     for s in range(th.shape[0]):
-        ci, co = _cosines(th[s], td[s], pd[s])
-        if not (ci > 0.0 and co > 0.0):
-            out[s, 0] = out[s, 1] = out[s, 2] = 0.0
+        visible, ci, co = _cosines_or_zero(th[s], td[s], pd[s], out, s)
+        if not visible:
             continue
         uh, ud = _u_h(th[s]), _u_d(td[s])
         ui = min(max(np.arccos(min(max(ci, -1.0), 1.0)), 0.0), _HALF_PI) * _DEG
@@ -69,9 +77,8 @@ def naive_hd(D, F, H, rho_d, rho_s, th, td, pd, out):  # pragma: no cover
     """Eq. 4: ``ρd + ρs D(θh) F(θd) H(φd)``, H periodic over [0, π)."""
     n_h = H.shape[0]
     for s in range(th.shape[0]):
-        ci, co = _cosines(th[s], td[s], pd[s])
-        if not (ci > 0.0 and co > 0.0):
-            out[s, 0] = out[s, 1] = out[s, 2] = 0.0
+        visible, ci, co = _cosines_or_zero(th[s], td[s], pd[s], out, s)
+        if not visible:
             continue
         uh, ud = _u_h(th[s]), _u_d(td[s])
         u = np.mod(np.mod(pd[s], np.pi) / (np.pi / n_h), n_h)
@@ -89,9 +96,8 @@ def bivariate_hd(B, th, td, pd, out):  # pragma: no cover
     """Eq. 5: ``B(θh, θd)``, bilinear on the (θ'h, θd) grid."""
     nh, nd = B.shape[0], B.shape[1]
     for s in range(th.shape[0]):
-        ci, co = _cosines(th[s], td[s], pd[s])
-        if not (ci > 0.0 and co > 0.0):
-            out[s, 0] = out[s, 1] = out[s, 2] = 0.0
+        visible, ci, co = _cosines_or_zero(th[s], td[s], pd[s], out, s)
+        if not visible:
             continue
         uh = min(max(_u_h(th[s]), 0.0), nh - 1.0)
         ud = min(max(_u_d(td[s]), 0.0), nd - 1.0)
@@ -107,6 +113,7 @@ def bivariate_hd(B, th, td, pd, out):  # pragma: no cover
 if _numba is not None:
     _inline = _numba.njit(cache=True, nogil=True, inline="always")
     _lerp_at, _cosines, _u_h, _u_d = (_inline(f) for f in (_lerp_at, _cosines, _u_h, _u_d))
+    _cosines_or_zero = _inline(_cosines_or_zero)
     microfacet_hd, naive_hd, bivariate_hd = (_numba.njit(cache=True, nogil=True)(f)
                                              for f in (microfacet_hd, naive_hd, bivariate_hd))
 
