@@ -5,8 +5,9 @@ travels through the scheduler), fits the model, saves the fit and computes BRDF-
 then writes its record; everything is written atomically, the record last, so a record on disk
 means the task's outputs are complete. The fit tasks are fed to the workers one per thread at
 a time, the next task of a material to the thread that ran its previous one, so that a worker
-loads and prepares a material once (:class:`_FitFeeder`). Output layout (``<material>`` and ``<model>`` are
-:func:`brdffit.paths.slug` of the names; records and the report keep the readable names)::
+loads and prepares a material once (:class:`_FitFeeder`). Output layout (``<material>`` and
+``<model>`` are :func:`brdffit.paths.slug` of the names; records and the report keep the
+readable names)::
 
     OUT/fits/<material>/<model>.npz       the fitted model (brdffit fit file)
     OUT/records/<material>/<model>.json   status, metrics, parameters, timings, task key,
@@ -976,8 +977,8 @@ def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed, lo
     def feed(after: str | None = None) -> list:
         """Fit tasks for the threads without one (``after``: the material of the task that
         just ended, whose thread is free; new workers' threads get new materials)."""
-        sent = []
-        while in_flight[0] < _threads(client):
+        sent, threads = [], _threads(client)       # (one call to the scheduler)
+        while in_flight[0] < threads:
             t = feeder.next(after)
             if t is None:
                 break
