@@ -341,8 +341,9 @@ class MicrofacetBRDF(BRDF, SerializableModel):
         """``f_r(wi, wo)`` (Dupuy 2015 Eq. 1 + ρd/π), RGB, 0 below the horizon."""
         wi, wo = _as_dirs(wi, wo)
         h, cos_d, ok = half_vectors(wi, wo)
+        # a new array, not *=: user Fresnels may return read-only arrays
         f = self._fresnel(cos_d) * self._specular(wi, wo, h, cos_d, ok)[..., None]
-        if self.diffuse is not None:                      # (user Fresnels may be read-only)
+        if self.diffuse is not None:
             f += np.where(ok, 1.0, 0.0)[..., None] * (self.diffuse / np.pi)
         return f
 
