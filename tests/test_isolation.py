@@ -123,3 +123,30 @@ def test_a_call_the_child_cannot_load_is_not_sendable_and_the_child_goes_on(monk
         with pytest.raises(NotSendable, match="cannot load the call"):
             child.call(operator.eq, _OnlyHere(), 1)
         assert child.call(operator.add, 1, 2) == 3 and child.starts == 1
+
+
+_STATE = {}
+
+
+def _remember(x):
+    _STATE["x"] = x
+
+
+def _recall():
+    return _STATE.get("x"), os.getpid()
+
+
+def test_reinit_runs_the_new_init_in_the_running_child_and_a_new_child_replays_it():
+    with IsolatedProcess(init=[(_remember, (1,), {})]) as child:
+        assert child.call(_recall)[0] == 1 and child.running
+        pid = child.call(_recall)[1]
+        child.reinit([(_remember, (2,), {})])
+        assert child.call(_recall) == (2, pid) and child.starts == 1
+        with pytest.raises(ChildCrashed):
+            child.call(_segfault)
+        assert not child.running
+        child.reinit([(_remember, (3,), {})])     # no child: made at the next start
+        assert child.call(_recall)[0] == 3 and child.starts == 2
+        with pytest.raises(ValueError, match="init failed"):
+            child.reinit([(_init_fails, (), {})])  # a child whose init fails is not kept
+        assert not child.running

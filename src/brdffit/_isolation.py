@@ -11,7 +11,9 @@ Calls are ``fn(*args, **kwargs)`` with a module-level function and picklable arg
 results (a call that does not pickle is :class:`NotSendable`, raised before anything is sent;
 pickle, not JSON: the child is our own code, started by us, talking over a private
 pipe); the child gets the parent's ``sys.path`` so that it can import what the parent
-can. A child keeps module state between calls (e.g. a renderer built by an ``init`` call).
+can. A child keeps module state between calls (e.g. a renderer built by an ``init`` call);
+:meth:`IsolatedProcess.reinit` gives a running child new ``init`` calls (one child serves
+one piece of work after another).
 :attr:`IsolatedProcess.cpu_seconds` adds up the child's CPU time of the calls
 that returned (the parent's ``time.process_time`` does not see it). The child's stdout is redirected to its stderr, so nothing it prints can corrupt the pipe;
 its stderr is the parent's. Progress events (:mod:`brdffit.progress`) reported in the child
@@ -140,6 +142,25 @@ class IsolatedProcess:
         except BaseException:  # never keep a child whose init did not run: the next call
             self.close()       # starts a new one
             raise
+
+    @property
+    def running(self) -> bool:
+        """A child is up (it has not crashed nor been closed)."""
+        return self._proc is not None
+
+    def reinit(self, init=()) -> None:
+        """Replace the ``init`` calls and make them now in the running child (a new child
+        makes them at its start); a child whose new init dies or raises is closed."""
+        with self._lock:
+            self.init = list(init)
+            if self._proc is None:
+                return
+            try:
+                for fn, args, kwargs in self.init:
+                    self._call(fn, args, kwargs)
+            except BaseException:
+                self.close()
+                raise
 
     def close(self) -> None:
         """Stop the child (it exits when its input closes)."""

@@ -199,3 +199,32 @@ def test_compare_with_mitsuba_reports_psnr_se(tmp_path):
     m = next(m for m in saved["models"] if m["name"] == "near")
     assert {"psnr", "psnr_se", "scenes"} <= set(m) and m["scenes"][0]["scene"] == "sphere-env"
     assert "proposal" in saved and saved["proposal"]["cosine_weight"] > 0
+
+
+@needs_mitsuba
+@pytest.mark.render
+def test_consecutive_comparisons_of_a_thread_share_one_renderer_child(tmp_path):
+    """The second comparison of a thread renders in the first one's child (its kernels
+    compiled), with the same figures as in a new child; ``render_cpu_seconds`` counts the
+    child's CPU of that comparison only."""
+    from brdffit.evaluation import scene_engines as se
+    from brdffit.evaluation.compare import compare
+
+    def run(ref, out):
+        return compare(ref, {"near": _ggx(0.22)}, out, scenes="sphere-env", spp=16,
+                       batches=2, resolution=32, brdf_metrics=())
+
+    ref_a, ref_b = _ggx(0.2), _ggx(0.3)
+    ref_a.name, ref_b.name = "crn-a", "crn-b"
+    run(ref_a, tmp_path / "a")
+    child, uses, _ = se._RENDERER_CHILD.slot
+    assert uses == 1 and child.running and child.init == []
+    before = child.cpu_seconds
+    second = run(ref_b, tmp_path / "b")
+    assert se._RENDERER_CHILD.slot[0] is child and child.starts == 1
+    assert child.cpu_seconds - before <= second["timing"]["render_cpu_seconds"] < child.cpu_seconds
+    se._RENDERER_CHILD.slot = (None, 0, None)     # a new child for the same comparison
+    child.close()
+    fresh = run(ref_b, tmp_path / "c")
+    assert se._RENDERER_CHILD.slot[0] is not child
+    assert [m["psnr"] for m in fresh["models"]] == [m["psnr"] for m in second["models"]]

@@ -18,6 +18,9 @@ Mitsuba engines also ``proposal_dict``, and :class:`IsolatedCRNEngine` ``close()
 
 from __future__ import annotations
 
+import os
+import sys
+import threading
 import time
 import traceback
 from typing import Mapping
@@ -216,6 +219,7 @@ def _child_engine_init(reference, models: Mapping, mat_name: str) -> None:
     """In the renderer's child process: build the :class:`CRNEngine` that the following
     :func:`_child_engine_call` use."""
     global _CHILD_ENGINE
+    _CHILD_ENGINE = None
     records = [{"name": label, "status": "ok"} for label in models]
     _CHILD_ENGINE = CRNEngine(reference, models, records, lambda msg: report(stage=msg),
                                mat_name)
@@ -232,25 +236,58 @@ def _child_engine_call(method: str, *args):
     return getattr(_CHILD_ENGINE, method)(*args)
 
 
+def _child_engine_release() -> None:
+    """In the renderer's child process: drop the engine (its tables), keep the process."""
+    global _CHILD_ENGINE
+    _CHILD_ENGINE = None
+
+
+#: comparisons one renderer child serves before a new child replaces it (it keeps Dr.Jit's
+#: compiled kernels and the loaded scenes between them; the bound caps whatever else it
+#: accumulates)
+RENDERER_CHILD_USES = 32
+_RENDERER_CHILD = threading.local()
+
+
+def _renderer_child() -> IsolatedProcess:
+    """This thread's renderer child (one per thread: concurrent comparisons never share
+    one), replaced after :data:`RENDERER_CHILD_USES` comparisons and when the environment
+    or ``sys.path`` it was started with changed (they configure the renderer)."""
+    setting = (sorted(os.environ.items()), list(sys.path))
+    child, uses, started_with = getattr(_RENDERER_CHILD, "slot", (None, 0, None))
+    if child is None or uses >= RENDERER_CHILD_USES or started_with != setting:
+        if child is not None:
+            child.close()
+        child, uses = IsolatedProcess("the renderer", track_stages=False), 0
+    _RENDERER_CHILD.slot = (child, uses + 1, setting)
+    return child
+
+
 class IsolatedCRNEngine:
     """:class:`CRNEngine` in a child process (:class:`brdffit._isolation.IsolatedProcess`):
     a renderer that dies from a signal fails the scene it was rendering, with one line
     (``the renderer crashed (SIGSEGV) while rendering knot-courtyard for gold-ggx``), and the
-    next scene starts a new child. Same interface as :class:`CRNEngine`."""
+    next scene starts a new child. The child is the thread's (:func:`_renderer_child`), kept
+    for its next comparison with its compiled kernels. Same interface as :class:`CRNEngine`;
+    ``child_cpu_seconds``: the child's CPU time for this engine."""
 
     def __init__(self, reference, models: Mapping, records, say, mat_name):
         self.mat_name, self.say = mat_name, say
         say(f"{mat_name}: preparing the renderer (evaluators, proposal)")
-        self.child = IsolatedProcess("the renderer", track_stages=False,
-                                     init=[(_child_engine_init, (reference, dict(models),
-                                                                 mat_name), {})])
+        self.child = _renderer_child()
+        self._cpu0 = self.child.cpu_seconds
         self.child.stage = f"preparing the renderer for {mat_name}"
+        self.child.reinit([(_child_engine_init, (reference, dict(models), mat_name), {})])
         info = self.child.call(_child_engine_info)
         by = {r["name"]: r for r in records}
         for rec in info["records"]:
             by[rec["name"]].update(rec)
         self.labels, self.proposal_dict = info["labels"], info["proposal_dict"]
         self.setup_seconds = info["setup_seconds"]
+
+    @property
+    def child_cpu_seconds(self) -> float:
+        return self.child.cpu_seconds - self._cpu0
 
     def _call(self, stage: str, method: str, *args):
         self.child.stage = stage
@@ -269,13 +306,18 @@ class IsolatedCRNEngine:
                           spec, ref_stack, mask, resolution, seed)
 
     def close(self) -> None:
-        self.child.close()
+        """Drop the engine in the child; the child stays for the thread's next comparison."""
+        self.child.init = []
+        if self.child.running:
+            try:
+                self.child.call(_child_engine_release)
+            except ChildCrashed:  # the next comparison starts a new child
+                pass
 
 
 def cpu_seconds(engine) -> float:
     """CPU time of this process and of the engine's renderer child (if any)."""
-    child = getattr(getattr(engine, "child", None), "cpu_seconds", 0.0)
-    return time.process_time() + child
+    return time.process_time() + getattr(engine, "child_cpu_seconds", 0.0)
 
 
 def make_engine(reference, models: Mapping, records, say, mat_name, isolate: bool):
