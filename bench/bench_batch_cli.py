@@ -10,7 +10,10 @@ fit times, convergence and status from ``OUT/records``. The projection to the wh
 is ``N ×`` the wall time (the sample is every N-th of the alphabetical list). With
 ``--reference DIR`` (an earlier run of the same command) the per-model fit times and the NPF
 objectives are compared material by material. Writes ``bench/results/batch_cli.json`` (the
-newest run, whatever its ``--every``).
+newest run without renders, whatever its ``--every``) or, with ``--render``,
+``bench/results/batch_cli_render.json`` (with the render tasks' wall and CPU times: the CPU
+of each comparison's renders, measured by the report, and of the whole task's process tree
+is the batch's; see ``docs/design/batch.md``).
 """
 
 from __future__ import annotations
@@ -73,8 +76,16 @@ def per_render(out: Path) -> dict:
         for model, m in (r.get("models") or {}).items():
             if m.get("psnr") is not None:
                 psnr.setdefault(model, []).append(m["psnr"])
+    render_cpu = []
+    for r in recs:
+        page = out / r.get("report_page", "")
+        result = page.parent / "result.json" if r.get("report_page") else None
+        if result is not None and result.is_file():
+            render_cpu.append(json.loads(result.read_text()).get("timing", {})
+                              .get("render_cpu_seconds"))
     return {"n": len(recs), "status": status,
             "task_wall_s": _stats(r.get("wall_time_s") for r in recs),
+            "render_cpu_s": _stats(render_cpu),
             "psnr_db": {m: _stats(v) for m, v in sorted(psnr.items())}}
 
 
@@ -131,7 +142,8 @@ def main() -> int:
     for m in pm.values():
         m.pop("objective", None)
     print(json.dumps(result, indent=1))
-    with atomic_write(ROOT / "bench" / "results" / "batch_cli.json", "w") as fh:
+    name = "batch_cli_render.json" if args.render else "batch_cli.json"
+    with atomic_write(ROOT / "bench" / "results" / name, "w") as fh:
         json.dump(result, fh, indent=1)
     return 0
 

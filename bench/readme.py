@@ -180,8 +180,10 @@ BENCHMARKS = (
     Entry("batch", "batch throughput with 1 and 2 Dask workers; `--full`: a whole-database "
           "run's records", "bench/bench_batch.py [--limit 8]", ("batch.json", "batch_full.json"),
           lambda r: f"2 workers / 1: × {r['speedup_2_over_1']:.2f}"),
-    Entry("batch_cli", "one `brdffit batch` invocation, every model, every N-th MERL material",
-          "bench/bench_batch_cli.py --every 5 --out runs/db20", ("batch_cli.json",),
+    Entry("batch_cli", "one `brdffit batch` invocation, every model, every N-th MERL material;"
+          " `--render`: with the four-scene renders (`batch_cli_render.json`)",
+          "bench/bench_batch_cli.py --every 5 --out runs/db20 [--render]",
+          ("batch_cli.json", "batch_cli_render.json"),
           lambda r: f"{len(r['materials'])} materials in {r['wall_s'] / 60:.1f} min; 100 "
                     f"projected {r['projected_all_materials_wall_h'] * 60:.0f} min"),
 )
