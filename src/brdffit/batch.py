@@ -84,7 +84,7 @@ from .progress import describe, listening
 from .batch_summary import COLUMNS, RECOMMENDATION_RULE, summary_rows
 from .evaluation.compare import Comparison, finish, prepare
 from .evaluation.metrics import BRDFMetrics
-from .evaluation.report import write_index, write_material_page, write_result
+from .evaluation.report import write_index
 from .export import report_exports
 from .fit.registry import fit_model, is_isotropic_only, model_params
 from .io import find_data_file, resolve_spec
@@ -518,6 +518,17 @@ def compare_with_exports(source, models, out_dir, **options) -> dict:
     return finish(comparison)
 
 
+def _measured_by_fit_task(rec: dict) -> dict:
+    """What a fit task's record measured of its fit, as a comparison's ``measured`` entry:
+    the BRDF-space metrics and the validity checks (its ``warnings``)."""
+    out = {}
+    if isinstance(rec.get("metrics"), dict):
+        out["brdf"] = rec["metrics"]
+    if isinstance(rec.get("warnings"), list):
+        out["validity"] = rec["warnings"]
+    return out
+
+
 def run_render_task(task: RenderTask, out_dir, *after) -> dict:
     """Render one material's reference and saved fits and write its report page.
 
@@ -529,14 +540,13 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
     record = _base_record(task)
     t0 = time.perf_counter()
     try:
-        models, missing, fit_metrics = {}, [], {}
+        models, missing, measured = {}, [], {}
         for model, key in task.fits:
             fit_task = Task(task.material, task.spec, model)
             rec, _ = _read_record(fit_task.record_path(out))
             if rec is not None and rec["status"] == "ok" and rec.get("key") == key:
                 models[model] = str(fit_task.fit_path(out))
-                if isinstance(rec.get("metrics"), dict):
-                    fit_metrics[model] = rec["metrics"]
+                measured[model] = _measured_by_fit_task(rec)
             else:
                 missing.append(model)
         record["missing_fits"] = missing
@@ -545,13 +555,7 @@ def run_render_task(task: RenderTask, out_dir, *after) -> dict:
             result = compare_with_exports(
                 load(task.spec), models, out / "report", name=task.material,
                 scenes=st.scenes, spp=st.spp, batches=st.batches, resolution=st.resolution,
-                seed=st.seed, save_fits=False, update_index=False,
-                brdf_metrics=(() if len(fit_metrics) == len(models) else BRDFMetrics.ALL))
-        if len(fit_metrics) == len(models):  # the fit tasks measured them already: reuse
-            for m in result["models"]:
-                m["brdf"] = fit_metrics.get(m["name"], m.get("brdf"))
-            write_result(out / "report" / result["slug"], result)
-            write_material_page(out / "report", result)
+                seed=st.seed, save_fits=False, update_index=False, measured=measured)
         record["report_page"] = f"report/{result['slug']}/index.html"
         record["scenes"] = [sc.get("name", sc) if isinstance(sc, dict) else sc
                             for sc in result.get("scenes", [])]

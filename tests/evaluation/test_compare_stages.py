@@ -114,3 +114,28 @@ def test_compare_many_runs_the_given_function(tmp_path):
     assert seen == [False, False]
     assert out[0]["models"][0]["status"] == "ok" and "error" in out[1]
     assert (tmp_path / "index.html").is_file()
+
+
+def test_figures_measured_elsewhere_are_taken_as_they_are(tmp_path, monkeypatch):
+    """``measured``: a model's given BRDF metrics and validity list are the result's; the
+    model without given figures is measured (the reference prepared for it only)."""
+    given = {"brdf": {"cos_rel_error": 0.125}, "validity": [{"check": "albedo", "value": 1.5}]}
+    prepared = []
+    real = C.M.BRDFMetrics
+
+    def counting(*args, **kwargs):
+        prepared.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(C.M, "BRDFMetrics", counting)
+    res = C.compare(_ref(), {"lambert": Lambert([0.3, 0.25, 0.2]), "exact": Phongish(30)},
+                    tmp_path, measured={"lambert": given}, **_FAST)
+    by = {m["name"]: m for m in res["models"]}
+    assert by["lambert"]["brdf"] == given["brdf"]
+    assert by["lambert"]["validity"] == given["validity"]
+    assert by["exact"]["validity"] == [] and "cos_rel_error" in by["exact"]["brdf"]
+    assert len(prepared) == 1
+    prepared.clear()
+    C.compare(_ref(), {"lambert": Lambert([0.3, 0.25, 0.2])}, tmp_path / "b",
+              measured={"lambert": given}, **_FAST)
+    assert prepared == []

@@ -176,6 +176,11 @@ class CompareOptions:
         prepared once).
     fit_options : mapping, optional
         Per-model keyword arguments of the fitters.
+    measured : mapping, optional
+        Per model label, figures of that model measured elsewhere (a batch's fit tasks),
+        taken as they are instead of being measured again: ``"brdf"`` (its BRDF-space
+        metrics, as :meth:`.metrics.BRDFMetrics.evaluate` returns them) and ``"validity"``
+        (its :func:`.validity.check_validity` list, as dictionaries).
     save_fits : bool
         Save each fitted model to ``<slug>/fits/<label>.npz``, linked from the page.
     write_exr : bool or "reference"
@@ -209,6 +214,7 @@ class CompareOptions:
     brdf_metric_samples: int = 1 << 16
     brdf_metrics: Sequence[str] = M.BRDFMetrics.ALL
     fit_options: Mapping[str, Mapping] | None = None
+    measured: Mapping[str, Mapping] | None = None
     save_fits: bool = True
     write_exr: bool | str = "reference"
     renderer: Callable | None = None
@@ -380,6 +386,7 @@ def resolve_comparison(source, models: Sequence | Mapping = DEFAULT_MODELS, out_
     mat_name = name or getattr(reference, "name", None) or (material or str(source))
     opts.render_options = dict(opts.render_options or {})
     opts.fit_options = dict(opts.fit_options or {})
+    opts.measured = dict(opts.measured or {})
     specs, notes = scene_suite(opts.scene if opts.scene is not None else opts.scenes,
                                opts.render_options.get("envmap"))
     rendered = opts.spp_batch * opts.batch_count
@@ -440,11 +447,13 @@ def _obtain_model(c: Comparison, label: str, what, rec: dict):
     return model
 
 
-def _describe_model(rec: dict, model) -> None:
-    """The model's class, parameters, validity checks and, for a fit, how it went."""
+def _describe_model(rec: dict, model, measured: Mapping) -> None:
+    """The model's class, parameters, validity checks (``measured["validity"]`` when given)
+    and, for a fit, how it went."""
     rec["model_class"] = type(model).__name__
     rec["params"] = model_params(model)
-    rec["validity"] = [v.as_dict() for v in check_validity(model)]
+    rec["validity"] = (list(measured["validity"]) if "validity" in measured
+                       else [v.as_dict() for v in check_validity(model)])
     info = getattr(model, "fit_info", None)
     if info:
         rec["fit_info"] = small_json(dict(info))
@@ -477,7 +486,7 @@ def fit_models(c: Comparison) -> Comparison:
             if model is None:
                 continue
             c.fitted[label] = model
-            _describe_model(rec, model)
+            _describe_model(rec, model, c.options.measured.get(label, {}))
             if c.options.save_fits and rec["origin"] == "fitted":
                 _save_model(c, label, model, rec)
         except Exception as exc:  # noqa: BLE001 – one failing model must not sink the report
@@ -716,11 +725,15 @@ def _summarize_model(rec: dict, entries: list[dict]) -> bool:
 
 def measure_models(c: Comparison) -> Comparison:
     """Each rendered model's summary over the scenes (:func:`_summarize_model`) and its
-    BRDF-space metrics (:class:`.metrics.BRDFMetrics`, the reference prepared once; an error
-    is recorded in ``brdf["errors"]``)."""
+    BRDF-space metrics (those of ``options.measured``, or :class:`.metrics.BRDFMetrics` with
+    the reference prepared once; an error is recorded in ``brdf["errors"]``)."""
     bm = None
     for rec in c.records:
         if rec["status"] != "ok" or not _summarize_model(rec, c.scene_entries[rec["name"]]):
+            continue
+        known = c.options.measured.get(rec["name"], {})
+        if "brdf" in known:
+            rec["brdf"] = known["brdf"]
             continue
         try:
             if bm is None:
