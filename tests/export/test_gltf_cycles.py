@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from brdffit.export.gltf import GLTFBRDF, gltf_equivalent
-from brdffit.export.gltf_cycles import CyclesPrincipledBRDF
+from brdffit.export.gltf_cycles import (_MU_NODES, CyclesPrincipledBRDF, _lambda, _Lobe,
+                                         _lobe_tables_kernel)
 from brdffit.microfacet import GGX, DielectricFresnel, MicrofacetBRDF, SchlickFresnel
 
 
@@ -99,3 +100,38 @@ def test_equivalent_engine_is_checked_and_coats_are_layered():
     assert np.all(coated.eval(wi, wo)[off] <= bare.eval(wi, wo)[off] + 1e-12)
     with pytest.raises(ValueError, match="anisotropy"):
         CyclesPrincipledBRDF([0.5, 0.5, 0.5], 0.0, 0.4, anisotropy_strength=0.5)
+
+
+def _lobe_tables_per_node(lobe, n):
+    """The lobe's ``(E, S)`` node by node: one VNDF quadrature per μ, written out."""
+    u = (np.arange(n) + 0.5) / n
+    U1, U2 = (x.ravel() for x in np.meshgrid(u, u, indexing="ij"))
+    E, S = [], []
+    for mu in _MU_NODES:
+        wo = np.array([[np.sqrt(1.0 - mu * mu), 0.0, mu]])
+        h = lobe._sample_visible_normals(wo, U1, U2)[0]
+        c = h @ wo[0]
+        wi_z = 2.0 * c * h[:, 2] - mu
+        g2 = 1.0 / (1.0 + _lambda(lobe.alpha, wi_z) + _lambda(lobe.alpha, mu))
+        w = np.where(wi_z > 0, g2 * (1.0 + _lambda(lobe.alpha, mu)), 0.0)
+        E.append(w.mean())
+        S.append((w * lobe.s(c)).mean() / w.mean() if lobe.eta else 0.0)
+    return np.array(E), np.array(S)
+
+
+@pytest.mark.parametrize("alpha, eta", [(0.0225, 1.5), (0.3, 1.5), (0.8, 2.4), (0.5, None),
+                                        (1e-5, 1.01)])
+def test_lobe_tables_kernel_and_numpy_agree_with_the_quadrature_per_node(alpha, eta):
+    """The compiled kernel and the NumPy pass (all nodes at once) give the tables of the
+    per-node quadrature to rounding."""
+    lobe = _Lobe(alpha, eta, n=32)
+    u = (np.arange(32) + 0.5) / 32
+    want_E, want_S = _lobe_tables_per_node(lobe, 32)
+    E, S = lobe._tables_numpy(u)
+    np.testing.assert_allclose(E, want_E, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(S, want_S, rtol=1e-12, atol=1e-300)
+    kE, kS = np.empty(_MU_NODES.size), np.empty(_MU_NODES.size)
+    _lobe_tables_kernel(lobe.alpha, float(eta or 0.0), _MU_NODES, u, kE, kS)
+    np.testing.assert_allclose(kE, want_E, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(kS, want_S, rtol=1e-12, atol=1e-300)
+    assert np.all((E > 0) & (E <= 1.0 + 1e-12))

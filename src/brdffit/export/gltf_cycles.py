@@ -46,8 +46,11 @@ from functools import lru_cache
 
 import numpy as np
 
+from .._jit import lazy_numba
 from ..brdf import _as_dirs
 from .gltf_brdf import GLTFBRDF
+
+_numba = lazy_numba()
 
 __all__ = ["CyclesPrincipledBRDF"]
 
@@ -81,6 +84,85 @@ def _lambda(alpha: float, mu):
     return 0.5 * (-1.0 + np.sqrt(1.0 + alpha * alpha * (1.0 / (mu * mu) - 1.0)))
 
 
+def _lobe_tables_kernel(alpha, eta, nodes, u, E, S):  # pragma: no cover  (compiled by numba)
+    """:class:`_Lobe`'s tables, one pass per sample: ``E[m]`` and ``S[m]`` at ``μ = nodes[m]``
+    from the VNDF samples of the stratified grid ``u × u`` (the same operations as
+    :meth:`_Lobe._tables_numpy`, summed in order rather than pairwise); ``eta`` 0: no index
+    (``S`` = 0)."""
+    n = u.size
+    p1 = np.empty(n * n)
+    q2 = np.empty(n * n)
+    q1 = np.empty(n * n)
+    for i in range(n):
+        r = np.sqrt(u[i])
+        for j in range(n):
+            phi = 2.0 * np.pi * u[j]
+            p1[i * n + j] = r * np.cos(phi)
+            q2[i * n + j] = r * np.sin(phi)
+            q1[i * n + j] = np.sqrt(1.0 - p1[i * n + j] * p1[i * n + j])
+    f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
+    for m in range(nodes.size):
+        mu = nodes[m]
+        wx = np.sqrt(1.0 - mu * mu)
+        vx, vz = alpha * wx, mu
+        norm = np.sqrt(vx * vx + vz * vz)
+        vx, vz = vx / norm, vz / norm
+        if vx * vx > 0:
+            t1x, t1y = -0.0, vx / np.sqrt(vx * vx)
+        else:
+            t1x, t1y = 1.0, 0.0
+        t2x, t2y, t2z = -vz * t1y, vz * t1x, vx * t1y
+        s = 0.5 * (1.0 + vz)
+        lam_o = _lambda_kernel(alpha, mu)
+        g1o = 1.0 / (1.0 + lam_o)
+        e_sum = 0.0
+        s_sum = 0.0
+        for k in range(n * n):
+            a1 = p1[k]
+            a2 = (1.0 - s) * q1[k] + s * q2[k]
+            a3 = np.sqrt(max(0.0, 1.0 - a1 * a1 - a2 * a2))
+            hx = alpha * (a1 * t1x + a2 * t2x + a3 * vx)
+            hy = alpha * (a1 * t1y + a2 * t2y)
+            hz = max(1e-9, a2 * t2z + a3 * vz)
+            hn = np.sqrt(hx * hx + hy * hy + hz * hz)
+            hx, hz = hx / hn, hz / hn
+            c = hx * wx + hz * mu
+            wi_z = 2.0 * c * hz - mu
+            if wi_z <= 0:
+                continue
+            w = (1.0 / (1.0 + _lambda_kernel(alpha, wi_z) + lam_o)) / g1o
+            e_sum += w
+            if eta > 0:
+                s_sum += w * min(max((_fresnel_kernel(c, eta) - f0) / (1.0 - f0), 0.0), 1.0)
+        E[m] = e_sum / (n * n)
+        S[m] = s_sum / (n * n) / max(E[m], 1e-300)
+
+
+def _lambda_kernel(alpha, mu):  # pragma: no cover  (compiled by numba)
+    """:func:`_lambda` of one cosine."""
+    mu = min(max(mu, 1e-9), 1.0)
+    return 0.5 * (-1.0 + np.sqrt(1.0 + alpha * alpha * (1.0 / (mu * mu) - 1.0)))
+
+
+def _fresnel_kernel(c, eta):  # pragma: no cover  (compiled by numba)
+    """:func:`_fresnel_dielectric` of one cosine."""
+    c = min(max(abs(c), 0.0), 1.0)
+    g2 = eta * eta - 1.0 + c * c
+    if g2 <= 0:
+        return 1.0
+    g = np.sqrt(g2)
+    a = (g - c) / (g + c)
+    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    f = 0.5 * a * a * (1.0 + b * b)
+    return 1.0 if np.isnan(f) else f
+
+
+if _numba is not None:
+    _inline = _numba.njit(cache=True, nogil=True, inline="always")
+    _lambda_kernel, _fresnel_kernel = _inline(_lambda_kernel), _inline(_fresnel_kernel)
+    _lobe_tables_kernel = _numba.njit(cache=True, nogil=True)(_lobe_tables_kernel)
+
+
 class _Lobe:
     """GGX lobe of slope scale ``alpha``: ``dv(wi, wo, h) = D G2 / (4 μi μo)`` and its
     tables in μ: ``E`` (albedo for F = 1), ``E_avg`` and ``s̄`` (the mean of ``s(c)`` for
@@ -90,44 +172,55 @@ class _Lobe:
         self.alpha = max(float(alpha), 1e-4)
         self.eta = eta
         u = (np.arange(n) + 0.5) / n
-        U1, U2 = np.meshgrid(u, u, indexing="ij")
-        U1, U2 = U1.ravel(), U2.ravel()
-        E, S = [], []
-        for mu in _MU_NODES:
-            wo = np.array([np.sqrt(1.0 - mu * mu), 0.0, mu])
-            h = self._sample_visible_normal(wo, U1, U2)
-            c = h @ wo
-            wi = 2.0 * c[:, None] * h - wo
-            ok = wi[:, 2] > 0
-            a = self.alpha
-            g1o = 1.0 / (1.0 + _lambda(a, mu))
-            g2 = 1.0 / (1.0 + _lambda(a, wi[:, 2]) + _lambda(a, mu))
-            w = np.where(ok, g2 / g1o, 0.0)          # f μi / pdf for F = 1 (VNDF sampling)
-            E.append(w.mean())
-            S.append((w * self.s(c)).mean() / max(w.mean(), 1e-300) if eta else 0.0)
-        self.E, self.S = np.array(E), np.array(S)
+        if _numba is not None and _lobe_tables_kernel.worth_compiling(_MU_NODES.size * n * n):
+            self.E, self.S = np.empty(_MU_NODES.size), np.empty(_MU_NODES.size)
+            _lobe_tables_kernel(self.alpha, float(eta or 0.0), _MU_NODES, u, self.E, self.S)
+        else:
+            self.E, self.S = self._tables_numpy(u)
         mu = np.linspace(0.0, 1.0, 257)
         self.E_avg = float(2.0 * np.trapezoid(np.interp(mu, _MU_NODES, self.E) * mu, mu))
 
-    def _sample_visible_normal(self, wo, u1, u2):
-        """Heitz 2018, "Sampling the GGX Distribution of Visible Normals" (isotropic)."""
+    def _tables_numpy(self, u):
+        """``(E, S)`` at the nodes :data:`_MU_NODES` by quadrature over the VNDF samples of the
+        stratified grid ``u × u`` (all nodes in one pass)."""
+        U1, U2 = np.meshgrid(u, u, indexing="ij")
+        mu = _MU_NODES[:, None]                                 # (32, 1) × n² samples
+        wo = np.stack([np.sqrt(1.0 - _MU_NODES**2), np.zeros_like(_MU_NODES), _MU_NODES], -1)
+        h = self._sample_visible_normals(wo, U1.ravel(), U2.ravel())
+        c = np.einsum("msk,mk->ms", h, wo)
+        wi_z = 2.0 * c * h[..., 2] - mu
         a = self.alpha
-        vh = np.array([a * wo[0], a * wo[1], wo[2]])
-        vh /= np.linalg.norm(vh)
-        lensq = vh[0] ** 2 + vh[1] ** 2
-        t1 = (np.array([-vh[1], vh[0], 0.0]) / np.sqrt(lensq) if lensq > 0
-              else np.array([1.0, 0.0, 0.0]))
+        g1o = 1.0 / (1.0 + _lambda(a, mu))
+        g2 = 1.0 / (1.0 + _lambda(a, wi_z) + _lambda(a, mu))
+        w = np.where(wi_z > 0, g2 / g1o, 0.0)          # f μi / pdf for F = 1 (VNDF sampling)
+        E = w.mean(axis=1)
+        if not self.eta:
+            return E, np.zeros_like(E)
+        return E, (w * self.s(c)).mean(axis=1) / np.maximum(E, 1e-300)
+
+    def _sample_visible_normals(self, wo, u1, u2):
+        """Heitz 2018, "Sampling the GGX Distribution of Visible Normals" (isotropic): the
+        normals ``(m, s, 3)`` of the samples ``(u1, u2)`` (s) for each of the directions
+        ``wo`` (m, 3)."""
+        a = self.alpha
+        vh = np.stack([a * wo[:, 0], a * wo[:, 1], wo[:, 2]], -1)
+        vh /= np.linalg.norm(vh, axis=1, keepdims=True)
+        lensq = vh[:, 0] ** 2 + vh[:, 1] ** 2
+        safe = np.sqrt(np.where(lensq > 0, lensq, 1.0))
+        t1 = np.where((lensq > 0)[:, None],
+                      np.stack([-vh[:, 1], vh[:, 0], np.zeros_like(lensq)], -1) / safe[:, None],
+                      np.array([1.0, 0.0, 0.0]))
         t2 = np.cross(vh, t1)
         r = np.sqrt(u1)
         phi = 2.0 * np.pi * u2
         p1 = r * np.cos(phi)
         p2 = r * np.sin(phi)
-        s = 0.5 * (1.0 + vh[2])
-        p2 = (1.0 - s) * np.sqrt(1.0 - p1 * p1) + s * p2
-        nh = (p1[:, None] * t1 + p2[:, None] * t2
-              + np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))[:, None] * vh)
-        n = np.stack([a * nh[:, 0], a * nh[:, 1], np.maximum(1e-9, nh[:, 2])], -1)
-        return n / np.linalg.norm(n, axis=1, keepdims=True)
+        s = 0.5 * (1.0 + vh[:, 2:3])
+        p2 = (1.0 - s) * np.sqrt(1.0 - p1 * p1) + s * p2          # (m, s)
+        p3 = np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))
+        nh = [p1 * t1[:, k:k + 1] + p2 * t2[:, k:k + 1] + p3 * vh[:, k:k + 1] for k in range(3)]
+        n = np.stack([a * nh[0], a * nh[1], np.maximum(1e-9, nh[2])], -1)
+        return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
     def s(self, c):
         """``s(c)``: the real index's Fresnel rescaled from [F0(η), 1] to [0, 1]."""
