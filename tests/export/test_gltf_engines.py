@@ -10,7 +10,9 @@ import pytest
 
 from brdffit.evaluation.engines import threejs_brdf as TB
 from brdffit.evaluation.metrics import rendered_psnr
-from brdffit.export.gltf import (engine_brdf, gltf_equivalent, gltf_parameters,
+from brdffit.export.gltf import (_engine_fit_gradient, _engine_fit_loss, _engine_fit_vector,
+                                 _fit_to_engines, _with_engine_fit_vector,
+                                 engine_brdf, gltf_equivalent, gltf_parameters,
                                  optimize_for_engines, threejs_dfg_table)
 from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel
 
@@ -136,3 +138,103 @@ def test_the_same_fit_is_optimised_once_per_process(monkeypatch):
     optimize_for_engines(other, rule, engines=("threejs",))
     optimize_for_engines(fit, rule, engines=("blender",))
     assert len(calls) == 4
+
+
+_ENGINE_MATERIALS = [
+    dict(baseColorFactor=[0.9, 0.6, 0.3, 1.0], metallicFactor=1.0, roughnessFactor=0.4),
+    dict(baseColorFactor=[0.2, 0.5, 0.05, 1.0], metallicFactor=0.0, roughnessFactor=0.3,
+         specular={"specularFactor": 0.7, "specularColorFactor": [1.0, 0.8, 0.5], "ior": 2.2}),
+    dict(baseColorFactor=[0.6, 0.1, 0.3, 1.0], metallicFactor=0.3, roughnessFactor=0.5,
+         clearcoat={"clearcoatFactor": 0.5, "clearcoatRoughnessFactor": 0.2}),
+]
+
+
+def _material(d):
+    return dict(d, alpha=d["roughnessFactor"] ** 2, anisotropy=None, notes=[])
+
+
+@pytest.mark.parametrize("engine", ["specification", "blender", "blender-ggx", "threejs"])
+@pytest.mark.parametrize("p", _ENGINE_MATERIALS)
+def test_a_render_channel_depends_on_the_same_base_colour_channel_only(engine, p):
+    """What the engine-aware gradient relies on: stepping base channel c changes channel c
+    of every engine model's values and leaves the others bit for bit (metals, Cycles'
+    max-channel layering, coats included)."""
+    p = _material(p)
+    rng = np.random.default_rng(3)
+    wi, wo = (v / np.linalg.norm(v, axis=1, keepdims=True)
+              for v in np.abs(rng.normal(size=(2, 2000, 3))) + [0, 0, 0.05])
+    f0 = engine_brdf(p, engine).eval(wi, wo)
+    for c in range(3):
+        base = list(p["baseColorFactor"])
+        base[c] += 0.05
+        f1 = engine_brdf(dict(p, baseColorFactor=base), engine).eval(wi, wo)
+        others = [k for k in range(3) if k != c]
+        np.testing.assert_array_equal(f1[:, others], f0[:, others])
+        assert np.any(f1[:, c] != f0[:, c])
+
+
+def test_engine_fit_gradient_is_scipys_forward_difference():
+    """``_engine_fit_gradient`` (three base-colour differences from one render) equals
+    scipy's 2-point difference of the objective with step 1e-4 and the bounds: inside, on
+    the upper bounds (a step back) and with a fixed channel (NaN, as scipy's 0/0)."""
+    from scipy.optimize._numdiff import approx_derivative
+
+    p = _material(_ENGINE_MATERIALS[1])
+    fit = _rough_paint()
+    sphere = TB.SphereSamples("sphere-distant", 12, 2)
+    ref, alpha = sphere.shade(fit)
+    mask = alpha >= 0.999
+    engines = ("specification", "blender", "threejs")
+
+    def mse_channels(q):
+        pp = _with_engine_fit_vector(p, q, True)
+        return np.array([np.mean((sphere.shade(engine_brdf(pp, e))[0][mask] - ref[mask]) ** 2,
+                                 axis=0) for e in engines]) / 3.0
+
+    def loss(q):                            # the objective as one MSE per engine
+        pp = _with_engine_fit_vector(p, q, True)
+        return _engine_fit_loss(np.array([np.mean((sphere.shade(engine_brdf(pp, e))[0][mask]
+                                                   - ref[mask]) ** 2) for e in engines]))
+
+    for q, bounds in (([0.2, 0.5, 0.05, 0.7, 0.3], [(0, 1)] * 5),
+                      ([1.0, 0.4, 1.0, 1.0, 1.0], [(0, 1)] * 5),
+                      ([0.3, 0.0, 0.6, 0.2, 0.45], [(0, 1), (0, 0), (0, 1), (0, 1), (0, 1)])):
+        q, bounds = np.array(q, float), np.array(bounds, float)
+        f, g = _engine_fit_gradient(mse_channels, bounds)(q)
+        with np.errstate(invalid="ignore"):
+            want = approx_derivative(loss, q, method="2-point", abs_step=1e-4,
+                                     bounds=(bounds[:, 0], bounds[:, 1]))
+        assert f == pytest.approx(loss(q), rel=1e-12)
+        np.testing.assert_array_equal(np.isnan(g), np.isnan(want))
+        ok = ~np.isnan(want)
+        np.testing.assert_allclose(g[ok], want[ok], rtol=1e-8, atol=0)
+
+
+@pytest.mark.parametrize("fit", [_rough_paint(),
+                                 MicrofacetBRDF(GGX(0.2), SchlickFresnel([0.9, 0.6, 0.3]),
+                                                diffuse=0.0, name="rough-metal")])
+def test_engine_fit_takes_the_steps_of_lbfgsb_with_scipys_differences(fit):
+    """``_fit_to_engines`` (its own gradient, fixed channels left out) ends where L-BFGS-B
+    with scipy's forward differences of the objective ends, options as documented."""
+    from scipy import optimize
+
+    p = gltf_parameters(fit)
+    sphere = TB.SphereSamples("sphere-distant", 12, 2)
+    ref, alpha = sphere.shade(fit)
+    mask = alpha >= 0.999
+    engines = ("blender", "threejs")
+    q0, has_sp = _engine_fit_vector(p)
+
+    def loss(q):
+        pp = _with_engine_fit_vector(p, q, has_sp)
+        return _engine_fit_loss(np.array([np.mean((sphere.shade(engine_brdf(pp, e))[0][mask]
+                                                   - ref[mask]) ** 2) for e in engines])
+                                / np.max(ref[mask]) ** 2)
+
+    bounds = [(0.0, 0.0) if i < 3 and q0[i] <= 0.0 else (0.0, 1.0) for i in range(len(q0))]
+    want = optimize.minimize(loss, q0, method="L-BFGS-B", bounds=bounds,
+                             options={"maxfun": 200, "maxiter": 40, "eps": 1e-4, "ftol": 1e-4})
+    got = _fit_to_engines(p, sphere, ref, alpha, engines)
+    assert got is not p and "fitted to the renders" in got["notes"][-1]
+    q1, _ = _engine_fit_vector(got)
+    np.testing.assert_allclose(q1, np.clip(want.x, 0, 1), rtol=0, atol=1e-6)

@@ -659,29 +659,99 @@ def _engine_fit_key(ref, alpha, p: dict, engines: tuple, resolution: int) -> str
 
 
 def _fit_to_engines(p: dict, sphere, ref, alpha, engines: tuple) -> dict:
-    """:func:`optimize_for_engines` given the fit's render ``ref`` (and coverage ``alpha``)."""
+    """:func:`optimize_for_engines` given the fit's render ``ref`` (and coverage ``alpha``).
+
+    L-BFGS-B on the forward-difference gradient of step :data:`ENGINE_FIT_STEP`
+    (:func:`_forward_steps`, as scipy takes it); a pixel's channel depends on the base colour's
+    same channel only in every engine model, so one render with all three channels stepped
+    gives their three differences (:func:`_engine_fit_gradient`). As scipy does with its own
+    differences, the parameters fixed by their bounds are left out of the problem, and each
+    difference counts as an evaluation: ``maxfun`` is :data:`ENGINE_FIT_MAXFUN` of those."""
     from scipy import optimize
 
     mask = alpha >= 0.999
     ref_px = ref[mask]
     peak2 = float(np.max(ref_px)) ** 2
-    floor = 10.0 ** (-ENGINE_FIT_CAP_DB / 10.0)
     q0, has_sp = _engine_fit_vector(p)
 
-    def mse_each(q) -> np.ndarray:          # per engine, relative to the fit's peak²
+    def mse_channels(q) -> np.ndarray:      # (engine, channel), relative to the fit's peak²
         pp = _with_engine_fit_vector(p, q, has_sp)
-        return np.array([np.mean((sphere.shade(engine_brdf(pp, e))[0][mask] - ref_px) ** 2)
-                         for e in engines]) / peak2
-
-    def loss(mse) -> float:                 # −(mean capped PSNR)/10
-        return float(np.mean(np.log10(mse + floor)))
+        return np.array([np.mean((sphere.shade(engine_brdf(pp, e))[0][mask] - ref_px) ** 2,
+                                 axis=0) for e in engines]) / (3.0 * peak2)
 
     # a base channel the rule leaves black stays black (the fit has no diffuse there)
-    bounds = [(0.0, 0.0) if i < 3 and q0[i] <= 0.0 else (0.0, 1.0) for i in range(len(q0))]
-    res = optimize.minimize(lambda q: loss(mse_each(q)), q0, method="L-BFGS-B", bounds=bounds,
-                            options={"maxfun": 200, "maxiter": 40, "eps": 1e-4, "ftol": 1e-4})
-    mse0, mse1 = mse_each(q0), mse_each(res.x)
-    return _engine_fit_result(p, engines, res.x, has_sp, mse0, mse1, loss(mse0) - loss(mse1))
+    bounds = np.array([(0.0, 0.0) if i < 3 and q0[i] <= 0.0 else (0.0, 1.0)
+                       for i in range(len(q0))])
+    free = bounds[:, 0] < bounds[:, 1]
+    full = _engine_fit_gradient(mse_channels, bounds)
+
+    def loss_and_gradient(x):               # of the free parameters (scipy drops the fixed)
+        q = q0.copy()
+        q[free] = x
+        f, g = full(q)
+        return f, g[free]
+
+    res = optimize.minimize(loss_and_gradient, q0[free], jac=True, method="L-BFGS-B",
+                            bounds=bounds[free],
+                            options={"maxfun": ENGINE_FIT_MAXFUN // (1 + int(free.sum())),
+                                     "maxiter": 40, "ftol": 1e-4})
+    q1 = q0.copy()
+    q1[free] = res.x
+    mse0, mse1 = mse_channels(q0).sum(1), mse_channels(q1).sum(1)
+    return _engine_fit_result(p, engines, q1, has_sp, mse0, mse1,
+                              _engine_fit_loss(mse0) - _engine_fit_loss(mse1))
+
+
+#: the step of :func:`optimize_for_engines`' forward differences, and its budget of
+#: objective evaluations (each difference counted, as scipy counts them)
+ENGINE_FIT_STEP = 1e-4
+ENGINE_FIT_MAXFUN = 200
+
+
+def _engine_fit_loss(mse) -> float:
+    """The objective of :func:`optimize_for_engines`: −(mean capped PSNR)/10 of the
+    engines' relative MSEs."""
+    return float(np.mean(np.log10(mse + 10.0 ** (-ENGINE_FIT_CAP_DB / 10.0))))
+
+
+def _forward_steps(q, bounds) -> np.ndarray:
+    """scipy's 2-point steps at ``q`` within ``bounds`` (n, 2) (``approx_derivative`` with
+    ``abs_step``): ``+h``; ``−h`` when ``q + h`` leaves the bounds and ``−h`` does not; else
+    the distance to the farther bound (0 for a fixed parameter)."""
+    lower, upper = q - bounds[:, 0], bounds[:, 1] - q
+    h = np.full(q.shape, ENGINE_FIT_STEP)
+    fits = h <= np.maximum(lower, upper)
+    h = np.where(((q + h < bounds[:, 0]) | (q + h > bounds[:, 1])) & fits, -h, h)
+    return np.where(fits, h, np.where(upper >= lower, upper, -lower))
+
+
+def _engine_fit_gradient(mse_channels, bounds):
+    """``q ↦ (loss, gradient)``: :func:`_engine_fit_loss` of ``mse_channels(q)`` (engine,
+    channel) and its forward differences (:func:`_forward_steps`) — the base colour's three
+    from one render with all three stepped (channel c of the engines' renders depends on
+    base channel c only), the others one render each. A fixed parameter's difference is 0/0,
+    NaN as scipy's."""
+    def fun(q):
+        q = np.asarray(q, float)
+        m0 = mse_channels(q)
+        f0 = _engine_fit_loss(m0.sum(1))
+        h = _forward_steps(q, bounds)
+        dx = (q + h) - q
+        grad = np.empty(q.size)
+        stepped = q.copy()
+        stepped[:3] += h[:3]
+        m_base = mse_channels(stepped) if np.any(h[:3] != 0.0) else m0
+        for c in range(3):
+            m = m0.copy()
+            m[:, c] = m_base[:, c]
+            grad[c] = _engine_fit_loss(m.sum(1)) - f0
+        for i in range(3, q.size):
+            stepped = q.copy()
+            stepped[i] += h[i]
+            grad[i] = _engine_fit_loss(mse_channels(stepped).sum(1)) - f0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return f0, grad / dx
+    return fun
 
 
 def _engine_fit_result(p: dict, engines: tuple, q, has_sp: bool, mse0, mse1,
