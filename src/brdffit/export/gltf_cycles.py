@@ -47,7 +47,7 @@ from functools import lru_cache
 import numpy as np
 
 from .._jit import lazy_numba
-from ..brdf import _as_dirs
+from ..brdf import _as_dirs, _dot3, _unit_half
 from .gltf_brdf import GLTFBRDF
 
 _numba = lazy_numba()
@@ -85,10 +85,11 @@ def _lambda(alpha: float, mu):
 
 
 def _lobe_tables_kernel(alpha, eta, nodes, u, E, S):  # pragma: no cover  (compiled by numba)
-    """:class:`_Lobe`'s tables, one pass per sample: ``E[m]`` and ``S[m]`` at ``μ = nodes[m]``
-    from the VNDF samples of the stratified grid ``u × u`` (the same operations as
-    :meth:`_Lobe._tables_numpy`, summed in order rather than pairwise); ``eta`` 0: no index
-    (``S`` = 0)."""
+    """:class:`_Lobe`'s tables ``E[m]`` and ``S[m]`` at ``μ = nodes[m]`` from the VNDF samples
+    of the stratified grid ``u × u``: the operations of :meth:`_Lobe._tables_numpy`, per node
+    a branch-free pass over the samples (NumPy's error model, no division checks: the
+    compiler vectorises it), then the sums in order rather than pairwise; ``eta`` 0: no
+    index (``S`` = 0)."""
     n = u.size
     p1 = np.empty(n * n)
     q2 = np.empty(n * n)
@@ -101,6 +102,8 @@ def _lobe_tables_kernel(alpha, eta, nodes, u, E, S):  # pragma: no cover  (compi
             q2[i * n + j] = r * np.sin(phi)
             q1[i * n + j] = np.sqrt(1.0 - p1[i * n + j] * p1[i * n + j])
     f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
+    w = np.empty(n * n)
+    cos = np.empty(n * n)
     for m in range(nodes.size):
         mu = nodes[m]
         wx = np.sqrt(1.0 - mu * mu)
@@ -115,8 +118,6 @@ def _lobe_tables_kernel(alpha, eta, nodes, u, E, S):  # pragma: no cover  (compi
         s = 0.5 * (1.0 + vz)
         lam_o = _lambda_kernel(alpha, mu)
         g1o = 1.0 / (1.0 + lam_o)
-        e_sum = 0.0
-        s_sum = 0.0
         for k in range(n * n):
             a1 = p1[k]
             a2 = (1.0 - s) * q1[k] + s * q2[k]
@@ -128,12 +129,18 @@ def _lobe_tables_kernel(alpha, eta, nodes, u, E, S):  # pragma: no cover  (compi
             hx, hz = hx / hn, hz / hn
             c = hx * wx + hz * mu
             wi_z = 2.0 * c * hz - mu
-            if wi_z <= 0:
-                continue
-            w = (1.0 / (1.0 + _lambda_kernel(alpha, wi_z) + lam_o)) / g1o
-            e_sum += w
-            if eta > 0:
-                s_sum += w * min(max((_fresnel_kernel(c, eta) - f0) / (1.0 - f0), 0.0), 1.0)
+            lam_i = _lambda_kernel(alpha, wi_z)
+            w[k] = (1.0 / (1.0 + lam_i + lam_o)) / g1o if wi_z > 0 else 0.0
+            cos[k] = c
+        e_sum = 0.0
+        s_sum = 0.0
+        for k in range(n * n):
+            e_sum += w[k]
+        if eta > 0:
+            for k in range(n * n):
+                if w[k] > 0:
+                    s_sum += w[k] * min(max((_fresnel_kernel(cos[k], eta) - f0) / (1.0 - f0),
+                                            0.0), 1.0)
         E[m] = e_sum / (n * n)
         S[m] = s_sum / (n * n) / max(E[m], 1e-300)
 
@@ -158,9 +165,10 @@ def _fresnel_kernel(c, eta):  # pragma: no cover  (compiled by numba)
 
 
 if _numba is not None:
-    _inline = _numba.njit(cache=True, nogil=True, inline="always")
+    _inline = _numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
     _lambda_kernel, _fresnel_kernel = _inline(_lambda_kernel), _inline(_fresnel_kernel)
-    _lobe_tables_kernel = _numba.njit(cache=True, nogil=True)(_lobe_tables_kernel)
+    _lobe_tables_kernel = _numba.njit(cache=True, nogil=True, error_model="numpy")(
+        _lobe_tables_kernel)
 
 
 class _Lobe:
@@ -275,9 +283,8 @@ class CyclesPrincipledBRDF(GLTFBRDF):
     def eval(self, wi, wo) -> np.ndarray:
         wi, wo = _as_dirs(wi, wo)
         ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
-        h = wi + wo
-        h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
-        c = np.abs(np.sum(wo * h, -1))
+        h = _unit_half(wi, wo)
+        c = np.abs(_dot3(wo, h))
         mu = wo[..., 2]
         lobe, m = self.lobe, self.metallic
         dv = lobe.dv(wi, wo, h)[..., None]
@@ -301,7 +308,9 @@ class CyclesPrincipledBRDF(GLTFBRDF):
         else:
             scale_d, dark_d, scale_m = 1.0, 1.0, 1.0
         spec_d = F_d * dv * scale_d
-        layer = np.clip(1.0 - np.max(albedo * dark_d, axis=-1, keepdims=True), 0.0, 1.0)
+        top = albedo * dark_d                # its largest channel, without a reduction
+        top = np.maximum(np.maximum(top[..., 0], top[..., 1]), top[..., 2])[..., None]
+        layer = np.clip(1.0 - top, 0.0, 1.0)
         f = m * F_m * dv * scale_m + (1.0 - m) * (spec_d + layer * self.base_color / np.pi)
         if self.coat is not None:
             cl = self.coat
