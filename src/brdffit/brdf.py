@@ -38,6 +38,19 @@ def _as_dirs(wi, wo) -> tuple[np.ndarray, np.ndarray]:
     return np.broadcast_arrays(wi, wo)
 
 
+def _dot3(a, b) -> np.ndarray:
+    """``a·b`` over the last axis (size 3), summed left to right: the bits of
+    ``np.sum(a * b, -1)`` without numpy's slow reduction over a short axis."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
+def _unit_half(wi, wo) -> np.ndarray:
+    """The half vector ``(wi + wo) / max(|wi + wo|, 1e-300)`` (the norm as
+    ``np.linalg.norm``'s, bit for bit)."""
+    h = wi + wo
+    return h / np.maximum(np.sqrt(_dot3(h, h)), 1e-300)[..., None]
+
+
 def sample_arguments(wi, u) -> tuple[np.ndarray, np.ndarray]:
     """``(wi, u)`` of a ``sample(wi, u)`` call as float64, broadcast against each other
     (``wi`` ``(..., 3)``, ``u`` ``(..., 2)``; read-only views)."""

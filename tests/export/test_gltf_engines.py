@@ -238,3 +238,15 @@ def test_engine_fit_takes_the_steps_of_lbfgsb_with_scipys_differences(fit):
     assert got is not p and "fitted to the renders" in got["notes"][-1]
     q1, _ = _engine_fit_vector(got)
     np.testing.assert_allclose(q1, np.clip(want.x, 0, 1), rtol=0, atol=1e-6)
+
+
+def test_sphere_samples_pixel_means_are_the_image_pixels():
+    """``SphereSamples.pixel_means`` (the objective's renders) gives the pixels of
+    ``shade``'s image to rounding."""
+    brdf = TB.ThreeJSBRDF([0.6, 0.3, 0.1], 0.4, 0.35, lut=np.full((16, 16, 2), 0.5))
+    for res, ss in ((16, 3), (9, 1)):
+        sphere = TB.SphereSamples("sphere-distant", res, ss)
+        img, alpha = sphere.shade(brdf)
+        pixels = alpha > 0.5
+        np.testing.assert_allclose(sphere.pixel_means(brdf, pixels), img[pixels],
+                                   rtol=1e-13, atol=1e-300)

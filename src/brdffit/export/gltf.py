@@ -676,7 +676,7 @@ def _fit_to_engines(p: dict, sphere, ref, alpha, engines: tuple) -> dict:
 
     def mse_channels(q) -> np.ndarray:      # (engine, channel), relative to the fit's peak²
         pp = _with_engine_fit_vector(p, q, has_sp)
-        return np.array([np.mean((sphere.shade(engine_brdf(pp, e))[0][mask] - ref_px) ** 2,
+        return np.array([np.mean((sphere.pixel_means(engine_brdf(pp, e), mask) - ref_px) ** 2,
                                  axis=0) for e in engines]) / (3.0 * peak2)
 
     # a base channel the rule leaves black stays black (the fit has no diffuse there)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..brdf import IsotropicBRDF, _as_dirs
+from ..brdf import IsotropicBRDF, _as_dirs, _dot3, _unit_half
 from ..microfacet import GGX, MicrofacetBRDF, SchlickFresnel
 
 __all__ = ["GLTFBRDF"]
@@ -69,7 +69,7 @@ class GLTFBRDF(IsotropicBRDF):
         a2 = a * a
         with np.errstate(divide="ignore", invalid="ignore"):
             D = a2 * (nh > 0) / (np.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
-            V = ((np.sum(wi * h, -1) > 0) * (np.sum(wo * h, -1) > 0)
+            V = ((_dot3(wi, h) > 0) * (_dot3(wo, h) > 0)
                  / ((np.abs(nl) + np.sqrt(a2 + (1.0 - a2) * nl * nl))
                     * (np.abs(nv) + np.sqrt(a2 + (1.0 - a2) * nv * nv))))
             return np.nan_to_num(D * V)
@@ -111,9 +111,8 @@ class GLTFBRDF(IsotropicBRDF):
         + m F_m D V`` (L = wi, V = wo; see the module docstring)."""
         wi, wo = _as_dirs(wi, wo)
         ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
-        h = wi + wo
-        h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
-        vh = np.abs(np.sum(wo * h, -1))
+        h = _unit_half(wi, wo)
+        vh = np.abs(_dot3(wo, h))
         dv = self._specular_dv(wi, wo, h)[..., None]
         x5 = ((1.0 - vh) ** 5)[..., None]
         f0_d, f90_d = self.dielectric_f0_f90()

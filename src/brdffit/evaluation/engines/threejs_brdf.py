@@ -52,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...brdf import IsotropicBRDF, _as_dirs
+from ...brdf import IsotropicBRDF, _as_dirs, _dot3, _unit_half
 from ..metrics import rendered_psnr
 from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
 from .threejs import EngineUnavailable, sphere_geometry_px, three_dir
@@ -103,8 +103,13 @@ def _lut_bilinear(lut: np.ndarray, u, v) -> np.ndarray:
     x0 = np.minimum(np.floor(x).astype(int), w - 2)
     y0 = np.minimum(np.floor(y).astype(int), h - 2)
     fx, fy = (x - x0)[..., None], (y - y0)[..., None]
-    return ((lut[y0, x0] * (1 - fx) + lut[y0, x0 + 1] * fx) * (1 - fy)
-            + (lut[y0 + 1, x0] * (1 - fx) + lut[y0 + 1, x0 + 1] * fx) * fy)
+    texels = lut.reshape(h * w, -1)
+    i = y0 * w + x0
+
+    def at(k):                                 # the texels at flat offset k from (y0, x0)
+        return texels.take(i + k, axis=0)
+
+    return ((at(0) * (1 - fx) + at(1) * fx) * (1 - fy) + (at(w) * (1 - fx) + at(w + 1) * fx) * fy)
 
 
 class ThreeJSBRDF(IsotropicBRDF):
@@ -177,12 +182,11 @@ class ThreeJSBRDF(IsotropicBRDF):
         directions' batch shape), ``(..., 3)``; 0 below the horizon."""
         wi, wo = _as_dirs(wi, wo)
         g = np.asarray(g, float)
-        h = wi + wo
-        h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+        h = _unit_half(wi, wo)
         nl = np.clip(wi[..., 2], 0.0, 1.0)
         nv = np.clip(wo[..., 2], 0.0, 1.0)
         nh = np.clip(h[..., 2], 0.0, 1.0)
-        vh = np.clip(np.sum(wo * h, -1), 0.0, 1.0)
+        vh = np.clip(_dot3(wo, h), 0.0, 1.0)
         r = self._rough(self.roughness, g)
         m = self.metallic
         f0_d, f90_d = self.dielectric_f0_f90()
@@ -351,6 +355,9 @@ class SphereSamples:
         self.wi, self.wo = wi[m], wo[m]
         self.weight = E[m] * self.wi[:, 2]
         self.g = cam.geometry_roughness()[m] if geometry_roughness else None
+        rows, cols = np.nonzero(m)
+        k = self.supersample
+        self._pixel = (rows // k) * self.resolution + cols // k     # of each lit sample
 
     def shade(self, brdf, geometry_roughness: bool = False):
         """``(image (H, W, 3), alpha (H, W))`` of ``brdf`` (box average of the samples);
@@ -360,6 +367,17 @@ class SphereSamples:
         f = brdf.eval_g(self.wi, self.wo, self.g) if geometry_roughness else \
             brdf.eval(self.wi, self.wo)
         return self._cam.average(self.weight[:, None] * f, self.lit)
+
+    def pixel_means(self, brdf, pixels: np.ndarray) -> np.ndarray:
+        """The values ``(K, 3)`` of the K pixels ``pixels`` (``(H, W)`` bool) of
+        :meth:`shade`'s image of ``brdf`` (g = 0), from the samples of those pixels only,
+        summed per pixel in their order (the image's to rounding)."""
+        flat = pixels.ravel()
+        take = flat[self._pixel]
+        f = self.weight[take, None] * brdf.eval(self.wi[take], self.wo[take])
+        n, k2 = self.resolution**2, self.supersample**2
+        sums = np.stack([np.bincount(self._pixel[take], f[:, c], n) for c in range(3)], -1)
+        return sums[flat] / k2
 
 
 def shade_sphere(brdf, scene: str = "sphere-distant", resolution: int = 128,
