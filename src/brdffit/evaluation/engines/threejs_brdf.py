@@ -358,6 +358,7 @@ class SphereSamples:
         rows, cols = np.nonzero(m)
         k = self.supersample
         self._pixel = (rows // k) * self.resolution + cols // k     # of each lit sample
+        self._subset = (None, None)                                 # of :meth:`_samples_of`
 
     def shade(self, brdf, geometry_roughness: bool = False):
         """``(image (H, W, 3), alpha (H, W))`` of ``brdf`` (box average of the samples);
@@ -372,12 +373,20 @@ class SphereSamples:
         """The values ``(K, 3)`` of the K pixels ``pixels`` (``(H, W)`` bool) of
         :meth:`shade`'s image of ``brdf`` (g = 0), from the samples of those pixels only,
         summed per pixel in their order (the image's to rounding)."""
-        flat = pixels.ravel()
-        take = flat[self._pixel]
-        f = self.weight[take, None] * brdf.eval(self.wi[take], self.wo[take])
+        wi, wo, weight, pixel = self._samples_of(pixels)
+        f = weight[:, None] * brdf.eval(wi, wo)
         n, k2 = self.resolution**2, self.supersample**2
-        sums = np.stack([np.bincount(self._pixel[take], f[:, c], n) for c in range(3)], -1)
-        return sums[flat] / k2
+        sums = np.stack([np.bincount(pixel, f[:, c], n) for c in range(3)], -1)
+        return sums[pixels.ravel()] / k2
+
+    def _samples_of(self, pixels: np.ndarray) -> tuple:
+        """``(wi, wo, weight, pixel)`` of the lit samples in ``pixels`` (the last kept)."""
+        key = np.asarray(pixels, bool).tobytes()
+        if self._subset[0] != key:
+            take = pixels.ravel()[self._pixel]
+            self._subset = (key, (self.wi[take], self.wo[take], self.weight[take],
+                                  self._pixel[take]))
+        return self._subset[1]
 
 
 def shade_sphere(brdf, scene: str = "sphere-distant", resolution: int = 128,
