@@ -135,3 +135,29 @@ def test_lobe_tables_kernel_and_numpy_agree_with_the_quadrature_per_node(alpha, 
     np.testing.assert_allclose(kE, want_E, rtol=1e-12, atol=0)
     np.testing.assert_allclose(kS, want_S, rtol=1e-12, atol=1e-300)
     assert np.all((E > 0) & (E <= 1.0 + 1e-12))
+
+
+@pytest.mark.parametrize("kwargs", [
+    dict(base_color=[0.9, 0.6, 0.3], metallic=1.0, roughness=0.4),
+    dict(base_color=[0.2, 0.5, 0.0], metallic=0.0, roughness=0.3, specular_factor=0.7,
+         specular_color=[1.0, 0.8, 0.5], ior=2.2),
+    dict(base_color=[0.6, 0.1, 0.3], metallic=0.3, roughness=0.5, clearcoat=0.5,
+         clearcoat_roughness=0.2),
+    dict(base_color=[0.6, 0.1, 0.3], metallic=0.0, roughness=0.05, ior=1.0),
+    dict(base_color=[0.3, 0.3, 0.3], metallic=0.5, roughness=0.01, specular_factor=0.2)])
+@pytest.mark.parametrize("multiscatter", [True, False])
+def test_compiled_eval_is_the_numpy_eval(kwargs, multiscatter, monkeypatch):
+    """``_eval_compiled`` (:func:`_cycles_kernel`) gives the NumPy path's values to rounding,
+    below the horizon included."""
+    import brdffit.export.gltf_cycles as gc
+
+    rng = np.random.default_rng(7)
+    v = rng.normal(size=(2, 50, 80, 3))
+    wi, wo = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    brdf = CyclesPrincipledBRDF(**kwargs, multiscatter=multiscatter)
+    got = brdf._eval_compiled(wi, wo)
+    monkeypatch.setattr(gc, "_numba", None)
+    want = brdf.eval(wi, wo)
+    assert got.shape == want.shape == (50, 80, 3)
+    np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-15)
+    assert np.any(want == 0) and np.all(want >= 0)

@@ -38,6 +38,10 @@ values of μ, linear interpolation in μ) where Cycles reads precomputed 16³ / 
 ``(√α, μ, √((η−1)/(η+1)))``; anisotropy (``KHR_materials_anisotropy``) is not modelled
 (:class:`ValueError`); Cycles' shading-normal correction at grazing angles
 (``maybe_ensure_valid_specular_reflection``) is not modelled.
+
+With Numba, :meth:`CyclesPrincipledBRDF.eval` and the albedo tables run compiled per-sample
+kernels (``_cycles_kernel``, ``_lobe_tables_kernel``): the NumPy paths' operations in their
+order, the same values to rounding (tested).
 """
 
 from __future__ import annotations
@@ -164,12 +168,88 @@ def _fresnel_kernel(c, eta):  # pragma: no cover  (compiled by numba)
     return 1.0 if np.isnan(f) else f
 
 
+def _interp_kernel(nodes, values, x):  # pragma: no cover  (compiled by numba)
+    """``np.interp(x, nodes, values)`` for ``x`` in ``[nodes[0], nodes[-1]]``."""
+    j = np.searchsorted(nodes, x, side="right") - 1
+    if j >= nodes.size - 1 or nodes[j] == x:
+        return values[min(j, nodes.size - 1)]
+    slope = (values[j + 1] - values[j]) / (nodes[j + 1] - nodes[j])
+    return slope * (x - nodes[j]) + values[j]
+
+
+def _ggx_dv_kernel(alpha, a2, nl, nv, nh):  # pragma: no cover  (compiled by numba)
+    """:meth:`_Lobe.dv` of one sample (``nan_to_num`` included)."""
+    D = a2 / (np.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
+    G2 = 1.0 / (1.0 + _lambda_kernel(alpha, nl) + _lambda_kernel(alpha, nv))
+    x = D * G2 / (4.0 * nl * nv)
+    if np.isnan(x):
+        return 0.0
+    return min(max(x, -1.7976931348623157e308), 1.7976931348623157e308)
+
+
+def _cycles_kernel(wi, wo, lobe, tables, base, metallic, f0t, fms_d, fms_m, coat,
+                   out):  # pragma: no cover  (compiled by numba)
+    """:meth:`CyclesPrincipledBRDF.eval` per sample (its order of operations): ``lobe`` =
+    (α, α², η or 0, F0(η), multiscatter 1/0), ``tables`` (4, 32) = the lobe's E and S, the
+    coat's E and S at :data:`_MU_NODES`; ``fms_d``, ``fms_m`` the layers' ``F_ms`` per
+    channel; ``coat`` = (weight, α, α², F_ms) (weight 0: none)."""
+    alpha, a2, eta, f0_eta, ms = lobe[0], lobe[1], lobe[2], lobe[3], lobe[4] > 0
+    nodes = _MU_NODES_K
+    f0_c = ((1.5 - 1.0) / (1.5 + 1.0)) ** 2
+    cf = under = 0.0
+    for k in range(wi.shape[0]):
+        nl, nv = wi[k, 2], wo[k, 2]
+        if not (nl > 0 and nv > 0):
+            out[k, 0] = out[k, 1] = out[k, 2] = 0.0
+            continue
+        hx, hy, hz = wi[k, 0] + wo[k, 0], wi[k, 1] + wo[k, 1], nl + nv
+        hn = max(np.sqrt(hx * hx + hy * hy + hz * hz), 1e-300)
+        hx, hy, hz = hx / hn, hy / hn, hz / hn
+        c = abs(wo[k, 0] * hx + wo[k, 1] * hy + nv * hz)
+        mu = min(max(nv, nodes[0]), 1.0)
+        dv = _ggx_dv_kernel(alpha, a2, nl, nv, hz)
+        x5 = (1.0 - c) ** 5.0
+        E = _interp_kernel(nodes, tables[0], mu)
+        s = s_mean = 0.0
+        if eta > 0:
+            s = min(max((_fresnel_kernel(c, eta) - f0_eta) / (1.0 - f0_eta), 0.0), 1.0)
+            s_mean = _interp_kernel(nodes, tables[1], mu)
+        top = -np.inf
+        for ch in range(3):
+            albedo = f0t[ch] + (1.0 - f0t[ch]) * s_mean if eta > 0 else 0.0
+            dark = (1.0 + fms_d[ch] * (1.0 - E) / E) * E if ms else 1.0
+            top = max(top, albedo * dark)
+        layer = min(max(1.0 - top, 0.0), 1.0)
+        if coat[0] > 0:
+            Ec = _interp_kernel(nodes, tables[2], mu)
+            scale_c = 1.0 + coat[3] * (1.0 - Ec) / Ec
+            alb_c = f0_c + (1.0 - f0_c) * _interp_kernel(nodes, tables[3], mu)
+            cf = (coat[0] * _fresnel_kernel(c, 1.5) * _ggx_dv_kernel(coat[1], coat[2], nl, nv, hz)
+                  * scale_c)
+            under = min(max(1.0 - coat[0] * alb_c * (scale_c * Ec), 0.0), 1.0)
+        for ch in range(3):
+            b = base[ch]
+            F_m = b + (1.0 - b) * x5
+            F_d = f0t[ch] + (1.0 - f0t[ch]) * s if eta > 0 else 0.0
+            scale_m = 1.0 + fms_m[ch] * (1.0 - E) / E if ms else 1.0
+            scale_d = 1.0 + fms_d[ch] * (1.0 - E) / E if ms else 1.0
+            f = (metallic * F_m * dv * scale_m
+                 + (1.0 - metallic) * (F_d * dv * scale_d + layer * b / np.pi))
+            out[k, ch] = cf + under * f if coat[0] > 0 else f
+
+
+_MU_NODES_K = _MU_NODES.copy()
+#: the coat's mean Fresnel ``F_ss`` (index 1.5, Cycles' fit)
+_COAT_FSS = (1.5 - 1.0) / (4.08567 + 1.00071 * 1.5)
+
+
 if _numba is not None:
     _inline = _numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
     _lambda_kernel, _fresnel_kernel = _inline(_lambda_kernel), _inline(_fresnel_kernel)
-    _lobe_tables_kernel = _numba.njit(cache=True, nogil=True, error_model="numpy")(
-        _lobe_tables_kernel)
-
+    _interp_kernel, _ggx_dv_kernel = _inline(_interp_kernel), _inline(_ggx_dv_kernel)
+    _lobe_tables_kernel, _cycles_kernel = (
+        _numba.njit(cache=True, nogil=True, error_model="numpy")(f)
+        for f in (_lobe_tables_kernel, _cycles_kernel))
 
 class _Lobe:
     """GGX lobe of slope scale ``alpha``: ``dv(wi, wo, h) = D G2 / (4 μi μo)`` and its
@@ -282,6 +362,8 @@ class CyclesPrincipledBRDF(GLTFBRDF):
 
     def eval(self, wi, wo) -> np.ndarray:
         wi, wo = _as_dirs(wi, wo)
+        if _numba is not None and _cycles_kernel.worth_compiling(wi[..., 0].size):
+            return self._eval_compiled(wi, wo)
         ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
         h = _unit_half(wi, wo)
         c = np.abs(_dot3(wo, h))
@@ -315,12 +397,36 @@ class CyclesPrincipledBRDF(GLTFBRDF):
         if self.coat is not None:
             cl = self.coat
             F_c = _fresnel_dielectric(c, 1.5)[..., None]
-            Fss_c = (1.5 - 1.0) / (4.08567 + 1.00071 * 1.5)
-            scale_c, dark_c = cl.energy(Fss_c, mu)
+            scale_c, dark_c = cl.energy(_COAT_FSS, mu)
             alb_c = _f0_of(1.5) + (1.0 - _f0_of(1.5)) * cl.table(cl.S, mu)[..., None]
             coat = self.clearcoat * F_c * cl.dv(wi, wo, h)[..., None] * scale_c
             f = coat + np.clip(1.0 - self.clearcoat * alb_c * dark_c, 0.0, 1.0) * f
         return np.where(ok[..., None], f, 0.0)
+
+    def _eval_compiled(self, wi, wo) -> np.ndarray:
+        """:meth:`eval` by :func:`_cycles_kernel` (the NumPy path's values to rounding)."""
+        lobe, coat = self.lobe, self.coat
+        eta = float(lobe.eta or 0.0)
+        F_ss_m = self.base_color + (1.0 - self.base_color) / 21.0
+        fms_m = F_ss_m * lobe.E_avg / (1.0 - F_ss_m * (1.0 - lobe.E_avg))
+        fms_d = np.zeros(3)
+        if eta:
+            f_ss = (eta - 1.0) / (4.08567 + 1.00071 * eta)
+            s_ss = np.clip((f_ss - _f0_of(eta)) / (1.0 - _f0_of(eta)), 0.0, 1.0)
+            Fss_d = self.f0_tinted + (1.0 - self.f0_tinted) * s_ss
+            fms_d = Fss_d * lobe.E_avg / (1.0 - Fss_d * (1.0 - lobe.E_avg))
+        tables = np.stack([lobe.E, lobe.S] + ([coat.E, coat.S] if coat else [lobe.E, lobe.S]))
+        coat_args = (np.array([self.clearcoat, coat.alpha, coat.alpha**2,
+                               _COAT_FSS * coat.E_avg / (1.0 - _COAT_FSS * (1.0 - coat.E_avg))])
+                     if coat else np.zeros(4))
+        shape = wi.shape[:-1]
+        wi, wo = (np.ascontiguousarray(w).reshape(-1, 3) for w in (wi, wo))
+        out = np.empty(wi.shape)
+        _cycles_kernel(wi, wo, np.array([lobe.alpha, lobe.alpha**2, eta, _f0_of(eta) if eta
+                                         else 0.0, float(self.multiscatter)]),
+                       tables, self.base_color, self.metallic, self.f0_tinted, fms_d, fms_m,
+                       coat_args, out)
+        return out.reshape(shape + (3,))
 
     def as_microfacet(self):
         return None
