@@ -459,3 +459,27 @@ def test_mesh_option_is_checked_and_none_leaves_the_material_alone(tmp_path):
     idat = png.index(b"IDAT")
     size = int.from_bytes(png[idat - 4:idat], "big")
     assert zlib.decompress(png[idat + 4:idat + 4 + size]) == b"\x00\xff\xff\xff\xff"
+
+
+@pytest.mark.parametrize("kwargs", [
+    dict(base_color=[0.9, 0.6, 0.3], metallic=1.0, roughness=0.4),
+    dict(base_color=[0.2, 0.5, 0.0], metallic=0.0, roughness=0.3, specular_factor=0.7,
+         specular_color=[1.0, 0.8, 0.5], ior=2.2),
+    dict(base_color=[0.6, 0.1, 0.3], metallic=0.3, roughness=0.5, clearcoat=0.5,
+         clearcoat_roughness=0.2),
+    dict(base_color=[0.3, 0.3, 0.3], metallic=0.5, roughness=0.0, clearcoat=1.0)])
+def test_gltf_brdf_compiled_eval_is_the_numpy_eval(kwargs, monkeypatch):
+    """``GLTFBRDF._eval_compiled`` (``_gltf_kernel``) gives the NumPy path's values to
+    rounding, below the horizon included."""
+    import brdffit.export.gltf_brdf as gb
+
+    rng = np.random.default_rng(8)
+    v = rng.normal(size=(2, 40, 90, 3))
+    wi, wo = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    brdf = GLTFBRDF(**kwargs)
+    got = brdf._eval_compiled(wi, wo)
+    monkeypatch.setattr(gb, "_numba", None)
+    want = brdf.eval(wi, wo)
+    assert got.shape == want.shape == (40, 90, 3)
+    np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-15)
+    assert np.any(want == 0) and np.all(np.isfinite(want))

@@ -8,10 +8,59 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._jit import lazy_numba
 from ..brdf import IsotropicBRDF, _as_dirs, _dot3, _unit_half
 from ..microfacet import GGX, MicrofacetBRDF, SchlickFresnel
 
 __all__ = ["GLTFBRDF"]
+
+_numba = lazy_numba()
+
+
+def _core_dv_kernel(a, nl, nv, nh, il, iv):  # pragma: no cover  (compiled by numba)
+    """:meth:`GLTFBRDF._core_dv` of one sample (``il``, ``iv``: L·H > 0, V·H > 0)."""
+    a2 = a * a
+    D = a2 * (1.0 if nh > 0 else 0.0) / (np.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
+    V = ((1.0 if il and iv else 0.0)
+         / ((abs(nl) + np.sqrt(a2 + (1.0 - a2) * nl * nl))
+            * (abs(nv) + np.sqrt(a2 + (1.0 - a2) * nv * nv))))
+    x = D * V
+    if np.isnan(x):
+        return 0.0
+    return min(max(x, -1.7976931348623157e308), 1.7976931348623157e308)
+
+
+def _gltf_kernel(wi, wo, a, base, metallic, f0_d, f90_d, coat, a_coat,
+                 out):  # pragma: no cover  (compiled by numba)
+    """:meth:`GLTFBRDF.eval` (isotropic) per sample, its order of operations."""
+    for k in range(wi.shape[0]):
+        nl, nv = wi[k, 2], wo[k, 2]
+        if not (nl > 0 and nv > 0):
+            out[k, 0] = out[k, 1] = out[k, 2] = 0.0
+            continue
+        hx, hy, hz = wi[k, 0] + wo[k, 0], wi[k, 1] + wo[k, 1], nl + nv
+        hn = max(np.sqrt(hx * hx + hy * hy + hz * hz), 1e-300)
+        hx, hy, hz = hx / hn, hy / hn, hz / hn
+        lh = wi[k, 0] * hx + wi[k, 1] * hy + nl * hz
+        vh = wo[k, 0] * hx + wo[k, 1] * hy + nv * hz
+        dv = _core_dv_kernel(a, nl, nv, hz, lh > 0, vh > 0)
+        x5 = (1.0 - abs(vh)) ** 5.0
+        fc = dvc = 0.0
+        if coat > 0:
+            fc = 0.04 + 0.96 * (1.0 - abs(nv)) ** 5.0
+            dvc = _core_dv_kernel(a_coat, nl, nv, hz, lh > 0, vh > 0)
+        for ch in range(3):
+            b = base[ch]
+            F_d = f0_d[ch] + (f90_d - f0_d[ch]) * x5
+            F_m = b + (1.0 - b) * x5
+            f = (1.0 - metallic) * ((1.0 - F_d) * b / np.pi + F_d * dv) + metallic * F_m * dv
+            out[k, ch] = f * (1.0 - coat * fc) + coat * fc * dvc if coat > 0 else f
+
+
+if _numba is not None:
+    _core_dv_kernel = _numba.njit(cache=True, nogil=True, inline="always",
+                                  error_model="numpy")(_core_dv_kernel)
+    _gltf_kernel = _numba.njit(cache=True, nogil=True, error_model="numpy")(_gltf_kernel)
 
 
 class GLTFBRDF(IsotropicBRDF):
@@ -110,6 +159,9 @@ class GLTFBRDF(IsotropicBRDF):
         """``f_r`` of Appendix B with the extensions: ``(1 − m)((1 − F_d) c/π + F_d D V)
         + m F_m D V`` (L = wi, V = wo; see the module docstring)."""
         wi, wo = _as_dirs(wi, wo)
+        if (_numba is not None and self.anisotropy_strength == 0.0
+                and _gltf_kernel.worth_compiling(wi[..., 0].size)):
+            return self._eval_compiled(wi, wo)
         ok = (wi[..., 2] > 0) & (wo[..., 2] > 0)
         h = _unit_half(wi, wo)
         vh = np.abs(_dot3(wo, h))
@@ -125,6 +177,18 @@ class GLTFBRDF(IsotropicBRDF):
             dvc = self._core_dv(self.clearcoat_roughness**2, wi, wo, h)[..., None]
             f = f * (1.0 - self.clearcoat * fc) + self.clearcoat * fc * dvc
         return np.where(ok[..., None], f, 0.0)
+
+    def _eval_compiled(self, wi, wo) -> np.ndarray:
+        """:meth:`eval` (isotropic) by :func:`_gltf_kernel` (the NumPy path's values to
+        rounding)."""
+        f0_d, f90_d = self.dielectric_f0_f90()
+        shape = wi.shape[:-1]
+        wi, wo = (np.ascontiguousarray(w).reshape(-1, 3) for w in (wi, wo))
+        out = np.empty(wi.shape)
+        _gltf_kernel(wi, wo, self.roughness**2, self.base_color, self.metallic,
+                     np.asarray(f0_d, float), float(f90_d), self.clearcoat,
+                     self.clearcoat_roughness**2, out)
+        return out.reshape(shape + (3,))
 
     def as_microfacet(self):
         """For a pure metal (metallic = 1): the identical ``MicrofacetBRDF`` (GGX α = r²,

@@ -107,7 +107,7 @@ def _lobe_tables_kernel(alpha, eta, nodes, u, E, S):  # pragma: no cover  (compi
             q1[i * n + j] = np.sqrt(1.0 - p1[i * n + j] * p1[i * n + j])
     f0 = ((eta - 1.0) / (eta + 1.0)) ** 2
     w = np.empty(n * n)
-    cos = np.empty(n * n)
+    cos = np.empty(n * n)                      # V·H of each sample, then s(V·H)
     for m in range(nodes.size):
         mu = nodes[m]
         wx = np.sqrt(1.0 - mu * mu)
@@ -142,9 +142,9 @@ def _lobe_tables_kernel(alpha, eta, nodes, u, E, S):  # pragma: no cover  (compi
             e_sum += w[k]
         if eta > 0:
             for k in range(n * n):
-                if w[k] > 0:
-                    s_sum += w[k] * min(max((_fresnel_kernel(cos[k], eta) - f0) / (1.0 - f0),
-                                            0.0), 1.0)
+                cos[k] = min(max((_fresnel_kernel(cos[k], eta) - f0) / (1.0 - f0), 0.0), 1.0)
+            for k in range(n * n):
+                s_sum += w[k] * cos[k]
         E[m] = e_sum / (n * n)
         S[m] = s_sum / (n * n) / max(E[m], 1e-300)
 
