@@ -153,3 +153,28 @@ def _matches_our_model_of_threes_ibl(r, model, scene):
     turned = turned.reshape(48, 4, 48, 4, 3).mean(axis=(1, 3))
     assert rendered_psnr(r.image, turned, mask) < 35.0
 
+
+
+@pytest.mark.parametrize("kwargs", [
+    dict(base_color=[0.9, 0.6, 0.3], metallic=1.0, roughness=0.4),
+    dict(base_color=[0.2, 0.5, 0.0], metallic=0.0, roughness=0.3, specular_factor=0.7,
+         specular_color=[1.0, 0.8, 0.5], ior=2.2),
+    dict(base_color=[0.6, 0.1, 0.3], metallic=0.3, roughness=0.5, clearcoat=0.5,
+         clearcoat_roughness=0.2),
+    dict(base_color=[0.6, 0.1, 0.3], metallic=0.3, roughness=0.01, clearcoat=0.5,
+         sg_fresnel=False, min_roughness=False, multiscatter=False, physical=False)])
+def test_compiled_eval_is_the_numpy_eval(kwargs, monkeypatch):
+    """``ThreeJSBRDF._eval_compiled`` (``_threejs_kernel``) gives the NumPy path's values to
+    rounding, with and without geometry roughness, below the horizon included."""
+    rng = np.random.default_rng(9)
+    v = rng.normal(size=(2, 30, 70, 3))
+    wi, wo = v / np.linalg.norm(v, axis=-1, keepdims=True)
+    g = 0.2 * rng.random((30, 70))
+    lut = np.stack([0.3 + 0.6 * rng.random((16, 16)), 0.05 * rng.random((16, 16))], -1)
+    brdf = TB.ThreeJSBRDF(**kwargs, lut=lut)
+    got = [brdf._eval_compiled(wi, wo, np.asarray(x)) for x in (0.0, g)]
+    monkeypatch.setattr(TB, "_numba", None)
+    for x, y in zip(got, (brdf.eval(wi, wo), brdf.eval_g(wi, wo, g))):
+        assert x.shape == y.shape == (30, 70, 3)
+        np.testing.assert_allclose(x, y, rtol=1e-13, atol=1e-15)
+        assert np.any(y == 0) and np.all(np.isfinite(y))

@@ -52,6 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..._jit import lazy_numba
 from ...brdf import IsotropicBRDF, _as_dirs, _dot3, _unit_half
 from ..metrics import rendered_psnr
 from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
@@ -61,6 +62,7 @@ __all__ = ["ThreeJSBRDF", "from_gltf", "dfg_lut", "CameraSphere", "SphereSamples
            "shade_sphere", "estimate"]
 
 _MIN_ROUGHNESS = 0.045
+_numba = lazy_numba()
 
 
 def _f_schlick_sg(f0, f90, x):
@@ -110,6 +112,83 @@ def _lut_bilinear(lut: np.ndarray, u, v) -> np.ndarray:
         return texels.take(i + k, axis=0)
 
     return ((at(0) * (1 - fx) + at(1) * fx) * (1 - fy) + (at(w) * (1 - fx) + at(w + 1) * fx) * fy)
+
+
+def _fresnel_kernel(f0, f90, x, sg):  # pragma: no cover  (compiled by numba)
+    """:meth:`ThreeJSBRDF._fresnel` of one value."""
+    if sg:
+        return f0 + (f90 - f0) * np.exp2((-5.55473 * x - 6.98316) * x)
+    return f0 + (f90 - f0) * (1.0 - x) ** 5.0
+
+
+def _dv_kernel(r, nl, nv, nh):  # pragma: no cover  (compiled by numba)
+    """:meth:`ThreeJSBRDF._dv` of one sample."""
+    a = r * r
+    a2 = a * a
+    d = a2 / (np.pi * (nh * nh * (a2 - 1.0) + 1.0) ** 2)
+    gv = nl * np.sqrt(a2 + (1.0 - a2) * nv * nv)
+    gl = nv * np.sqrt(a2 + (1.0 - a2) * nl * nl)
+    return d * 0.5 / max(gv + gl, 1e-6)
+
+
+def _ess_kernel(lut, u, v):  # pragma: no cover  (compiled by numba)
+    """``dfg.x + dfg.y`` of :func:`_lut_bilinear` at one ``(u, v)``."""
+    h, w = lut.shape[0], lut.shape[1]
+    x = min(max(u * w - 0.5, 0.0), w - 1.0)
+    y = min(max(v * h - 0.5, 0.0), h - 1.0)
+    x0 = min(int(np.floor(x)), w - 2)
+    y0 = min(int(np.floor(y)), h - 2)
+    fx, fy = x - x0, y - y0
+    ess = 0.0
+    for c in range(2):
+        ess += ((lut[y0, x0, c] * (1 - fx) + lut[y0, x0 + 1, c] * fx) * (1 - fy)
+                + (lut[y0 + 1, x0, c] * (1 - fx) + lut[y0 + 1, x0 + 1, c] * fx) * fy)
+    return ess
+
+
+def _threejs_kernel(wi, wo, g, lut, flags, rough, base, metallic, f0_d, f90_d, coat,
+                    out):  # pragma: no cover  (compiled by numba)
+    """:meth:`ThreeJSBRDF.eval_g` per sample, its order of operations: ``flags`` = (sg
+    Fresnel, 0.045 floor, multiscatter), ``rough`` = (roughness, coat roughness)."""
+    sg, floor, ms = flags[0], flags[1], flags[2]
+    for k in range(wi.shape[0]):
+        if not (wi[k, 2] > 0 and wo[k, 2] > 0):
+            out[k, 0] = out[k, 1] = out[k, 2] = 0.0
+            continue
+        hx, hy, hz = wi[k, 0] + wo[k, 0], wi[k, 1] + wo[k, 1], wi[k, 2] + wo[k, 2]
+        hn = max(np.sqrt(hx * hx + hy * hy + hz * hz), 1e-300)
+        hx, hy, hz = hx / hn, hy / hn, hz / hn
+        nl, nv = min(max(wi[k, 2], 0.0), 1.0), min(max(wo[k, 2], 0.0), 1.0)
+        nh = min(max(hz, 0.0), 1.0)
+        vh = min(max(wo[k, 0] * hx + wo[k, 1] * hy + wo[k, 2] * hz, 0.0), 1.0)
+        r = min((max(rough[0], 0.045) if floor else rough[0]) + g[k], 1.0)
+        dv = _dv_kernel(r, nl, nv, nh)
+        ess = _ess_kernel(lut, r, nv) if ms else 1.0
+        f90 = f90_d * (1 - metallic) + metallic
+        fcc_v = cc = 0.0
+        if coat > 0:
+            rc = min((max(rough[1], 0.045) if floor else rough[1]) + g[k], 1.0)
+            rc = max(rc, 0.045) if floor else rc
+            fcc_v = _fresnel_kernel(0.04, 1.0, nv, sg)
+            cc = _fresnel_kernel(0.04, 1.0, vh, sg) * _dv_kernel(rc, nl, nv, nh)
+        for c in range(3):
+            f0 = f0_d[c] * (1 - metallic) + base[c] * metallic
+            spec = _fresnel_kernel(f0, f90, vh, sg) * dv
+            if ms:
+                spec = spec * (1.0 + f0 * (1.0 / ess - 1.0))
+            f = spec + ((1.0 - _fresnel_kernel(f0_d[c], f90_d, vh, sg)) * base[c]
+                        * (1.0 - metallic) / np.pi)
+            if coat > 0:
+                f = f * (1.0 - coat * fcc_v) + coat * cc
+            out[k, c] = 0.0 if np.isnan(f) else min(max(f, -1.7976931348623157e308),
+                                                    1.7976931348623157e308)
+
+
+if _numba is not None:
+    _inline = _numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")
+    _fresnel_kernel, _dv_kernel, _ess_kernel = (_inline(f) for f in (_fresnel_kernel,
+                                                                     _dv_kernel, _ess_kernel))
+    _threejs_kernel = _numba.njit(cache=True, nogil=True, error_model="numpy")(_threejs_kernel)
 
 
 class ThreeJSBRDF(IsotropicBRDF):
@@ -182,6 +261,8 @@ class ThreeJSBRDF(IsotropicBRDF):
         directions' batch shape), ``(..., 3)``; 0 below the horizon."""
         wi, wo = _as_dirs(wi, wo)
         g = np.asarray(g, float)
+        if _numba is not None and _threejs_kernel.worth_compiling(wi[..., 0].size):
+            return self._eval_compiled(wi, wo, g)
         h = _unit_half(wi, wo)
         nl = np.clip(wi[..., 2], 0.0, 1.0)
         nv = np.clip(wo[..., 2], 0.0, 1.0)
@@ -209,6 +290,22 @@ class ThreeJSBRDF(IsotropicBRDF):
             f = f * (1.0 - self.clearcoat * fcc_v) + self.clearcoat * coat[..., None]
         above = (wi[..., 2] > 0) & (wo[..., 2] > 0)
         return np.where(above[..., None], np.nan_to_num(f), 0.0)
+
+    def _eval_compiled(self, wi, wo, g) -> np.ndarray:
+        """:meth:`eval_g` by :func:`_threejs_kernel` (the NumPy path's values to rounding)."""
+        f0_d, f90_d = self.dielectric_f0_f90()
+        shape = wi.shape[:-1]
+        wi, wo = (np.ascontiguousarray(w).reshape(-1, 3) for w in (wi, wo))
+        g = np.array(np.broadcast_to(g, shape), dtype=float).reshape(-1)
+        lut = np.ascontiguousarray(self.lut if self.multiscatter else np.zeros((2, 2, 2)),
+                                   dtype=float)
+        out = np.empty(wi.shape)
+        _threejs_kernel(wi, wo, g, lut,
+                        np.array([self.sg_fresnel, self.min_roughness, self.multiscatter]),
+                        np.array([self.roughness, self.clearcoat_roughness]), self.base_color,
+                        self.metallic, np.asarray(f0_d, float), float(f90_d), self.clearcoat,
+                        out)
+        return out.reshape(shape + (3,))
 
     def describe(self) -> dict:
         return {"base_color": self.base_color.tolist(), "metallic": self.metallic,
