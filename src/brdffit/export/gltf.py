@@ -565,6 +565,10 @@ ENGINE_FIT_SUPERSAMPLE = 4
 #: the PSNR above which :func:`optimize_for_engines` no longer rewards an engine (dB): its
 #: objective is the mean over the engines of ``−10 log10(MSE/peak² + 10^(−cap/10))``
 ENGINE_FIT_CAP_DB = 65.0
+#: the step of :func:`optimize_for_engines`' forward differences, and its budget of
+#: objective evaluations (each difference counted, as scipy counts them)
+ENGINE_FIT_STEP = 1e-4
+ENGINE_FIT_MAXFUN = 200
 
 
 def _engine_fit_vector(p: dict) -> tuple[np.ndarray, bool]:
@@ -700,12 +704,6 @@ def _fit_to_engines(p: dict, sphere, ref, alpha, engines: tuple) -> dict:
     mse0, mse1 = mse_channels(q0).sum(1), mse_channels(q1).sum(1)
     return _engine_fit_result(p, engines, q1, has_sp, mse0, mse1,
                               _engine_fit_loss(mse0) - _engine_fit_loss(mse1))
-
-
-#: the step of :func:`optimize_for_engines`' forward differences, and its budget of
-#: objective evaluations (each difference counted, as scipy counts them)
-ENGINE_FIT_STEP = 1e-4
-ENGINE_FIT_MAXFUN = 200
 
 
 def _engine_fit_loss(mse) -> float:

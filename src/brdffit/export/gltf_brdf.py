@@ -2,7 +2,9 @@
 ``KHR_materials_specular``, ``_ior``, ``_clearcoat`` and ``_anisotropy`` extensions) as a BRDF
 of the library: :class:`GLTFBRDF`, what an engine that follows the specification renders
 for an exported material (:mod:`brdffit.export.gltf` maps fits to it, and
-:mod:`brdffit.export.gltf_cycles` models Blender's Cycles on top of it)."""
+:mod:`brdffit.export.gltf_cycles` models Blender's Cycles on top of it). With Numba the
+isotropic BRDF is evaluated by a compiled per-sample kernel (``_gltf_kernel``: the NumPy
+path's operations in their order, its values to rounding)."""
 
 from __future__ import annotations
 

@@ -32,6 +32,9 @@ the unit sphere) and passes it to :meth:`ThreeJSBRDF.eval_g`; :meth:`ThreeJSBRDF
 g = 0. The GPU takes finite differences over 2 × 2 pixel quads; the analytic derivative is
 the same to first order.
 
+With Numba, :meth:`ThreeJSBRDF.eval_g` runs a compiled per-sample kernel
+(``_threejs_kernel``: the NumPy path's operations in their order, its values to rounding).
+
 ``KHR_materials_anisotropy`` is not modelled (:func:`from_gltf` raises): our default fits are
 isotropic, and the anisotropic lobe needs the mesh's tangent frame.
 
