@@ -24,6 +24,7 @@ from brdffit.evaluation.engines import threejs as T
 from brdffit.evaluation.engines import threejs_brdf as TB
 from brdffit.evaluation.metrics import rendered_psnr
 from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel
+from tests.support.engine_materials import ENGINE_TEST_MATERIALS
 from tests.support.envmap_roundtrip import compare_with_turned_map
 
 OK, WHY = T.available()
@@ -156,11 +157,7 @@ def _matches_our_model_of_threes_ibl(r, model, scene):
 
 
 @pytest.mark.parametrize("kwargs", [
-    dict(base_color=[0.9, 0.6, 0.3], metallic=1.0, roughness=0.4),
-    dict(base_color=[0.2, 0.5, 0.0], metallic=0.0, roughness=0.3, specular_factor=0.7,
-         specular_color=[1.0, 0.8, 0.5], ior=2.2),
-    dict(base_color=[0.6, 0.1, 0.3], metallic=0.3, roughness=0.5, clearcoat=0.5,
-         clearcoat_roughness=0.2),
+    *ENGINE_TEST_MATERIALS,
     dict(base_color=[0.6, 0.1, 0.3], metallic=0.3, roughness=0.01, clearcoat=0.5,
          sg_fresnel=False, min_roughness=False, multiscatter=False, physical=False)])
 def test_compiled_eval_is_the_numpy_eval(kwargs, monkeypatch):

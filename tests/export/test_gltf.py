@@ -12,6 +12,7 @@ from brdffit.errors import ExportError
 from brdffit.export import export
 from brdffit.export.gltf import GLTFBRDF, gltf_fidelity, gltf_parameters
 from brdffit.microfacet import GGX, MicrofacetBRDF, SchlickFresnel
+from tests.support.engine_materials import ENGINE_TEST_MATERIALS
 
 
 def _pairs(n=2000, seed=0):
@@ -462,11 +463,7 @@ def test_mesh_option_is_checked_and_none_leaves_the_material_alone(tmp_path):
 
 
 @pytest.mark.parametrize("kwargs", [
-    dict(base_color=[0.9, 0.6, 0.3], metallic=1.0, roughness=0.4),
-    dict(base_color=[0.2, 0.5, 0.0], metallic=0.0, roughness=0.3, specular_factor=0.7,
-         specular_color=[1.0, 0.8, 0.5], ior=2.2),
-    dict(base_color=[0.6, 0.1, 0.3], metallic=0.3, roughness=0.5, clearcoat=0.5,
-         clearcoat_roughness=0.2),
+    *ENGINE_TEST_MATERIALS,
     dict(base_color=[0.3, 0.3, 0.3], metallic=0.5, roughness=0.0, clearcoat=1.0)])
 def test_gltf_brdf_compiled_eval_is_the_numpy_eval(kwargs, monkeypatch):
     """``GLTFBRDF._eval_compiled`` (``_gltf_kernel``) gives the NumPy path's values to

@@ -11,6 +11,7 @@ from brdffit.export.gltf import GLTFBRDF, gltf_equivalent
 from brdffit.export.gltf_cycles import (_MU_NODES, CyclesPrincipledBRDF, _lambda, _Lobe,
                                          _lobe_tables_kernel)
 from brdffit.microfacet import GGX, DielectricFresnel, MicrofacetBRDF, SchlickFresnel
+from tests.support.engine_materials import ENGINE_TEST_MATERIALS
 
 
 def _pairs(n, seed):
@@ -138,11 +139,7 @@ def test_lobe_tables_kernel_and_numpy_agree_with_the_quadrature_per_node(alpha, 
 
 
 @pytest.mark.parametrize("kwargs", [
-    dict(base_color=[0.9, 0.6, 0.3], metallic=1.0, roughness=0.4),
-    dict(base_color=[0.2, 0.5, 0.0], metallic=0.0, roughness=0.3, specular_factor=0.7,
-         specular_color=[1.0, 0.8, 0.5], ior=2.2),
-    dict(base_color=[0.6, 0.1, 0.3], metallic=0.3, roughness=0.5, clearcoat=0.5,
-         clearcoat_roughness=0.2),
+    *ENGINE_TEST_MATERIALS,
     dict(base_color=[0.6, 0.1, 0.3], metallic=0.0, roughness=0.05, ior=1.0),
     dict(base_color=[0.3, 0.3, 0.3], metallic=0.5, roughness=0.01, specular_factor=0.2)])
 @pytest.mark.parametrize("multiscatter", [True, False])

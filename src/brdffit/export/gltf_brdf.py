@@ -32,17 +32,26 @@ def _core_dv_kernel(a, nl, nv, nh, il, iv):  # pragma: no cover  (compiled by nu
     return min(max(x, -1.7976931348623157e308), 1.7976931348623157e308)
 
 
+def _visible_half_kernel(wi, wo, k, out):  # pragma: no cover  (compiled by numba)
+    """``(True, unit half vector)`` of sample ``k`` (:func:`brdffit.brdf._unit_half`'s
+    order) when both directions are above the surface; else ``False`` and the sample's
+    ``out`` zeroed."""
+    if not (wi[k, 2] > 0 and wo[k, 2] > 0):
+        out[k, 0] = out[k, 1] = out[k, 2] = 0.0
+        return False, 0.0, 0.0, 0.0
+    hx, hy, hz = wi[k, 0] + wo[k, 0], wi[k, 1] + wo[k, 1], wi[k, 2] + wo[k, 2]
+    hn = max(np.sqrt(hx * hx + hy * hy + hz * hz), 1e-300)
+    return True, hx / hn, hy / hn, hz / hn
+
+
 def _gltf_kernel(wi, wo, a, base, metallic, f0_d, f90_d, coat, a_coat,
                  out):  # pragma: no cover  (compiled by numba)
     """:meth:`GLTFBRDF.eval` (isotropic) per sample, its order of operations."""
     for k in range(wi.shape[0]):
-        nl, nv = wi[k, 2], wo[k, 2]
-        if not (nl > 0 and nv > 0):
-            out[k, 0] = out[k, 1] = out[k, 2] = 0.0
+        visible, hx, hy, hz = _visible_half_kernel(wi, wo, k, out)
+        if not visible:
             continue
-        hx, hy, hz = wi[k, 0] + wo[k, 0], wi[k, 1] + wo[k, 1], nl + nv
-        hn = max(np.sqrt(hx * hx + hy * hy + hz * hz), 1e-300)
-        hx, hy, hz = hx / hn, hy / hn, hz / hn
+        nl, nv = wi[k, 2], wo[k, 2]
         lh = wi[k, 0] * hx + wi[k, 1] * hy + nl * hz
         vh = wo[k, 0] * hx + wo[k, 1] * hy + nv * hz
         dv = _core_dv_kernel(a, nl, nv, hz, lh > 0, vh > 0)
@@ -60,8 +69,9 @@ def _gltf_kernel(wi, wo, a, base, metallic, f0_d, f90_d, coat, a_coat,
 
 
 if _numba is not None:
-    _core_dv_kernel = _numba.njit(cache=True, nogil=True, inline="always",
-                                  error_model="numpy")(_core_dv_kernel)
+    _core_dv_kernel, _visible_half_kernel = (
+        _numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")(f)
+        for f in (_core_dv_kernel, _visible_half_kernel))
     _gltf_kernel = _numba.njit(cache=True, nogil=True, error_model="numpy")(_gltf_kernel)
 
 

@@ -52,7 +52,7 @@ import numpy as np
 
 from .._jit import lazy_numba
 from ..brdf import _as_dirs, _dot3, _unit_half
-from .gltf_brdf import GLTFBRDF
+from .gltf_brdf import GLTFBRDF, _visible_half_kernel
 
 _numba = lazy_numba()
 
@@ -198,13 +198,10 @@ def _cycles_kernel(wi, wo, lobe, tables, base, metallic, f0t, fms_d, fms_m, coat
     f0_c = ((1.5 - 1.0) / (1.5 + 1.0)) ** 2
     cf = under = 0.0
     for k in range(wi.shape[0]):
-        nl, nv = wi[k, 2], wo[k, 2]
-        if not (nl > 0 and nv > 0):
-            out[k, 0] = out[k, 1] = out[k, 2] = 0.0
+        visible, hx, hy, hz = _visible_half_kernel(wi, wo, k, out)
+        if not visible:
             continue
-        hx, hy, hz = wi[k, 0] + wo[k, 0], wi[k, 1] + wo[k, 1], nl + nv
-        hn = max(np.sqrt(hx * hx + hy * hy + hz * hz), 1e-300)
-        hx, hy, hz = hx / hn, hy / hn, hz / hn
+        nl, nv = wi[k, 2], wo[k, 2]
         c = abs(wo[k, 0] * hx + wo[k, 1] * hy + nv * hz)
         mu = min(max(nv, nodes[0]), 1.0)
         dv = _ggx_dv_kernel(alpha, a2, nl, nv, hz)
@@ -250,6 +247,7 @@ if _numba is not None:
     _lobe_tables_kernel, _cycles_kernel = (
         _numba.njit(cache=True, nogil=True, error_model="numpy")(f)
         for f in (_lobe_tables_kernel, _cycles_kernel))
+
 
 class _Lobe:
     """GGX lobe of slope scale ``alpha``: ``dv(wi, wo, h) = D G2 / (4 μi μo)`` and its
