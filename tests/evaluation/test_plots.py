@@ -109,3 +109,34 @@ class PerChannel(Lambert):
 def test_per_channel_models_have_factors(tmp_path):
     assert plots.has_factors(PerChannel())
     assert _is_png(plots.plot_factors({"sgd-like": PerChannel()}, tmp_path / "pc.png"))
+
+
+@pytest.mark.parametrize("n_fits,title", [(1, None), (3, "a material"), (8, "a material")])
+def test_fixed_layout_keeps_labels_inside_and_apart(monkeypatch, tmp_path, n_fits, title):
+    """The fixed margins leave every panel's labels, ticks and title inside the figure and
+    off the other panels (what ``tight_layout`` guaranteed by measuring them)."""
+    boxes = []
+
+    def check(fig, path, dpi=100):
+        r = fig.canvas.get_renderer()
+        fig.draw(r)
+        w, h = fig.bbox.width, fig.bbox.height
+        axes = [ax for ax in fig.axes if ax.axison]
+        bbs = [ax.get_tightbbox(r) for ax in axes]
+        for bb in bbs + [t.get_window_extent(r) for t in fig.texts]:
+            assert bb.x0 >= -1 and bb.y0 >= -1 and bb.x1 <= w + 1 and bb.y1 <= h + 1
+        for i, a in enumerate(bbs):
+            for b in bbs[i + 1:]:
+                ov = a.intersection(a, b)
+                assert ov is None or ov.width * ov.height < 1.0
+        boxes.append(len(bbs))
+        plots._plt().close(fig)
+        return path
+
+    monkeypatch.setattr(plots, "save_figure", check)
+    kinds = [FakeMicrofacet, FakeNPF, PerChannel, lambda: Lambert([0.4, 0.3, 0.2])]
+    fits = {f"model-{k}": kinds[k % 4]() for k in range(n_fits)}
+    plots.plot_lobes(Phongish(40), fits, tmp_path / "l.png", title=title)
+    plots.plot_factors(fits, tmp_path / "f.png", title=title)
+    plots.plot_slices(Phongish(40), fits, tmp_path / "s.png", title=title)
+    assert len(boxes) == 3

@@ -63,6 +63,24 @@ def save_figure(fig, path, dpi: int = 100) -> Path:
     return path
 
 
+#: Height (inches) of a figure title (``suptitle`` at font size 9) above the panels' titles.
+_SUPTITLE_IN = 0.29
+
+
+def _fixed_layout(fig, nrow: int, ncol: int, left: float, right: float, bottom: float,
+                  top: float, wgap: float, hgap: float, title: str | None = None) -> None:
+    """Place a figure's ``nrow`` × ``ncol`` panels with fixed margins and gaps in inches
+    (``top`` without a title; a title adds :data:`_SUPTITLE_IN`). The values are those
+    :meth:`Figure.tight_layout` finds for these plots' labels, fixed: measuring every tick
+    label is most of a plot's cost."""
+    w, h = fig.get_size_inches()
+    top += _SUPTITLE_IN if title else 0.0
+    axw = (w - left - right - (ncol - 1) * wgap) / ncol
+    axh = (h - bottom - top - (nrow - 1) * hgap) / nrow
+    fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h,
+                        wspace=wgap / axw, hspace=hgap / axh)
+
+
 def _eval(brdf, wi, wo) -> np.ndarray:
     f = np.asarray(brdf.eval(wi, wo), dtype=np.float64)
     return np.maximum(np.nan_to_num(f, nan=0.0, posinf=0.0, neginf=0.0), 0.0)
@@ -118,7 +136,7 @@ def plot_lobes(reference, fits: Mapping[str, object], path, incidences=LOBE_INCI
     axes[0][0].legend(fontsize=6, loc="upper right", title="θi (ref dashed)", title_fontsize=6)
     if title:
         fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+    _fixed_layout(fig, nrow, ncol, 0.43, 0.15, 0.17, 0.18, 0.40, 0.20, title)
     return save_figure(fig, path)
 
 
@@ -247,7 +265,7 @@ def plot_factors(fits: Mapping[str, object], path, n: int = 200, title: str | No
         ax.tick_params(labelsize=7)
     if title:
         fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+    _fixed_layout(fig, nrows, 3, 0.50, 0.15, 0.54, 0.36, 0.48, 0.76, title)
     return save_figure(fig, path)
 
 
@@ -346,6 +364,14 @@ def slice_values(brdf, which: str, n: int = 180) -> tuple[np.ndarray, np.ndarray
     raise ValueError(f"slice: expected 'backscatter' or 'theta_h0', found {which!r}")
 
 
+def _log_label_room(ax) -> float:
+    """Room (inches) left of a log-scale panel for its tick labels and y label: matplotlib's
+    ``LogFormatterSciNotation`` also labels minor ticks (``2×10⁻¹``, wider than ``10⁻¹``)
+    when the view spans less than one decade (its ``minor_thresholds``)."""
+    lo, hi = ax.get_ylim()
+    return 0.68 if hi >= 10.0 * lo else 1.08
+
+
 def plot_slices(reference, fits: Mapping[str, object], path, title: str | None = None) -> Path:
     """Backscattering (θd = 0) and θh = 0 slices, data (black) vs fits, log scale, one row per
     RGB channel mean (left: over θh, right: over θd)."""
@@ -364,7 +390,8 @@ def plot_slices(reference, fits: Mapping[str, object], path, title: str | None =
     axes[0][1].legend(fontsize=6)
     if title:
         fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+    _fixed_layout(fig, 1, 2, _log_label_room(axes[0][0]), 0.15, 0.54, 0.36,
+                  _log_label_room(axes[0][1]), 0.0, title)
     return save_figure(fig, path)
 
 
