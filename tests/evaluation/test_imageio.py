@@ -31,6 +31,16 @@ def test_png_round_trip_and_quantisation(tmp_path, rng):
     assert np.all(read_png(tmp_path / "b.png") == 255)
 
 
+@pytest.mark.parametrize("channels", [1, 3, 4])
+def test_png_uint8_round_trip_identical(tmp_path, rng, channels):
+    """Any uint8 image (noise and smooth gradients) decodes to the same pixels."""
+    noise = rng.integers(0, 256, (33, 47, channels), dtype=np.uint8)
+    ramp = np.broadcast_to(np.arange(47, dtype=np.uint8)[None, :, None] * 5, noise.shape)
+    for k, img in enumerate((noise, ramp)):
+        back = read_png(write_png(tmp_path / f"{k}.png", img))
+        np.testing.assert_array_equal(back, img)
+
+
 def test_write_image_dispatch(tmp_path):
     img = np.full((4, 4, 3), 50.0, np.float32)
     write_image(tmp_path / "x.png", img, exposure=0.02, gamma=2.2)

