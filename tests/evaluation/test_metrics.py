@@ -365,3 +365,26 @@ def test_grid_values_of_fits_evaluated_through_directions_equal_their_eval_hd(mo
         assert np.array_equal(grid, grid_hd, equal_nan=True)
         assert np.array_equal(samples, samples_hd, equal_nan=True)
         assert np.isfinite(samples).all() and samples.max() > 0
+
+
+def test_crn_reference_reused_equals_crn_psnr_of_masked_float64_stacks(rng):
+    """One CRNReference measuring several models gives bitwise what crn_psnr gives for
+    each model alone, from float64 copies of the stacks masked with a boolean index."""
+    K, H, W = 5, 12, 9
+    ref = (rng.random((K, H, W, 3)) * 40).astype(np.float32)
+    mask = rng.random((H, W)) > 0.4
+    tests = [(ref * s + rng.normal(0, 0.5, ref.shape)).astype(np.float32)
+             for s in (1.0, 1.1, 0.7)]
+    crn = M.CRNReference(ref, mask)
+    for tst in tests:
+        got = crn.psnr(tst, peak=30.0)
+        want = M.crn_psnr(ref.astype(np.float64), tst.astype(np.float64), mask, peak=30.0)
+        assert got == want
+        full = np.ones((H, W), bool)
+        sub = M.crn_psnr(ref[:, mask][:, :, None].astype(np.float64),
+                         tst[:, mask][:, :, None].astype(np.float64), full[mask][:, None], 30.0)
+        assert got == sub
+    np.testing.assert_equal(M.CRNReference(ref[0]).psnr(tests[0][0]),
+                            M.crn_psnr(ref[0].astype(np.float64), tests[0][0].astype(np.float64)))
+    with pytest.raises(ValueError, match="same shape"):
+        crn.psnr(tests[0][:, :-1])

@@ -612,12 +612,15 @@ def _measure_reference(c: Comparison, engine, i: int, sc: _Scene) -> None:
         srec["reference"]["exr"] = exr
 
 
-def _measure_model(c: Comparison, sc: _Scene, de_ref, label: str, stack, entry: dict) -> None:
+def _measure_model(c: Comparison, sc: _Scene, refs: tuple, label: str, stack,
+                   entry: dict) -> None:
     """One model in one scene: PSNR with standard errors (:func:`.metrics.crn_psnr`; the
     total ``psnr_se`` adds the peak's residual uncertainty, ``psnr_se_mse`` is the part that
-    separates two models of the comparison), mean dE2000, and its pictures."""
+    separates two models of the comparison), mean dE2000, and its pictures. ``refs``: the
+    scene's :class:`.metrics.CRNReference` and :class:`.metrics.DeltaE2000`."""
+    crn_ref, de_ref = refs
     peak_se = float(sc.record["reference"].get("peak_psnr_se", 0.0))
-    est = M.crn_psnr(sc.ref_stack, stack, sc.mask, peak=sc.record["reference"]["peak"])
+    est = crn_ref.psnr(stack, peak=sc.record["reference"]["peak"])
     entry.update({k: est[k] for k in ("psnr", "mse", "mse_se", "noise_mse",
                                       "resolved", "bound", "psnr_plain")})
     entry["psnr_se_mse"] = est["psnr_se"]
@@ -637,7 +640,8 @@ def _measure_model(c: Comparison, sc: _Scene, de_ref, label: str, stack, entry: 
 def _measure_scene(c: Comparison, sc: _Scene, stacks, failures: Mapping[str, str]) -> None:
     """Every model's entry of one rendered scene (:func:`_measure_model`; a model that failed
     to render or to be measured gets an ``error``)."""
-    de_ref = M.DeltaE2000(sc.ref_mean, sc.mask, tonemap=sc.tonemap)
+    refs = (M.CRNReference(sc.ref_stack, sc.mask),
+            M.DeltaE2000(sc.ref_mean, sc.mask, tonemap=sc.tonemap))
     for label, entries in c.scene_entries.items():
         entry: dict[str, Any] = {"scene": sc.spec.name}
         entries.append(entry)
@@ -645,7 +649,7 @@ def _measure_scene(c: Comparison, sc: _Scene, stacks, failures: Mapping[str, str
             entry["error"] = failures[label]
             continue
         try:
-            _measure_model(c, sc, de_ref, label, stacks[label], entry)
+            _measure_model(c, sc, refs, label, stacks[label], entry)
         except Exception as exc:  # noqa: BLE001
             entry["error"] = f"{type(exc).__name__}: {exc}"
 

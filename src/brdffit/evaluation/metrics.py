@@ -52,7 +52,7 @@ from ..losses.objective import merl_grid_geometry, prepare_objective
 
 __all__ = [
     "DELTA_E_VMAX", "DELTA_E_CMAP", "npf_tonemap", "foreground_mask", "rendered_psnr",
-    "crn_psnr", "combine_psnr", "psnr_from_mse", "DeltaE2000", "delta_e2000",
+    "crn_psnr", "CRNReference", "combine_psnr", "psnr_from_mse", "DeltaE2000", "delta_e2000",
     "to_lab", "delta_e2000_image", "mean_delta_e2000", "colorize_delta_e",
     "cosine_weighted_relative_error", "measured_pairs", "error_regions", "region_of",
     "REGIONS", "count_wins", "brdf_metrics", "BRDFMetrics",
@@ -171,38 +171,55 @@ def psnr_from_mse(peak: float, mse: float) -> float:
     return float(10.0 * np.log10(peak * peak / mse))
 
 
-def _foreground_differences(reference, test, mask) -> tuple[np.ndarray, np.ndarray]:
-    """``(R, D)`` of :func:`crn_psnr`, both ``(K, P)`` float64: the reference batches on the
-    foreground ``mask`` (P values: pixels × channels) and the differences test − reference
-    (checked finite); a single ``(H, W, 3)`` image pair is one batch."""
-    ref, tst = np.asarray(reference), np.asarray(test)   # converted after masking
-    if ref.ndim == 3:
-        ref, tst = ref[None], tst[None]
-    if ref.ndim != 4 or ref.shape[-1] != 3 or tst.shape != ref.shape:
-        raise ValueError(f"expected two (K, H, W, 3) stacks of the same shape, found {ref.shape} "
-                         f"and {tst.shape}")
-    K = ref.shape[0]
-    if mask is None:
-        m = np.ones(ref.shape[1:3], bool)
-    else:
-        m = np.asarray(mask).astype(bool)
+class CRNReference:
+    """The reference side of :func:`crn_psnr`: its ``(K, H, W, 3)`` batches (a single
+    ``(H, W, 3)`` image is one batch) on the foreground ``mask`` (default all pixels),
+    gathered once as ``R`` ``(K, P)`` float64 (P values: pixels × channels); a comparison
+    measures every model of a scene against the same reference batches."""
+
+    def __init__(self, reference, mask=None):
+        ref = np.asarray(reference)          # converted to float64 after masking
+        ref = ref[None] if ref.ndim == 3 else ref
+        if ref.ndim != 4 or ref.shape[-1] != 3:
+            raise ValueError(f"expected two (K, H, W, 3) stacks of the same shape, found "
+                             f"{ref.shape}")
+        m = (np.ones(ref.shape[1:3], bool) if mask is None else np.asarray(mask).astype(bool))
         if m.shape != ref.shape[1:3]:
             raise ValueError(f"foreground mask: expected shape {ref.shape[1:3]}, found {m.shape}")
-    if not m.any():
-        raise ValueError("foreground mask: expected at least one foreground pixel, found none")
-    R = ref[:, m, :].reshape(K, -1).astype(np.float64)
-    D = tst[:, m, :].reshape(K, -1).astype(np.float64) - R
-    if not np.all(np.isfinite(D)):
-        raise ValueError("test image: expected finite values on the foreground, found NaN/inf")
-    return R, D
+        if not m.any():
+            raise ValueError("foreground mask: expected at least one foreground pixel, "
+                             "found none")
+        self.shape, self.index = ref.shape, np.flatnonzero(m)
+        self.R = self._gather(ref)
+
+    def _gather(self, stack: np.ndarray) -> np.ndarray:
+        """``stack``'s foreground values ``(K, P)`` float64, in the order of ``stack[:, mask]``."""
+        K = stack.shape[0]
+        return stack.reshape(K, -1, 3).take(self.index, axis=1).reshape(K, -1).astype(np.float64)
+
+    def differences(self, test) -> np.ndarray:
+        """``D = test − reference`` on the foreground, ``(K, P)`` float64, checked finite."""
+        tst = np.asarray(test)
+        tst = tst[None] if tst.ndim == 3 else tst
+        if tst.shape != self.shape:
+            raise ValueError(f"expected two (K, H, W, 3) stacks of the same shape, found "
+                             f"{self.shape} and {tst.shape}")
+        D = self._gather(tst) - self.R
+        if not np.all(np.isfinite(D)):
+            raise ValueError("test image: expected finite values on the foreground, found NaN/inf")
+        return D
+
+    def psnr(self, test, peak: float | None = None) -> dict:
+        """:func:`crn_psnr` of ``test`` against this reference."""
+        return _crn_estimate(self.R, self.differences(test), peak)
 
 
-def _jackknife_se(D: np.ndarray, S: np.ndarray, base: float) -> float:
+def _jackknife_se(D: np.ndarray, D2: np.ndarray, S: np.ndarray, base: float) -> float:
     """Delete-one-batch jackknife standard error of :func:`crn_psnr`'s ``MSE_U`` (K ≥ 3
-    batches, rows of ``D``; ``S = Σ_k D_k``, ``base = mean_P (S² − Q)``): U without batch k
-    is ``mean_P[(S − D_k)² − (Q − D_k²)] / ((K−1)(K−2))``."""
+    batches, rows of ``D``; ``D2 = D²``, ``S = Σ_k D_k``, ``base = mean_P (S² − Q)``): U
+    without batch k is ``mean_P[(S − D_k)² − (Q − D_k²)] / ((K−1)(K−2))``."""
     K = D.shape[0]
-    loo = (base - 2.0 * (D @ S) / D.shape[1] + 2.0 * np.mean(D * D, axis=1)) / ((K - 1) * (K - 2))
+    loo = (base - 2.0 * (D @ S) / D.shape[1] + 2.0 * np.mean(D2, axis=1)) / ((K - 1) * (K - 2))
     return float(np.sqrt((K - 1) / K * np.sum(np.square(loo - loo.mean()))))
 
 
@@ -245,14 +262,20 @@ def crn_psnr(reference, test, mask=None, peak: float | None = None) -> dict:
     ``peak``, ``batches``, ``resolved``, ``bound`` (``None`` or ``"lower"``),
     ``psnr_plain`` (PSNR of the mean images, biased low).
     """
-    R, D = _foreground_differences(reference, test, mask)
+    return CRNReference(reference, mask).psnr(test, peak)
+
+
+def _crn_estimate(R: np.ndarray, D: np.ndarray, peak: float | None) -> dict:
+    """:func:`crn_psnr` from the reference's foreground values ``R`` and the differences
+    ``D`` (:class:`CRNReference`)."""
     K = R.shape[0]
     if peak is None:
         peak = float(np.max(R.mean(0)))
     if not np.isfinite(peak) or peak <= 0:
         raise ValueError(f"reference foreground: expected a positive finite peak, found {peak}")
     S = D.sum(0)
-    Q = np.square(D).sum(0)
+    D2 = np.square(D)
+    Q = D2.sum(0)
     mse_plain = float(np.mean(np.square(S / K)))
     out = {"batches": int(K), "peak": float(peak), "mse_plain": mse_plain,
            "psnr_plain": psnr_from_mse(peak, mse_plain)}
@@ -265,7 +288,7 @@ def crn_psnr(reference, test, mask=None, peak: float | None = None) -> dict:
                       "bound": "lower"}
     base = np.mean(S * S - Q)
     mse = float(base / (K * (K - 1)))
-    se = _jackknife_se(D, S, base) if K >= 3 else float("nan")
+    se = _jackknife_se(D, D2, S, base) if K >= 3 else float("nan")
     out |= {"mse": mse, "mse_se": se, "noise_mse": mse_plain - mse}
     if mse > 0:
         resolved = bool(np.isfinite(se) and mse > 2.0 * se)
