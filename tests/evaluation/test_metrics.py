@@ -169,6 +169,25 @@ def test_prepared_brdf_metrics_match_direct_and_report_missing():
     assert out["compressive_objective"] is None and "compressive_objective" in out["errors"]
 
 
+def test_brdf_metrics_without_pair_metrics_evaluate_no_pairs_until_asked():
+    """Without cos_rel_error and error_regions no sample pair is drawn or evaluated; a later
+    cos_rel_error prepares them and equals the one of a fully prepared BRDFMetrics."""
+    calls = []
+
+    class Counting(Phongish):
+        def eval(self, wi, wo):
+            calls.append(len(wi))
+            return super().eval(wi, wo)
+
+    ref, fit = Counting(20), Lambert([0.5, 0.4, 0.3])
+    bm = M.BRDFMetrics(ref, 1 << 10, seed=3, metrics=())
+    assert calls == [] and bm._wi is None
+    assert bm.evaluate(fit) == {"seconds": {}}
+    lazy = bm.cos_rel_error(fit)
+    assert lazy == M.BRDFMetrics(Phongish(20), 1 << 10, seed=3).cos_rel_error(fit)
+    assert "cos_rel_error_setup" in bm.timings
+
+
 # ------------------------------------------------------------------------------------------
 # PSNR with standard error from batches rendered with common random numbers (issue 13)
 # ------------------------------------------------------------------------------------------

@@ -39,6 +39,7 @@ Database summaries
 from __future__ import annotations
 
 import importlib
+import time
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -680,16 +681,13 @@ class BRDFMetrics:
         self.metrics = tuple(metrics)
         self.errors: dict[str, str] = {}
         self.timings: dict[str, float] = {}
-        import time
-
-        t0 = time.perf_counter()
-        self._wi, self._wo = measured_pairs(reference, *_sobol_pairs(n_samples, seed))
-        self._ref_vals = np.nan_to_num(np.asarray(reference.eval(self._wi, self._wo), float))
-        self._regions = region_of(self._wi, self._wo)
+        self._n_samples, self._seed = n_samples, seed
+        self._wi = self._wo = self._ref_vals = self._regions = None
+        if {"cos_rel_error", "error_regions"} & set(self.metrics):
+            self._pairs()
         self._last: tuple = (None, None)       # (fit, its values on the pairs)
         self._grid_nodes = None                 # the nodes both grid metrics read
         self._grid_directions = None            # and their (wi, wo)
-        self.timings["cos_rel_error_setup"] = time.perf_counter() - t0
         self._l2 = None
         if "normalized_l2" in self.metrics:
             t0 = time.perf_counter()
@@ -712,6 +710,20 @@ class BRDFMetrics:
             except Exception as exc:  # noqa: BLE001
                 self.errors["compressive_objective"] = f"{type(exc).__name__}: {exc}"
             self.timings["compressive_objective_setup"] = time.perf_counter() - t0
+
+    def _pairs(self) -> None:
+        """The sample pairs of ``cos_rel_error`` and ``error_regions`` over the reference's
+        measured domain, its values and regions there: prepared by the first metric that
+        reads them (none when neither is computed)."""
+        if self._wi is not None:
+            return
+        t0 = time.perf_counter()
+        self._wi, self._wo = measured_pairs(self.reference,
+                                            *_sobol_pairs(self._n_samples, self._seed))
+        self._ref_vals = np.nan_to_num(np.asarray(self.reference.eval(self._wi, self._wo),
+                                                  float))
+        self._regions = region_of(self._wi, self._wo)
+        self.timings["cos_rel_error_setup"] = time.perf_counter() - t0
 
     def _grid_metric_values(self, test):
         """``(values at the L2 grid's nodes, values at the objective's samples)`` of ``test``
@@ -740,13 +752,15 @@ class BRDFMetrics:
         return full.reshape(shape + (3,))[:, :, ::l2.phi_stride], full[obj.index]
 
     def _test_values(self, test) -> np.ndarray:
+        self._pairs()
         if self._last[0] is not test:          # one evaluation per fit for every metric
             self._last = (test, np.nan_to_num(np.asarray(test.eval(self._wi, self._wo), float)))
         return self._last[1]
 
     def error_regions(self, test) -> dict:
         """:func:`error_regions` on the prepared sample pairs."""
-        return _regions_from(self._regions, self._ref_vals, self._test_values(test), self._wi)
+        ft = self._test_values(test)
+        return _regions_from(self._regions, self._ref_vals, ft, self._wi)
 
     def cos_rel_error(self, test, per_channel: bool = False):
         """:func:`cosine_weighted_relative_error` on the prepared sample pairs."""
@@ -760,8 +774,6 @@ class BRDFMetrics:
         return float(num.sum() / den.sum())
 
     def evaluate(self, test) -> dict:
-        import time
-
         out: dict = {}
         errors = dict(self.errors)
         timings = {}
