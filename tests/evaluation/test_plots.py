@@ -140,3 +140,29 @@ def test_fixed_layout_keeps_labels_inside_and_apart(monkeypatch, tmp_path, n_fit
     plots.plot_factors(fits, tmp_path / "f.png", title=title)
     plots.plot_slices(Phongish(40), fits, tmp_path / "s.png", title=title)
     assert len(boxes) == 3
+
+
+def test_titles_pinned_except_above_an_offset_text(monkeypatch, tmp_path):
+    """Titles sit at their panel's top edge; a nearly constant linear curve (whose axis
+    shows an offset text) keeps matplotlib's placement, above that text."""
+    seen = []
+
+    def check(fig, path, dpi=100):
+        r = fig.canvas.get_renderer()
+        fig.draw(r)
+        for ax in fig.axes:
+            off = ax.yaxis.offsetText
+            if ax.get_title() and off.get_visible() and off.get_text():
+                seen.append(ax.get_title())
+                assert ax.title.get_window_extent(r).y0 >= off.get_window_extent(r).y1 - 1
+        plots._plt().close(fig)
+        return path
+
+    monkeypatch.setattr(plots, "save_figure", check)
+    flat = FakeNPF()
+    flat._tabs["F"] = 0.7 + 1e-7 * np.linspace(0, 1, 90)[:, None] * [1, 2, 3]
+    plots.plot_factors({"flat": flat, "glossy": FakeMicrofacet()}, tmp_path / "f.png")
+    assert seen == ["flat: F per channel"]
+    fig, ax = plots._plt().subplots()
+    assert not plots._may_show_offset(ax)       # the default view (0, 1): pinned
+    plots._plt().close(fig)

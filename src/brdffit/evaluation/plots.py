@@ -73,12 +73,33 @@ def _fixed_layout(fig, nrow: int, ncol: int, left: float, right: float, bottom: 
     (``top`` without a title; a title adds :data:`_SUPTITLE_IN`). The values are those
     :meth:`Figure.tight_layout` finds for these plots' labels, fixed: measuring every tick
     label is most of a plot's cost."""
+    _pin_titles(fig)
     w, h = fig.get_size_inches()
     top += _SUPTITLE_IN if title else 0.0
     axw = (w - left - right - (ncol - 1) * wgap) / ncol
     axh = (h - bottom - top - (nrow - 1) * hgap) / nrow
     fig.subplots_adjust(left=left / w, right=1 - right / w, bottom=bottom / h, top=1 - top / h,
                         wspace=wgap / axw, hspace=hgap / axh)
+
+
+def _may_show_offset(ax) -> bool:
+    """Whether a panel's y axis may get an offset or ×10ⁿ text above it (matplotlib's
+    ``ScalarFormatter`` on a linear axis whose view is narrow for its magnitude, or whose
+    values are below 10⁻⁴ or above 10⁶); the test errs on the side of yes."""
+    if ax.get_yscale() != "linear":
+        return False
+    lo, hi = ax.get_ylim()
+    big = max(abs(lo), abs(hi))
+    return not 1e-3 <= big < 1e5 or hi - lo < 1e-2 * big
+
+
+def _pin_titles(fig) -> None:
+    """Panel titles at the top edge of their panel, which is where matplotlib puts them
+    unless a y-axis offset text is in the way (:func:`_may_show_offset`: those keep the
+    automatic placement, which measures the axis at every draw)."""
+    for ax in fig.axes:
+        if ax.get_title() and not _may_show_offset(ax):
+            ax.set_title(ax.get_title(), fontsize=ax.title.get_fontsize(), y=1.0)
 
 
 def _eval(brdf, wi, wo) -> np.ndarray:
