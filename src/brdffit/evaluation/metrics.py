@@ -427,7 +427,7 @@ class DeltaE2000:
 
     def __init__(self, reference, mask=None, exposure: float = 0.02, gamma: float = 2.2,
                  tonemap=None):
-        ref = np.asarray(reference, dtype=np.float64)
+        ref = np.asarray(reference)     # to_lab converts the foreground to float64
         self.mask = (np.ones(ref.shape[:2], bool) if mask is None
                      else np.asarray(mask).astype(bool).reshape(ref.shape[:2]))
         self.shape = ref.shape
@@ -435,7 +435,7 @@ class DeltaE2000:
         self.ref_lab = to_lab(ref[self.mask][None], *self.kw)[0]
 
     def image(self, test) -> np.ndarray:
-        tst = np.asarray(test, dtype=np.float64)
+        tst = np.asarray(test)
         if tst.shape != self.shape:
             raise ValueError(f"test image: expected shape {self.shape} (as the reference), "
                              f"found {tst.shape}")
