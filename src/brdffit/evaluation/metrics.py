@@ -10,9 +10,8 @@ Image space
   random numbers (reference and model share every random number within a batch), with its
   standard error; :func:`combine_psnr` – mean over scenes with the propagated error.
 * :func:`delta_e2000_image` / :func:`mean_delta_e2000` – CIE dE2000 difference images as
-  shown in the supplemental of Dupuy et al. 2015 (per-material "CIE dE00" rows), after the
-  conversion documented in :func:`to_lab` (:func:`delta_e2000`: colour-science's
-  operations, bitwise equal to it, without its 0.7 s import).
+  shown in the supplemental of Dupuy et al. 2015 (per-material "CIE dE00" rows), computed
+  with ``colour-science`` after the conversion documented in :func:`to_lab`.
 * :func:`colorize_delta_e` – the fixed colour map used for every dE image of a report
   (0 … :data:`DELTA_E_VMAX` mapped through matplotlib's ``inferno``; larger values saturate),
   so that images of different materials and models are comparable.
@@ -53,7 +52,7 @@ from ..losses.objective import merl_grid_geometry, prepare_objective
 
 __all__ = [
     "DELTA_E_VMAX", "DELTA_E_CMAP", "npf_tonemap", "foreground_mask", "rendered_psnr",
-    "crn_psnr", "CRNReference", "combine_psnr", "psnr_from_mse", "DeltaE2000", "delta_e2000",
+    "crn_psnr", "CRNReference", "combine_psnr", "psnr_from_mse", "DeltaE2000",
     "to_lab", "delta_e2000_image", "mean_delta_e2000", "colorize_delta_e",
     "cosine_weighted_relative_error", "measured_pairs", "error_regions", "region_of",
     "REGIONS", "count_wins", "brdf_metrics", "BRDFMetrics",
@@ -322,25 +321,6 @@ def combine_psnr(per_scene: Sequence[Mapping]) -> dict:
     return {"psnr": mean, "psnr_se": se, "bound": bound, "n_scenes": len(ps)}
 
 
-#: Linear sRGB (IEC 61966-2-1) → CIE XYZ (D65), the matrix colour-science 0.4 tabulates.
-_SRGB_TO_XYZ = np.array([[0.4124, 0.3576, 0.1805], [0.2126, 0.7152, 0.0722],
-                         [0.0193, 0.1192, 0.9505]])
-#: colour-science's CAT02 adaptation between the equal D65 white points of sRGB and of
-#: L*a*b* (``RGB_to_XYZ``'s default): the identity up to rounding (≤ 3e-17), applied so that
-#: the L*a*b* values are bitwise those of colour-science.
-_CAT02_D65_TO_D65 = np.array([
-    [1.0, -2.925337592710602e-17, -2.0424934209769367e-17],
-    [1.865516512262643e-17, 1.0, -6.012863655103287e-19],
-    [-1.1925326645651568e-18, -6.805220268068795e-19, 1.0]])
-#: The D65 white point (x, y) = (0.3127, 0.329) as XYZ with Y = 1.
-_D65_XYZ = (0.9504559270516716, 1.0, 1.0890577507598784)
-
-
-def _lab_f(t: np.ndarray) -> np.ndarray:
-    """CIE 1976 ``f(t)``: ``t^(1/3)`` above ``(24/116)³``, ``841/108 t + 16/116`` below."""
-    return np.where(t > (24 / 116) ** 3, np.abs(t) ** (1 / 3), (841 / 108) * t + 16 / 116)
-
-
 def to_lab(img, exposure: float = 0.02, gamma: float = 2.2, tonemap=None) -> np.ndarray:
     """Linear rendering ``(H, W, 3)`` → CIE L*a*b* (D65) as it is displayed in the report.
 
@@ -348,71 +328,26 @@ def to_lab(img, exposure: float = 0.02, gamma: float = 2.2, tonemap=None) -> np.
 
     1. tone map with the operator of Bagher et al. 2016 §5 (``tonemap`` or
        :func:`npf_tonemap` with ``exposure``/``gamma``) – this is exactly the PNG shown;
-    2. interpret the result ``V`` as *encoded* sRGB (IEC 61966-2-1) and decode it with the
-       sRGB EOTF: ``V / 12.92`` for ``V ≤ 0.0031308 · 12.92``, else ``((V + 0.055)/1.055)^2.4``;
-    3. linear sRGB → CIE XYZ (D65, :data:`_SRGB_TO_XYZ`) → CIE L*a*b* with the D65 white
-       point: ``L = 116 f(Y/Yn) − 16``, ``a = 500 (f(X/Xn) − f(Y/Yn))``,
-       ``b = 200 (f(Y/Yn) − f(Z/Zn))``.
+    2. interpret the result as *encoded* sRGB (IEC 61966-2-1) and decode it with the sRGB
+       EOTF to linear sRGB;
+    3. linear sRGB → CIE XYZ (D65) → CIE L*a*b* with the D65 white point (colour-science).
 
     The renderer's linear RGB is taken to be linear sRGB primaries (the MERL/RGL data and
-    Mitsuba's ``*_rgb`` variants use sRGB/Rec.709 primaries). The operations are those of
-    colour-science 0.4 (``cctf_decoding``, ``RGB_to_XYZ``, ``XYZ_to_Lab``) in the same
-    order, so the values are bitwise equal to it (tested) without importing it.
+    Mitsuba's ``*_rgb`` variants use sRGB/Rec.709 primaries).
     """
+    import colour
+
     tm = tonemap if tonemap is not None else (lambda x: npf_tonemap(x, exposure, gamma))
-    v = np.clip(np.asarray(tm(np.asarray(img, dtype=np.float64)), dtype=np.float64), 0, 1)
-    linear = np.where(0.0031308 * 12.92 >= v, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
-    xyz = np.matmul(_SRGB_TO_XYZ, linear[..., None])
-    xyz = np.matmul(_CAT02_D65_TO_D65, xyz).squeeze(-1)
-    fx, fy, fz = (_lab_f(xyz[..., k] / _D65_XYZ[k]) for k in range(3))
-    return np.stack([116 * fy - 16, 500 * (fx - fy), 200 * (fy - fz)], axis=-1)
-
-
-def _hue_deg(b: np.ndarray, a: np.ndarray) -> np.ndarray:
-    """Hue angle ``atan2(b, a)`` in [0°, 360°), 0 where ``a = b = 0``."""
-    return np.where(np.logical_and(b == 0, a == 0), 0, np.degrees(np.arctan2(b, a)) % 360)
-
-
-def delta_e2000(lab1, lab2) -> np.ndarray:
-    """CIE dE2000 between L*a*b* arrays ``(..., 3)`` (Sharma, Wu, Dalal 2005 Eq. 1-22,
-    ``k_L = k_C = k_H = 1``), with the operations of colour-science 0.4's
-    ``delta_E(method="CIE 2000")`` in the same order (bitwise equal, tested)."""
-    L1, a1, b1 = (lab1[..., k] for k in range(3))
-    L2, a2, b2 = (lab2[..., k] for k in range(3))
-    C_bar_7 = ((np.hypot(a1, b1) + np.hypot(a2, b2)) / 2) ** 7
-    G = 0.5 * (1 - np.sqrt(C_bar_7 / (C_bar_7 + 25**7)))
-    ap1, ap2 = (1 + G) * a1, (1 + G) * a2
-    Cp1, Cp2 = np.hypot(ap1, b1), np.hypot(ap2, b2)
-    hp1, hp2 = _hue_deg(b1, ap1), _hue_deg(b2, ap2)
-    dh = hp2 - hp1
-    Cp12 = Cp1 * Cp2
-    dhp = np.select([Cp12 == 0, np.fabs(dh) <= 180, dh > 180, dh < -180],
-                    [0, dh, dh - 360, dh + 360])
-    dHp = 2 * np.sqrt(Cp12) * np.sin(np.deg2rad(dhp / 2))
-    L_bar = (L1 + L2) / 2
-    C_bar_p = (Cp1 + Cp2) / 2
-    adh, sh = np.fabs(hp1 - hp2), hp1 + hp2
-    h_bar = np.select([Cp12 == 0, adh <= 180, np.logical_and(adh > 180, sh < 360),
-                       np.logical_and(adh > 180, sh >= 360)],
-                      [sh, sh / 2, (sh + 360) / 2, (sh - 360) / 2])
-    T = (1 - 0.17 * np.cos(np.deg2rad(h_bar - 30)) + 0.24 * np.cos(np.deg2rad(2 * h_bar))
-         + 0.32 * np.cos(np.deg2rad(3 * h_bar + 6)) - 0.20 * np.cos(np.deg2rad(4 * h_bar - 63)))
-    d_theta = 30 * np.exp(-(((h_bar - 275) / 25) ** 2))
-    C_bar_p_7 = C_bar_p**7
-    R_C = 2 * np.sqrt(C_bar_p_7 / (C_bar_p_7 + 25**7))
-    L_bar_2 = (L_bar - 50) ** 2
-    S_L = 1 + ((0.015 * L_bar_2) / np.sqrt(20 + L_bar_2))
-    S_C = 1 + 0.045 * C_bar_p
-    S_H = 1 + 0.015 * C_bar_p * T
-    R_T = -np.sin(np.deg2rad(2 * d_theta)) * R_C
-    dC = (Cp2 - Cp1) / S_C
-    dH = dHp / S_H
-    return np.sqrt(((L2 - L1) / S_L) ** 2 + dC**2 + dH**2 + R_T * dC * dH)
+    encoded = np.clip(np.asarray(tm(np.asarray(img, dtype=np.float64)), dtype=np.float64), 0, 1)
+    linear = colour.cctf_decoding(encoded, function="sRGB")
+    xyz = colour.RGB_to_XYZ(linear, colour.RGB_COLOURSPACES["sRGB"], apply_cctf_decoding=False)
+    white = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]["D65"]
+    return colour.XYZ_to_Lab(xyz, white)
 
 
 def delta_e2000_image(reference, test, mask=None, exposure: float = 0.02, gamma: float = 2.2,
                       tonemap=None) -> np.ndarray:
-    """Per-pixel CIE dE2000 (:func:`delta_e2000`) between two renderings.
+    """Per-pixel CIE dE2000 (``colour.delta_E``, method ``CIE 2000``) between two renderings.
 
     Both images go through :func:`to_lab`. Background pixels (outside ``mask``) are NaN.
     Symmetric in its two image arguments.
@@ -435,11 +370,14 @@ class DeltaE2000:
         self.ref_lab = to_lab(ref[self.mask][None], *self.kw)[0]
 
     def image(self, test) -> np.ndarray:
+        import colour
+
         tst = np.asarray(test)
         if tst.shape != self.shape:
             raise ValueError(f"test image: expected shape {self.shape} (as the reference), "
                              f"found {tst.shape}")
-        de = delta_e2000(self.ref_lab, to_lab(tst[self.mask][None], *self.kw)[0])
+        de = colour.delta_E(self.ref_lab, to_lab(tst[self.mask][None], *self.kw)[0],
+                            method="CIE 2000")
         out = np.full(self.shape[:2], np.nan)
         out[self.mask] = de
         return out
