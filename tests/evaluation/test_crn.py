@@ -201,12 +201,18 @@ def test_compare_with_mitsuba_reports_psnr_se(tmp_path):
     assert "proposal" in saved and saved["proposal"]["cosine_weight"] > 0
 
 
+def _cached_evaluators() -> int:
+    from brdffit.evaluation.render import translate
+
+    return len(translate._CACHE or ())
+
+
 @needs_mitsuba
 @pytest.mark.render
 def test_consecutive_comparisons_of_a_thread_share_one_renderer_child(tmp_path):
     """The second comparison of a thread renders in the first one's child (its kernels
-    compiled), with the same figures as in a new child; ``render_cpu_seconds`` counts the
-    child's CPU of that comparison only."""
+    compiled, the first one's evaluators freed), with the same figures as in a new child;
+    ``render_cpu_seconds`` counts the child's CPU of that comparison only."""
     from brdffit.evaluation import scene_engines as se
     from brdffit.evaluation.compare import compare
 
@@ -219,10 +225,12 @@ def test_consecutive_comparisons_of_a_thread_share_one_renderer_child(tmp_path):
     run(ref_a, tmp_path / "a")
     child, uses, _ = se._RENDERER_CHILD.slot
     assert uses == 1 and child.running and child.init == []
+    assert child.call(_cached_evaluators) == 0     # the comparison's evaluators are freed
     before = child.cpu_seconds
     second = run(ref_b, tmp_path / "b")
     assert se._RENDERER_CHILD.slot[0] is child and child.starts == 1
-    assert child.cpu_seconds - before <= second["timing"]["render_cpu_seconds"] < child.cpu_seconds
+    cpu = second["timing"]["render_cpu_seconds"]   # the child's CPU of this comparison only
+    assert 0.5 * (child.cpu_seconds - before) < cpu < child.cpu_seconds
     se._RENDERER_CHILD.slot = (None, 0, None)     # a new child for the same comparison
     child.close()
     fresh = run(ref_b, tmp_path / "c")

@@ -256,6 +256,12 @@ def _cache_put(brdf, key, ev):
         _CACHE.popitem(last=False)
 
 
+def clear_evaluator_cache() -> None:
+    """Forget the evaluators :func:`to_evaluator` keeps (and with them their Dr.Jit arrays)."""
+    if _CACHE is not None:
+        _CACHE.clear()
+
+
 def to_evaluator(brdf, mode: str = "auto", verify_tol: float = 0.02, seed: int = 0,
                  cache: bool = True):
     """Dr.Jit evaluator of ``brdf`` (see module docstring for the resolution order).
