@@ -23,11 +23,14 @@ from typing import Any
 
 import numpy as np
 
+from ._jit import lazy_numba
 from .geometry import half_diff_to_io, io_to_half_diff
 
 __all__ = ["BRDF", "IsotropicBRDF", "cosine_hemisphere_sample", "cosine_hemisphere_pdf",
            "cosine_pairs", "jittered_grid", "stratified_square", "measured_mask",
            "sample_arguments", "eval_hd_through_directions", "hd_through_directions"]
+
+_numba = lazy_numba()
 
 
 def _as_dirs(wi, wo) -> tuple[np.ndarray, np.ndarray]:
@@ -49,6 +52,23 @@ def _unit_half(wi, wo) -> np.ndarray:
     ``np.linalg.norm``'s, bit for bit)."""
     h = wi + wo
     return h / np.maximum(np.sqrt(_dot3(h, h)), 1e-300)[..., None]
+
+
+def _visible_half_kernel(wi, wo, k, out):  # pragma: no cover  (compiled by numba)
+    """``(True, unit half vector)`` of sample ``k`` (:func:`_unit_half`'s
+    order) when both directions are above the surface; else ``False`` and the sample's
+    ``out`` zeroed."""
+    if not (wi[k, 2] > 0 and wo[k, 2] > 0):
+        out[k, 0] = out[k, 1] = out[k, 2] = 0.0
+        return False, 0.0, 0.0, 0.0
+    hx, hy, hz = wi[k, 0] + wo[k, 0], wi[k, 1] + wo[k, 1], wi[k, 2] + wo[k, 2]
+    hn = max(np.sqrt(hx * hx + hy * hy + hz * hz), 1e-300)
+    return True, hx / hn, hy / hn, hz / hn
+
+
+if _numba is not None:
+    _visible_half_kernel = _numba.njit(cache=True, nogil=True, inline="always",
+                                       error_model="numpy")(_visible_half_kernel)
 
 
 def sample_arguments(wi, u) -> tuple[np.ndarray, np.ndarray]:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._jit import lazy_numba
-from ..brdf import IsotropicBRDF, _as_dirs, _dot3, _unit_half
+from ..brdf import IsotropicBRDF, _as_dirs, _dot3, _unit_half, _visible_half_kernel
 from ..microfacet import GGX, MicrofacetBRDF, SchlickFresnel
 
 __all__ = ["GLTFBRDF"]
@@ -30,18 +30,6 @@ def _core_dv_kernel(a, nl, nv, nh, il, iv):  # pragma: no cover  (compiled by nu
     if np.isnan(x):
         return 0.0
     return min(max(x, -1.7976931348623157e308), 1.7976931348623157e308)
-
-
-def _visible_half_kernel(wi, wo, k, out):  # pragma: no cover  (compiled by numba)
-    """``(True, unit half vector)`` of sample ``k`` (:func:`brdffit.brdf._unit_half`'s
-    order) when both directions are above the surface; else ``False`` and the sample's
-    ``out`` zeroed."""
-    if not (wi[k, 2] > 0 and wo[k, 2] > 0):
-        out[k, 0] = out[k, 1] = out[k, 2] = 0.0
-        return False, 0.0, 0.0, 0.0
-    hx, hy, hz = wi[k, 0] + wo[k, 0], wi[k, 1] + wo[k, 1], wi[k, 2] + wo[k, 2]
-    hn = max(np.sqrt(hx * hx + hy * hy + hz * hz), 1e-300)
-    return True, hx / hn, hy / hn, hz / hn
 
 
 def _gltf_kernel(wi, wo, a, base, metallic, f0_d, f90_d, coat, a_coat,
@@ -69,9 +57,8 @@ def _gltf_kernel(wi, wo, a, base, metallic, f0_d, f90_d, coat, a_coat,
 
 
 if _numba is not None:
-    _core_dv_kernel, _visible_half_kernel = (
-        _numba.njit(cache=True, nogil=True, inline="always", error_model="numpy")(f)
-        for f in (_core_dv_kernel, _visible_half_kernel))
+    _core_dv_kernel = _numba.njit(cache=True, nogil=True, inline="always",
+                                  error_model="numpy")(_core_dv_kernel)
     _gltf_kernel = _numba.njit(cache=True, nogil=True, error_model="numpy")(_gltf_kernel)
 
 

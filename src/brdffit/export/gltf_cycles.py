@@ -51,8 +51,8 @@ from functools import lru_cache
 import numpy as np
 
 from .._jit import lazy_numba
-from ..brdf import _as_dirs, _dot3, _unit_half
-from .gltf_brdf import GLTFBRDF, _visible_half_kernel
+from ..brdf import _as_dirs, _dot3, _unit_half, _visible_half_kernel
+from .gltf_brdf import GLTFBRDF
 
 _numba = lazy_numba()
 

@@ -56,7 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from ..._jit import lazy_numba
-from ...brdf import IsotropicBRDF, _as_dirs, _dot3, _unit_half
+from ...brdf import IsotropicBRDF, _as_dirs, _dot3, _unit_half, _visible_half_kernel
 from ..metrics import rendered_psnr
 from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
 from .threejs import EngineUnavailable, sphere_geometry_px, three_dir
@@ -155,12 +155,9 @@ def _threejs_kernel(wi, wo, g, lut, flags, rough, base, metallic, f0_d, f90_d, c
     Fresnel, 0.045 floor, multiscatter), ``rough`` = (roughness, coat roughness)."""
     sg, floor, ms = flags[0], flags[1], flags[2]
     for k in range(wi.shape[0]):
-        if not (wi[k, 2] > 0 and wo[k, 2] > 0):
-            out[k, 0] = out[k, 1] = out[k, 2] = 0.0
+        visible, hx, hy, hz = _visible_half_kernel(wi, wo, k, out)
+        if not visible:
             continue
-        hx, hy, hz = wi[k, 0] + wo[k, 0], wi[k, 1] + wo[k, 1], wi[k, 2] + wo[k, 2]
-        hn = max(np.sqrt(hx * hx + hy * hy + hz * hz), 1e-300)
-        hx, hy, hz = hx / hn, hy / hn, hz / hn
         nl, nv = min(max(wi[k, 2], 0.0), 1.0), min(max(wo[k, 2], 0.0), 1.0)
         nh = min(max(hz, 0.0), 1.0)
         vh = min(max(wo[k, 0] * hx + wo[k, 1] * hy + wo[k, 2] * hz, 0.0), 1.0)
