@@ -239,8 +239,8 @@ def _child_engine_call(method: str, *args):
 
 def _child_engine_release() -> None:
     """In the renderer's child process: free the engine and its evaluators (the translation
-    cache, reference cycles), keep the process. Left alive, they made the next material's
-    renders cost 1.2-1.3× and its peaks 3-4× the CPU."""
+    cache, reference cycles), keep the process. Left alive, they make the next material's
+    renders cost 1.2-1.3× and its peaks 3-4× the CPU (docs/design/batch.md)."""
     global _CHILD_ENGINE
     _CHILD_ENGINE = None
     clear_evaluator_cache()
