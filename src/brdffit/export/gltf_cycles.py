@@ -51,7 +51,7 @@ from functools import lru_cache
 import numpy as np
 
 from .._jit import lazy_numba
-from ..brdf import _as_dirs, _dot3, _unit_half, _visible_half_kernel
+from ..brdf import _as_dirs, _dot3, _run_per_sample, _unit_half, _visible_half_kernel
 from .gltf_brdf import GLTFBRDF
 
 _numba = lazy_numba()
@@ -324,12 +324,15 @@ class _Lobe:
             G2 = 1.0 / (1.0 + _lambda(self.alpha, nl) + _lambda(self.alpha, nv))
             return np.nan_to_num(D * G2 / (4.0 * nl * nv))
 
+    def f_ms(self, F_ss):
+        """``F_ms = F_ss E_avg / (1 − F_ss (1 − E_avg))`` for the mean Fresnel ``F_ss``."""
+        F_ss = np.asarray(F_ss, float)
+        return F_ss * self.E_avg / (1.0 - F_ss * (1.0 - self.E_avg))
+
     def energy(self, F_ss, mu):
         """``(1 + F_ms (1 − E)/E, darkening)`` at ``μ`` for the mean Fresnel ``F_ss``."""
         E = self.table(self.E, mu)[..., None]
-        F_ss = np.asarray(F_ss, float)
-        F_ms = F_ss * self.E_avg / (1.0 - F_ss * (1.0 - self.E_avg))
-        scale = 1.0 + F_ms * (1.0 - E) / E
+        scale = 1.0 + self.f_ms(F_ss) * (1.0 - E) / E
         return scale, scale * E
 
 
@@ -358,6 +361,17 @@ class CyclesPrincipledBRDF(GLTFBRDF):
         self.lobe = _lobe(alpha, self.eta if self.eta > 1.0 else None)
         self.coat = (_lobe(self.clearcoat_roughness**2, 1.5) if self.clearcoat > 0 else None)
 
+    def _mean_fresnels(self) -> tuple[np.ndarray, np.ndarray]:
+        """The layers' mean Fresnels ``F_ss`` (module docstring): metal ``mix(base, 1,
+        1/21)``, dielectric ``mix(f0t, 1, s_ss)`` with Cycles' fit of ``F_ss(η)`` (0 without
+        an index)."""
+        metal = self.base_color + (1.0 - self.base_color) / 21.0
+        if not self.lobe.eta:
+            return metal, np.zeros(3)
+        f_ss = (self.eta - 1.0) / (4.08567 + 1.00071 * self.eta)
+        s_ss = np.clip((f_ss - _f0_of(self.eta)) / (1.0 - _f0_of(self.eta)), 0.0, 1.0)
+        return metal, self.f0_tinted + (1.0 - self.f0_tinted) * s_ss
+
     def eval(self, wi, wo) -> np.ndarray:
         wi, wo = _as_dirs(wi, wo)
         if _numba is not None and _cycles_kernel.worth_compiling(wi[..., 0].size):
@@ -377,14 +391,12 @@ class CyclesPrincipledBRDF(GLTFBRDF):
             F_d = self.f0_tinted + (1.0 - self.f0_tinted) * s
             s_mean = lobe.table(lobe.S, mu)[..., None]
             albedo = self.f0_tinted + (1.0 - self.f0_tinted) * s_mean
-            f_ss = (self.eta - 1.0) / (4.08567 + 1.00071 * self.eta)
-            s_ss = np.clip((f_ss - _f0_of(self.eta)) / (1.0 - _f0_of(self.eta)), 0.0, 1.0)
-            Fss_d = self.f0_tinted + (1.0 - self.f0_tinted) * s_ss
         else:                               # index 1: no specular layer
-            F_d = albedo = Fss_d = np.zeros(3)
+            F_d = albedo = np.zeros(3)
         if self.multiscatter:
-            scale_d, dark_d = lobe.energy(Fss_d, mu)
-            scale_m, _ = lobe.energy(self.base_color + (1.0 - self.base_color) / 21.0, mu)
+            fss_metal, fss_dielectric = self._mean_fresnels()
+            scale_d, dark_d = lobe.energy(fss_dielectric, mu)
+            scale_m, _ = lobe.energy(fss_metal, mu)
         else:
             scale_d, dark_d, scale_m = 1.0, 1.0, 1.0
         spec_d = F_d * dv * scale_d
@@ -405,26 +417,15 @@ class CyclesPrincipledBRDF(GLTFBRDF):
         """:meth:`eval` by :func:`_cycles_kernel` (the NumPy path's values to rounding)."""
         lobe, coat = self.lobe, self.coat
         eta = float(lobe.eta or 0.0)
-        F_ss_m = self.base_color + (1.0 - self.base_color) / 21.0
-        fms_m = F_ss_m * lobe.E_avg / (1.0 - F_ss_m * (1.0 - lobe.E_avg))
-        fms_d = np.zeros(3)
-        if eta:
-            f_ss = (eta - 1.0) / (4.08567 + 1.00071 * eta)
-            s_ss = np.clip((f_ss - _f0_of(eta)) / (1.0 - _f0_of(eta)), 0.0, 1.0)
-            Fss_d = self.f0_tinted + (1.0 - self.f0_tinted) * s_ss
-            fms_d = Fss_d * lobe.E_avg / (1.0 - Fss_d * (1.0 - lobe.E_avg))
+        fss_metal, fss_dielectric = self._mean_fresnels()
         tables = np.stack([lobe.E, lobe.S] + ([coat.E, coat.S] if coat else [lobe.E, lobe.S]))
-        coat_args = (np.array([self.clearcoat, coat.alpha, coat.alpha**2,
-                               _COAT_FSS * coat.E_avg / (1.0 - _COAT_FSS * (1.0 - coat.E_avg))])
+        coat_args = (np.array([self.clearcoat, coat.alpha, coat.alpha**2, coat.f_ms(_COAT_FSS)])
                      if coat else np.zeros(4))
-        shape = wi.shape[:-1]
-        wi, wo = (np.ascontiguousarray(w).reshape(-1, 3) for w in (wi, wo))
-        out = np.empty(wi.shape)
-        _cycles_kernel(wi, wo, np.array([lobe.alpha, lobe.alpha**2, eta, _f0_of(eta) if eta
-                                         else 0.0, float(self.multiscatter)]),
-                       tables, self.base_color, self.metallic, self.f0_tinted, fms_d, fms_m,
-                       coat_args, out)
-        return out.reshape(shape + (3,))
+        return _run_per_sample(_cycles_kernel, wi, wo,
+                               np.array([lobe.alpha, lobe.alpha**2, eta,
+                                         _f0_of(eta) if eta else 0.0, float(self.multiscatter)]),
+                               tables, self.base_color, self.metallic, self.f0_tinted,
+                               lobe.f_ms(fss_dielectric), lobe.f_ms(fss_metal), coat_args)
 
     def as_microfacet(self):
         return None
