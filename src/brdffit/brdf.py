@@ -71,6 +71,16 @@ if _numba is not None:
                                        error_model="numpy")(_visible_half_kernel)
 
 
+def _run_per_sample(kernel, wi, wo, *args) -> np.ndarray:
+    """``kernel(wi, wo, *args, out)`` on the directions ``(..., 3)`` as contiguous ``(n, 3)``
+    rows (a compiled per-sample kernel); its ``out`` as ``(..., 3)``."""
+    shape = wi.shape[:-1]
+    wi, wo = (np.ascontiguousarray(w).reshape(-1, 3) for w in (wi, wo))
+    out = np.empty(wi.shape)
+    kernel(wi, wo, *args, out)
+    return out.reshape(shape + (3,))
+
+
 def sample_arguments(wi, u) -> tuple[np.ndarray, np.ndarray]:
     """``(wi, u)`` of a ``sample(wi, u)`` call as float64, broadcast against each other
     (``wi`` ``(..., 3)``, ``u`` ``(..., 2)``; read-only views)."""

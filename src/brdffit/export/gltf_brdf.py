@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from .._jit import lazy_numba
-from ..brdf import IsotropicBRDF, _as_dirs, _dot3, _unit_half, _visible_half_kernel
+from ..brdf import (IsotropicBRDF, _as_dirs, _dot3, _run_per_sample, _unit_half,
+                    _visible_half_kernel)
 from ..microfacet import GGX, MicrofacetBRDF, SchlickFresnel
 
 __all__ = ["GLTFBRDF"]
@@ -181,13 +182,9 @@ class GLTFBRDF(IsotropicBRDF):
         """:meth:`eval` (isotropic) by :func:`_gltf_kernel` (the NumPy path's values to
         rounding)."""
         f0_d, f90_d = self.dielectric_f0_f90()
-        shape = wi.shape[:-1]
-        wi, wo = (np.ascontiguousarray(w).reshape(-1, 3) for w in (wi, wo))
-        out = np.empty(wi.shape)
-        _gltf_kernel(wi, wo, self.roughness**2, self.base_color, self.metallic,
-                     np.asarray(f0_d, float), float(f90_d), self.clearcoat,
-                     self.clearcoat_roughness**2, out)
-        return out.reshape(shape + (3,))
+        return _run_per_sample(_gltf_kernel, wi, wo, self.roughness**2, self.base_color,
+                               self.metallic, np.asarray(f0_d, float), float(f90_d),
+                               self.clearcoat, self.clearcoat_roughness**2)
 
     def as_microfacet(self):
         """For a pure metal (metallic = 1): the identical ``MicrofacetBRDF`` (GGX α = r²,

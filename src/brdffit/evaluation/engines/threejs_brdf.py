@@ -56,7 +56,8 @@ from pathlib import Path
 import numpy as np
 
 from ..._jit import lazy_numba
-from ...brdf import IsotropicBRDF, _as_dirs, _dot3, _unit_half, _visible_half_kernel
+from ...brdf import (IsotropicBRDF, _as_dirs, _dot3, _run_per_sample, _unit_half,
+                     _visible_half_kernel)
 from ..metrics import rendered_psnr
 from ..render.scenes import CAMERA, DISTANT_LIGHT, POINT_LIGHT
 from .threejs import EngineUnavailable, sphere_geometry_px, three_dir
@@ -294,18 +295,14 @@ class ThreeJSBRDF(IsotropicBRDF):
     def _eval_compiled(self, wi, wo, g) -> np.ndarray:
         """:meth:`eval_g` by :func:`_threejs_kernel` (the NumPy path's values to rounding)."""
         f0_d, f90_d = self.dielectric_f0_f90()
-        shape = wi.shape[:-1]
-        wi, wo = (np.ascontiguousarray(w).reshape(-1, 3) for w in (wi, wo))
-        g = np.array(np.broadcast_to(g, shape), dtype=float).reshape(-1)
+        g = np.array(np.broadcast_to(g, wi.shape[:-1]), dtype=float).reshape(-1)
         lut = np.ascontiguousarray(self.lut if self.multiscatter else np.zeros((2, 2, 2)),
                                    dtype=float)
-        out = np.empty(wi.shape)
-        _threejs_kernel(wi, wo, g, lut,
-                        np.array([self.sg_fresnel, self.min_roughness, self.multiscatter]),
-                        np.array([self.roughness, self.clearcoat_roughness]), self.base_color,
-                        self.metallic, np.asarray(f0_d, float), float(f90_d), self.clearcoat,
-                        out)
-        return out.reshape(shape + (3,))
+        return _run_per_sample(
+            _threejs_kernel, wi, wo, g, lut,
+            np.array([self.sg_fresnel, self.min_roughness, self.multiscatter]),
+            np.array([self.roughness, self.clearcoat_roughness]), self.base_color,
+            self.metallic, np.asarray(f0_d, float), float(f90_d), self.clearcoat)
 
     def describe(self) -> dict:
         return {"base_color": self.base_color.tolist(), "metallic": self.metallic,
