@@ -651,8 +651,8 @@ class BRDFMetrics:
 
     def _pairs(self) -> None:
         """The sample pairs of ``cos_rel_error`` and ``error_regions`` over the reference's
-        measured domain, its values and regions there: prepared by the first metric that
-        reads them (none when neither is computed)."""
+        measured domain, its values and regions there: prepared at set-up when the chosen
+        metrics read them, else by the first call that does (never when none does)."""
         if self._wi is not None:
             return
         t0 = time.perf_counter()
