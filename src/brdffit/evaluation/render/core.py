@@ -36,7 +36,7 @@ from ..metrics import rendered_psnr as psnr  # Bagher 2016 §5 (one implementati
 from ._mitsuba import load
 from .plugin import make_bsdf
 from .proposal import proposal_for
-from .scenes import SCENES, _camera, roughness_texture, scene_dict, scene_spec
+from .scenes import SCENES, roughness_texture, scene_dict, scene_spec, window_sensor
 from .translate import to_evaluator
 
 __all__ = ["RenderResult", "Renderer", "render", "render_ex", "noise_floor", "psnr",
@@ -405,9 +405,11 @@ class MultiRenderer:
         kw = {}
         if crop is not None:
             crop = tuple(int(v) for v in crop)
-            if crop not in self._sensors:
-                self._sensors[crop] = self.mi.load_dict(_camera(self.resolution, 4, crop=crop))
-            kw["sensor"] = self._sensors[crop]
+            x0, y0, w, h = crop
+            if (w, h) not in self._sensors:
+                self._sensors[w, h] = window_sensor(self.resolution, w, h)
+            self._sensors[w, h].move(x0, y0)
+            kw["sensor"] = self._sensors[w, h]
         img = self.mi.render(self.scene, integrator=self.integrator, seed=int(seed), spp=int(spp),
                              **kw)
         arr = np.array(img, dtype=np.float32)

@@ -52,6 +52,30 @@ __all__ = ["MERLTableEval", "tabulate_full_phi", "despike", "Table4DEval", "Micr
 INV_PI = 1.0 / np.pi
 
 
+def kernel_params(obj, *names):
+    """The attributes ``names`` of ``obj`` (Python floats or ``mi.ScalarColor3f``) as opaque
+    Dr.Jit values (``dr.opaque``): parameters of the compiled kernel, not constants in it.
+
+    Dr.Jit compiles a new kernel for every new constant it finds in a trace; a material's
+    roughness, F0 or proxy lobe written as literals would make every material's renders
+    (≈ 0.5 s of LLVM compilation per sphere scene, 1.2 s for the knot) miss the kernel cache.
+    As opaque values, one kernel per scene serves every material. The opaque copies are made
+    once per value (kept in ``obj._kernel_params``, remade when the attribute changes).
+    """
+    cache = obj.__dict__.setdefault("_kernel_params", {})
+    out = []
+    for name in names:
+        value = getattr(obj, name)
+        color = isinstance(value, mi.ScalarColor3f)
+        key = tuple(float(v) for v in value) if color else float(value)
+        hit = cache.get(name)
+        if hit is None or hit[0] != key:
+            hit = cache[name] = (key, mi.Color3f(*(dr.opaque(mi.Float, v) for v in key))
+                                 if color else dr.opaque(mi.Float, key))
+        out.append(hit[1])
+    return out if len(out) > 1 else out[0]
+
+
 # -- helpers --------------------------------------------------------------------------------
 def to_vec3(a) -> "mi.Vector3f":
     """``(N, 3)`` NumPy array → ``mi.Vector3f``."""
@@ -230,15 +254,15 @@ class _ProxySampling:
     proxy_weight: float = 0.5
 
     def pdf(self, wi, wo, alpha_scale=1.0, active=True):
-        a = self.proxy_alpha
-        p = (self.proxy_weight * _ggx_reflect_pdf(wi, wo, a, a)
-             + (1.0 - self.proxy_weight) * dr.maximum(wo.z, 0.0) * INV_PI)
+        a, w = kernel_params(self, "proxy_alpha", "proxy_weight")
+        p = (w * _ggx_reflect_pdf(wi, wo, a, a)
+             + (1.0 - w) * dr.maximum(wo.z, 0.0) * INV_PI)
         return dr.select(active & (wi.z > 0) & (wo.z > 0), p, 0.0)
 
     def sample(self, wi, u1, u2, alpha_scale=1.0, active=True):
-        a = self.proxy_alpha
+        a, w = kernel_params(self, "proxy_alpha", "proxy_weight")
         m = ggx_vndf_sample(wi, u2, a, a)
-        spec = u1 < self.proxy_weight
+        spec = u1 < w
         wo = dr.select(spec, _reflect(wi, m), cosine_sample(u2))
         return wo, self.pdf(wi, wo, alpha_scale, active)
 
@@ -309,7 +333,7 @@ class MERLTableEval(_ProxySampling):
                 for ip, wp in ((ip0, 1.0 - fp), (ip1, fp)):
                     out += (wh * wd * wp) * dr.gather(mi.Color3f, self.buffer, base + ip, ok)
         if self.interp == "log":
-            out = dr.maximum(dr.exp(out) - self.eps, 0.0)
+            out = dr.maximum(dr.exp(out) - kernel_params(self, "eps"), 0.0)
         return dr.select(ok, out, 0.0)
 
 
@@ -415,7 +439,7 @@ class Table4DEval(_ProxySampling):
                     for d, wd in axis(xpd, npd, True):
                         out += (wa * wb * wc * wd) * dr.gather(mi.Color3f, self.buffer, base + d, ok)
         if self.interp == "log":
-            out = dr.maximum(dr.exp(out) - self.eps, 0.0)
+            out = dr.maximum(dr.exp(out) - kernel_params(self, "eps"), 0.0)
         return dr.select(ok, out, 0.0)
 
 
@@ -436,28 +460,38 @@ class _Elliptical:
             raise ValueError(f"invalid (alpha_x, alpha_y, rho) = ({self.ax}, {self.ay}, {self.rho})")
         self.sr = float(np.sqrt(1.0 - self.rho**2))
 
+    def _params(self):
+        """``(αx, αy, ρ, √(1−ρ²))`` as kernel parameters (:func:`kernel_params`); the
+        Python floats decide only the structure (``ρ = 0``)."""
+        return kernel_params(self, "ax", "ay", "rho", "sr")
+
     def _q_inv(self, x, y, s):
-        X, Y = x / (self.ax * s), y / (self.ay * s)
+        ax, ay, rho, sr = self._params()
+        X, Y = x / (ax * s), y / (ay * s)
         if self.rho == 0.0:
             return dr.square(X) + dr.square(Y)
-        return (dr.square(X) - 2.0 * self.rho * X * Y + dr.square(Y)) / (self.sr * self.sr)
+        return (dr.square(X) - 2.0 * rho * X * Y + dr.square(Y)) / (sr * sr)
 
     def _q(self, x, y, s):
-        ax, ay = self.ax * s, self.ay * s
+        ax, ay, rho, _ = self._params()
+        ax, ay = ax * s, ay * s
         if self.rho == 0.0:
             return dr.square(ax * x) + dr.square(ay * y)
-        return dr.square(ax * x) + 2.0 * self.rho * ax * ay * x * y + dr.square(ay * y)
+        return dr.square(ax * x) + 2.0 * rho * ax * ay * x * y + dr.square(ay * y)
 
     def _det_sqrt(self, s):
-        return self.ax * self.ay * self.sr * s * s
+        ax, ay, _, sr = self._params()
+        return ax * ay * sr * s * s
 
     def _L(self, x, y, s):
         """``L (x, y)``."""
-        return (self.ax * s * x, self.rho * self.ay * s * x + self.ay * self.sr * s * y)
+        ax, ay, rho, sr = self._params()
+        return (ax * s * x, rho * ay * s * x + ay * sr * s * y)
 
     def _Lt(self, x, y, s):
         """``Lᵀ (x, y)``."""
-        return (self.ax * s * x + self.rho * self.ay * s * y, self.ay * self.sr * s * y)
+        ax, ay, rho, sr = self._params()
+        return (ax * s * x + rho * ay * s * y, ay * sr * s * y)
 
     def pdf_m(self, wi, m, s=1.0):
         """Visible-normal density ``G1(wi) <wi, m>₊ D(m) / cos θi`` (Heitz & d'Eon 2014)."""
@@ -514,8 +548,8 @@ class BeckmannDist(_Elliptical):
 
     def sample(self, wi, u, s=1.0):
         if self.rho == 0.0:
-            md = mi.MicrofacetDistribution(mi.MicrofacetType.Beckmann, self.ax * s,
-                                           self.ay * s, True)
+            ax, ay, _, _ = self._params()
+            md = mi.MicrofacetDistribution(mi.MicrofacetType.Beckmann, ax * s, ay * s, True)
             m, _ = md.sample(wi, u)
         else:
             r = dr.sqrt(-dr.log(dr.maximum(1.0 - u.x, 1e-12)))
@@ -656,7 +690,8 @@ class SchlickFresnelDJ:
 
     def eval(self, c, active=True):
         k = dr.square(dr.square(1.0 - c)) * (1.0 - c)
-        return mi.Color3f(self.f0) + (1.0 - mi.Color3f(self.f0)) * k
+        f0 = kernel_params(self, "f0")
+        return f0 + (1.0 - f0) * k
 
 
 class ConstantFresnelDJ:
@@ -669,7 +704,7 @@ class ConstantFresnelDJ:
         self.v = mi.ScalarColor3f(*map(float, v))
 
     def eval(self, c, active=True):
-        return mi.Color3f(self.v) + 0.0 * c
+        return kernel_params(self, "v") + 0.0 * c
 
 
 class TableFresnelDJ:
@@ -740,9 +775,10 @@ class MicrofacetEval:
             g = 1.0 / ((1.0 + li) * (1.0 + lo))
         F = self.fresnel.eval(dr.clip(dr.dot(wi, h), 0.0, 1.0), ok)
         denom = 4.0 * dr.maximum(wi.z, 1e-7) * dr.maximum(wo.z, 1e-7)
-        f = mi.Color3f(self.ks) * F * (self.dist.D(h, alpha_scale) * g / denom)
+        ks, kd = kernel_params(self, "ks", "kd")
+        f = ks * F * (self.dist.D(h, alpha_scale) * g / denom)
         if self.has_diffuse:
-            f += mi.Color3f(self.kd) * INV_PI
+            f += kd * INV_PI
         return dr.select(ok, f, 0.0)
 
     def pdf(self, wi, wo, alpha_scale=1.0, active=True):
@@ -751,16 +787,17 @@ class MicrofacetEval:
         # wo = reflect(wi, m): density of m times the Jacobian 1/(4 |wo·h|)
         pm = self.dist.pdf_m(wi, h, alpha_scale) / (4.0 * dr.maximum(dr.abs(dr.dot(wo, h)), 1e-7))
         pm = dr.select(dr.dot(wi, h) > 0, pm, 0.0)
-        p = self.spec_weight * pm
+        w = kernel_params(self, "spec_weight")
+        p = w * pm
         if self.has_diffuse:
-            p += (1.0 - self.spec_weight) * dr.maximum(wo.z, 0.0) * INV_PI
+            p += (1.0 - w) * dr.maximum(wo.z, 0.0) * INV_PI
         return dr.select(ok, p, 0.0)
 
     def sample(self, wi, u1, u2, alpha_scale=1.0, active=True):
         m, _ = self.dist.sample(wi, u2, alpha_scale)
         wo = _reflect(wi, m)
         if self.has_diffuse:
-            wo = dr.select(u1 < self.spec_weight, wo, cosine_sample(u2))
+            wo = dr.select(u1 < kernel_params(self, "spec_weight"), wo, cosine_sample(u2))
         return wo, self.pdf(wi, wo, alpha_scale, active)
 
 
@@ -879,5 +916,6 @@ class NPFEval(_ProxySampling):
         else:
             i0, i1, t = periodic_cell(periodic_coordinate(pd, dr.pi, 180), 180)
             spec *= dr.lerp(dr.gather(mi.Color3f, self.H, i0, ok), dr.gather(mi.Color3f, self.H, i1, ok), t)
-        f = mi.Color3f(self.rho_d) + mi.Color3f(self.rho_s) * spec
+        rho_d, rho_s = kernel_params(self, "rho_d", "rho_s")
+        f = rho_d + rho_s * spec
         return dr.select(ok, f, 0.0)

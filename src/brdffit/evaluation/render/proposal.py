@@ -157,14 +157,27 @@ class Proposal:
                 "weights": list(self.weights), **self.info}
 
     # -- Dr.Jit ----------------------------------------------------------------------------
+    def _kernel_params(self):
+        """``(cosine weight, alphas, weights)`` as opaque Dr.Jit values, so that one compiled
+        kernel serves every material's proposal (:func:`.drjit_eval.kernel_params`)."""
+        key = (self.cosine_weight, tuple(self.alphas), tuple(self.weights))
+        hit = self.__dict__.get("_kernel_values")
+        if hit is None or hit[0] != key:
+            dr, mi = dj.dr, dj.mi
+            hit = self._kernel_values = (key, (dr.opaque(mi.Float, self.cosine_weight),
+                                               [dr.opaque(mi.Float, a) for a in self.alphas],
+                                               [dr.opaque(mi.Float, w) for w in self.weights]))
+        return hit[1]
+
     def pdf(self, wi, wo, alpha_scale=1.0, active=True):
         mi, dr = dj.mi, dj.dr
         up = (wi.z > 0) & (wo.z > 0)
-        p = self.cosine_weight * dr.maximum(wo.z, 0.0) * (1.0 / np.pi)
-        if self.alphas:
+        cosine_weight, alphas, weights = self._kernel_params()
+        p = cosine_weight * dr.maximum(wo.z, 0.0) * (1.0 / np.pi)
+        if alphas:
             h = dr.normalize(wi + wo)
             cos_i = dr.maximum(wi.z, 1e-7)
-            for a, w in zip(self.alphas, self.weights):
+            for a, w in zip(alphas, weights):
                 g1 = 1.0 / (1.0 + dj.ggx_lambda(wi, a, a))
                 p += w * g1 * dj.ggx_D(h, a, a) / (4.0 * cos_i)
         return dr.select(active & up, p, mi.Float(0.0))
@@ -172,12 +185,12 @@ class Proposal:
     def sample(self, wi, u1, u2, alpha_scale=1.0, active=True):
         mi, dr = dj.mi, dj.dr
         wo = dj.cosine_sample(u2)
-        edge = self.cosine_weight
-        for a, w in zip(self.alphas, self.weights):
+        edge, alphas, weights = self._kernel_params()
+        for a, w in zip(alphas, weights):
             m = dj.ggx_vndf_sample(wi, u2, a, a)
             r = 2.0 * dr.dot(wi, m) * m - wi
             wo = dr.select(u1 >= edge, r, wo)
-            edge += w
+            edge = edge + w   # not +=: that would change the cached opaque value in place
         return wo, self.pdf(wi, wo, alpha_scale, active)
 
 

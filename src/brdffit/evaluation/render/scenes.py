@@ -212,23 +212,95 @@ def _read_envmap(spec: str) -> np.ndarray:
     return read_exr(path)
 
 
-def _camera(resolution: int, spp: int, crop=None):
-    """The scenes' camera (:data:`CAMERA`); ``crop=(x0, y0, width, height)`` renders only
-    that window of the same film (same pixels and camera rays)."""
-    mi, _ = _load()
-    film = {"type": "hdrfilm", "width": int(resolution), "height": int(resolution),
+def _film(width: int, height: int) -> dict:
+    return {"type": "hdrfilm", "width": int(width), "height": int(height),
             "rfilter": {"type": "box"}, "pixel_format": "rgba", "component_format": "float32"}
-    if crop is not None:
-        x0, y0, w, h = (int(v) for v in crop)
-        film |= {"crop_offset_x": x0, "crop_offset_y": y0, "crop_width": w, "crop_height": h}
+
+
+def _camera(resolution: int, spp: int):
+    """The scenes' camera (:data:`CAMERA`) with a ``resolution²`` film."""
+    mi, _ = _load()
     return {
         "type": "perspective", "fov": CAMERA["fov_degrees"], "fov_axis": "x",
         "to_world": mi.ScalarTransform4f().look_at(origin=list(CAMERA["origin"]),
                                                    target=list(CAMERA["target"]),
                                                    up=list(CAMERA["up"])),
-        "film": film,
+        "film": _film(resolution, resolution),
         "sampler": {"type": "independent", "sample_count": int(spp)},
     }
+
+
+_WINDOW_PLUGIN = "brdffit_window"
+_window_registered = False
+
+
+def window_sensor(resolution: int, width: int, height: int):
+    """A sensor that renders a ``width × height`` window of the scenes' camera at
+    ``resolution`` (the same pixels, camera rays and random numbers as that crop of the full
+    film; rays equal to float32 rounding). Place it with ``sensor.move(x0, y0)`` (top-left
+    pixel of the window) before each ``mi.render``.
+
+    A film crop would do the same, but Mitsuba writes a crop's offset into the render kernel
+    as a constant, so every new window is a new kernel to compile (≈ 0.2 s for a sphere
+    scene, 3 windows per scene and material for the peaks). Here the offset is an opaque
+    Dr.Jit value: one kernel renders every window of that size.
+    """
+    global _window_registered
+    mi, dr = _load()
+    if not _window_registered:
+        mi.register_sensor(_WINDOW_PLUGIN, lambda props: _window_sensor_class(mi, dr)(props))
+        _window_registered = True
+    sensor = mi.load_dict({"type": _WINDOW_PLUGIN, "film": _film(width, height),
+                           "sampler": {"type": "independent", "sample_count": 4}})
+    sensor.setup(mi.load_dict(_camera(resolution, 4)), resolution)
+    return sensor
+
+
+@lru_cache(maxsize=1)
+def _window_sensor_class(mi, dr):
+    """The ``mi.Sensor`` subclass of :func:`window_sensor` (made once Mitsuba is loaded)."""
+
+    class WindowSensor(mi.Sensor):
+        """Forwards ray sampling to the full-film ``camera``: a position ``p`` ∈ [0, 1]² on
+        the window's film is ``origin + p · extent`` on the full film."""
+
+        def __init__(self, props):
+            mi.Sensor.__init__(self, props)
+            self.camera, self.resolution = None, None
+            self.origin = self.extent = None
+
+        def setup(self, camera, resolution: int):
+            self.camera, self.resolution = camera, int(resolution)
+            # draw the camera's samples only (a pinhole needs no aperture sample), so the
+            # window gets the random numbers a crop of the full film gets
+            self.m_needs_sample_2 = camera.needs_sample_2()
+            self.m_needs_sample_3 = camera.needs_sample_3()
+            size = self.film().size()
+            self.extent = mi.Vector2f(*(dr.opaque(mi.Float, float(n) / self.resolution)
+                                        for n in size))
+            self.move(0, 0)
+
+        def move(self, x0: int, y0: int):
+            self.origin = mi.Point2f(dr.opaque(mi.Float, float(x0) / self.resolution),
+                                     dr.opaque(mi.Float, float(y0) / self.resolution))
+
+        def _on_full_film(self, p):
+            return mi.Point2f(self.origin.x + p.x * self.extent.x,
+                              self.origin.y + p.y * self.extent.y)
+
+        def sample_ray(self, time, sample1, sample2, sample3, active=True):
+            return self.camera.sample_ray(time, sample1, self._on_full_film(sample2), sample3,
+                                          active)
+
+        def sample_ray_differential(self, time, sample1, sample2, sample3, active=True):
+            return self.camera.sample_ray_differential(time, sample1,
+                                                       self._on_full_film(sample2), sample3,
+                                                       active)
+
+        def to_string(self):
+            return f"WindowSensor[{self.film().size()} of {self.resolution}²]"
+
+    return WindowSensor
 
 
 def _env_emitter(envmap):
