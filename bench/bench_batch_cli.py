@@ -14,6 +14,11 @@ newest run without renders, whatever its ``--every``) or, with ``--render``,
 ``bench/results/batch_cli_render.json`` (with the render tasks' wall and CPU times: the CPU
 of each comparison's renders, measured by the report, and of the whole task's process tree
 is the batch's; see ``docs/design/batch.md``).
+
+The child runs with an empty Dr.Jit kernel cache (``DRJIT_CACHE_DIR`` a fresh temporary
+folder), as on a machine that never rendered these materials: Dr.Jit keeps compiled kernels
+on disk (``~/.drjit``), and a kernel cache filled by earlier runs of the same command would
+hide the compilations a first run pays. ``--warm-kernel-cache`` keeps the user's cache.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ import os
 import resource
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -98,6 +104,8 @@ def main() -> int:
     ap.add_argument("--summarise", action="store_true", help="only summarise --out")
     ap.add_argument("--render", action="store_true",
                     help="pass --render (the four-scene paper suite, product defaults)")
+    ap.add_argument("--warm-kernel-cache", action="store_true",
+                    help="use the user's Dr.Jit kernel cache instead of an empty one")
     args = ap.parse_args()
     from brdffit.batch import enumerate_materials
 
@@ -113,12 +121,18 @@ def main() -> int:
         load0 = list(os.getloadavg())
         t0 = time.perf_counter()
         r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-        rc = subprocess.call(cmd, cwd=ROOT)
+        with tempfile.TemporaryDirectory(prefix="drjit-cache-") as cache:
+            env = dict(os.environ)
+            if not args.warm_kernel_cache:
+                env["DRJIT_CACHE_DIR"] = cache
+            rc = subprocess.call(cmd, cwd=ROOT, env=env)
         r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
         wall = time.perf_counter() - t0
         result.update(exit_code=rc, wall_s=wall,
                       cpu_s_user_sys=(r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime),
                       projected_all_materials_wall_h=wall * args.every / 3600.0,
+                      drjit_kernel_cache="warm (the user's)" if args.warm_kernel_cache
+                      else "empty at the start (fresh DRJIT_CACHE_DIR)",
                       load_average_start=load0, load_average_end=list(os.getloadavg()))
     out = ROOT / args.out
     pm = per_model(out)
