@@ -345,24 +345,44 @@ def despike(values, factor: float = 100.0):
     produce such values at grazing angles (the RGL ``paper_white`` reader gives 1e4-1e14 at
     θd ≥ 87°, 228 of 2.9 M samples) and a single one ruins a render with fireflies; genuine
     specular peaks are smooth at the grid scale and are left alone (0 samples changed on the
-    Neural-BRDF chrome-steel). Returns ``(values, n_replaced)``.
+    Neural-BRDF chrome-steel). Neighbourhoods repeat the edge samples (``median_filter``'s
+    ``mode="nearest"``); their medians are computed only where the sample exceeds ``factor``
+    × the table's median and × its neighbourhood's minimum (a necessary condition). Returns
+    ``(values, n_replaced)``.
     """
-    from scipy.ndimage import median_filter
-
     v = np.asarray(values, dtype=np.float64)
     lum = v.mean(-1)
     pos = lum[lum > 0]
     if pos.size == 0:
         return v, 0
-    med = median_filter(lum, size=3, mode="nearest")
-    bad = (lum > factor * np.maximum(med, 1e-30)) & (lum > factor * np.median(pos))
-    n = int(bad.sum())
-    if n:
+    from scipy.ndimage import minimum_filter
+
+    # the neighbourhood median is at least its minimum: only samples above factor × that
+    # minimum can be spikes (a smooth specular peak has none)
+    near_min = minimum_filter(lum, size=3, mode="nearest")
+    candidates = np.flatnonzero((lum > factor * np.median(pos))
+                                & (lum > factor * np.maximum(near_min, 1e-30)))
+    bad = candidates[lum.flat[candidates]
+                     > factor * np.maximum(_local_medians(lum, candidates), 1e-30)]
+    if bad.size:
         v = v.copy()
         for c in range(v.shape[-1]):
-            mc = median_filter(v[..., c], size=3, mode="nearest")
-            v[..., c] = np.where(bad, mc, v[..., c])
-    return v, n
+            channel = v[..., c]
+            channel.flat[bad] = _local_medians(channel, bad)
+    return v, int(bad.size)
+
+
+def _local_medians(a: np.ndarray, flat_index: np.ndarray) -> np.ndarray:
+    """Medians of the 3×3×… neighbourhoods of ``a`` at ``flat_index``, edge samples repeated
+    (``scipy.ndimage.median_filter(a, size=3, mode="nearest")`` at those samples)."""
+    padded = np.pad(a, 1, mode="edge")
+    centre = np.ravel_multi_index(tuple(c + 1 for c in np.unravel_index(flat_index, a.shape)),
+                                  padded.shape)
+    offsets = np.ravel_multi_index(
+        tuple(np.stack(np.meshgrid(*[(0, 1, 2)] * a.ndim, indexing="ij")).reshape(a.ndim, -1)),
+        padded.shape) - np.ravel_multi_index((1,) * a.ndim, padded.shape)
+    middle = offsets.size // 2     # 3^ndim samples: the median is the middle one
+    return np.partition(padded.ravel()[centre[:, None] + offsets], middle, axis=1)[:, middle]
 
 
 def tabulate_full_phi(brdf, chunk: int = 1 << 18) -> np.ndarray:
