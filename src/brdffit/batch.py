@@ -724,7 +724,9 @@ def _client(scheduler: str | None, workers: int, memory_limit: str | None,
             retries: int = DEFAULT_RETRIES):
     """A client of ``scheduler``, or of a new local cluster (returned too, to be closed).
 
-    The local scheduler gives up on a task after ``retries + 1`` worker deaths
+    The local workers render with ``cores // workers`` threads each
+    (:func:`_render_threads_env`). The local scheduler gives up on a task after
+    ``retries + 1`` worker deaths
     (``allowed-failures``) and sends each worker one task at a time (``worker-saturation``
     1.0), so that a worker killed by one task does not take queued innocent tasks with it.
     Dask's own log lines below CRITICAL are silenced: the batch reports every task's
@@ -736,7 +738,8 @@ def _client(scheduler: str | None, workers: int, memory_limit: str | None,
 
     if scheduler:
         return Client(scheduler, timeout="30s"), None
-    environ = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_MALLOC_ENV}
+    environ = {**dask.config.get("distributed.nanny.pre-spawn-environ", {}), **WORKER_MALLOC_ENV,
+               **_render_threads_env(workers)}
     with dask.config.set({"distributed.nanny.pre-spawn-environ": environ,
                           "distributed.scheduler.allowed-failures": int(retries),
                           "distributed.scheduler.worker-saturation": 1.0}):
@@ -745,6 +748,15 @@ def _client(scheduler: str | None, workers: int, memory_limit: str | None,
                                memory_limit=memory_limit or "auto",
                                silence_logs=logging.CRITICAL)
     return Client(cluster), cluster
+
+
+def _render_threads_env(workers: int) -> dict:
+    """``BRDFFIT_RENDER_THREADS`` of local workers that share this machine's cores: each
+    worker's renders get ``cores // workers`` threads (at least 1), unless the user set it
+    (:mod:`brdffit.evaluation.render._mitsuba`)."""
+    if os.environ.get("BRDFFIT_RENDER_THREADS", "").strip():
+        return {}
+    return {"BRDFFIT_RENDER_THREADS": str(max(1, (os.cpu_count() or 1) // max(1, workers)))}
 
 
 def _data_files(tasks: Iterable[Task | RenderTask]) -> list[str]:

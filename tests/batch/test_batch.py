@@ -94,23 +94,28 @@ def test_isotropic_only_model_is_skipped_on_anisotropic_material(tmp_path):
     assert json.loads(task.record_path(tmp_path).read_text())["status"] == "skipped"
 
 
-def _malloc_env():
-    return {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_")}
+def _worker_env():
+    return {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_",
+                                           "BRDFFIT_RENDER_THREADS")}
 
 
 @pytest.mark.slow
-def test_local_workers_keep_numpy_temporaries_on_the_heap():
+def test_local_workers_keep_numpy_temporaries_on_the_heap_and_share_the_cores(monkeypatch):
     """Dask's nanny default (trim threshold 64 KiB) turns every NumPy temporary into an mmap;
-    the local cluster overrides it (brdffit.batch.WORKER_MALLOC_ENV)."""
+    the local cluster overrides it (brdffit.batch.WORKER_MALLOC_ENV). Its workers' renders
+    share the cores (BRDFFIT_RENDER_THREADS = cores // workers)."""
     from brdffit.batch import WORKER_MALLOC_ENV, _client
 
-    client, cluster = _client(None, 1, None)
+    monkeypatch.delenv("BRDFFIT_RENDER_THREADS", raising=False)
+    client, cluster = _client(None, 2, None)
     try:
-        (env,) = client.run(_malloc_env).values()
+        envs = list(client.run(_worker_env).values())
     finally:
         client.close()
         cluster.close()
-    assert env == {k: str(v) for k, v in WORKER_MALLOC_ENV.items()}
+    threads = str(max(1, os.cpu_count() // 2))
+    assert envs == 2 * [{**{k: str(v) for k, v in WORKER_MALLOC_ENV.items()},
+                         "BRDFFIT_RENDER_THREADS": threads}]
 
 
 def test_progress_inside_running_tasks_reaches_caller_and_log(tmp_path, dask_client):

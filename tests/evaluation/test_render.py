@@ -3,6 +3,8 @@ spatially varying roughness. Small images (≤ 64²) and spp to keep the budget.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -165,3 +167,27 @@ def test_plugin_by_name_in_scene_dict():
         plugin.unregister_evaluator(key)
     with pytest.raises(Exception, match="evaluator"):
         dj.mi.load_dict({"type": plugin.PLUGIN_NAME, "evaluator_id": key})
+
+
+def test_render_threads_are_read_checked_and_applied(monkeypatch):
+    """``BRDFFIT_RENDER_THREADS``: a positive integer or a clear error; a new process's
+    Dr.Jit runs that many threads."""
+    import subprocess
+    import sys
+
+    from brdffit.evaluation.render import _mitsuba
+
+    monkeypatch.delenv("BRDFFIT_RENDER_THREADS", raising=False)
+    assert _mitsuba._render_threads() is None
+    monkeypatch.setenv("BRDFFIT_RENDER_THREADS", " 3 ")
+    assert _mitsuba._render_threads() == 3
+    for bad in ("0", "-1", "two", "1.5", "99999"):
+        monkeypatch.setenv("BRDFFIT_RENDER_THREADS", bad)
+        with pytest.raises(_mitsuba.MitsubaUnavailable, match="BRDFFIT_RENDER_THREADS: "
+                                                             "expected an integer"):
+            _mitsuba._render_threads()
+    code = ("from brdffit.evaluation.render._mitsuba import load; "
+            "mi, dr = load(); print(dr.thread_count())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, "BRDFFIT_RENDER_THREADS": "1"}, timeout=120)
+    assert out.returncode == 0 and out.stdout.split()[-1] == "1", out.stderr[-1000:]
