@@ -318,8 +318,9 @@ def g_jacobian_blocks(hd, gi0, gti, go0, gto, inv_cc, w, z, G, D, F, rho_d, rho_
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _line_terms(G, dG, w, z, Q, c, j, k, a, t, b, s, ic):  # pragma: no cover
-    """Sample ``j``'s terms of channel ``c`` added to the polynomials of :func:`p_stats_line`."""
+def _line_terms(G, dG, w, z, c, j, a, t, b, s, ic, q):  # pragma: no cover
+    """Sample ``j``'s terms of channel ``c`` added to the running sums ``q`` (11 values, as
+    ``Q[c, bin]``) of :func:`p_stats_line`; returns the new sums."""
     g_i, g_o = _g_pair(G, c, a, t, b, s)
     d_i, d_o = _g_pair(dG, c, a, t, b, s)
     wj = w[c, j] * ic
@@ -328,31 +329,47 @@ def _line_terms(G, dG, w, z, Q, c, j, k, a, t, b, s, ic):  # pragma: no cover
     p2 = d_i * d_o
     wz = wj * z[c, j]
     w2 = wj * ic
-    q = Q[c, k]
-    q[0] += wj * p0
-    q[1] += wj * p1
-    q[2] += wj * p2
-    q[3] += w2 * p0 * p0
-    q[4] += w2 * 2.0 * p0 * p1
-    q[5] += w2 * (p1 * p1 + 2.0 * p0 * p2)
-    q[6] += w2 * 2.0 * p1 * p2
-    q[7] += w2 * p2 * p2
-    q[8] += wz * p0
-    q[9] += wz * p1
-    q[10] += wz * p2
+    return (q[0] + wj * p0, q[1] + wj * p1, q[2] + wj * p2,
+            q[3] + w2 * p0 * p0, q[4] + w2 * 2.0 * p0 * p1,
+            q[5] + w2 * (p1 * p1 + 2.0 * p0 * p2), q[6] + w2 * 2.0 * p1 * p2,
+            q[7] + w2 * p2 * p2, q[8] + wz * p0, q[9] + wz * p1, q[10] + wz * p2)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _flush_line(Q, c, k, q):  # pragma: no cover
+    """Add a run's sums ``q`` to ``Q[c, k]``."""
+    for m in range(11):
+        Q[c, k, m] += q[m]
+
+
+_NO_LINE_SUMS = (0.0,) * 11
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _line_pass(hd, gi0, gti, go0, gto, inv_cc, w, z, G, dG, Q, on0, on1, on2):  # pragma: no cover
-    """The pass of :func:`p_stats_line` for the channels ``on0``, ``on1``, ``on2``."""
-    for j in range(hd.shape[0]):
+    """The pass of :func:`p_stats_line` for the channels ``on0``, ``on1``, ``on2``: a bin's
+    sums are kept in registers over its run of samples and added to ``Q`` once, like
+    :func:`_p_runs`."""
+    n = hd.shape[0]
+    q0 = q1 = q2 = _NO_LINE_SUMS
+    k0 = hd[0] if n else 0
+    for j in range(n + 1):
+        k = hd[j] if j < n else -1
+        if k != k0:                       # flush the run of bin k0
+            _flush_line(Q, 0, k0, q0)
+            _flush_line(Q, 1, k0, q1)
+            _flush_line(Q, 2, k0, q2)
+            q0 = q1 = q2 = _NO_LINE_SUMS
+            k0 = k
+        if j == n:
+            break
         k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
         if on0:
-            _line_terms(G, dG, w, z, Q, 0, j, k, a, t, b, s, ic)
+            q0 = _line_terms(G, dG, w, z, 0, j, a, t, b, s, ic, q0)
         if on1:
-            _line_terms(G, dG, w, z, Q, 1, j, k, a, t, b, s, ic)
+            q1 = _line_terms(G, dG, w, z, 1, j, a, t, b, s, ic, q1)
         if on2:
-            _line_terms(G, dG, w, z, Q, 2, j, k, a, t, b, s, ic)
+            q2 = _line_terms(G, dG, w, z, 2, j, a, t, b, s, ic, q2)
 
 
 @njit(cache=True, nogil=True)
