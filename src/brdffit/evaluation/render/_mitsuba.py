@@ -22,8 +22,8 @@ process (``demo``, ``batch``, the renderer's child process of :mod:`brdffit._iso
 ``BRDFFIT_RENDER_THREADS=N``
     Dr.Jit runs its kernels on ``N`` threads (unset: one per CPU). A local batch gives its
     workers ``cores // workers`` (:func:`brdffit.batch._client`): with every core already
-    busy, more threads only wait for one another (Dr.Jit's idle threads spin), which cost a
-    render task 10-20 % more CPU on 2 cores with 2 workers.
+    busy, more threads only wait for one another (a render task's renderer spends 1.1× the
+    CPU with two threads as with one, 2 workers on 2 cores: docs/design/batch.md).
 """
 
 from __future__ import annotations

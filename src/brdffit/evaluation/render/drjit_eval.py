@@ -60,7 +60,9 @@ def kernel_params(obj, *names):
     roughness, F0 or proxy lobe written as literals would make every material's renders
     (≈ 0.5 s of LLVM compilation per sphere scene, 1.2 s for the knot) miss the kernel cache.
     As opaque values, one kernel per scene serves every material. The opaque copies are made
-    once per value (kept in ``obj._kernel_params``, remade when the attribute changes).
+    once per value (kept in ``obj._kernel_params``, remade when the attribute changes) and
+    shared by every trace: callers must not update them in place (``x += …`` on a Dr.Jit
+    array changes that array).
     """
     cache = obj.__dict__.setdefault("_kernel_params", {})
     out = []
