@@ -71,3 +71,6 @@ def test_window_renders_the_film_crop_with_one_kernel():
     assert crop.max() > 0
     np.testing.assert_allclose(window, crop, rtol=1e-4, atol=1e-6 * crop.max())
     assert _compiled(dr, lambda: mr.render(3, 16, crop=(20, 5, 3, 3))) == []
+    for outside in ((30, 5, 3, 3), (-1, 0, 3, 3), (0, 0, 0, 3)):
+        with pytest.raises(ValueError, match="crop: expected a window inside the 32² film"):
+            mr.render(3, 16, crop=outside)

@@ -406,6 +406,10 @@ class MultiRenderer:
         if crop is not None:
             crop = tuple(int(v) for v in crop)
             x0, y0, w, h = crop
+            if not (0 <= x0 and 0 <= y0 and w >= 1 and h >= 1
+                    and x0 + w <= self.resolution and y0 + h <= self.resolution):
+                raise ValueError(f"crop: expected a window inside the {self.resolution}² "
+                                 f"film, found (x0, y0, width, height) = {crop}")
             if (w, h) not in self._sensors:
                 self._sensors[w, h] = window_sensor(self.resolution, w, h)
             self._sensors[w, h].move(x0, y0)
