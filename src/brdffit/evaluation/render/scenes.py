@@ -213,6 +213,7 @@ def _read_envmap(spec: str) -> np.ndarray:
 
 
 def _film(width: int, height: int) -> dict:
+    """The scenes' film: RGBA float32, box filter (one pixel is the mean of its samples)."""
     return {"type": "hdrfilm", "width": int(width), "height": int(height),
             "rfilter": {"type": "box"}, "pixel_format": "rgba", "component_format": "float32"}
 
