@@ -752,11 +752,12 @@ def _client(scheduler: str | None, workers: int, memory_limit: str | None,
 
 def _render_threads_env(workers: int) -> dict:
     """``BRDFFIT_RENDER_THREADS`` of local workers that share this machine's cores: each
-    worker's renders get ``cores // workers`` threads (at least 1), unless the user set it
-    (:mod:`brdffit.evaluation.render._mitsuba`)."""
+    worker's renders get ``cores // workers`` threads (at least 1; the cores this process
+    may run on), unless the user set it (:mod:`brdffit.evaluation.render._mitsuba`)."""
     if os.environ.get("BRDFFIT_RENDER_THREADS", "").strip():
         return {}
-    return {"BRDFFIT_RENDER_THREADS": str(max(1, (os.cpu_count() or 1) // max(1, workers)))}
+    cores = len(os.sched_getaffinity(0))
+    return {"BRDFFIT_RENDER_THREADS": str(max(1, cores // max(1, workers)))}
 
 
 def _data_files(tasks: Iterable[Task | RenderTask]) -> list[str]:

@@ -113,7 +113,7 @@ def test_local_workers_keep_numpy_temporaries_on_the_heap_and_share_the_cores(mo
     finally:
         client.close()
         cluster.close()
-    threads = str(max(1, os.cpu_count() // 2))
+    threads = str(max(1, len(os.sched_getaffinity(0)) // 2))
     assert envs == 2 * [{**{k: str(v) for k, v in WORKER_MALLOC_ENV.items()},
                          "BRDFFIT_RENDER_THREADS": threads}]
 
