@@ -64,6 +64,7 @@ from __future__ import annotations
 import collections
 import contextlib
 import dataclasses
+import datetime
 import functools
 import hashlib
 import json
@@ -105,8 +106,8 @@ _log = logging.getLogger("brdffit.batch")
 
 #: Record fields that legitimately differ between two runs of the same task (the fit file
 #: holds its creation time, hence its checksum).
-TIMING_FIELDS = ("fit_time_s", "metrics_time_s", "metrics_seconds", "wall_time_s", "finished",
-                 "worker", "fit_sha256")
+TIMING_FIELDS = ("fit_time_s", "metrics_time_s", "metrics_seconds", "wall_time_s", "started",
+                 "finished", "worker", "fit_sha256")
 
 #: Statuses of finished work (not redone on resume, not counted as failures).
 DONE = ("ok", "skipped")
@@ -389,7 +390,8 @@ def _base_record(task: Task | RenderTask) -> dict[str, Any]:
 
     record: dict[str, Any] = {"material": task.material, "spec": task.spec,
                               "key": task.key(),
-                              "worker": f"{socket.gethostname()}:{os.getpid()}"}
+                              "worker": f"{socket.gethostname()}:{os.getpid()}",
+                              "started": datetime.datetime.now().isoformat(timespec="milliseconds")}
     if isinstance(task, Task):
         record.update(model=task.model, options=task.options_dict())
     else:

@@ -94,6 +94,23 @@ def test_isotropic_only_model_is_skipped_on_anisotropic_material(tmp_path):
     assert json.loads(task.record_path(tmp_path).read_text())["status"] == "skipped"
 
 
+def test_record_says_when_its_task_started_to_the_millisecond(tmp_path):
+    """``started`` (ISO, milliseconds) and ``finished`` (ISO, seconds) bound the task's
+    ``wall_time_s``: a timeline of a batch's workers can be drawn from the records."""
+    import datetime
+
+    from brdffit.batch import TIMING_FIELDS, run_task
+
+    task, = make_tasks([("gold", "synthetic:gold-ggx")], ["ggx"])
+    rec = run_task(task, tmp_path, metrics=False)
+    started = datetime.datetime.fromisoformat(rec["started"])
+    finished = datetime.datetime.fromisoformat(rec["finished"])
+    assert len(rec["started"].rsplit(".", 1)[-1]) == 3          # milliseconds
+    assert started.replace(microsecond=0) <= finished
+    assert (finished - started).total_seconds() <= rec["wall_time_s"] + 1.0
+    assert "started" in TIMING_FIELDS      # differs between two runs of the same task
+
+
 def _worker_env():
     return {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_",
                                            "BRDFFIT_RENDER_THREADS")}
