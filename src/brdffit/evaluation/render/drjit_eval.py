@@ -53,8 +53,9 @@ INV_PI = 1.0 / np.pi
 
 
 def kernel_params(obj, *names):
-    """The attributes ``names`` of ``obj`` (Python floats or ``mi.ScalarColor3f``) as opaque
-    Dr.Jit values (``dr.opaque``): parameters of the compiled kernel, not constants in it.
+    """The attributes ``names`` of ``obj`` (Python floats, ``mi.ScalarColor3f``, or lists of
+    floats, which give lists) as opaque Dr.Jit values (``dr.opaque``): parameters of the
+    compiled kernel, not constants in it.
 
     Dr.Jit compiles a new kernel for every new constant it finds in a trace; a material's
     roughness, F0 or proxy lobe written as literals would make every material's renders
@@ -69,11 +70,13 @@ def kernel_params(obj, *names):
     for name in names:
         value = getattr(obj, name)
         color = isinstance(value, mi.ScalarColor3f)
-        key = tuple(float(v) for v in value) if color else float(value)
+        several = color or isinstance(value, (list, tuple))
+        key = tuple(float(v) for v in value) if several else float(value)
         hit = cache.get(name)
         if hit is None or hit[0] != key:
-            hit = cache[name] = (key, mi.Color3f(*(dr.opaque(mi.Float, v) for v in key))
-                                 if color else dr.opaque(mi.Float, key))
+            opaque = ([dr.opaque(mi.Float, v) for v in key] if several
+                      else dr.opaque(mi.Float, key))
+            hit = cache[name] = (key, mi.Color3f(*opaque) if color else opaque)
         out.append(hit[1])
     return out if len(out) > 1 else out[0]
 

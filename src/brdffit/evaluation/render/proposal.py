@@ -157,22 +157,11 @@ class Proposal:
                 "weights": list(self.weights), **self.info}
 
     # -- Dr.Jit ----------------------------------------------------------------------------
-    def _kernel_params(self):
-        """``(cosine weight, alphas, weights)`` as opaque Dr.Jit values, so that one compiled
-        kernel serves every material's proposal (:func:`.drjit_eval.kernel_params`)."""
-        key = (self.cosine_weight, tuple(self.alphas), tuple(self.weights))
-        hit = self.__dict__.get("_kernel_values")
-        if hit is None or hit[0] != key:
-            dr, mi = dj.dr, dj.mi
-            hit = self._kernel_values = (key, (dr.opaque(mi.Float, self.cosine_weight),
-                                               [dr.opaque(mi.Float, a) for a in self.alphas],
-                                               [dr.opaque(mi.Float, w) for w in self.weights]))
-        return hit[1]
-
     def pdf(self, wi, wo, alpha_scale=1.0, active=True):
         mi, dr = dj.mi, dj.dr
         up = (wi.z > 0) & (wo.z > 0)
-        cosine_weight, alphas, weights = self._kernel_params()
+        cosine_weight, alphas, weights = dj.kernel_params(self, "cosine_weight",
+                                                          "alphas", "weights")
         p = cosine_weight * dr.maximum(wo.z, 0.0) * (1.0 / np.pi)
         if alphas:
             h = dr.normalize(wi + wo)
@@ -185,7 +174,8 @@ class Proposal:
     def sample(self, wi, u1, u2, alpha_scale=1.0, active=True):
         mi, dr = dj.mi, dj.dr
         wo = dj.cosine_sample(u2)
-        edge, alphas, weights = self._kernel_params()
+        edge, alphas, weights = dj.kernel_params(self, "cosine_weight", "alphas",
+                                                 "weights")
         for a, w in zip(alphas, weights):
             m = dj.ggx_vndf_sample(wi, u2, a, a)
             r = 2.0 * dr.dot(wi, m) * m - wi
