@@ -5,7 +5,7 @@ travels through the scheduler), fits the model, saves the fit and computes BRDF-
 then writes its record; everything is written atomically, the record last, so a record on disk
 means the task's outputs are complete. The fit tasks are fed to the workers one per thread at
 a time, the next task of a material to the thread that ran its previous one, so that a worker
-loads and prepares a material once (:class:`_FitFeeder`). Output layout (``<material>`` and
+loads and prepares a material once (:class:`_Feeder`). Output layout (``<material>`` and
 ``<model>`` are :func:`brdffit.paths.slug` of the names; records and the report keep the
 readable names)::
 
@@ -728,9 +728,9 @@ def _client(scheduler: str | None, workers: int, memory_limit: str | None,
 
     The local workers render with ``cores // workers`` threads each
     (:func:`_render_threads_env`). The local scheduler gives up on a task after
-    ``retries + 1`` worker deaths
-    (``allowed-failures``) and sends each worker one task at a time (``worker-saturation``
-    1.0), so that a worker killed by one task does not take queued innocent tasks with it.
+    ``retries + 1`` worker deaths (``allowed-failures``). The batch sends one task per free thread (:func:`_run_todo`), so
+    that a worker killed by one task does not take queued innocent tasks with it
+    (``worker-saturation`` 1.0 does the same for tasks that Dask queues itself).
     Dask's own log lines below CRITICAL are silenced: the batch reports every task's
     failure itself, and on a loaded machine a worker's heartbeat can race the local
     cluster's shutdown and log a traceback that means nothing to the user.
@@ -932,21 +932,35 @@ def run_batch(tasks: Sequence[Task], out_dir, *, scheduler: str | None = None,
             "wall_time_s": time.perf_counter() - t0, "records": records}
 
 
-class _FitFeeder:
-    """The fit task to send when one ends: the next task of the same material, else the
-    first task of the next material not begun, else (at the end) one of the material with
-    the most tasks left. With one task in flight per worker thread, the thread that just
-    became free gets it: a material's tasks run one after the other on one worker, which
-    loads, tabulates and prepares it once (≈ 1.5 s of CPU for a Neural-BRDF material that
-    two workers would both prepare); only the last materials are shared."""
+class _Feeder:
+    """The task to send to a thread that became free: the next fit of the material whose task
+    just ended there, else a render task whose material's fits are over, else the first fit
+    of the next material not begun, else (at the end) one of the material with the most fits
+    left. With one task in flight per worker thread (:func:`_run_todo`), a material's fits
+    run one after the other on one worker, which loads, tabulates and prepares it once
+    (≈ 1.5 s of CPU for a Neural-BRDF material that two workers would both prepare), and its
+    render follows them there; only the last materials are shared."""
 
-    def __init__(self, fits: Sequence[Task]):
-        self.left: dict[str, collections.deque] = {}     # material → tasks not yet sent
+    def __init__(self, fits: Sequence[Task], renders: Sequence[RenderTask] = ()):
+        self.left: dict[str, collections.deque] = {}     # material → fits not yet sent
         for t in fits:
             self.left.setdefault(t.material, collections.deque()).append(t)
         self.begun: set[str] = set()
+        self.renders = {t.material: t for t in renders}
+        self.fits_running = {m: 0 for m in self.renders}  # sent and not over
+        self.ready = collections.deque(r for m, r in self.renders.items() if m not in self.left)
 
-    def next(self, after: str | None = None) -> Task | None:
+    def done(self, task: Task | RenderTask) -> None:
+        """``task`` is over (whatever its outcome): its material's render may be ready."""
+        m = task.material
+        if isinstance(task, Task) and m in self.fits_running:
+            self.fits_running[m] -= 1
+            if not self.fits_running[m] and m not in self.left:
+                self.ready.append(self.renders[m])
+
+    def next(self, after: str | None = None) -> Task | RenderTask | None:
+        if after not in self.left and self.ready:
+            return self.ready.popleft()
         m = after if after in self.left else next(
             (k for k in self.left if k not in self.begun),
             max(self.left, key=lambda k: len(self.left[k]), default=None))
@@ -956,6 +970,8 @@ class _FitFeeder:
         t = self.left[m].popleft()
         if not self.left[m]:
             del self.left[m]
+        if m in self.fits_running:
+            self.fits_running[m] += 1
         return t
 
 
@@ -967,47 +983,40 @@ def _threads(client) -> int:
 
 def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed, log=None,
               on_event=None) -> list[dict]:
-    """Send the fit tasks one per worker thread at a time (:class:`_FitFeeder`), and each
-    render task once its material's fits are over."""
-    fits = [t for t in todo if isinstance(t, Task)]
-    renders = {t.material: t for t in todo if isinstance(t, RenderTask)}
-    pending = {m: 0 for m in renders}
-    for t in fits:
-        if t.material in pending:
-            pending[t.material] += 1
+    """Send the tasks one per worker thread at a time, in :class:`_Feeder`'s order: a task is
+    submitted only when a thread is free, so Dask places it on that thread's worker (Dask
+    assigns a task without dependencies to a worker when it is submitted, and queues it
+    there behind a running one: a fit sent while both workers were busy waited behind a
+    15-s fit on one while the other finished its render and stood idle)."""
+    feeder = _Feeder([t for t in todo if isinstance(t, Task)],
+                     [t for t in todo if isinstance(t, RenderTask)])
     tasks_of: dict = {}
     started: dict = {}
+    in_flight = [0]
 
-    order: dict[str, int] = {}
-    for t in todo:
-        order.setdefault(t.material, len(order))
-
-    def submit(fn, t, *args):
-        kind = t.model if isinstance(t, Task) else "render"
-        prio = -order[t.material] + (len(order) if kind == "render" else 0)  # renders first
-        fut = client.submit(fn, t, str(out), *args, pure=False, priority=prio,
+    def submit(t):
+        kind, fn, args = ((t.model, run_task, (metrics,)) if isinstance(t, Task)
+                          else ("render", run_render_task, ()))
+        fut = client.submit(fn, t, str(out), *args, pure=False,
                             key=f"brdffit-{slug(t.material)}-{slug(kind)}-{t.key()}")
         tasks_of[fut.key] = t
         started[fut.key] = time.perf_counter()
+        in_flight[0] += 1
         return fut
 
-    feeder, in_flight = _FitFeeder(fits), [0]
-
     def feed(after: str | None = None) -> list:
-        """Fit tasks for the threads without one (``after``: the material of the task that
-        just ended, whose thread is free; new workers' threads get new materials)."""
+        """Tasks for the threads without one (``after``: the material of the task that just
+        ended, whose thread is free)."""
         sent, threads = [], _threads(client)       # (one call to the scheduler)
         while in_flight[0] < threads:
             t = feeder.next(after)
             if t is None:
                 break
             after = None
-            in_flight[0] += 1
-            sent.append(submit(run_task, t, metrics))
+            sent.append(submit(t))
         return sent
 
     futures = feed()
-    futures += [submit(run_render_task, r) for m, r in renders.items() if pending[m] == 0]
     done: list[dict] = []
     with _Progress(todo, enabled=progress is True) as bar, \
             _subscribed(client, bar, log, on_event):
@@ -1019,20 +1028,16 @@ def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed, lo
             except Exception as exc:  # noqa: BLE001 – KilledWorker, lost connection, ...
                 rec = _lost_record(t, exc, out, started[fut.key])
             fut.release()
-            if isinstance(t, Task):
-                in_flight[0] -= 1
-                for nxt in feed(t.material):
-                    queue.add(nxt)
+            in_flight[0] -= 1
+            feeder.done(t)
+            for nxt in feed(t.material):
+                queue.add(nxt)
             done.append(rec)
             bar.advance(rec)
             if log is not None:
                 log.finished(rec)
             if callable(progress):
                 progress(rec)
-            if isinstance(t, Task) and t.material in pending:
-                pending[t.material] -= 1
-                if pending[t.material] == 0:
-                    queue.add(submit(run_render_task, renders[t.material]))
     return done
 
 

@@ -218,14 +218,14 @@ def test_tasks_of_one_material_share_its_prepared_metrics(tmp_path, monkeypatch)
     batch._reference_metrics.cache_clear()
 
 
-def test_fit_feeder_sends_a_material_after_itself_and_shares_only_the_last():
+def test_feeder_sends_a_material_after_itself_and_shares_only_the_last():
     """After a task of a material, the next task of that material; then the first material
     not begun; when none is left, the material with the most tasks left."""
-    from brdffit.batch import _FitFeeder
+    from brdffit.batch import _Feeder
 
     tasks = make_tasks([("a", "synthetic:a"), ("b", "synthetic:b"), ("c", "synthetic:c")],
                        ["ggx", "beckmann", "tabulated"])
-    feeder = _FitFeeder(tasks)
+    feeder = _Feeder(tasks)
     sent = [feeder.next(), feeder.next()]                # two threads: two materials
     assert [(t.material, t.model) for t in sent] == [("a", "ggx"), ("b", "ggx")]
     got = []
@@ -236,3 +236,108 @@ def test_fit_feeder_sends_a_material_after_itself_and_shares_only_the_last():
                    ("a", "c", "ggx"), ("a", "c", "beckmann"), ("b", "b", "tabulated"),
                    ("b", "c", "tabulated")]
     assert feeder.next("c") is None and feeder.next() is None
+
+
+def test_feeder_sends_a_render_to_the_thread_that_ended_its_material():
+    """A material's render is sent when its last fit is over (not before), to the thread that
+    ran that fit, ahead of a new material; a thread whose material has fits left goes on
+    with them; a render whose fits were done before the run is sent first."""
+    from brdffit.batch import RenderSettings, RenderTask, _Feeder, make_render_tasks
+
+    fits = make_tasks([("a", "synthetic:a"), ("b", "synthetic:b"), ("c", "synthetic:c")],
+                      ["ggx", "beckmann"])
+    renders = make_render_tasks(fits, RenderSettings())
+    feeder = _Feeder([t for t in fits if t.material != "c"], renders)
+    rc = feeder.next()
+    assert isinstance(rc, RenderTask) and rc.material == "c"
+    a1, b1 = feeder.next(), feeder.next()
+    assert (a1.material, a1.model, b1.material, b1.model) == ("a", "ggx", "b", "ggx")
+    feeder.done(a1)
+    a2 = feeder.next("a")
+    assert (a2.material, a2.model) == ("a", "beckmann")
+    feeder.done(b1)
+    b2 = feeder.next("b")
+    assert (b2.material, b2.model, list(feeder.ready)) == ("b", "beckmann", [])
+    feeder.done(a2)                                      # a's fits are over: its render
+    ra = feeder.next("a")
+    assert isinstance(ra, RenderTask) and ra.material == "a"
+    feeder.done(ra)
+    assert feeder.next("a") is None                      # nothing left but b's running fit
+
+
+class _SimulatedCluster:
+    """A client of a cluster of ``threads`` one-thread workers, in simulated time: a
+    submitted task runs at once on a free thread (submitting with every thread busy fails
+    the test: Dask would queue it behind a running task on some worker), and
+    :meth:`as_completed` yields the tasks in the order they end."""
+
+    def __init__(self, threads: int, seconds):
+        self.free, self.seconds, self.now = list(range(threads)), seconds, 0.0
+        self.threads = threads
+        self.ran: list[tuple] = []                     # (thread, material, kind) in start order
+
+    def scheduler_info(self):
+        return {"workers": {f"w{i}": {"nthreads": 1} for i in range(self.threads)}}
+
+    def subscribe_topic(self, *args):
+        pass
+
+    def unsubscribe_topic(self, *args):
+        pass
+
+    def submit(self, fn, task, out, *args, key, **kwargs):
+        assert self.free, f"{key} submitted while every thread is busy"
+        kind = getattr(task, "model", "render")
+        thread = self.free.pop(0)
+        self.ran.append((thread, task.material, kind))
+        record = {"material": task.material, "model": kind, "status": "ok"}
+        return _SimulatedFuture(key, thread, self.now + self.seconds[kind], record)
+
+    def as_completed(self, futures):
+        cluster, pending = self, list(futures)
+
+        class _Queue:
+            def add(self, fut):
+                pending.append(fut)
+
+            def __iter__(self):
+                while pending:
+                    fut = min(pending, key=lambda f: f.end)
+                    pending.remove(fut)
+                    cluster.now = fut.end
+                    cluster.free.append(fut.thread)
+                    yield fut
+
+        return _Queue()
+
+
+class _SimulatedFuture:
+    def __init__(self, key, thread, end, record):
+        self.key, self.thread, self.end, self.record = key, thread, end, record
+
+    def result(self):
+        return self.record
+
+    def release(self):
+        pass
+
+
+def test_run_todo_sends_one_task_per_free_thread_and_a_render_after_its_fits(tmp_path):
+    """Renders count among the tasks in flight (a render sent beside two running fits would
+    wait on a busy worker while the other may run dry), a render starts after its
+    material's fits, on the thread of its last fit, and a material's fits stay on one
+    thread except at the end."""
+    from brdffit.batch import RenderSettings, _run_todo, make_render_tasks
+
+    names = [(n, f"synthetic:{n}") for n in "abcdef"]
+    fits = make_tasks(names, ["ggx", "npf", "sgd"])
+    todo = fits + make_render_tasks(fits, RenderSettings())
+    cluster = _SimulatedCluster(2, {"ggx": 1.0, "npf": 7.0, "sgd": 0.5, "render": 6.0})
+    done = _run_todo(cluster, todo, tmp_path, True, False, cluster.as_completed)
+
+    assert sorted((r["material"], r["model"]) for r in done) == sorted(
+        (t.material, getattr(t, "model", "render")) for t in todo)
+    for name, _ in names[:-1]:                          # the last material may be shared
+        runs = [(i, th, kind) for i, (th, m, kind) in enumerate(cluster.ran) if m == name]
+        assert len({th for _, th, _ in runs}) == 1, runs
+        assert runs[-1][2] == "render", runs
