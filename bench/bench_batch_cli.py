@@ -19,6 +19,11 @@ The child runs with an empty Dr.Jit kernel cache (``DRJIT_CACHE_DIR`` a fresh te
 folder), as on a machine that never rendered these materials: Dr.Jit keeps compiled kernels
 on disk (``~/.drjit``), and a kernel cache filled by earlier runs of the same command would
 hide the compilations a first run pays. ``--warm-kernel-cache`` keeps the user's cache.
+Numba's cache (``src/**/__pycache__/*.nbi``, written by the first process that compiles a
+kernel) is taken as found, and a fresh checkout has none: both workers then compile every
+fit kernel in their first tasks. ``--warm-numba-cache`` first runs the fits of one material
+(no renders, untimed), as any earlier use of the installed package (``make demo``, a fit)
+would have; the results record ``numba_cache_files_at_start``.
 """
 
 from __future__ import annotations
@@ -46,6 +51,11 @@ MODELS = "tabulated,ggx,beckmann,sgd,npf,npf-g-from-d,npf-naive,npf-bivariate"
 def _stats(xs):
     xs = [float(x) for x in xs if x is not None]
     return {"min": min(xs), "mean": float(np.mean(xs)), "max": max(xs), "n": len(xs)} if xs else {}
+
+
+def _numba_cache_files() -> int:
+    """Numba's on-disk cache entries of the package (0: every kernel compiles in the run)."""
+    return sum(1 for _ in (ROOT / "src").rglob("*.nbi"))
 
 
 def per_model(out: Path) -> dict:
@@ -106,6 +116,9 @@ def main() -> int:
                     help="pass --render (the four-scene paper suite, product defaults)")
     ap.add_argument("--warm-kernel-cache", action="store_true",
                     help="use the user's Dr.Jit kernel cache instead of an empty one")
+    ap.add_argument("--warm-numba-cache", action="store_true",
+                    help="first run the batch's fits (no renders) on one material in a scratch "
+                         "folder, untimed, so that Numba's on-disk cache holds the kernels")
     args = ap.parse_args()
     from brdffit.batch import enumerate_materials
 
@@ -118,6 +131,12 @@ def main() -> int:
               "command": " ".join(cmd[1:]), "every": args.every, "materials": names,
               "cpus": os.cpu_count()}
     if not args.summarise:
+        if args.warm_numba_cache:
+            with tempfile.TemporaryDirectory(prefix="numba-warm-") as scratch:
+                warm = cmd[:cmd.index("--only")] + ["--only", names[0], "--out", scratch,
+                                                    "--quiet"]
+                subprocess.call(warm, cwd=ROOT)
+        result["numba_cache_files_at_start"] = _numba_cache_files()
         load0 = list(os.getloadavg())
         t0 = time.perf_counter()
         r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
