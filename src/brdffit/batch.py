@@ -3,8 +3,8 @@
 One task per (material, model). A task loads the material *on the worker* (only its load spec
 travels through the scheduler), fits the model, saves the fit and computes BRDF-space metrics,
 then writes its record; everything is written atomically, the record last, so a record on disk
-means the task's outputs are complete. The fit tasks are fed to the workers one per thread at
-a time, the next task of a material to the thread that ran its previous one, so that a worker
+means the task's outputs are complete. The tasks are fed to the workers one per thread at a
+time, the next task of a material to the thread that ran its previous one, so that a worker
 loads and prepares a material once (:class:`_Feeder`). Output layout (``<material>`` and
 ``<model>`` are :func:`brdffit.paths.slug` of the names; records and the report keep the
 readable names)::

@@ -52,6 +52,43 @@ def test_a_second_material_reuses_the_first_ones_kernel():
     assert not np.allclose(a["ggx"], b["ggx"])        # the parameters did reach the kernel
 
 
+def _merl_table(seed: int) -> np.ndarray:
+    """A smooth positive full-φ MERL-grid table (90, 90, 360, 3): a measured reference."""
+    rng = np.random.default_rng(seed)
+    th = np.linspace(0.0, 1.0, 90)[:, None, None, None]
+    td = np.linspace(0.0, 1.0, 90)[None, :, None, None]
+    ph = np.linspace(0.0, 2.0 * np.pi, 360, endpoint=False)[None, None, :, None]
+    lobe = np.exp(-rng.uniform(5.0, 40.0) * th ** 2) * (1.0 + 0.5 * td ** 4)
+    return (rng.uniform(0.02, 0.2, 3) + rng.uniform(1.0, 30.0, 3) * lobe
+            * (1.0 + 0.05 * np.cos(ph)))
+
+
+@needs_mitsuba
+@pytest.mark.render
+def test_a_second_measured_reference_reuses_the_first_ones_kernel():
+    """The reference table is read with packet loads (``_gather_rgb``); the kernel must not
+    depend on which table it reads, or every material compiles its renders again."""
+    from brdffit.evaluation.render._mitsuba import load
+    from brdffit.evaluation.render.core import MultiRenderer
+    from brdffit.evaluation.render.drjit_eval import MERLTableEval
+    from brdffit.evaluation.render.proposal import Proposal
+
+    _, dr = load()
+    refs = [MERLTableEval(_merl_table(seed)) for seed in (1, 2, 3)]
+
+    def renderer(ev):
+        return MultiRenderer({"ref": None}, scene="sphere-env", resolution=16,
+                             proposal=Proposal([0.2], [0.5], 0.5), evaluators={"ref": ev})
+
+    renderer(refs[0]).render(0, 2)
+    images = [renderer(refs[0]).render(1, 2).images["ref"]]
+    for ev in refs[1:]:
+        mr = renderer(ev)
+        assert _compiled(dr, lambda: mr.render(1, 2)) == []
+        images.append(mr.render(1, 2).images["ref"])
+    assert not np.allclose(images[0], images[1])      # each table did reach the kernel
+
+
 @needs_mitsuba
 @pytest.mark.render
 def test_window_renders_the_film_crop_with_one_kernel():
@@ -74,3 +111,23 @@ def test_window_renders_the_film_crop_with_one_kernel():
     for outside in ((30, 5, 3, 3), (-1, 0, 3, 3), (0, 0, 0, 3)):
         with pytest.raises(ValueError, match="crop: expected a window inside the 32² film"):
             mr.render(3, 16, crop=outside)
+
+
+@needs_mitsuba
+@pytest.mark.render
+def test_table_packet_loads_read_the_rgb_entries():
+    """``_table_buffer``'s RGBA entries read by ``_gather_rgb`` are the RGB values a plain
+    ``Color3f`` gather reads from the unpadded table (0 for inactive lanes)."""
+    from brdffit.evaluation.render._mitsuba import load
+    from brdffit.evaluation.render.drjit_eval import _gather_rgb, _table_buffer
+
+    mi, dr = load()
+    table = np.random.default_rng(5).random((6, 7, 3)) + 0.01
+    eps, buf = _table_buffer(table, "log")
+    plain = mi.Float(np.log(table + eps).astype(np.float32).ravel())
+    index = mi.UInt32(np.random.default_rng(6).permutation(42))
+    active = mi.Bool(np.arange(42) % 5 != 0)
+    got, want = _gather_rgb(buf, index, active), dr.gather(mi.Color3f, plain, index, active)
+    for c in range(3):
+        np.testing.assert_array_equal(np.array(got[c]), np.array(want[c]))
+    assert np.count_nonzero(np.array(want[0])) == int(np.count_nonzero(np.arange(42) % 5))
