@@ -728,9 +728,10 @@ def _client(scheduler: str | None, workers: int, memory_limit: str | None,
 
     The local workers render with ``cores // workers`` threads each
     (:func:`_render_threads_env`). The local scheduler gives up on a task after
-    ``retries + 1`` worker deaths (``allowed-failures``). The batch sends one task per free thread (:func:`_run_todo`), so
-    that a worker killed by one task does not take queued innocent tasks with it
-    (``worker-saturation`` 1.0 does the same for tasks that Dask queues itself).
+    ``retries + 1`` worker deaths (``allowed-failures``). The batch sends one task per
+    free thread (:func:`_run_todo`), so that a worker killed by one task does not take
+    queued innocent tasks with it (``worker-saturation`` 1.0 does the same for tasks that
+    Dask queues itself).
     Dask's own log lines below CRITICAL are silenced: the batch reports every task's
     failure itself, and on a loaded machine a worker's heartbeat can race the local
     cluster's shutdown and log a traceback that means nothing to the user.
@@ -985,9 +986,8 @@ def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed, lo
               on_event=None) -> list[dict]:
     """Send the tasks one per worker thread at a time, in :class:`_Feeder`'s order: a task is
     submitted only when a thread is free, so Dask places it on that thread's worker (Dask
-    assigns a task without dependencies to a worker when it is submitted, and queues it
-    there behind a running one: a fit sent while both workers were busy waited behind a
-    15-s fit on one while the other finished its render and stood idle)."""
+    assigns a task without dependencies to a worker when it is submitted, behind the task
+    that worker is running if all are busy; docs/design/batch.md, session 31)."""
     feeder = _Feeder([t for t in todo if isinstance(t, Task)],
                      [t for t in todo if isinstance(t, RenderTask)])
     tasks_of: dict = {}
