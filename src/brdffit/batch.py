@@ -990,25 +990,21 @@ def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed, lo
     that worker is running if all are busy; docs/design/batch.md, session 31)."""
     feeder = _Feeder([t for t in todo if isinstance(t, Task)],
                      [t for t in todo if isinstance(t, RenderTask)])
-    tasks_of: dict = {}
-    started: dict = {}
-    in_flight = [0]
+    running: dict = {}          # future key → (task, perf_counter at submission)
 
     def submit(t):
         kind, fn, args = ((t.model, run_task, (metrics,)) if isinstance(t, Task)
                           else ("render", run_render_task, ()))
         fut = client.submit(fn, t, str(out), *args, pure=False,
                             key=f"brdffit-{slug(t.material)}-{slug(kind)}-{t.key()}")
-        tasks_of[fut.key] = t
-        started[fut.key] = time.perf_counter()
-        in_flight[0] += 1
+        running[fut.key] = (t, time.perf_counter())
         return fut
 
     def feed(after: str | None = None) -> list:
         """Tasks for the threads without one (``after``: the material of the task that just
         ended, whose thread is free)."""
         sent, threads = [], _threads(client)       # (one call to the scheduler)
-        while in_flight[0] < threads:
+        while len(running) < threads:
             t = feeder.next(after)
             if t is None:
                 break
@@ -1022,13 +1018,12 @@ def _run_todo(client, todo, out: Path, metrics: bool, progress, as_completed, lo
             _subscribed(client, bar, log, on_event):
         queue = as_completed(futures)
         for fut in queue:
-            t = tasks_of[fut.key]
+            t, t0 = running.pop(fut.key)
             try:
                 rec = fut.result()
             except Exception as exc:  # noqa: BLE001 – KilledWorker, lost connection, ...
-                rec = _lost_record(t, exc, out, started[fut.key])
+                rec = _lost_record(t, exc, out, t0)
             fut.release()
-            in_flight[0] -= 1
             feeder.done(t)
             for nxt in feed(t.material):
                 queue.add(nxt)
