@@ -77,6 +77,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 from ._atomic import atomic_write
+from ._cpus import usable_cpus
 from ._json import json_default
 from ._malloc import WORKER_MALLOC_ENV  # the local workers' malloc settings
 from .errors import BRDFError, csv_cell, printable
@@ -759,7 +760,7 @@ def _render_threads_env(workers: int) -> dict:
     may run on), unless the user set it (:mod:`brdffit.evaluation.render._mitsuba`)."""
     if os.environ.get("BRDFFIT_RENDER_THREADS", "").strip():
         return {}
-    cores = len(os.sched_getaffinity(0))
+    cores = usable_cpus()
     return {"BRDFFIT_RENDER_THREADS": str(max(1, cores // max(1, workers)))}
 
 

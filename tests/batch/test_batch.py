@@ -10,6 +10,7 @@ import sys
 import numpy as np
 import pytest
 
+from brdffit._cpus import usable_cpus
 from brdffit.batch import enumerate_materials, make_tasks
 from brdffit.errors import BRDFError
 
@@ -130,7 +131,7 @@ def test_local_workers_keep_numpy_temporaries_on_the_heap_and_share_the_cores(mo
     finally:
         client.close()
         cluster.close()
-    threads = str(max(1, len(os.sched_getaffinity(0)) // 2))
+    threads = str(max(1, usable_cpus() // 2))
     assert envs == 2 * [{**{k: str(v) for k, v in WORKER_MALLOC_ENV.items()},
                          "BRDFFIT_RENDER_THREADS": threads}]
 

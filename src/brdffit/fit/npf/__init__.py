@@ -116,6 +116,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from ..._blas import with_single_blas_thread
+from ..._cpus import usable_cpus
 from ...brdf import BRDF, IsotropicBRDF
 from ...errors import FitError
 from ...losses.objective import ObjectiveOptions, prepare_objective
@@ -339,7 +340,7 @@ def _n_threads() -> int:
     env = os.environ.get("OMP_NUM_THREADS", "")
     if env.isdigit() and int(env) > 0:
         return int(env)
-    return len(os.sched_getaffinity(0))
+    return usable_cpus()
 
 
 @with_single_blas_thread
