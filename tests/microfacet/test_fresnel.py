@@ -103,3 +103,18 @@ def test_tabulated_interpolates_linearly_in_theta_d():
 def test_validation(make):
     with pytest.raises(ValueError):
         make()
+
+
+@pytest.mark.parametrize("fresnel", [
+    SchlickFresnel([0.02, 0.5, 0.97]),
+    GeneralizedSchlickFresnel([0.9, 0.3, 0.05], [0.2, -0.1, 0.0]),
+    DielectricFresnel([1.3, 1.5, 0.8]), ConductorFresnel(GOLD_ETA, GOLD_K),
+    TabulatedFresnel([0.0, 0.7, 1.5707963], [[0.1, 0.2, 0.3], [0.2, 0.3, 0.4], [1.0, 1.0, 1.0]]),
+])
+def test_eval_channel_is_the_channel_of_eval(fresnel):
+    cos = np.random.default_rng(3).uniform(-0.2, 1.2, (7, 11))
+    rgb = fresnel.eval(cos)
+    for c in range(3):
+        one = fresnel.eval_channel(c, cos)
+        assert one.shape == cos.shape
+        np.testing.assert_array_equal(one, rgb[..., c])

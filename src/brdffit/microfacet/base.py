@@ -224,6 +224,10 @@ class Fresnel(abc.ABC):
     def eval(self, cos_theta_d) -> np.ndarray:
         """Reflectance at ``cos θd`` (broadcast shape + ``(3,)``)."""
 
+    def eval_channel(self, c: int, cos_theta_d) -> np.ndarray:
+        """Channel ``c`` of :meth:`eval` (the same numbers), shape of ``cos_theta_d``."""
+        return self.eval(cos_theta_d)[..., c]
+
     def __call__(self, cos_theta_d) -> np.ndarray:
         return self.eval(cos_theta_d)
 

@@ -59,6 +59,15 @@ def _cos(cos_theta_d) -> np.ndarray:
     return np.clip(np.asarray(cos_theta_d, dtype=np.float64), 0.0, 1.0)[..., None]
 
 
+def _schlick(c, f0) -> np.ndarray:
+    """``f0 + (1 − f0)(1 − c)⁵`` (Schlick 1994), ``c`` already clamped."""
+    x = 1.0 - c
+    x5 = x * x
+    x5 *= x5
+    x5 *= x
+    return f0 + (1.0 - f0) * x5
+
+
 class _RGBParameters(Fresnel):
     """A Fresnel given by the RGB arrays named in ``rgb_params``: its ``params()`` maps each
     name to its list, its repr shows each rounded to 4 decimals."""
@@ -84,11 +93,10 @@ class SchlickFresnel(_RGBParameters):
         self.f0 = _rgb("f0", f0, 0.0, 1.0, "SchlickFresnel")
 
     def eval(self, cos_theta_d) -> np.ndarray:
-        x = 1.0 - _cos(cos_theta_d)
-        x5 = x * x
-        x5 *= x5
-        x5 *= x
-        return self.f0 + (1.0 - self.f0) * x5
+        return _schlick(_cos(cos_theta_d), self.f0)
+
+    def eval_channel(self, c: int, cos_theta_d) -> np.ndarray:
+        return _schlick(_cos(cos_theta_d)[..., 0], self.f0[c])
 
 
 class GeneralizedSchlickFresnel(_RGBParameters):
@@ -109,11 +117,11 @@ class GeneralizedSchlickFresnel(_RGBParameters):
 
     def eval(self, cos_theta_d) -> np.ndarray:
         c = _cos(cos_theta_d)
-        x = 1.0 - c
-        x5 = x * x
-        x5 *= x5
-        x5 *= x
-        return self.F0 + (1.0 - self.F0) * x5 - self.F1 * c
+        return _schlick(c, self.F0) - self.F1 * c
+
+    def eval_channel(self, c: int, cos_theta_d) -> np.ndarray:
+        cos = _cos(cos_theta_d)[..., 0]
+        return _schlick(cos, self.F0[c]) - self.F1[c] * cos
 
 
 class DielectricFresnel(_RGBParameters):

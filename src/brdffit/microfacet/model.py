@@ -351,7 +351,10 @@ class MicrofacetBRDF(BRDF, SerializableModel):
         """Channel ``c`` of :meth:`eval` (the same numbers) at unit directions ``wi``, ``wo``
         with their :func:`half_vectors` ``h, cos_d, ok``: for models made of one lobe per
         channel, which share the half vectors."""
-        f = self._fresnel(cos_d)[..., c] * self._specular(wi, wo, h, cos_d, ok)
+        F = 1.0 if self.fresnel is None else self.fresnel.eval_channel(c, cos_d)
+        if self.specular is not None:
+            F = F * self.specular[c]
+        f = F * self._specular(wi, wo, h, cos_d, ok)
         if self.diffuse is not None:
             f += np.where(ok, 1.0, 0.0) * (self.diffuse[c] / np.pi)
         return f
