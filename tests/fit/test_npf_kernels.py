@@ -181,3 +181,49 @@ def test_g_jacobian_blocks_without_samples_are_zero():
     _kernels.g_jacobian_blocks(*arrays, f["G"], f["D"], f["F"], f["rho_d"], f["rho_s"],
                                *new[:6], True, *new[6:])
     assert all(np.all(a == 0.0) for a in new)
+
+
+@njit
+def ref_g_normal_equations(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
+                           Ai_d, Ai_o, bi, Ao_d, Ao_o, bo, chans):
+    """Reference: every sample's terms added to the entries in memory, one by one."""
+    for A in (Ai_d, Ai_o, bi, Ao_d, Ao_o, bo):
+        A[:] = 0.0
+    for j in range(hd.shape[0]):
+        k, a, t, b, s, ic = hd[j], gi0[j], gti[j], go0[j], gto[j], inv_cc[j]
+        for c in range(3):
+            if not chans[c]:
+                continue
+            g_i = G[c, a] + t * (G[c, a + 1] - G[c, a])
+            g_o = G[c, b] + s * (G[c, b + 1] - G[c, b])
+            r = z[c, j] - rho_d[c]
+            xk = X[c, k] * ic
+            for A_d, A_o, rhs, u, v, y in ((Ai_d, Ai_o, bi, a, t, xk * g_o),
+                                           (Ao_d, Ao_o, bo, b, s, xk * g_i)):
+                wy2 = w[c, j] * y * y
+                wyr = w[c, j] * y * r
+                A_d[c, u] += wy2 * (1.0 - v) * (1.0 - v)
+                A_d[c, u + 1] += wy2 * v * v
+                A_o[c, u] += wy2 * v * (1.0 - v)
+                rhs[c, u] += wyr * (1.0 - v)
+                rhs[c, u + 1] += wyr * v
+
+
+@pytest.mark.parametrize("order", ["merl", "shuffled"])
+@pytest.mark.parametrize("chans", [(True,) * 3, (True, False, True), (False, True, False)])
+def test_g_normal_equations_are_the_per_sample_sums(order, chans):
+    """The entries kept in registers over a run of samples in one G cell get the same terms
+    in the same order as per-sample updates in memory: the same numbers, bit for bit."""
+    arrays, f = _samples(order, seed=3)
+    X = (f["rho_s"][:, None, None] * f["D"][:, :, None] * f["F"][:, None, :]).reshape(3, -1)
+    new = [np.full((3, NG), np.nan) for _ in range(6)]
+    ref = [np.full((3, NG), np.nan) for _ in range(6)]
+    _kernels.g_normal_equations(*arrays, f["G"], X, f["rho_d"], *new, np.array(chans))
+    ref_g_normal_equations(*arrays, f["G"], X, f["rho_d"], *ref, np.array(chans))
+    for a, b in zip(new, ref):
+        assert np.array_equal(a, b)
+    on = np.array(chans)
+    assert all(np.abs(a[on]).max() > 0 and np.all(a[~on] == 0.0) for a in new[:1])
+    empty = [a[..., :0] for a in arrays]
+    _kernels.g_normal_equations(*empty, f["G"], X, f["rho_d"], *new, np.array(chans))
+    assert all(np.all(a == 0.0) for a in new)

@@ -108,48 +108,90 @@ def p_stats(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d, S1, S2, Spz,
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _add_tridiagonal(A_d, A_o, rhs, c, a, t, wj, y, r):  # pragma: no cover
-    """Add one sample's terms to the normal equations of the unknown G cells ``a``, ``a + 1``
-    (weights ``1 - t``, ``t``) of a model ``y ((1 - t) G_a + t G_{a+1})``, residual ``r``."""
+def _tridiagonal_terms(cell, t, wj, y, r):  # pragma: no cover
+    """One sample's terms added to the normal equations of the unknown G cells ``a``,
+    ``a + 1`` (weights ``1 - t``, ``t``) of a model ``y ((1 - t) G_a + t G_{a+1})``, residual
+    ``r``: ``cell`` = (diagonal a, diagonal a + 1, super-diagonal a, rhs a, rhs a + 1)."""
     wy2 = wj * y * y
     wyr = wj * y * r
-    A_d[c, a] += wy2 * (1.0 - t) * (1.0 - t)
-    A_d[c, a + 1] += wy2 * t * t
-    A_o[c, a] += wy2 * t * (1.0 - t)
-    rhs[c, a] += wyr * (1.0 - t)
-    rhs[c, a + 1] += wyr * t
+    d0, d1, o, r0, r1 = cell
+    return (d0 + wy2 * (1.0 - t) * (1.0 - t), d1 + wy2 * t * t, o + wy2 * t * (1.0 - t),
+            r0 + wyr * (1.0 - t), r1 + wyr * t)
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _g_ne_terms(G, X, rho_d, w, z, c, j, k, a, t, b, s, ic,
-                Ai_d, Ai_o, bi, Ao_d, Ao_o, bo):  # pragma: no cover
-    """Sample ``j``'s terms of channel ``c`` added to the normal equations of
-    :func:`g_normal_equations`."""
+def _load_cell(A_d, A_o, rhs, c, a):  # pragma: no cover
+    """The entries of channel ``c``'s normal equations that a sample in G cell ``a`` adds to."""
+    return A_d[c, a], A_d[c, a + 1], A_o[c, a], rhs[c, a], rhs[c, a + 1]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _store_cell(A_d, A_o, rhs, c, a, cell):  # pragma: no cover
+    """Write back what :func:`_load_cell` read, with the samples' terms added."""
+    A_d[c, a], A_d[c, a + 1], A_o[c, a], rhs[c, a], rhs[c, a + 1] = cell
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _load_cells(A_d, A_o, rhs, a):  # pragma: no cover
+    """:func:`_load_cell` of the three channels."""
+    return (_load_cell(A_d, A_o, rhs, 0, a), _load_cell(A_d, A_o, rhs, 1, a),
+            _load_cell(A_d, A_o, rhs, 2, a))
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _store_cells(A_d, A_o, rhs, a, cells):  # pragma: no cover
+    """:func:`_store_cell` of the three channels."""
+    _store_cell(A_d, A_o, rhs, 0, a, cells[0])
+    _store_cell(A_d, A_o, rhs, 1, a, cells[1])
+    _store_cell(A_d, A_o, rhs, 2, a, cells[2])
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _g_ne_terms(G, X, rho_d, w, z, c, j, k, a, t, b, s, ic, cell_i, cell_o):  # pragma: no cover
+    """Sample ``j``'s terms of channel ``c`` added to its θi cell's and θo cell's entries of
+    the normal equations of :func:`g_normal_equations`."""
     g_i, g_o = _g_pair(G, c, a, t, b, s)
     wj = w[c, j]
     r = z[c, j] - rho_d[c]
     xk = X[c, k] * ic
-    # G(θi) unknown: model = y_i · ((1-t) G_a + t G_{a+1}), y_i = X G(θo) / cc
-    _add_tridiagonal(Ai_d, Ai_o, bi, c, a, t, wj, xk * g_o, r)
-    # G(θo) unknown
-    _add_tridiagonal(Ao_d, Ao_o, bo, c, b, s, wj, xk * g_i, r)
+    # G(θi) unknown: model = y_i · ((1-t) G_a + t G_{a+1}), y_i = X G(θo) / cc; then G(θo)
+    return (_tridiagonal_terms(cell_i, t, wj, xk * g_o, r),
+            _tridiagonal_terms(cell_o, s, wj, xk * g_i, r))
 
 
 @njit(cache=True, nogil=True, inline="always")
 def _g_ne_pass(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
                Ai_d, Ai_o, bi, Ao_d, Ao_o, bo, on0, on1, on2):  # pragma: no cover
-    """The pass of :func:`g_normal_equations` for the channels ``on0``, ``on1``, ``on2``."""
+    """The pass of :func:`g_normal_equations` for the channels ``on0``, ``on1``, ``on2``.
+
+    The entries a sample adds to are those of its θi cell and of its θo cell, and the next
+    samples mostly share them (5-7 on MERL): they are kept in registers while the cell stays
+    and written back when it changes. Every entry still receives the samples' terms one by
+    one in sample order, so the sums are the same numbers as with an update in memory per
+    sample (whose read-modify-write chains were the pass's cost)."""
+    if hd.shape[0] == 0:
+        return
+    ca, cb = gi0[0], go0[0]
+    i0, i1, i2 = _load_cells(Ai_d, Ai_o, bi, ca)
+    o0, o1, o2 = _load_cells(Ao_d, Ao_o, bo, cb)
     for j in range(hd.shape[0]):
         k, a, t, b, s, ic = _sample(hd, gi0, gti, go0, gto, inv_cc, j)
+        if a != ca:
+            _store_cells(Ai_d, Ai_o, bi, ca, (i0, i1, i2))
+            ca = a
+            i0, i1, i2 = _load_cells(Ai_d, Ai_o, bi, ca)
+        if b != cb:
+            _store_cells(Ao_d, Ao_o, bo, cb, (o0, o1, o2))
+            cb = b
+            o0, o1, o2 = _load_cells(Ao_d, Ao_o, bo, cb)
         if on0:
-            _g_ne_terms(G, X, rho_d, w, z, 0, j, k, a, t, b, s, ic, Ai_d, Ai_o, bi,
-                        Ao_d, Ao_o, bo)
+            i0, o0 = _g_ne_terms(G, X, rho_d, w, z, 0, j, k, a, t, b, s, ic, i0, o0)
         if on1:
-            _g_ne_terms(G, X, rho_d, w, z, 1, j, k, a, t, b, s, ic, Ai_d, Ai_o, bi,
-                        Ao_d, Ao_o, bo)
+            i1, o1 = _g_ne_terms(G, X, rho_d, w, z, 1, j, k, a, t, b, s, ic, i1, o1)
         if on2:
-            _g_ne_terms(G, X, rho_d, w, z, 2, j, k, a, t, b, s, ic, Ai_d, Ai_o, bi,
-                        Ao_d, Ao_o, bo)
+            i2, o2 = _g_ne_terms(G, X, rho_d, w, z, 2, j, k, a, t, b, s, ic, i2, o2)
+    _store_cells(Ai_d, Ai_o, bi, ca, (i0, i1, i2))
+    _store_cells(Ao_d, Ao_o, bo, cb, (o0, o1, o2))
 
 
 @njit(cache=True, nogil=True)
