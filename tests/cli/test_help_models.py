@@ -164,3 +164,21 @@ def test_typical_figures_are_absent_without_the_bench_results(monkeypatch, tmp_p
         monkeypatch.undo()
         registry.typical_figures.cache_clear()
     assert registry.MODELS["ggx"].typical_time_s is not None
+
+
+def test_help_lists_every_environment_variable_the_package_reads(monkeypatch, capsys):
+    """``brdffit --help`` lists each ``BRDFFIT_*`` variable that some module of the package
+    reads (found in the source, so a new one cannot be left out) with what it does."""
+    import re
+
+    import brdffit
+    from brdffit.cli import ENVIRONMENT
+
+    src = Path(brdffit.__file__).parent
+    read = {m for f in src.rglob("*.py")
+            for m in re.findall(r"\bBRDFFIT_[A-Z_]+[A-Z]\b", f.read_text(encoding="utf-8"))}
+    assert read and read == set(ENVIRONMENT), read ^ set(ENVIRONMENT)
+    lines = _help([], monkeypatch, capsys)
+    start = lines.index("Environment:")
+    listed = [ln.split()[0] for ln in lines[start + 1:start + 1 + len(ENVIRONMENT)]]
+    assert listed == list(ENVIRONMENT)

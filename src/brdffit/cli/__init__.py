@@ -49,6 +49,18 @@ EXIT_CODES = {EXIT_OK: "all done", EXIT_ERROR: "error", EXIT_USAGE: "usage error
               EXIT_FAILED_TASKS: "some tasks failed (the rest is done)"}
 _ABORTED = 130  # interrupted (Ctrl-C), as a shell reports SIGINT
 
+#: The environment variables brdffit reads (``brdffit --help`` lists them).
+ENVIRONMENT = {
+    "BRDFFIT_DATA": "folders searched for relative load specs",
+    "BRDFFIT_ENVMAP_DIR": "the HDR environment maps of the render scenes",
+    "BRDFFIT_RENDER_THREADS": "threads per render (unset: all CPUs; batch: a share)",
+    "BRDFFIT_LLVM_TARGET": "avx2: render kernels for AVX2, not the host CPU",
+    "BRDFFIT_DRJIT_DEBUG": "1: bounds-check every gather of a render (slow)",
+    "BRDFFIT_BLENDER_PYTHON": "a Python that imports bpy (Blender round trip)",
+    "BRDFFIT_NPM_PREFIX": "the folder whose node_modules has three (three.js)",
+    "BRDFFIT_CHROMIUM": "the Chromium of the three.js round trip",
+}
+
 _SUMMARY = "Fit compact microfacet models to measured BRDFs (MERL, RGL, UTIA, Neural-BRDF)."
 _EXIT_TEXT = ("Exit status: 0 all done, 1 error, 2 usage (unknown model, bad option or value, "
               "output folder locked), 3 some tasks failed (the rest is done).")
@@ -59,7 +71,8 @@ def build_parser(commands=None) -> tuple[_Parser, dict[str, _Parser]]:
     :data:`~brdffit.cli._commands.PARSERS`; default: all of them), and each command's parser
     by name."""
     root = _Parser(prog="brdffit", usage="brdffit [-h] [--version] [--debug] COMMAND [ARGS]...",
-                   description=_SUMMARY, epilog=models_help(), add_help=False)
+                   description=_SUMMARY, epilog=models_help() + "\n\n" + _environment_help(),
+                   add_help=False)
     root.add_argument("-h", "--help", action="help", help="Show this message and exit.")
     root.add_argument("--debug", action="store_true", help="Show full tracebacks on errors.")
     root.add_argument("--version", action="version", version=f"brdffit {__version__}",
@@ -73,6 +86,12 @@ def build_parser(commands=None) -> tuple[_Parser, dict[str, _Parser]]:
             for name, parser in parsers.items()]
     root.description = "\n\n".join([_SUMMARY, _EXIT_TEXT, "\b\nCommands:\n" + "\n".join(rows)])
     return root, parsers
+
+
+def _environment_help() -> str:
+    """The :data:`ENVIRONMENT` block of ``brdffit --help``, kept as written (``\\b``)."""
+    return "\n".join(["\b", "Environment:"] + [f"  {name:<23}{text}"
+                                                 for name, text in ENVIRONMENT.items()])
 
 
 def _command_name(argv: list[str]) -> str | None:
