@@ -732,7 +732,9 @@ def _client(scheduler: str | None, workers: int, memory_limit: str | None,
     ``retries + 1`` worker deaths (``allowed-failures``). The batch sends one task per
     free thread (:func:`_run_todo`), so that a worker killed by one task does not take
     queued innocent tasks with it (``worker-saturation`` 1.0 does the same for tasks that
-    Dask queues itself).
+    Dask queues itself). The local workers do not run Dask's statistical profiler (it walks
+    the running task's stack every 10 ms on the worker's event loop, for the dashboard's
+    profile page): 1.5-3 % of a worker's CPU (docs/design/batch.md, session 32).
     Dask's own log lines below CRITICAL are silenced: the batch reports every task's
     failure itself, and on a loaded machine a worker's heartbeat can race the local
     cluster's shutdown and log a traceback that means nothing to the user.
@@ -746,7 +748,8 @@ def _client(scheduler: str | None, workers: int, memory_limit: str | None,
                **_render_threads_env(workers)}
     with dask.config.set({"distributed.nanny.pre-spawn-environ": environ,
                           "distributed.scheduler.allowed-failures": int(retries),
-                          "distributed.scheduler.worker-saturation": 1.0}):
+                          "distributed.scheduler.worker-saturation": 1.0,
+                          "distributed.worker.profile.enabled": False}):
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                host="127.0.0.1", dashboard_address=":0",
                                memory_limit=memory_limit or "auto",

@@ -112,28 +112,31 @@ def test_record_says_when_its_task_started_to_the_millisecond(tmp_path):
     assert "started" in TIMING_FIELDS      # differs between two runs of the same task
 
 
-def _worker_env():
-    return {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_",
-                                           "BRDFFIT_RENDER_THREADS")}
+def _worker_env(dask_worker):
+    env = {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_",
+                                          "BRDFFIT_RENDER_THREADS")}
+    return env, sorted(dask_worker.periodic_callbacks)
 
 
 @pytest.mark.slow
 def test_local_workers_keep_numpy_temporaries_on_the_heap_and_share_the_cores(monkeypatch):
     """Dask's nanny default (trim threshold 64 KiB) turns every NumPy temporary into an mmap;
     the local cluster overrides it (brdffit.batch.WORKER_MALLOC_ENV). Its workers' renders
-    share the cores (BRDFFIT_RENDER_THREADS = cores // workers)."""
+    share the cores (BRDFFIT_RENDER_THREADS = cores // workers). They run no profiler."""
     from brdffit.batch import WORKER_MALLOC_ENV, _client
 
     monkeypatch.delenv("BRDFFIT_RENDER_THREADS", raising=False)
     client, cluster = _client(None, 2, None)
     try:
-        envs = list(client.run(_worker_env).values())
+        found = list(client.run(_worker_env).values())
     finally:
         client.close()
         cluster.close()
     threads = str(max(1, usable_cpus() // 2))
-    assert envs == 2 * [{**{k: str(v) for k, v in WORKER_MALLOC_ENV.items()},
-                         "BRDFFIT_RENDER_THREADS": threads}]
+    assert [env for env, _ in found] == 2 * [{**{k: str(v) for k, v in WORKER_MALLOC_ENV.items()},
+                                              "BRDFFIT_RENDER_THREADS": threads}]
+    for _, callbacks in found:
+        assert "heartbeat" in callbacks and "profile" not in callbacks, callbacks
 
 
 def test_progress_inside_running_tasks_reaches_caller_and_log(tmp_path, dask_client):
