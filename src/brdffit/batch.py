@@ -723,6 +723,23 @@ def lock_output(out_dir, wait: bool = False):
 
 
 # -- the cluster ----------------------------------------------------------------------------
+#: Dask's periodic housekeeping in the local cluster's processes (workers, and the nannies
+#: and scheduler in the calling process). Dask's defaults serve its dashboard: a statistical
+#: profiler that walks the running task's stack every 10 ms on each worker's event loop, an
+#: event-loop "tick" every 20 ms in every server, system metrics every 500 ms and memory
+#: every 100 ms. The batch has no dashboard user (it reports each task itself), and these
+#: took 3.6-5.0 % of a busy worker's CPU on its event-loop thread, 0.4 % with the values
+#: below (docs/design/batch.md, session 32). The memory limits are still enforced, twice a
+#: second instead of ten times; an event loop blocked for ``tick.limit`` (3 s) is still
+#: reported.
+LOCAL_HOUSEKEEPING = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.tick.interval": "1s",
+    "distributed.admin.system-monitor.interval": "2s",
+    "distributed.worker.memory.monitor-interval": "500ms",
+}
+
+
 def _client(scheduler: str | None, workers: int, memory_limit: str | None,
             retries: int = DEFAULT_RETRIES):
     """A client of ``scheduler``, or of a new local cluster (returned too, to be closed).
@@ -732,9 +749,8 @@ def _client(scheduler: str | None, workers: int, memory_limit: str | None,
     ``retries + 1`` worker deaths (``allowed-failures``). The batch sends one task per
     free thread (:func:`_run_todo`), so that a worker killed by one task does not take
     queued innocent tasks with it (``worker-saturation`` 1.0 does the same for tasks that
-    Dask queues itself). The local workers do not run Dask's statistical profiler (it walks
-    the running task's stack every 10 ms on the worker's event loop, for the dashboard's
-    profile page): 1.5-3 % of a worker's CPU (docs/design/batch.md, session 32).
+    Dask queues itself); with nothing queued, work stealing has nothing to move and is off.
+    The local cluster's housekeeping is set by :data:`LOCAL_HOUSEKEEPING`.
     Dask's own log lines below CRITICAL are silenced: the batch reports every task's
     failure itself, and on a loaded machine a worker's heartbeat can race the local
     cluster's shutdown and log a traceback that means nothing to the user.
@@ -749,7 +765,8 @@ def _client(scheduler: str | None, workers: int, memory_limit: str | None,
     with dask.config.set({"distributed.nanny.pre-spawn-environ": environ,
                           "distributed.scheduler.allowed-failures": int(retries),
                           "distributed.scheduler.worker-saturation": 1.0,
-                          "distributed.worker.profile.enabled": False}):
+                          "distributed.scheduler.work-stealing": False,
+                          **LOCAL_HOUSEKEEPING}):
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                host="127.0.0.1", dashboard_address=":0",
                                memory_limit=memory_limit or "auto",

@@ -115,14 +115,15 @@ def test_record_says_when_its_task_started_to_the_millisecond(tmp_path):
 def _worker_env(dask_worker):
     env = {k: os.environ.get(k) for k in ("MALLOC_TRIM_THRESHOLD_", "MALLOC_MMAP_THRESHOLD_",
                                           "BRDFFIT_RENDER_THREADS")}
-    return env, sorted(dask_worker.periodic_callbacks)
+    return env, {k: pc.callback_time for k, pc in dask_worker.periodic_callbacks.items()}
 
 
 @pytest.mark.slow
 def test_local_workers_keep_numpy_temporaries_on_the_heap_and_share_the_cores(monkeypatch):
     """Dask's nanny default (trim threshold 64 KiB) turns every NumPy temporary into an mmap;
     the local cluster overrides it (brdffit.batch.WORKER_MALLOC_ENV). Its workers' renders
-    share the cores (BRDFFIT_RENDER_THREADS = cores // workers). They run no profiler."""
+    share the cores (BRDFFIT_RENDER_THREADS = cores // workers). They run no profiler, and
+    their housekeeping runs at brdffit.batch.LOCAL_HOUSEKEEPING's intervals."""
     from brdffit.batch import WORKER_MALLOC_ENV, _client
 
     monkeypatch.delenv("BRDFFIT_RENDER_THREADS", raising=False)
@@ -135,8 +136,10 @@ def test_local_workers_keep_numpy_temporaries_on_the_heap_and_share_the_cores(mo
     threads = str(max(1, usable_cpus() // 2))
     assert [env for env, _ in found] == 2 * [{**{k: str(v) for k, v in WORKER_MALLOC_ENV.items()},
                                               "BRDFFIT_RENDER_THREADS": threads}]
-    for _, callbacks in found:
+    for _, callbacks in found:           # {name: interval in ms}
         assert "heartbeat" in callbacks and "profile" not in callbacks, callbacks
+        assert (callbacks["tick"], callbacks["monitor"], callbacks["memory_monitor"]) == \
+            (1000, 2000, 500), callbacks
 
 
 def test_progress_inside_running_tasks_reaches_caller_and_log(tmp_path, dask_client):
