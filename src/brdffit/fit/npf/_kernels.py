@@ -168,7 +168,8 @@ def _g_ne_pass(hd, gi0, gti, go0, gto, inv_cc, w, z, G, X, rho_d,
     samples mostly share them (5-7 on MERL): they are kept in registers while the cell stays
     and written back when it changes. Every entry still receives the samples' terms one by
     one in sample order, so the sums are the same numbers as with an update in memory per
-    sample (whose read-modify-write chains were the pass's cost)."""
+    sample, in 0.92× its time (the pass is bound by its arithmetic: docs/design/batch.md,
+    session 32)."""
     if hd.shape[0] == 0:
         return
     ca, cb = gi0[0], go0[0]
