@@ -328,13 +328,15 @@ class MicrofacetBRDF(BRDF, SerializableModel):
         self._has_vndf = _supports_vndf(distribution)
 
     # -- evaluation --------------------------------------------------------------------------
-    def _fresnel(self, cos_d) -> np.ndarray:
+    def _fresnel(self, cos_d, channel: int | None = None) -> np.ndarray:
+        """``F(cos θd)`` times the specular scale: RGB, or only ``channel``."""
+        rgb = channel is None
         if self.fresnel is None:
-            F = np.ones(np.shape(cos_d) + (3,))
+            F = np.ones(np.shape(cos_d) + ((3,) if rgb else ()))
         else:
-            F = self.fresnel.eval(cos_d)
+            F = self.fresnel.eval(cos_d) if rgb else self.fresnel.eval_channel(channel, cos_d)
         if self.specular is not None:
-            F = F * self.specular
+            F = F * (self.specular if rgb else self.specular[channel])
         return F
 
     def eval(self, wi, wo) -> np.ndarray:
@@ -351,10 +353,7 @@ class MicrofacetBRDF(BRDF, SerializableModel):
         """Channel ``c`` of :meth:`eval` (the same numbers) at unit directions ``wi``, ``wo``
         with their :func:`half_vectors` ``h, cos_d, ok``: for models made of one lobe per
         channel, which share the half vectors."""
-        F = 1.0 if self.fresnel is None else self.fresnel.eval_channel(c, cos_d)
-        if self.specular is not None:
-            F = F * self.specular[c]
-        f = F * self._specular(wi, wo, h, cos_d, ok)
+        f = self._fresnel(cos_d, c) * self._specular(wi, wo, h, cos_d, ok)
         if self.diffuse is not None:
             f += np.where(ok, 1.0, 0.0) * (self.diffuse[c] / np.pi)
         return f
